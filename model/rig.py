@@ -1,0 +1,148 @@
+"""The blendshape rig: neutral surface, polygon faces as in the file, named shape deltas, units.
+
+ALGORITHMS.md §1: ``x(w) = b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c``. Vertex identity is the whole contract:
+every shape has exactly the neutral's vertex count and order.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .errors import RigInputError
+
+UNITS = ("cm", "mm", "m")
+UNIT_IN_METRES = {"mm": 0.001, "cm": 0.01, "m": 1.0}
+
+
+def unit_scale(from_units: str, to_units: str) -> float:
+    """Factor that converts a length in ``from_units`` to ``to_units``."""
+    for u in (from_units, to_units):
+        if u not in UNIT_IN_METRES:
+            raise RigInputError(f"Unknown units '{u}': use one of {', '.join(UNIT_IN_METRES)}.")
+    return UNIT_IN_METRES[from_units] / UNIT_IN_METRES[to_units]
+
+
+@dataclass
+class Rig:
+    """A blendshape rig.
+
+    neutral      (V, 3) float64, the rest surface ``b0``.
+    face_counts  (F,) int32, vertices per polygon, in file order.
+    face_indices (sum(face_counts),) int32, polygon vertex indices, in file order (0-based).
+    shape_names  K unique names.
+    deltas       (K, V, 3) float64, ``d_k = b_k - b0``.
+    units        'cm', 'mm' or 'm'.
+    correctives  list of ``model.correctives.Corrective`` (drivers, rule, delta).
+    presets      named weight sets, e.g. {"happy": {"mouthSmile_L": 1.0, ...}}.
+    """
+
+    neutral: np.ndarray
+    face_counts: np.ndarray
+    face_indices: np.ndarray
+    shape_names: list[str]
+    deltas: np.ndarray
+    units: str = "cm"
+    name: str = "rig"
+    source: str = ""
+    correctives: list = field(default_factory=list)
+    presets: dict[str, dict[str, float]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        self.neutral = np.ascontiguousarray(self.neutral, dtype=np.float64)
+        self.face_counts = np.ascontiguousarray(self.face_counts, dtype=np.int32)
+        self.face_indices = np.ascontiguousarray(self.face_indices, dtype=np.int32)
+        self.deltas = np.ascontiguousarray(self.deltas, dtype=np.float64).reshape(-1, self.n_vertices, 3)
+        self.shape_names = list(self.shape_names)
+        self.validate()
+
+    # --- sizes -----------------------------------------------------------------------------------
+    @property
+    def n_vertices(self) -> int:
+        return int(self.neutral.shape[0])
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.face_counts.shape[0])
+
+    @property
+    def n_shapes(self) -> int:
+        return len(self.shape_names)
+
+    def validate(self) -> None:
+        """Raise RigInputError if the arrays do not describe one consistent rig."""
+        where = self.source or self.name
+        if self.neutral.ndim != 2 or self.neutral.shape[1] != 3:
+            raise RigInputError(f"{where}: the neutral must be an array of 3D points.")
+        if not np.isfinite(self.neutral).all():
+            raise RigInputError(f"{where}: the neutral has NaN or infinite coordinates.")
+        if self.deltas.shape != (len(self.shape_names), self.n_vertices, 3):
+            raise RigInputError(
+                f"{where}: {len(self.shape_names)} shape names but deltas of shape {self.deltas.shape}.")
+        if not np.isfinite(self.deltas).all():
+            raise RigInputError(f"{where}: a shape has NaN or infinite coordinates.")
+        if int(self.face_counts.sum()) != self.face_indices.size:
+            raise RigInputError(f"{where}: the face list is inconsistent (counts do not match indices).")
+        if self.face_indices.size and (self.face_indices.min() < 0 or self.face_indices.max() >= self.n_vertices):
+            raise RigInputError(f"{where}: a face refers to a vertex that does not exist.")
+        dup = {n for n in self.shape_names if self.shape_names.count(n) > 1}
+        if dup:
+            raise RigInputError(f"{where}: duplicate shape names: {', '.join(sorted(dup))}.")
+        if self.units not in UNITS:
+            raise RigInputError(f"{where}: unknown units '{self.units}'.")
+
+    # --- names and weights -----------------------------------------------------------------------
+    def shape_index(self, name: str) -> int:
+        try:
+            return self.shape_names.index(name)
+        except ValueError:
+            raise RigInputError(f"The rig has no shape named '{name}'.") from None
+
+    def weights_from_dict(self, named: dict[str, float]) -> np.ndarray:
+        """A (K,) weight vector from {shape name: weight}; unknown names raise RigInputError."""
+        w = np.zeros(self.n_shapes)
+        for name, value in named.items():
+            w[self.shape_index(name)] = float(value)
+        return w
+
+    def weights_to_dict(self, weights: np.ndarray, *, nonzero: bool = True) -> dict[str, float]:
+        return {n: float(v) for n, v in zip(self.shape_names, weights) if v != 0 or not nonzero}
+
+    # --- geometry --------------------------------------------------------------------------------
+    def polygons(self) -> list[np.ndarray]:
+        """The faces as a list of index arrays (slow; for export and tests)."""
+        return np.split(self.face_indices, np.cumsum(self.face_counts)[:-1])
+
+    def triangles(self) -> np.ndarray:
+        """(T, 3) fan triangulation of the polygons, for display and per-triangle operators."""
+        return fan_triangulate(self.face_counts, self.face_indices)
+
+    def edges(self) -> np.ndarray:
+        """(E, 2) unique undirected polygon edges (i < j), sorted."""
+        starts = np.concatenate(([0], np.cumsum(self.face_counts)[:-1]))
+        nxt = np.arange(self.face_indices.size) + 1
+        ends = starts + self.face_counts
+        nxt[ends - 1] = starts  # wrap each polygon
+        a, b = self.face_indices, self.face_indices[nxt]
+        e = np.sort(np.stack([a, b], axis=1), axis=1)
+        return np.unique(e, axis=0)
+
+    def shape(self, name: str) -> np.ndarray:
+        """The full target surface of a shape, ``b0 + d_k``."""
+        return self.neutral + self.deltas[self.shape_index(name)]
+
+    def copy(self) -> "Rig":
+        import copy
+        return copy.deepcopy(self)
+
+
+def fan_triangulate(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
+    """(T, 3) triangles of polygons given as counts + flat indices (fan from each first vertex)."""
+    counts = np.asarray(face_counts, dtype=np.int64)
+    idx = np.asarray(face_indices)
+    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    ntri = np.maximum(counts - 2, 0)
+    face_of_tri = np.repeat(np.arange(counts.size), ntri)
+    k = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri)  # triangle number in face
+    s = starts[face_of_tri]
+    return np.stack([idx[s], idx[s + k + 1], idx[s + k + 2]], axis=1).astype(np.int32)
