@@ -1,0 +1,200 @@
+"""The ``blendshape-studio`` command line (DESIGN.md, Command line). Stable: scripts and tests rely on it.
+
+Every error in the input is one sentence on stderr naming the file and the problem, and a non-zero exit.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from model.errors import RigInputError
+
+EXIT_INPUT = 2
+
+
+def parse_weights(text: str | None) -> dict[str, float]:
+    """'jawOpen=1,mouthSmile_L=0.5' -> {'jawOpen': 1.0, 'mouthSmile_L': 0.5}."""
+    out: dict[str, float] = {}
+    if not text:
+        return out
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            continue
+        name, sep, value = item.partition("=")
+        if not sep:
+            raise RigInputError(f"--weights: '{item}' is not NAME=VALUE.")
+        try:
+            v = float(value)
+        except ValueError:
+            raise RigInputError(f"--weights: the value of '{name}' is not a number: '{value}'.") from None
+        if not np.isfinite(v):
+            raise RigInputError(f"--weights: the value of '{name}' is not finite.")
+        out[name.strip()] = v
+    return out
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    try:
+        w, h = (int(x) for x in text.split(","))
+    except ValueError:
+        raise RigInputError(f"--size: '{text}' is not W,H (two whole numbers).") from None
+    if not (16 <= w <= 8192 and 16 <= h <= 8192):
+        raise RigInputError(f"--size: {w}x{h} is outside 16..8192 pixels.")
+    return w, h
+
+
+def _load(args):
+    from model.readers import load_rig
+    return load_rig(args.rig, neutral=getattr(args, "neutral", None), units=getattr(args, "units", None))
+
+
+def _pose_weights(rig, args) -> np.ndarray:
+    named = {}
+    if getattr(args, "preset", None):
+        if args.preset not in rig.presets:
+            raise RigInputError(f"--preset: the rig has no preset '{args.preset}' "
+                                f"(it has: {', '.join(sorted(rig.presets)) or 'none'}).")
+        named.update(rig.presets[args.preset])
+    named.update(parse_weights(getattr(args, "weights", None)))
+    return rig.weights_from_dict(named)
+
+
+def cmd_info(args) -> int:
+    rig = _load(args)
+    moving = int((np.abs(rig.deltas).max(axis=(0, 2)) > 0).sum()) if rig.n_shapes else 0
+    info = {
+        "path": str(args.rig),
+        "name": rig.name,
+        "vertices": rig.n_vertices,
+        "faces": rig.n_faces,
+        "triangles": int(np.maximum(rig.face_counts - 2, 0).sum()),
+        "units": rig.units,
+        "shapes": rig.shape_names,
+        "moving_vertices": moving,
+        "correctives": [{"name": c.name, "drivers": list(c.drivers), "rule": c.rule} for c in rig.correctives],
+        "presets": sorted(rig.presets),
+        "bounds": [rig.neutral.min(axis=0).round(6).tolist(), rig.neutral.max(axis=0).round(6).tolist()],
+    }
+    if args.json:
+        print(json.dumps(info, indent=2))
+    else:
+        print(f"{info['name']}: {info['vertices']} vertices, {info['faces']} faces, "
+              f"{len(info['shapes'])} shapes, units {info['units']}")
+        print(f"  shapes: {', '.join(info['shapes'])}")
+        if info["correctives"]:
+            print(f"  correctives: {', '.join(c['name'] for c in info['correctives'])}")
+        if info["presets"]:
+            print(f"  presets: {', '.join(info['presets'])}")
+    return 0
+
+
+def cmd_render(args) -> int:
+    from widgets.scene import use_offscreen_backend_if_headless
+    use_offscreen_backend_if_headless()
+    from app.views import build_view
+    rig = _load(args)
+    weights = _pose_weights(rig, args)
+    size = parse_size(args.size)
+    view = build_view(rig, weights, args.view, threshold=args.threshold, level=args.level)
+    from widgets.scene import render_png
+    render_png(view.points, rig.face_counts, rig.face_indices, args.output, focus=view.focus,
+               colormap=view.colormap, camera=args.camera, size=size, wireframe=args.wireframe,
+               title=view.title if args.label else "")
+    print(f"wrote {args.output}")
+    return 0
+
+
+def cmd_export(args) -> int:
+    from model.obj_io import write_obj
+    from model.pose import PoseEvaluator
+    rig = _load(args)
+    weights = _pose_weights(rig, args)
+    points = PoseEvaluator(rig, dtype=np.float64).evaluate(weights)
+    header = f"Blendshape Studio export of {rig.name}\nweights: " + json.dumps(rig.weights_to_dict(weights))
+    write_obj(args.output, points, rig.face_counts, rig.face_indices, header=header)
+    print(f"wrote {args.output} ({rig.n_vertices} vertices, {rig.n_faces} faces)")
+    return 0
+
+
+def cmd_sample(args) -> int:
+    from resources.sample_rig import write_sample
+    out = write_sample(args.output)
+    print(f"wrote the sample rig to {out}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="blendshape-studio",
+                                description="Blendshape Studio: edit, segment, solve and render blendshape face rigs.")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
+
+    def rig_arg(sp):
+        sp.add_argument("rig", metavar="RIG", help="an OBJ folder, a .gltf/.glb file or a .bsproj project")
+        sp.add_argument("--neutral", help="file name of the neutral OBJ in a folder (default: the one named *neutral*)")
+        sp.add_argument("--units", choices=["cm", "mm", "m"], help="units of the rig files (default: cm for OBJ)")
+
+    def pose_args(sp):
+        sp.add_argument("--weights", help="NAME=V,... shape weights of the pose (default: neutral)")
+        sp.add_argument("--preset", help="start from a named preset of the rig (e.g. happy)")
+
+    sp = sub.add_parser("info", help="print what a rig holds")
+    rig_arg(sp)
+    sp.add_argument("--json", action="store_true", help="machine-readable output")
+    sp.set_defaults(func=cmd_info)
+
+    sp = sub.add_parser("render", help="render a pose or a map to a PNG, off screen")
+    rig_arg(sp)
+    pose_args(sp)
+    sp.add_argument("-o", "--output", required=True, help="PNG file to write")
+    sp.add_argument("--view", default="shaded", choices=["shaded", "deformation", "deformation-rgb", "segmentation"])
+    sp.add_argument("--threshold", type=float, default=0.75, help="segmentation quantile t in [0, 1] (default 0.75)")
+    sp.add_argument("--level", type=int, default=0, help="hierarchy level to show (0 = finest)")
+    sp.add_argument("--size", default="1024,768", help="W,H in pixels (default 1024,768)")
+    sp.add_argument("--camera", default="front", choices=["front", "left", "right", "three-quarter"])
+    sp.add_argument("--wireframe", action="store_true", help="draw polygon edges")
+    sp.add_argument("--label", action="store_true", help="write the view's name in the corner")
+    sp.set_defaults(func=cmd_render)
+
+    sp = sub.add_parser("export", help="write the posed surface as an OBJ, vertex order kept")
+    rig_arg(sp)
+    pose_args(sp)
+    sp.add_argument("-o", "--output", required=True, help="OBJ file to write")
+    sp.set_defaults(func=cmd_export)
+
+    sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder")
+    sp.add_argument("-o", "--output", required=True, help="folder to write")
+    sp.set_defaults(func=cmd_sample)
+
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv or (argv[0] not in _COMMANDS and not argv[0].startswith("-")):
+        from app.gui import run_gui
+        return run_gui(argv[0] if argv else None)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 0
+    try:
+        return int(args.func(args) or 0)
+    except RigInputError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+_COMMANDS = {"info", "render", "export", "sample", "segment", "solve", "corrective"}
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,400 @@
+"""The main window: viewport in the centre, panels in docks, menus, undo, status bar.
+
+It wires widgets' gestures to undo commands on the Document and redraws views on its signals.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from app import settings as app_settings
+from app.commands import SetWeightsCommand
+from app.document import Document
+from app.loading import LoadWorker
+from model.errors import RigInputError
+from model.project import Project
+from widgets.scene import focus_vertices
+from widgets.shapes_panel import ShapesPanel
+from widgets.viewport import Viewport
+
+RIG_FILTER = "Rigs and projects (*.bsproj *.gltf *.glb *.obj);;Projects (*.bsproj);;glTF (*.gltf *.glb);;OBJ (*.obj)"
+
+
+class MainWindow(QtWidgets.QMainWindow):
+    loaded = QtCore.Signal()          # a rig or project finished loading
+    load_failed = QtCore.Signal(str)  # the message shown to the user
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        self.setWindowTitle("Blendshape Studio")
+        self.resize(1400, 900)
+        self.confirm_discard = True   # tests turn the unsaved-changes question off
+        self.last_error: str | None = None
+        self.document = Document(self)
+        self.viewport = Viewport(self)
+        self.setCentralWidget(self.viewport)
+        self.shapes_panel = ShapesPanel(self)
+        self.shapes_dock = self._add_dock("Shapes", self.shapes_panel, QtCore.Qt.RightDockWidgetArea)
+        self._worker: LoadWorker | None = None
+        self._progress: QtWidgets.QProgressDialog | None = None
+        self._drag_old: np.ndarray | None = None
+        self._redraw_pending = False
+        self._build_actions()
+        self._build_status_bar()
+        self._connect()
+        self._restore_layout()
+
+    # --- construction ------------------------------------------------------------------------------
+    def _add_dock(self, title: str, widget: QtWidgets.QWidget, area) -> QtWidgets.QDockWidget:
+        dock = QtWidgets.QDockWidget(title, self)
+        dock.setObjectName(f"dock_{title.replace(' ', '_')}")
+        dock.setWidget(widget)
+        self.addDockWidget(area, dock)
+        return dock
+
+    def _action(self, menu, text, slot=None, shortcut=None, tip=None, checkable=False):
+        act = QtGui.QAction(text, self)
+        if shortcut:
+            act.setShortcut(QtGui.QKeySequence(shortcut))
+        if tip:
+            act.setStatusTip(tip)
+            act.setToolTip(tip)
+        act.setCheckable(checkable)
+        if slot is not None:
+            (act.toggled if checkable else act.triggered).connect(slot)
+        menu.addAction(act)
+        return act
+
+    def _build_actions(self) -> None:
+        mb = self.menuBar()
+        f = mb.addMenu("&File")
+        self._action(f, "Open Rig &Folder…", self.open_folder_dialog, "Ctrl+O",
+                     "Open a folder of OBJ blendshapes (the neutral is the file named *neutral*)")
+        self._action(f, "&Open File…", self.open_file_dialog, "Ctrl+Shift+O",
+                     "Open a project (.bsproj), a glTF/GLB with morph targets, or an OBJ in a rig folder")
+        self.recent_menu = f.addMenu("Open &Recent")
+        self._action(f, "Open &Sample Rig", self.open_sample, None, "Open the bundled sample face")
+        f.addSeparator()
+        self.save_action = self._action(f, "&Save", self.save, QtGui.QKeySequence.Save, "Save the project (.bsproj)")
+        self._action(f, "Save &As…", self.save_as, QtGui.QKeySequence.SaveAs, "Save the project under a new name")
+        f.addSeparator()
+        self._action(f, "&Export Pose as OBJ…", self.export_pose, "Ctrl+E",
+                     "Write the posed surface as an OBJ, vertex order kept")
+        f.addSeparator()
+        self._action(f, "&Quit", self.close, QtGui.QKeySequence.Quit)
+
+        e = mb.addMenu("&Edit")
+        undo = self.document.undo_stack.createUndoAction(self, "&Undo")
+        undo.setShortcut(QtGui.QKeySequence.Undo)
+        redo = self.document.undo_stack.createRedoAction(self, "&Redo")
+        redo.setShortcuts([QtGui.QKeySequence.Redo, QtGui.QKeySequence("Ctrl+Y")])
+        e.addAction(undo)
+        e.addAction(redo)
+        self.undo_action, self.redo_action = undo, redo
+        e.addSeparator()
+        self._action(e, "Reset &Pose", self.reset_pose, "Ctrl+0", "Set every weight to 0")
+
+        v = mb.addMenu("&View")
+        self.wire_action = self._action(v, "&Wireframe", self.viewport.set_wireframe, "W",
+                                        "Draw polygon edges over the surface", checkable=True)
+        v.addSeparator()
+        for i, (name, label) in enumerate([("front", "&Front"), ("left", "&Left Side"),
+                                           ("right", "&Right Side"), ("three-quarter", "&Three-Quarter")]):
+            self._action(v, f"{label} Camera", lambda _=False, n=name: self.viewport.set_camera(n), str(i + 1),
+                         f"Look at the face from the {name.replace('-', ' ')}")
+        self._action(v, "Reset &View", self.viewport.reset_view, "F", "Frame the face again")
+        v.addSeparator()
+        self.panels_menu = v.addMenu("&Panels")
+        self.panels_menu.addAction(self.shapes_dock.toggleViewAction())
+        self.undo_view = QtWidgets.QUndoView(self.document.undo_stack)
+        self.undo_view.setEmptyLabel("<opened>")
+        self.history_dock = self._add_dock("History", self.undo_view, QtCore.Qt.RightDockWidgetArea)
+        self.tabifyDockWidget(self.shapes_dock, self.history_dock)
+        self.shapes_dock.raise_()
+        self.panels_menu.addAction(self.history_dock.toggleViewAction())
+
+        h = mb.addMenu("&Help")
+        self._action(h, "&Keyboard Shortcuts", self.show_shortcuts, "F1")
+        self._action(h, "&About Blendshape Studio", self.show_about)
+        self._rebuild_recent_menu()
+
+    def _build_status_bar(self) -> None:
+        self.counts_label = QtWidgets.QLabel("no rig")
+        self.statusBar().addPermanentWidget(self.counts_label)
+
+    def _connect(self) -> None:
+        doc = self.document
+        doc.rig_changed.connect(self._on_rig_change)
+        doc.shapes_changed.connect(self._on_rig_shapes_change)
+        doc.pose_changed.connect(self._on_pose_change)
+        doc.path_changed.connect(self._update_title)
+        doc.undo_stack.cleanChanged.connect(self._on_clean_change)
+        p = self.shapes_panel
+        p.drag_started.connect(self._on_slider_drag_started)
+        p.weight_dragged.connect(self._on_slider_dragged)
+        p.drag_finished.connect(self._on_slider_drag_finished)
+        p.weight_committed.connect(self._on_weight_committed)
+        p.reset_requested.connect(self.reset_pose)
+        p.preset_requested.connect(self.apply_preset)
+
+    # --- document signals --------------------------------------------------------------------------
+    def _on_rig_change(self) -> None:
+        rig = self.document.rig
+        self.shapes_panel.set_shapes(rig.shape_names, sorted(rig.presets))
+        self.viewport.set_surface(self.document.surface(), rig.face_counts, rig.face_indices,
+                                  focus=focus_vertices(rig.neutral, rig.deltas))
+        self.counts_label.setText(f"{rig.n_vertices:,} vertices · {rig.n_faces:,} faces · "
+                                  f"{rig.n_shapes} shapes · {len(rig.correctives)} correctives · {rig.units}")
+        self._update_title()
+
+    def _on_rig_shapes_change(self) -> None:
+        self._on_rig_change()
+
+    def _on_pose_change(self) -> None:
+        self.shapes_panel.set_weights(self.document.weights)
+        self._schedule_redraw()
+
+    def _schedule_redraw(self) -> None:
+        """Coalesce bursts of pose changes (slider drags) into one redraw per event-loop turn."""
+        if not self._redraw_pending:
+            self._redraw_pending = True
+            QtCore.QTimer.singleShot(0, self.redraw_now)
+
+    def redraw_now(self) -> None:
+        self._redraw_pending = False
+        if self.document.project is not None:
+            self.viewport.update_points(self.document.surface())
+
+    def _on_clean_change(self, _clean: bool) -> None:
+        self._update_title()
+
+    def _update_title(self) -> None:
+        name = self.document.path.name if self.document.path else (self.document.rig.name if self.document.rig else "")
+        self.setWindowTitle(f"{name}[*] — Blendshape Studio" if name else "Blendshape Studio")
+        self.setWindowModified(self.document.is_modified)
+
+    # --- pose edits (each one undo step) -----------------------------------------------------------
+    def _on_slider_drag_started(self, k: int) -> None:
+        self._drag_old = self.document.weights
+
+    def _on_slider_dragged(self, k: int, value: float) -> None:
+        w = self.document.weights
+        w[k] = value
+        self.document.set_weights(w)
+
+    def _on_slider_drag_finished(self, k: int) -> None:
+        if self._drag_old is None:
+            return
+        old, self._drag_old = self._drag_old, None
+        new = self.document.weights
+        if not np.array_equal(old, new):
+            self.document.undo_stack.push(
+                SetWeightsCommand(self.document, old, new, f"Drag {self.document.rig.shape_names[k]}"))
+
+    def _on_weight_committed(self, k: int, value: float) -> None:
+        old = self.document.weights
+        new = old.copy()
+        new[k] = value
+        if not np.array_equal(old, new):
+            self.document.undo_stack.push(
+                SetWeightsCommand(self.document, old, new, f"Set {self.document.rig.shape_names[k]} to {value:.3g}"))
+
+    def set_pose(self, weights: np.ndarray, text: str) -> None:
+        old = self.document.weights
+        if not np.array_equal(old, weights):
+            self.document.undo_stack.push(SetWeightsCommand(self.document, old, weights, text))
+
+    def reset_pose(self) -> None:
+        if self.document.rig is not None:
+            self.set_pose(np.zeros(self.document.rig.n_shapes), "Reset pose")
+
+    def apply_preset(self, name: str) -> None:
+        rig = self.document.rig
+        self.set_pose(rig.weights_from_dict(rig.presets[name]), f"Preset {name}")
+
+    # --- files -------------------------------------------------------------------------------------
+    def open_sample(self) -> None:
+        from resources.sample_rig import build_sample_rig
+        if not self._maybe_discard():
+            return
+        self.document.set_project(Project(rig=build_sample_rig()), None)
+        self.loaded.emit()
+
+    def open_folder_dialog(self) -> None:
+        s = app_settings.settings()
+        folder = QtWidgets.QFileDialog.getExistingDirectory(self, "Open Rig Folder", s.value("lastFolder", ""))
+        if folder:
+            s.setValue("lastFolder", folder)
+            self.open_path(folder)
+
+    def open_file_dialog(self) -> None:
+        s = app_settings.settings()
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open", s.value("lastFolder", ""), RIG_FILTER)
+        if path:
+            s.setValue("lastFolder", str(Path(path).parent))
+            self.open_path(path)
+
+    def open_path(self, path: str | Path) -> None:
+        """Open a rig or project in the background; on failure keep what is open and say why."""
+        if self._worker is not None or not self._maybe_discard():
+            return
+        path = Path(path)
+        self._progress = QtWidgets.QProgressDialog(f"Opening {path.name}…", None, 0, 0, self)
+        self._progress.setWindowTitle("Opening")
+        self._progress.setMinimumDuration(300)
+        self._progress.setWindowModality(QtCore.Qt.WindowModal)
+        self._worker = LoadWorker(path, self)
+        self._worker.progress.connect(self._on_load_progress)
+        self._worker.loaded.connect(lambda project: self._on_loaded(project, path))
+        self._worker.failed.connect(self._on_load_failed)
+        self._worker.finished.connect(self._on_worker_finished)
+        self.statusBar().showMessage(f"Opening {path}…")
+        self._worker.start()
+
+    def _on_load_progress(self, done: int, total: int, what: str) -> None:
+        dialog = self._progress  # setValue on a modal dialog processes events: it may close meanwhile
+        if dialog is not None:
+            dialog.setLabelText(f"Reading {what} ({done}/{total})")
+            dialog.setMaximum(total)
+            dialog.setValue(done)
+
+    def _on_loaded(self, project: Project, path: Path) -> None:
+        self.document.set_project(project, path if path.suffix.lower() == ".bsproj" else None)
+        app_settings.add_recent_file(str(path))
+        self._rebuild_recent_menu()
+        self.statusBar().showMessage(f"Opened {path}", 5000)
+        self.loaded.emit()
+
+    def _on_load_failed(self, message: str) -> None:
+        self.show_error("Could not open", message)
+        self.load_failed.emit(message)
+
+    def _on_worker_finished(self) -> None:
+        if self._progress is not None:
+            self._progress.close()
+            self._progress = None
+        self._worker = None
+
+    def wait_for_load(self) -> None:
+        """Block until a background load is done (for scripts and tests)."""
+        if self._worker is not None:
+            self._worker.wait()
+        QtWidgets.QApplication.processEvents()
+
+    def save(self) -> bool:
+        if self.document.project is None:
+            return False
+        if self.document.path is None or self.document.path.suffix.lower() != ".bsproj":
+            return self.save_as()
+        return self.save_to(self.document.path)
+
+    def save_as(self) -> bool:
+        if self.document.project is None:
+            return False
+        s = app_settings.settings()
+        start = str(Path(s.value("lastFolder", "")) / f"{self.document.rig.name}.bsproj")
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Save Project", start, "Projects (*.bsproj)")
+        if not path:
+            return False
+        if not path.lower().endswith(".bsproj"):
+            path += ".bsproj"
+        return self.save_to(path)
+
+    def save_to(self, path: str | Path) -> bool:
+        try:
+            self.document.save(path)
+        except OSError as exc:
+            self.show_error("Could not save", f"{path}: could not be written ({exc.strerror or exc}).")
+            return False
+        app_settings.add_recent_file(str(path))
+        self._rebuild_recent_menu()
+        self.statusBar().showMessage(f"Saved {path}", 5000)
+        return True
+
+    def export_pose(self) -> None:
+        if self.document.project is None:
+            return
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Export Pose as OBJ",
+                                                        f"{self.document.rig.name}_pose.obj", "OBJ (*.obj)")
+        if path:
+            self.export_pose_to(path)
+
+    def export_pose_to(self, path: str | Path) -> None:
+        from model.obj_io import write_obj
+        from model.pose import PoseEvaluator
+        rig = self.document.rig
+        points = PoseEvaluator(rig, dtype=np.float64).evaluate(self.document.weights)
+        try:
+            write_obj(path, points, rig.face_counts, rig.face_indices, header=f"Blendshape Studio pose of {rig.name}")
+        except OSError as exc:
+            self.show_error("Could not export", f"{path}: could not be written ({exc.strerror or exc}).")
+            return
+        self.statusBar().showMessage(f"Exported {path}", 5000)
+
+    def _rebuild_recent_menu(self) -> None:
+        self.recent_menu.clear()
+        files = app_settings.recent_files()
+        for i, f in enumerate(files):
+            act = self.recent_menu.addAction(f"&{i + 1} {f}")
+            act.triggered.connect(lambda _=False, p=f: self.open_path(p))
+        if files:
+            self.recent_menu.addSeparator()
+            self.recent_menu.addAction("Clear Recent", lambda: (app_settings.clear_recent_files(),
+                                                                self._rebuild_recent_menu()))
+        self.recent_menu.setEnabled(bool(files))
+
+    def _maybe_discard(self) -> bool:
+        if not self.confirm_discard or not self.document.is_modified:
+            return True
+        answer = QtWidgets.QMessageBox.question(
+            self, "Unsaved changes", "The project has unsaved changes. Save them first?",
+            QtWidgets.QMessageBox.Save | QtWidgets.QMessageBox.Discard | QtWidgets.QMessageBox.Cancel)
+        if answer == QtWidgets.QMessageBox.Save:
+            return self.save()
+        return answer == QtWidgets.QMessageBox.Discard
+
+    # --- messages ----------------------------------------------------------------------------------
+    def show_error(self, title: str, message: str) -> None:
+        """A clear, non-blocking error dialog; the message is kept in last_error (tests read it)."""
+        self.last_error = message
+        self.statusBar().showMessage(message, 10000)
+        box = QtWidgets.QMessageBox(QtWidgets.QMessageBox.Warning, title, message, QtWidgets.QMessageBox.Ok, self)
+        box.setAttribute(QtCore.Qt.WA_DeleteOnClose)
+        box.open()
+
+    def show_about(self) -> None:
+        QtWidgets.QMessageBox.about(self, "About Blendshape Studio",
+                                    "Blendshape Studio — pose, segment, solve and correct blendshape face rigs.")
+
+    def show_shortcuts(self) -> None:
+        rows = []
+        for menu in self.menuBar().findChildren(QtWidgets.QMenu):
+            for act in menu.actions():
+                if act.shortcut().toString():
+                    rows.append(f"<tr><td>{act.text().replace('&', '')}</td>"
+                                f"<td><b>{act.shortcut().toString()}</b></td></tr>")
+        QtWidgets.QMessageBox.information(self, "Keyboard Shortcuts", "<table>" + "".join(rows) + "</table>")
+
+    # --- window state ------------------------------------------------------------------------------
+    def _restore_layout(self) -> None:
+        s = app_settings.settings()
+        geo = s.value("window/geometry")
+        if geo is not None:
+            self.restoreGeometry(geo)
+        state = s.value("window/state")
+        if state is not None:
+            self.restoreState(state)
+
+    def closeEvent(self, event: QtGui.QCloseEvent) -> None:
+        if not self._maybe_discard():
+            event.ignore()
+            return
+        s = app_settings.settings()
+        s.setValue("window/geometry", self.saveGeometry())
+        s.setValue("window/state", self.saveState())
+        if self._worker is not None:
+            self._worker.wait()
+        self.viewport.close_viewport()
+        super().closeEvent(event)

@@ -1,0 +1,36 @@
+"""What a view shows: the posed points plus an optional colour map, for the viewport and ``render``.
+
+A view is computed here (app layer, calling solvers) and drawn by widgets.scene.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from model.errors import RigInputError
+from model.pose import PoseEvaluator
+from model.rig import Rig
+from widgets.scene import ColorMap, focus_vertices
+
+VIEWS = ("shaded", "deformation", "deformation-rgb", "segmentation")
+
+
+@dataclass
+class View:
+    points: np.ndarray
+    focus: np.ndarray
+    colormap: ColorMap | None
+    title: str
+
+
+def build_view(rig: Rig, weights: np.ndarray, view: str = "shaded", *, threshold: float = 0.75,
+               level: int = 0) -> View:
+    if view not in VIEWS:
+        raise RigInputError(f"Unknown view '{view}': use one of {', '.join(VIEWS)}.")
+    points = PoseEvaluator(rig).evaluate(weights)
+    focus = focus_vertices(rig.neutral, rig.deltas)
+    if view == "shaded":
+        return View(points, focus, None, "shaded")
+    from app.map_views import map_colormap
+    return View(points, focus, map_colormap(rig, view, threshold=threshold, level=level), view)

@@ -1,0 +1,68 @@
+"""The command line on real data: info, export, render, and one-sentence errors with a non-zero exit."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from model.obj_io import read_obj
+from tests.cli_runner import run_cli
+from tests.rig_files import write_rig_folder
+
+
+def test_info_json_on_ict(ict_dir):
+    info = json.loads(run_cli("info", ict_dir, "--json").stdout)
+    assert info["vertices"] == 26719 and info["faces"] == 26384 and len(info["shapes"]) == 57
+    assert info["units"] == "cm" and "jawOpen" in info["shapes"]
+
+
+def test_export_keeps_vertex_order(ict_dir, ict_rig, tmp_path):
+    out = tmp_path / "jaw.obj"
+    run_cli("export", ict_dir, "--weights", "jawOpen=1,mouthSmile_L=0.5", "-o", out)
+    mesh = read_obj(out)
+    expected = ict_rig.neutral + ict_rig.deltas[ict_rig.shape_index("jawOpen")] \
+        + 0.5 * ict_rig.deltas[ict_rig.shape_index("mouthSmile_L")]
+    assert mesh.vertices.shape == (26719, 3)
+    np.testing.assert_allclose(mesh.vertices, expected, atol=1e-5)
+    assert np.array_equal(mesh.face_counts, ict_rig.face_counts)
+    assert np.array_equal(mesh.face_indices, ict_rig.face_indices)
+
+
+def test_render_jaw_open_changes_the_mouth(ict_dir, tmp_path):
+    from tests.image_compare import load_png
+    run_cli("render", ict_dir, "-o", tmp_path / "n.png", "--size", "400,400")
+    run_cli("render", ict_dir, "-o", tmp_path / "j.png", "--size", "400,400", "--weights", "jawOpen=1")
+    a, b = load_png(tmp_path / "n.png"), load_png(tmp_path / "j.png")
+    assert a.shape == (400, 400, 3)
+    diff = np.abs(a.astype(int) - b.astype(int)).sum(axis=2) > 40
+    ys, xs = np.nonzero(diff)
+    assert diff.sum() > 500, "opening the jaw should change many pixels"
+    # The change sits in the lower-middle of the face (mouth and chin), not at the top of the head.
+    assert 0.45 * 400 < np.median(ys) < 0.85 * 400 and 0.35 * 400 < np.median(xs) < 0.65 * 400
+
+
+@pytest.mark.parametrize("args, words", [
+    (["info", "{folder}/nope"], ["does not exist"]),
+    (["render", "{folder}", "-o", "{tmp}/x.png", "--weights", "jawOpen=1"], ["no shape named 'jawOpen'"]),
+    (["render", "{folder}", "-o", "{tmp}/x.png", "--weights", "raise"], ["not NAME=VALUE"]),
+    (["export", "{folder}", "-o", "{tmp}/x.obj", "--weights", "raise=abc"], ["not a number"]),
+    (["render", "{folder}", "-o", "{tmp}/x.png", "--size", "big"], ["--size"]),
+])
+def test_cli_errors_are_one_sentence(tmp_path, args, words):
+    folder = tmp_path / "rig"
+    write_rig_folder(folder)
+    proc = run_cli(*[a.format(folder=folder, tmp=tmp_path) for a in args], check=False)
+    assert proc.returncode != 0
+    err = proc.stderr.strip()
+    assert err.startswith("error: ") and err.count("\n") == 0, err
+    for w in words:
+        assert w in err
+
+
+def test_cli_bad_target_names_the_file(tmp_path):
+    folder = tmp_path / "rig"
+    write_rig_folder(folder)
+    (folder / "raise.obj").write_text("v 1 2\n")
+    proc = run_cli("info", folder, check=False)
+    assert proc.returncode == 2 and "raise.obj" in proc.stderr

@@ -1,0 +1,102 @@
+"""The .bsproj project: exact round trip, atomic save, damaged files named clearly."""
+from __future__ import annotations
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from model.errors import RigInputError
+from model.project import Project, load_project, save_project
+from model.readers import load_rig
+from tests.rig_files import write_rig_folder
+
+
+@pytest.fixture
+def small_project(tmp_path):
+    write_rig_folder(tmp_path / "rig")
+    rig = load_rig(tmp_path / "rig")
+    rig.presets = {"half": {"raise": 0.5}}
+    return Project(rig=rig, weights=np.array([0.25, 0.75]), sections={"segmentation": {"t": 0.6}},
+                   arrays={"keys": np.arange(6.0).reshape(2, 3)})
+
+
+def test_round_trip_exact(small_project, tmp_path):
+    path = tmp_path / "p.bsproj"
+    save_project(small_project, path)
+    back = load_project(path)
+    r0, r1 = small_project.rig, back.rig
+    for a in ("neutral", "face_counts", "face_indices", "deltas"):
+        assert np.array_equal(getattr(r0, a), getattr(r1, a)), a
+    assert r1.shape_names == r0.shape_names and r1.units == r0.units and r1.presets == r0.presets
+    assert np.array_equal(back.weights, small_project.weights)
+    assert back.sections == {"segmentation": {"t": 0.6}}
+    assert np.array_equal(back.arrays["keys"], small_project.arrays["keys"])
+
+
+def test_ict_round_trip_exact(ict_rig, tmp_path):
+    path = tmp_path / "ict.bsproj"
+    w = np.linspace(0, 1, ict_rig.n_shapes)
+    save_project(Project(rig=ict_rig, weights=w), path)
+    back = load_project(path)
+    assert np.array_equal(back.rig.deltas, ict_rig.deltas) and np.array_equal(back.rig.neutral, ict_rig.neutral)
+    assert np.array_equal(back.rig.face_indices, ict_rig.face_indices) and back.rig.shape_names == ict_rig.shape_names
+    assert np.array_equal(back.weights, w)
+
+
+def test_crash_mid_save_keeps_previous_file(small_project, tmp_path, monkeypatch):
+    path = tmp_path / "p.bsproj"
+    save_project(small_project, path)
+    before = path.read_bytes()
+    import model.project as mp
+
+    def boom(a):
+        raise OSError("disk full")
+    monkeypatch.setattr(mp, "_npy_bytes", boom)
+    with pytest.raises(OSError):
+        save_project(small_project, path)
+    assert path.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["p.bsproj", "rig"]  # no temporary left behind
+
+
+def _rewrite(path, drop=None, replace=None):
+    with zipfile.ZipFile(path) as z:
+        items = {n: z.read(n) for n in z.namelist()}
+    if drop:
+        items.pop(drop)
+    items.update(replace or {})
+    with zipfile.ZipFile(path, "w") as z:
+        for n, b in items.items():
+            z.writestr(n, b)
+
+
+def test_damaged_projects(small_project, tmp_path):
+    path = tmp_path / "p.bsproj"
+    save_project(small_project, path)
+    good = path.read_bytes()
+
+    path.write_bytes(good[: len(good) // 2])
+    with pytest.raises(RigInputError, match="damaged zip"):
+        load_project(path)
+
+    path.write_bytes(good)
+    _rewrite(path, drop="manifest.json")
+    with pytest.raises(RigInputError, match="no manifest"):
+        load_project(path)
+
+    path.write_bytes(good)
+    import io
+    buf = io.BytesIO()
+    np.save(buf, np.zeros((3, 3)))
+    _rewrite(path, replace={"rig/deltas.npy": buf.getvalue()})
+    with pytest.raises(RigInputError, match=r"rig/deltas.*shape"):
+        load_project(path)
+
+    path.write_bytes(good)
+    _rewrite(path, replace={"manifest.json": json.dumps({"format": "something-else"}).encode()})
+    with pytest.raises(RigInputError, match="not a Blendshape Studio project"):
+        load_project(path)
+    with pytest.raises(RigInputError) as info:
+        load_project(path)
+    assert str(info.value).startswith(str(path))

@@ -1,0 +1,138 @@
+"""Scene building shared by the GUI viewport and the headless ``render`` command.
+
+Turns rig arrays into pyvista meshes, sets the look (skin material, lights, cameras) and colour maps
+with legends. Holds no algorithm: scalars to colour by are computed elsewhere and passed in.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+import numpy as np
+
+SKIN = (0.86, 0.70, 0.60)
+BACKGROUND_TOP = (0.33, 0.35, 0.40)
+BACKGROUND_BOTTOM = (0.12, 0.12, 0.14)
+CAMERAS = ("front", "left", "right", "three-quarter")
+
+
+def use_offscreen_backend_if_headless() -> None:
+    """Without an X display, let VTK render through EGL instead of failing on X (call before importing VTK)."""
+    if not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY"):
+        os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
+
+
+def vtk_faces(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
+    """Polygons in VTK's padded cell format [n, i0, ..., n, ...], polygons kept as in the file."""
+    counts = np.asarray(face_counts, dtype=np.int64)
+    out = np.empty(counts.size + counts.sum(), dtype=np.int64)
+    starts = np.concatenate(([0], np.cumsum(counts + 1)[:-1]))
+    out[starts] = counts
+    mask = np.ones(out.size, dtype=bool)
+    mask[starts] = False
+    out[mask] = face_indices
+    return out
+
+
+def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray):
+    """A pyvista PolyData of the surface (float32 points for display)."""
+    import pyvista as pv
+    return pv.PolyData(np.asarray(points, dtype=np.float32), vtk_faces(face_counts, face_indices))
+
+
+@dataclass
+class ColorMap:
+    """Per-vertex scalars with their colour map and legend text (title includes units)."""
+    scalars: np.ndarray          # (V,) values, or (V, 3) uint8 RGB when rgb=True
+    title: str = ""
+    cmap: str = "inferno"
+    clim: tuple[float, float] | None = None
+    rgb: bool = False
+    categorical: bool = False
+
+
+def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: bool = False, name="surface"):
+    """Add the rig surface with smooth shading; colour by ``colormap`` with a legend if given."""
+    kwargs = dict(smooth_shading=True, name=name, show_edges=wireframe, edge_color=(0.15, 0.15, 0.18),
+                  line_width=0.5, specular=0.25, specular_power=20, diffuse=0.85, ambient=0.12,
+                  reset_camera=False)
+    if colormap is None:
+        return plotter.add_mesh(mesh, color=SKIN, **kwargs)
+    if colormap.rgb:
+        mesh.point_data["colors"] = np.asarray(colormap.scalars, dtype=np.uint8)
+        return plotter.add_mesh(mesh, scalars="colors", rgb=True, **kwargs)
+    mesh.point_data["values"] = np.asarray(colormap.scalars, dtype=np.float32)
+    bar = dict(title=colormap.title or " ", vertical=True, position_x=0.86, position_y=0.12, height=0.76,
+               width=0.06, title_font_size=14, label_font_size=12, n_labels=5, fmt="%.3g",
+               color="white")
+    if colormap.categorical:
+        return plotter.add_mesh(mesh, scalars="values", cmap=colormap.cmap, clim=colormap.clim,
+                                show_scalar_bar=False, interpolate_before_map=False, **kwargs)
+    return plotter.add_mesh(mesh, scalars="values", cmap=colormap.cmap, clim=colormap.clim,
+                            scalar_bar_args=bar, **kwargs)
+
+
+def style_plotter(plotter) -> None:
+    plotter.set_background(BACKGROUND_BOTTOM, top=BACKGROUND_TOP)
+    plotter.enable_lightkit()
+
+
+def camera_direction(name: str) -> tuple[np.ndarray, np.ndarray]:
+    """(direction from focus to eye, view up) for a camera preset. The face looks down +Z, Y up."""
+    dirs = {
+        "front": (0.0, 0.0, 1.0),
+        "left": (1.0, 0.0, 0.0),     # the character's left side (+X)
+        "right": (-1.0, 0.0, 0.0),
+        "three-quarter": (0.55, 0.12, 0.83),
+    }
+    if name not in dirs:
+        raise ValueError(f"Unknown camera '{name}': use one of {', '.join(CAMERAS)}.")
+    d = np.asarray(dirs[name])
+    return d / np.linalg.norm(d), np.array([0.0, 1.0, 0.0])
+
+
+def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float = 30.0) -> None:
+    """Frame ``focus_points`` (e.g. the face area) from a preset direction."""
+    pts = np.asarray(focus_points, dtype=np.float64)
+    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    center = (lo + hi) / 2
+    radius = 0.5 * np.linalg.norm(hi - lo)
+    d, up = camera_direction(name)
+    dist = radius / np.tan(np.radians(view_angle / 2)) * 1.05
+    cam = plotter.camera
+    cam.view_angle = view_angle
+    cam.focal_point = center.tolist()
+    cam.position = (center + d * dist).tolist()
+    cam.up = up.tolist()
+    plotter.reset_camera_clipping_range()
+
+
+def focus_vertices(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
+    """The points a camera should frame: the vertices any shape moves (the face), else all."""
+    if deltas.size:
+        moving = np.abs(deltas).max(axis=(0, 2)) > 1e-6 * max(1.0, np.abs(neutral).max())
+        if moving.sum() >= 3:
+            pts = neutral[moving]
+            # Drop interior parts (teeth, tongue, eyeballs move too but sit inside the face box).
+            return pts
+    return neutral
+
+
+def render_png(points, face_counts, face_indices, out_path, *, focus=None, colormap: ColorMap | None = None,
+               camera: str = "front", size=(1024, 768), wireframe=False, overlays=None, title: str = "") -> None:
+    """Render the surface off screen to a PNG file."""
+    use_offscreen_backend_if_headless()
+    import pyvista as pv
+    plotter = pv.Plotter(off_screen=True, window_size=list(size))
+    try:
+        style_plotter(plotter)
+        mesh = rig_mesh(points, face_counts, face_indices)
+        add_surface(plotter, mesh, colormap, wireframe=wireframe)
+        for add in overlays or ():
+            add(plotter)
+        if title:
+            plotter.add_text(title, position="upper_left", font_size=11, color="white")
+        set_camera(plotter, camera, points if focus is None else focus)
+        plotter.screenshot(str(out_path))
+    finally:
+        plotter.close()
