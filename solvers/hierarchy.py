@@ -1,0 +1,165 @@
+"""Region hierarchy (ALGORITHMS.md §3; Joshi et al. 2003, §4).
+
+Level 0 is the finest segmentation; each higher level merges contiguous regions until the top level is
+one region (plus the background), which is the global solve.
+
+Merge rule. Every vertex is given to its nearest region core by graph distance (a graph-Voronoi
+partition, one multi-source Dijkstra on the unweighted mesh graph). Two regions are *contiguous* when
+their cells meet. For such a pair, ``gap`` is the graph distance between their cores (1 when the cores
+touch; min over cell-boundary edges (i, j) of d(i) + 1 + d(j)) and ``boundary`` is the number of mesh edges
+between the two cells that lie on a path at most ``gap + 2`` long (the length of the front where they are
+close). Clusters inherit the smallest gap of their member pairs and the summed boundary of the pairs at
+that gap. Merges go by smaller gap first, then largest shared boundary, then smaller label; within one
+pass each cluster merges at most once (a greedy matching), and passes repeat until the level's target
+count is reached. Regions whose cells never meet (separate mesh pieces) are merged last, closest
+centroids first, so the top level is always one region.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from model.errors import RigInputError
+
+
+def level_targets(n_regions: int, levels: int | None = None) -> list[int]:
+    """Region count of each level, strictly decreasing from ``n_regions`` to 1 (Joshi et al. 2003, §4).
+
+    ``levels=None`` halves the count per level (⌈R/2⌉, ⌈R/4⌉, …, 1). A given ``levels`` N spaces the counts
+    geometrically, ``R^(1 − i/(N−1))``; N is capped at R (one merge per level) since every level must have
+    strictly fewer regions than the one below. ``levels=1`` keeps only level 0.
+    """
+    R = int(n_regions)
+    if R <= 0:
+        return []
+    if levels is not None:
+        if int(levels) < 1:
+            raise RigInputError(f"The hierarchy needs at least one level; got {levels}.")
+        N = min(int(levels), R)
+        if N == 1:
+            return [R]
+        out = [R]
+        for i in range(1, N):
+            want = int(round(R ** (1.0 - i / (N - 1))))
+            want = max(min(want, out[-1] - 1), N - i)  # strictly decreasing, room for the levels above
+            out.append(want)
+        return out
+    out = [R]
+    while out[-1] > 1:
+        out.append(int(math.ceil(out[-1] / 2)))
+    return out
+
+
+def region_contacts(labels: np.ndarray, adjacency: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
+    """Contiguity of regions for the merge rule of Joshi et al. 2003, §4 (see the module doc).
+
+    (R, R) ``gap`` (graph distance between cores, inf if the graph-Voronoi cells never meet) and
+    ``boundary`` (mesh edges between the two cells within ``gap + 2`` hops) of every region pair."""
+    labels = np.asarray(labels, dtype=np.int64)
+    R = int(labels.max()) + 1 if (labels >= 0).any() else 0
+    gap = np.full((R, R), np.inf)
+    bnd = np.zeros((R, R))
+    if R < 2:
+        return gap, bnd
+    A = sp.csr_matrix(adjacency)
+    src = np.flatnonzero(labels >= 0)
+    dist, _, sources = csgraph.dijkstra(A, directed=False, indices=src, unweighted=True,
+                                        min_only=True, return_predecessors=True)
+    cell = np.where(sources >= 0, labels[np.maximum(sources, 0)], -1)
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    cols = A.indices
+    m = (rows < cols) & (cell[rows] >= 0) & (cell[cols] >= 0) & (cell[rows] != cell[cols])
+    i, j = rows[m], cols[m]
+    a, b = cell[i], cell[j]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    length = dist[i] + dist[j] + 1.0
+    np.minimum.at(gap, (lo, hi), length)
+    near = length <= gap[lo, hi] + 2.0
+    np.add.at(bnd, (lo[near], hi[near]), 1.0)
+    gap = np.minimum(gap, gap.T)
+    bnd = bnd + bnd.T
+    return gap, bnd
+
+
+def merge_clusters(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.ndarray,
+                   levels: int | None = None) -> list[np.ndarray]:
+    """Cluster id of each level-0 region for every level (Joshi et al. 2003, §4; rule in the module doc).
+
+    Returns a list of (R,) int arrays, level 0 first (the identity), the last all zeros (one region).
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    R = int(labels.max()) + 1 if (labels >= 0).any() else 0
+    targets = level_targets(R, levels)
+    if not targets:
+        return []
+    gap, bnd = region_contacts(labels, adjacency)
+    P = np.asarray(positions, dtype=np.float64)
+    fg = labels >= 0
+    sizes = np.bincount(labels[fg], minlength=R).astype(np.float64)
+    sums = np.stack([np.bincount(labels[fg], weights=P[fg, c], minlength=R) for c in range(3)], axis=1)
+    cluster = np.arange(R)
+    out = [cluster.copy()]
+    ii, jj = np.triu_indices(R, 1)
+    for target in targets[1:]:
+        while True:
+            uniq, cluster = np.unique(cluster, return_inverse=True)
+            n = uniq.size
+            if n <= target:
+                break
+            ci, cj = cluster[ii], cluster[jj]
+            lo, hi = np.minimum(ci, cj), np.maximum(ci, cj)
+            keep = lo != hi
+            cg = np.full((n, n), np.inf)
+            np.minimum.at(cg, (lo[keep], hi[keep]), gap[ii[keep], jj[keep]])
+            at_min = keep & (gap[ii, jj] == cg[lo, hi]) & np.isfinite(gap[ii, jj])
+            cb = np.zeros((n, n))
+            np.add.at(cb, (lo[at_min], hi[at_min]), bnd[ii[at_min], jj[at_min]])
+            pa, pb = np.triu_indices(n, 1)
+            g = cg[pa, pb]
+            finite = np.isfinite(g)
+            if finite.any():
+                pa, pb, g, b = pa[finite], pb[finite], g[finite], cb[pa[finite], pb[finite]]
+                order = np.lexsort((pb, pa, -b, g))
+                pairs = list(zip(pa[order], pb[order]))
+            else:  # no contiguous pair left: closest centroids (separate mesh pieces)
+                csum = np.zeros((n, 3))
+                np.add.at(csum, cluster, sums)
+                csz = np.bincount(cluster, weights=sizes, minlength=n)
+                cen = csum / csz[:, None]
+                dd = np.linalg.norm(cen[pa] - cen[pb], axis=1)
+                k = int(np.argmin(dd))
+                pairs = [(pa[k], pb[k])]
+            used = np.zeros(n, dtype=bool)
+            merge_to = np.arange(n)
+            count = n
+            for a, b in pairs:
+                if count <= target:
+                    break
+                if used[a] or used[b]:
+                    continue
+                used[a] = used[b] = True
+                merge_to[b] = a
+                count -= 1
+            cluster = merge_to[cluster]
+        _, cluster = np.unique(cluster, return_inverse=True)
+        out.append(cluster.copy())
+    return out
+
+
+def hierarchy_labels(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.ndarray,
+                     levels: int | None = None) -> list[np.ndarray]:
+    """Per-vertex core labels of every level (level 0 = ``labels``); background (-1) is kept at every level.
+
+    Joshi et al. 2003, §4: each level merges contiguous regions of the level below; the top has one region.
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    fg = labels >= 0
+    out = []
+    for cl in merge_clusters(labels, adjacency, positions, levels):
+        lab = np.full(labels.size, -1, dtype=np.int64)
+        lab[fg] = cl[labels[fg]]
+        out.append(lab)
+    return out

@@ -1,0 +1,142 @@
+"""Mesh graph and discrete Laplacians on plain arrays (ALGORITHMS.md §2; Joshi et al. 2003, §2).
+
+The mesh is given as polygons (``face_counts`` + flat ``face_indices``, as in ``model.rig.Rig``) or as an
+(E, 2) edge list. Everything is built once as ``scipy.sparse`` CSR and reused.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from model.errors import RigInputError
+
+
+def polygon_edges(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
+    """(E, 2) unique undirected polygon edges (i < j), sorted; each polygon is closed (last → first).
+
+    The 1-ring graph of Joshi et al. 2003, §2 (ALGORITHMS.md §2).
+    """
+    counts = np.asarray(face_counts, dtype=np.int64)
+    idx = np.asarray(face_indices, dtype=np.int64)
+    if int(counts.sum()) != idx.size:
+        raise RigInputError("The face list is inconsistent: the polygon sizes do not add up to the indices.")
+    if idx.size == 0:
+        return np.zeros((0, 2), dtype=np.int64)
+    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    nxt = np.arange(idx.size) + 1
+    nxt[starts + counts - 1] = starts
+    a, b = idx, idx[nxt]
+    lo, hi = np.minimum(a, b), np.maximum(a, b)
+    keep = lo != hi
+    n = int(hi.max()) + 1
+    key = np.unique(lo[keep] * n + hi[keep])  # 1-D keys: much faster than np.unique(axis=0)
+    return np.stack([key // n, key % n], axis=1)
+
+
+def adjacency_matrix(n_vertices: int, edges: np.ndarray) -> sp.csr_matrix:
+    """Symmetric (V, V) 0/1 vertex adjacency (the 1-ring graph N(v) of Joshi et al. 2003, §2) as CSR float64."""
+    e = np.asarray(edges, dtype=np.int64).reshape(-1, 2)
+    if e.size and (e.min() < 0 or e.max() >= n_vertices):
+        raise RigInputError("An edge refers to a vertex that does not exist.")
+    e = e[e[:, 0] != e[:, 1]]
+    rows = np.concatenate([e[:, 0], e[:, 1]])
+    cols = np.concatenate([e[:, 1], e[:, 0]])
+    A = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n_vertices, n_vertices))
+    A.sum_duplicates()
+    A.data[:] = 1.0
+    A.sort_indices()
+    return A
+
+
+def mesh_adjacency(n_vertices: int, face_counts: np.ndarray, face_indices: np.ndarray) -> sp.csr_matrix:
+    """Vertex adjacency graph of a polygon mesh: neighbours share a polygon edge (Joshi et al. 2003, §2 N(v))."""
+    return adjacency_matrix(n_vertices, polygon_edges(face_counts, face_indices))
+
+
+def uniform_laplacian(adjacency: sp.spmatrix) -> sp.csr_matrix:
+    """Umbrella Laplacian ``L = D⁻¹A − I`` (Joshi et al. 2003, §2; ALGORITHMS.md §2).
+
+    ``(L x)(v) = (1/|N(v)|) Σ_{u∈N(v)} (x(u) − x(v))`` over the 1-ring N(v). Isolated vertices get a zero
+    row. The constant vector is in the kernel, so the Laplacian of a translation is exactly zero.
+    """
+    A = sp.csr_matrix(adjacency, dtype=np.float64)
+    n = A.shape[0]
+    deg = np.diff(A.indptr)
+    inv = np.zeros(n)
+    inv[deg > 0] = 1.0 / deg[deg > 0]
+    W = sp.csr_matrix((A.data * np.repeat(inv, deg), A.indices, A.indptr), shape=A.shape)
+    L = W - sp.diags((deg > 0).astype(np.float64), format="csr")
+    L = sp.csr_matrix(L)
+    L.sort_indices()
+    return L
+
+
+def cotangent_weights(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_matrix:
+    """Symmetric (V, V) cotangent weights ``w_ij = (cot α_ij + cot β_ij) / 2`` over a triangle mesh.
+
+    Pinkall & Polthier 1993 / Meyer et al. 2003, the cotangent option of ALGORITHMS.md §2.
+    """
+    X = np.asarray(vertices, dtype=np.float64)
+    T = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    n = X.shape[0]
+    rows, cols, vals = [], [], []
+    for k in range(3):  # the angle at corner k is opposite edge (i, j)
+        i, j, o = T[:, (k + 1) % 3], T[:, (k + 2) % 3], T[:, k]
+        a, b = X[i] - X[o], X[j] - X[o]
+        cross = np.linalg.norm(np.cross(a, b), axis=1)
+        dot = np.einsum("ij,ij->i", a, b)
+        cot = np.where(cross > 1e-300, dot / np.maximum(cross, 1e-300), 0.0)
+        rows += [i, j]
+        cols += [j, i]
+        vals += [0.5 * cot, 0.5 * cot]
+    W = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n))
+    W.sum_duplicates()
+    W.setdiag(0.0)
+    W.eliminate_zeros()
+    return W
+
+
+def cotangent_laplacian(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_matrix:
+    """Row-normalised cotangent Laplacian ``(L x)(v) = Σ_u w_vu (x(u) − x(v)) / Σ_u w_vu``.
+
+    Cotangent weights (Pinkall & Polthier 1993) in the normalised form of the umbrella operator (Joshi et al.
+    2003, §2), so both maps are unitless and comparable. Rows whose weight sum is not positive (degenerate
+    or very obtuse neighbourhoods) fall back to the uniform weights, so translations stay in the kernel.
+    """
+    X = np.asarray(vertices, dtype=np.float64)
+    W = cotangent_weights(X, triangles)
+    n = X.shape[0]
+    s = np.asarray(W.sum(axis=1)).ravel()
+    bad = s <= 1e-12
+    if bad.any():
+        deg = np.diff(W.indptr)
+        row_of = np.repeat(np.arange(n), deg)
+        W.data = np.where(bad[row_of], 1.0, W.data)
+        s = np.asarray(W.sum(axis=1)).ravel()
+    deg = np.diff(W.indptr)
+    inv = np.zeros(n)
+    inv[s > 0] = 1.0 / s[s > 0]
+    Wn = sp.csr_matrix((W.data * np.repeat(inv, deg), W.indices, W.indptr), shape=W.shape)
+    L = sp.csr_matrix(Wn - sp.diags((s > 0).astype(np.float64), format="csr"))
+    L.sort_indices()
+    return L
+
+
+def mesh_laplacian(vertices: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
+                   kind: str = "uniform", adjacency: sp.spmatrix | None = None) -> sp.csr_matrix:
+    """The mesh Laplacian of ALGORITHMS.md §2 (Joshi et al. 2003, §2): ``kind`` 'uniform' or 'cotangent'."""
+    n = int(np.asarray(vertices).shape[0])
+    if kind == "uniform":
+        A = adjacency if adjacency is not None else mesh_adjacency(n, face_counts, face_indices)
+        return uniform_laplacian(A)
+    if kind == "cotangent":
+        from model.rig import fan_triangulate
+        return cotangent_laplacian(vertices, fan_triangulate(face_counts, face_indices))
+    raise RigInputError(f"Unknown Laplacian '{kind}': use 'uniform' or 'cotangent'.")
+
+
+def directed_edges(adjacency: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of every stored entry of a CSR adjacency, each undirected edge both ways (ALGORITHMS.md §3)."""
+    A = sp.csr_matrix(adjacency)
+    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+    return rows, A.indices.astype(np.int64)

@@ -1,0 +1,312 @@
+"""Threshold segmentation of a deformation map (ALGORITHMS.md §3; Joshi et al. 2003, §2).
+
+Labels are (V,) int arrays: ``r ≥ 0`` is the core of region r, ``-1`` (``BACKGROUND``) the background.
+Functions take the (V, V) CSR vertex adjacency from ``solvers.laplacian``.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+from model.errors import RigInputError
+
+BACKGROUND = -1
+
+
+# --- threshold ----------------------------------------------------------------------------------------
+
+def validate_threshold_t(t) -> float:
+    """The threshold quantile t of Joshi et al. 2003, §2 as a float in [0, 1], or RigInputError."""
+    try:
+        value = float(t)
+    except (TypeError, ValueError):
+        raise RigInputError(f"The segmentation threshold must be a number between 0 and 1, not {t!r}.") from None
+    if not (0.0 <= value <= 1.0) or math.isnan(value):
+        raise RigInputError(f"The segmentation threshold t must lie between 0 and 1; got {value:g}.")
+    return value
+
+
+def quantile_threshold(sorted_values: np.ndarray, t: float) -> float:
+    """``threshold = D[⌊n·t⌋]`` with D the map sorted ascending (Joshi et al. 2003, §2; ALGORITHMS.md §3).
+
+    t = 1 uses the last element (nothing lies strictly above it).
+    """
+    t = validate_threshold_t(t)
+    D = np.asarray(sorted_values)
+    n = D.size
+    if n == 0:
+        raise RigInputError("The deformation map is empty: the rig has no vertices.")
+    return float(D[min(int(math.floor(n * t)), n - 1)])
+
+
+def connected_regions(mask: np.ndarray, adjacency: sp.spmatrix) -> np.ndarray:
+    """Labels of the connected components of the vertex set ``mask`` on the mesh graph; -1 elsewhere.
+
+    Regions are the components of the deforming set (Joshi et al. 2003, §2), numbered by smallest vertex.
+    """
+    mask = np.asarray(mask, dtype=bool)
+    labels = np.full(mask.size, BACKGROUND, dtype=np.int64)
+    idx = np.flatnonzero(mask)
+    if idx.size == 0:
+        return labels
+    A = sp.csr_matrix(adjacency)[idx][:, idx]
+    _, comp = csgraph.connected_components(A, directed=False)
+    labels[idx] = comp
+    return relabel(labels)
+
+
+def relabel(labels: np.ndarray) -> np.ndarray:
+    """Renumber region labels 0..R-1 by each region's smallest vertex index; -1 stays (ALGORITHMS.md §3)."""
+    labels = np.asarray(labels, dtype=np.int64)
+    out = np.full(labels.size, BACKGROUND, dtype=np.int64)
+    fg = labels >= 0
+    if not fg.any():
+        return out
+    uniq, first = np.unique(labels[fg], return_index=True)
+    order = np.argsort(first)  # regions ordered by their first (smallest) vertex
+    new_of = np.empty(uniq.size, dtype=np.int64)
+    new_of[order] = np.arange(uniq.size)
+    out[fg] = new_of[np.searchsorted(uniq, labels[fg])]
+    return out
+
+
+def _rows_cols(adjacency: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
+    A = sp.csr_matrix(adjacency)
+    return np.repeat(np.arange(A.shape[0]), np.diff(A.indptr)), A.indices
+
+
+# --- clean-up -----------------------------------------------------------------------------------------
+
+def absorb_small_regions(labels: np.ndarray, adjacency: sp.spmatrix, min_size: int) -> np.ndarray:
+    """Merge every region with fewer than ``min_size`` vertices into the neighbour it shares most boundary with.
+
+    Joshi et al. 2003, §2 (clean-up, ALGORITHMS.md §3). Boundary = number of mesh edges between the two
+    vertex sets; the background counts as a neighbour. An island with no neighbour joins the background.
+    A small region whose best neighbour is another small region merges into it only if it is the smaller
+    of the two (ties by label), so merges never cycle; rounds repeat until no region is small.
+    """
+    lab = relabel(labels)
+    if min_size <= 1:
+        return lab
+    rows, cols = _rows_cols(adjacency)
+    while True:
+        R = int(lab.max()) + 1
+        if R == 0:
+            return lab
+        sizes = np.bincount(lab[lab >= 0], minlength=R)
+        small = sizes < min_size
+        if not small.any():
+            return lab
+        la, lb = lab[rows], lab[cols]
+        cross = (la != lb) & (la >= 0)
+        cross &= small[np.where(la >= 0, la, 0)]
+        a = la[cross]
+        b = np.where(lb[cross] >= 0, lb[cross], R)  # R = background
+        C = sp.coo_matrix((np.ones(a.size), (a, b)), shape=(R, R + 1)).toarray()
+        target = np.full(R, -2, dtype=np.int64)  # -2: keep
+        has = C.sum(axis=1) > 0
+        best = C.argmax(axis=1)
+        for r in np.flatnonzero(small):
+            if not has[r]:
+                target[r] = BACKGROUND
+                continue
+            t = int(best[r])
+            if t == R:
+                target[r] = BACKGROUND
+            elif not small[t] or (sizes[r], r) < (sizes[t], t):
+                target[r] = t
+        # resolve chains r → t → u within one round
+        mapping = np.arange(R, dtype=np.int64)
+        for r in np.flatnonzero(target != -2):
+            mapping[r] = target[r]
+        for _ in range(R):
+            nxt = np.where(mapping >= 0, mapping[np.maximum(mapping, 0)], BACKGROUND)
+            if np.array_equal(nxt, mapping):
+                break
+            mapping = nxt
+        lab = relabel(np.where(lab >= 0, mapping[np.maximum(lab, 0)], BACKGROUND))
+
+
+def close_regions(labels: np.ndarray, adjacency: sp.spmatrix, rings: int) -> np.ndarray:
+    """Reduce concavity by graph closing: grow ``rings`` rings, then shrink ``rings`` rings.
+
+    Joshi et al. 2003, §2 (clean-up). The closing is taken of the union of all regions (so it also
+    bridges narrow background gaps); a vertex it adds takes the label of the nearest region (ring-by-ring
+    growth). Closing never removes a vertex from a region.
+    """
+    lab = np.asarray(labels, dtype=np.int64).copy()
+    if rings <= 0 or not (lab >= 0).any():
+        return lab
+    A = sp.csr_matrix(adjacency)
+    rows, cols = _rows_cols(A)
+    grown = lab.copy()
+    for _ in range(rings):  # dilation with nearest-region labels
+        take = (grown[rows] >= 0) & (grown[cols] < 0)
+        new = grown.copy()
+        new[cols[take]] = grown[rows[take]]
+        grown = new
+    inside = grown >= 0
+    for _ in range(rings):  # erosion of the dilated union
+        outside_nbr = (A @ (~inside).astype(np.float64)) > 0
+        inside = inside & ~outside_nbr
+    add = inside & (lab < 0)
+    lab[add] = grown[add]
+    return lab
+
+
+def fill_background_holes(labels: np.ndarray, adjacency: sp.spmatrix) -> np.ndarray:
+    """Fill background holes inside a region (Joshi et al. 2003, §2 clean-up).
+
+    A hole is a connected piece of background whose every region neighbour is one region r, that is
+    smaller than r's core and is not the largest piece of background; it joins r.
+    """
+    lab = np.asarray(labels, dtype=np.int64).copy()
+    bg = np.flatnonzero(lab < 0)
+    if bg.size == 0 or bg.size == lab.size:
+        return lab
+    A = sp.csr_matrix(adjacency)
+    ncomp, comp = csgraph.connected_components(A[bg][:, bg], directed=False)
+    comp_of = np.full(lab.size, -1, dtype=np.int64)
+    comp_of[bg] = comp
+    csize = np.bincount(comp, minlength=ncomp)
+    rows, cols = _rows_cols(A)
+    m = (comp_of[rows] >= 0) & (lab[cols] >= 0)
+    pairs = np.unique(np.stack([comp_of[rows[m]], lab[cols[m]]], axis=1), axis=0)
+    if pairs.size == 0:
+        return lab
+    n_nbr = np.bincount(pairs[:, 0], minlength=ncomp)
+    region_of = np.full(ncomp, -1, dtype=np.int64)
+    region_of[pairs[:, 0]] = pairs[:, 1]
+    rsize = np.bincount(lab[lab >= 0])
+    largest = int(csize.argmax())
+    fill = (n_nbr == 1) & (np.arange(ncomp) != largest)
+    fill &= csize < rsize[np.maximum(region_of, 0)]
+    hit = fill[comp_of[bg]]
+    lab[bg[hit]] = region_of[comp_of[bg[hit]]]
+    return lab
+
+
+def clean_up(labels: np.ndarray, adjacency: sp.spmatrix, *, min_size: int, concavity_rings: int) -> np.ndarray:
+    """Clean-up of ALGORITHMS.md §3 (Joshi et al. 2003, §2), in this order: absorb islands smaller than
+    ``min_size``; closing by ``concavity_rings``; fill background holes; absorb again. Relabelled 0..R-1."""
+    lab = absorb_small_regions(labels, adjacency, min_size)
+    lab = close_regions(lab, adjacency, concavity_rings)
+    lab = fill_background_holes(lab, adjacency)
+    return absorb_small_regions(lab, adjacency, min_size)
+
+
+def threshold_labels(values: np.ndarray, adjacency: sp.spmatrix, t: float, *,
+                     sorted_values: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+    """Raw threshold segmentation (Joshi et al. 2003, §2): ``threshold = D[⌊n·t⌋]``, deforming = M > threshold,
+    regions = connected components of the deforming set. Returns (labels, threshold)."""
+    values = np.asarray(values, dtype=np.float64)
+    D = np.sort(values) if sorted_values is None else sorted_values
+    thr = quantile_threshold(D, t)
+    return connected_regions(values > thr, adjacency), thr
+
+
+# --- overlap and blending -----------------------------------------------------------------------------
+
+def ring_distances(core: np.ndarray, adjacency: sp.spmatrix, rings: int,
+                   n_vertices: int | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices at graph distance 1..rings from ``core`` and their distances: the overlap rings of
+    Joshi et al. 2003, §2 (ALGORITHMS.md §3), by breadth-first search."""
+    A = sp.csr_matrix(adjacency)
+    n = A.shape[0] if n_vertices is None else n_vertices
+    seen = np.zeros(n, dtype=bool)
+    seen[core] = True
+    frontier = np.asarray(core, dtype=np.int64)
+    out_v, out_d = [], []
+    for d in range(1, rings + 1):
+        if frontier.size == 0:
+            break
+        nb = A[frontier].indices
+        nb = np.unique(nb[~seen[nb]])
+        seen[nb] = True
+        out_v.append(nb)
+        out_d.append(np.full(nb.size, d, dtype=np.int64))
+        frontier = nb
+    if not out_v:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    return np.concatenate(out_v), np.concatenate(out_d)
+
+
+def region_cores(labels: np.ndarray) -> list[np.ndarray]:
+    """Sorted core vertex indices of each region 0..R-1 of a label array (ALGORITHMS.md §3)."""
+    labels = np.asarray(labels)
+    fg = np.flatnonzero(labels >= 0)
+    if fg.size == 0:
+        return []
+    order = fg[np.argsort(labels[fg], kind="stable")]
+    counts = np.bincount(labels[fg])
+    return [np.sort(c) for c in np.split(order, np.cumsum(counts)[:-1])]
+
+
+def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int
+                      ) -> tuple[list[np.ndarray], list[np.ndarray], sp.csr_matrix]:
+    """Grow every region by ``rings`` rings and build partition-of-unity blend weights (ALGORITHMS.md §3).
+
+    Joshi et al. 2003, §2–4: regions overlap by one ring [default] and a partition of unity
+    ``φ_r(v)``, ``Σ_r φ_r(v) = 1``, joins their results. Raw weights: 1 on a region's core, the linear ramp
+    ``(rings + 1 − d)/(rings + 1)`` at ring distance d in its overlap, 1 on the background for background
+    vertices; each row is divided by its sum. Returns (cores, vertices, blend) with ``vertices`` = core ∪
+    overlap (sorted) and ``blend`` (V, R+1) CSR whose last column is the background.
+    """
+    labels = np.asarray(labels, dtype=np.int64)
+    V = labels.size
+    if rings < 0:
+        raise RigInputError(f"The overlap must be zero or more rings; got {rings}.")
+    A = sp.csr_matrix(adjacency)
+    cores = region_cores(labels)
+    R = len(cores)
+    fg = np.flatnonzero(labels >= 0)
+    # (V, R) indicators, all regions at once: ring d = (A @ ring d-1) minus everything reached so far.
+    core_ind = sp.csr_matrix((np.ones(fg.size), (fg, labels[fg])), shape=(V, R))
+    raw = core_ind.copy()
+    reach = core_ind.copy()
+    frontier = core_ind
+    for d in range(1, rings + 1):
+        nb = A @ frontier
+        nb.data[:] = 1.0
+        new = nb - nb.multiply(reach)
+        new.eliminate_zeros()
+        if new.nnz == 0:
+            break
+        raw = raw + new * ((rings + 1.0 - d) / (rings + 1.0))
+        reach = reach + new
+        frontier = new
+    reach = reach.tocsc()
+    reach.sort_indices()
+    verts = [reach.indices[reach.indptr[r]:reach.indptr[r + 1]].astype(np.int64) for r in range(R)]
+    bg = np.flatnonzero(labels < 0)
+    bg_col = sp.csr_matrix((np.ones(bg.size), (bg, np.zeros(bg.size, dtype=np.int64))), shape=(V, 1))
+    W = sp.csr_matrix(sp.hstack([raw, bg_col], format="csr"))
+    W.sum_duplicates()
+    s = np.asarray(W.sum(axis=1)).ravel()  # ≥ 1: every vertex is in a core or the background
+    W.data /= np.repeat(s, np.diff(W.indptr))
+    W.sort_indices()
+    return cores, verts, W
+
+
+# --- statistics ---------------------------------------------------------------------------------------
+
+def region_shape_activity(per_shape: np.ndarray, cores: list[np.ndarray]) -> np.ndarray:
+    """(R, K) activity of each shape in each region: ``Σ_{v∈core} m_k(v)`` (Joshi et al. 2003, §2 maps)."""
+    P = np.asarray(per_shape)
+    if not cores:
+        return np.zeros((0, P.shape[1]))
+    return np.stack([P[c].sum(axis=0) for c in cores])
+
+
+def most_active_shapes(activity: np.ndarray, shape_names: list[str], n: int = 5) -> list[list[tuple[str, float]]]:
+    """Per region, the ``n`` shapes with the largest activity ``Σ_core m_k`` (Joshi et al. 2003, §2), as
+    (name, share of the region's total)."""
+    out = []
+    for row in np.asarray(activity):
+        total = float(row.sum())
+        top = np.argsort(-row, kind="stable")[:n]
+        out.append([(shape_names[k], float(row[k] / total) if total > 0 else 0.0) for k in top])
+    return out

@@ -1,0 +1,128 @@
+"""Mesh Laplacian and deformation maps (ALGORITHMS.md §2) on the real ICT FaceKit rig."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from model.errors import RigInputError
+from solvers.deformation_maps import (deformation_maps, displacement_map, laplacian_magnitudes,
+                                      laplacian_vectors, vector_colors)
+from solvers.laplacian import (adjacency_matrix, cotangent_laplacian, mesh_adjacency, mesh_laplacian,
+                               polygon_edges, uniform_laplacian)
+
+
+@pytest.fixture(scope="module")
+def ict_graph(ict_rig):
+    A = mesh_adjacency(ict_rig.n_vertices, ict_rig.face_counts, ict_rig.face_indices)
+    return A, uniform_laplacian(A)
+
+
+@pytest.fixture(scope="module")
+def ict_maps(ict_rig, ict_graph):
+    return deformation_maps(ict_graph[1], ict_rig.deltas)
+
+
+def test_polygon_edges_match_the_rig_edges(ict_rig):
+    assert np.array_equal(polygon_edges(ict_rig.face_counts, ict_rig.face_indices), ict_rig.edges())
+
+
+def test_adjacency_is_the_symmetric_one_ring(ict_rig, ict_graph):
+    A, _ = ict_graph
+    assert (A != A.T).nnz == 0
+    assert A.diagonal().sum() == 0
+    e = ict_rig.edges()
+    assert A.nnz == 2 * len(e)
+    assert A[e[0, 0], e[0, 1]] == 1.0
+
+
+def test_uniform_laplacian_is_the_umbrella_operator(ict_rig, ict_graph):
+    A, L = ict_graph
+    x = ict_rig.neutral
+    v = 1234
+    nbrs = A[v].indices
+    expected = (x[nbrs] - x[v]).mean(axis=0)
+    assert np.allclose((L @ x)[v], expected, atol=1e-12)
+    # rows of connected vertices sum to zero
+    assert np.allclose(np.asarray(L.sum(axis=1)).ravel(), 0.0, atol=1e-12)
+
+
+def test_laplacian_of_a_rigidly_translated_shape_is_zero(ict_rig, ict_graph):
+    _, L = ict_graph
+    V = ict_rig.n_vertices
+    translated = np.broadcast_to(np.array([0.3, -1.2, 2.5]), (1, V, 3))
+    assert np.abs(laplacian_magnitudes(L, translated)).max() < 1e-12
+    Lc = mesh_laplacian(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, "cotangent")
+    assert np.abs(laplacian_magnitudes(Lc, translated)).max() < 1e-12
+    # while a real shape is not zero
+    assert laplacian_magnitudes(L, ict_rig.deltas[:1]).max() > 1e-3
+
+
+def test_laplacian_of_a_linear_field_is_zero_inside_a_flat_grid():
+    n = 6
+    g = np.stack(np.meshgrid(np.arange(n), np.arange(n), indexing="ij"), -1).reshape(-1, 2).astype(float)
+    pts = np.column_stack([g, np.zeros(len(g))])
+    quads = np.array([[i * n + j, (i + 1) * n + j, (i + 1) * n + j + 1, i * n + j + 1]
+                      for i in range(n - 1) for j in range(n - 1)])
+    counts = np.full(len(quads), 4)
+    field = np.column_stack([2 * pts[:, 0] + pts[:, 1], -pts[:, 1], 0.5 * pts[:, 0]])[None]
+    interior = np.array([i * n + j for i in range(1, n - 1) for j in range(1, n - 1)])
+    for kind in ("uniform", "cotangent"):
+        L = mesh_laplacian(pts, counts, quads.ravel(), kind)
+        assert np.abs(laplacian_vectors(L, field)[interior]).max() < 1e-12, kind
+        # a bump is not linear: it shows
+        bump = np.zeros((1, n * n, 3))
+        bump[0, 14, 2] = 1.0
+        assert laplacian_magnitudes(L, bump)[14, 0] > 0.5
+
+
+def test_all_shapes_in_one_product_equal_shape_by_shape(ict_rig, ict_graph, ict_maps):
+    _, L = ict_graph
+    for k in (0, 30, 56):
+        single = np.linalg.norm(L @ ict_rig.deltas[k], axis=1)
+        assert np.allclose(ict_maps.per_shape[:, k], single, atol=1e-12)
+
+
+def test_combined_map_argmax_and_vector(ict_rig, ict_graph, ict_maps):
+    m = ict_maps
+    V, K = m.per_shape.shape
+    assert (V, K) == (ict_rig.n_vertices, ict_rig.n_shapes)
+    assert np.array_equal(m.combined, m.per_shape.max(axis=1))
+    rows = np.arange(V)
+    assert np.array_equal(m.per_shape[rows, m.argmax_shape], m.combined)
+    v = int(np.argmax(m.combined))
+    k = int(m.argmax_shape[v])
+    assert np.allclose(m.vector[v], (ict_graph[1] @ ict_rig.deltas[k])[v])
+    assert np.allclose(np.linalg.norm(m.vector, axis=1), m.combined)
+    # the strongest local deformation of ICT is in the mouth, from the jaw or a mouth shape
+    assert ict_rig.shape_names[k].startswith(("jaw", "mouth"))
+    rgb = vector_colors(m.vector)
+    assert rgb.shape == (V, 3) and rgb.min() >= 0 and rgb.max() <= 1
+    assert np.allclose(vector_colors(np.zeros((3, 3))), 0.5)
+
+
+def test_displacement_map_is_the_largest_shape_displacement(ict_rig, ict_maps):
+    d = ict_maps.displacement
+    assert np.allclose(d, np.linalg.norm(ict_rig.deltas, axis=2).max(axis=0))
+    assert np.array_equal(displacement_map(ict_rig.deltas), d)
+    assert ict_maps.values("displacement") is d and ict_maps.values("laplacian") is ict_maps.combined
+    with pytest.raises(RigInputError, match="Unknown map"):
+        ict_maps.values("curvature")
+
+
+def test_cotangent_laplacian_is_row_normalised(ict_rig):
+    from model.rig import fan_triangulate
+    Lc = cotangent_laplacian(ict_rig.neutral, fan_triangulate(ict_rig.face_counts, ict_rig.face_indices))
+    assert np.allclose(np.asarray(Lc.sum(axis=1)).ravel(), 0.0, atol=1e-9)
+    assert np.allclose(Lc.diagonal()[np.diff(Lc.indptr) > 1], -1.0)
+
+
+def test_bad_input_messages(ict_rig, ict_graph):
+    _, L = ict_graph
+    with pytest.raises(RigInputError, match="no blendshapes"):
+        deformation_maps(L, np.zeros((0, ict_rig.n_vertices, 3)))
+    with pytest.raises(RigInputError, match=r"\(K, 26719, 3\)"):
+        deformation_maps(L, np.zeros((2, 10, 3)))
+    with pytest.raises(RigInputError, match="does not exist"):
+        adjacency_matrix(3, np.array([[0, 5]]))
+    with pytest.raises(RigInputError, match="Unknown Laplacian"):
+        mesh_laplacian(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, "harmonic")
