@@ -1,0 +1,85 @@
+"""PC2 point caches (the Blender / Maya / 3ds Max point-cache format), written atomically and streamed.
+
+Layout (little-endian): ``b'POINTCACHE2\\0'`` (12 bytes), int32 version (1), int32 numPoints, float32
+startFrame, float32 sampleRate, int32 numSamples, then float32 samples × points × 3. ``sampleRate`` is the
+frame step between samples (1.0 = every frame), as Blender and Max write it.
+"""
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+from typing import Iterable
+
+import numpy as np
+
+from .atomic import atomic_write_with
+from .errors import RigInputError
+
+MAGIC = b"POINTCACHE2\0"
+HEADER = struct.Struct("<12siiffi")
+
+
+def write_pc2(path: str | Path, frames: np.ndarray | Iterable[np.ndarray], *, n_points: int | None = None,
+              start_frame: float = 0.0, sample_rate: float = 1.0) -> int:
+    """Write frames (F, N, 3) — an array, or any iterable of (N, 3) arrays for long takes, streamed one frame
+    at a time — to a PC2 file atomically (a crash mid-write leaves any previous file intact).
+    Returns the number of samples written."""
+    if isinstance(frames, np.ndarray):
+        if frames.ndim != 3 or frames.shape[2] != 3:
+            raise RigInputError(f"{path}: a point cache needs frames of shape (F, N, 3), not {frames.shape}.")
+        n_points = frames.shape[1] if n_points is None else n_points
+    count = [0]
+
+    def writer(f):
+        f.write(HEADER.pack(MAGIC, 1, int(n_points or 0), float(start_frame), float(sample_rate), 0))
+        npts = n_points
+        for frame in frames:
+            a = np.asarray(frame, dtype="<f4")
+            if npts is None:
+                npts = a.shape[0]
+            if a.shape != (npts, 3):
+                raise RigInputError(f"{path}: frame {count[0]} has shape {a.shape}, expected ({npts}, 3).")
+            if not np.isfinite(a).all():
+                raise RigInputError(f"{path}: frame {count[0]} has NaN or infinite coordinates.")
+            f.write(np.ascontiguousarray(a).tobytes())
+            count[0] += 1
+        if npts is None:
+            raise RigInputError(f"{path}: no frames to write and no point count given.")
+        f.seek(0)
+        f.write(HEADER.pack(MAGIC, 1, int(npts), float(start_frame), float(sample_rate), count[0]))
+        f.seek(0, 2)
+
+    atomic_write_with(path, writer)
+    return count[0]
+
+
+def read_pc2_header(path: str | Path) -> dict:
+    """{"n_points", "start_frame", "sample_rate", "n_samples"} of a PC2 file (validated against its size)."""
+    path = Path(path)
+    if not path.is_file():
+        raise RigInputError(f"{path}: does not exist.")
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(HEADER.size)
+    if len(head) < HEADER.size:
+        raise RigInputError(f"{path}: is too short to be a PC2 point cache.")
+    magic, version, n_points, start, rate, n_samples = HEADER.unpack(head)
+    if magic != MAGIC:
+        raise RigInputError(f"{path}: is not a PC2 point cache (no POINTCACHE2 signature).")
+    if version != 1 or n_points < 0 or n_samples < 0:
+        raise RigInputError(f"{path}: has an unsupported or corrupt PC2 header (version {version}).")
+    expected = HEADER.size + 12 * n_points * n_samples
+    if size < expected:
+        raise RigInputError(f"{path}: is truncated ({size} bytes, the header promises {expected}).")
+    return {"n_points": n_points, "start_frame": start, "sample_rate": rate, "n_samples": n_samples}
+
+
+def read_pc2(path: str | Path, *, mmap: bool = False) -> tuple[np.ndarray, float, float]:
+    """(frames (F, N, 3) float32, start_frame, sample_rate) of a PC2 file; ``mmap`` maps it read-only."""
+    h = read_pc2_header(path)
+    shape = (h["n_samples"], h["n_points"], 3)
+    if mmap:
+        data = np.memmap(path, dtype="<f4", mode="r", offset=HEADER.size, shape=shape)
+    else:
+        data = np.fromfile(path, dtype="<f4", count=int(np.prod(shape)), offset=HEADER.size).reshape(shape)
+    return data, h["start_frame"], h["sample_rate"]

@@ -1,0 +1,64 @@
+"""Per-frame weights as CSV: ``frame,time,<shape names...>``, one row per frame (written atomically)."""
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import atomic_write
+from .errors import RigInputError
+
+
+def write_weights_csv(path: str | Path, weights: np.ndarray, names: list[str], *, rate: float | None = None,
+                      times: np.ndarray | None = None, frames: np.ndarray | None = None) -> None:
+    """Write weights (F, K) with ``names`` (K); times from ``times`` or ``frame / rate`` (rate in fps)."""
+    W = np.asarray(weights, dtype=np.float64)
+    if W.ndim != 2 or W.shape[1] != len(names):
+        raise RigInputError(f"{path}: {len(names)} shape names but weights of shape {W.shape}.")
+    if len(set(names)) != len(names):
+        raise RigInputError(f"{path}: duplicate shape names in the weights.")
+    F = W.shape[0]
+    fr = np.arange(F) if frames is None else np.asarray(frames)
+    if times is None:
+        if rate is None or rate <= 0:
+            raise RigInputError(f"{path}: give the frame rate (fps > 0) or the frame times.")
+        times = fr / float(rate)
+    times = np.asarray(times, dtype=np.float64)
+    if fr.shape != (F,) or times.shape != (F,):
+        raise RigInputError(f"{path}: frames and times must have one entry per row of weights ({F}).")
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["frame", "time", *names])
+    for i in range(F):
+        w.writerow([int(fr[i]), repr(float(times[i])), *(repr(float(x)) for x in W[i])])
+    atomic_write(path, buf.getvalue().encode("utf-8"))
+
+
+def read_weights_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray]:
+    """(frames (F,) int, times (F,), names (K), weights (F, K)) from a weights CSV."""
+    path = Path(path)
+    if not path.is_file():
+        raise RigInputError(f"{path}: does not exist.")
+    text = path.read_text(encoding="utf-8-sig", errors="replace")
+    rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
+    if not rows:
+        raise RigInputError(f"{path}: the file is empty.")
+    header = [c.strip() for c in rows[0]]
+    if len(header) < 3 or header[0].lower() != "frame" or header[1].lower() != "time":
+        raise RigInputError(f"{path}: a weights CSV starts with the columns frame,time,<shape names>.")
+    names = header[2:]
+    if len(set(names)) != len(names):
+        raise RigInputError(f"{path}: duplicate shape names in the header.")
+    data = rows[1:]
+    bad = next((i for i, r in enumerate(data) if len(r) != len(header)), None)
+    if bad is not None:
+        raise RigInputError(f"{path}: row {bad + 2} has {len(data[bad])} values, the header has {len(header)}.")
+    try:
+        arr = np.array([[float(c) for c in r] for r in data], dtype=np.float64).reshape(len(data), len(header))
+    except ValueError:
+        raise RigInputError(f"{path}: has a value that is not a number.") from None
+    if not np.isfinite(arr).all():
+        raise RigInputError(f"{path}: has NaN or infinite values.")
+    return arr[:, 0].astype(np.int64), arr[:, 1], names, arr[:, 2:]

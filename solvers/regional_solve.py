@@ -1,0 +1,161 @@
+"""Per-region weight solves for one level of the region hierarchy (Joshi et al. 2003, §4, Eq. 2; ALGORITHMS.md
+§4 and §8).
+
+Each region r of a level owns the markers that sit on its vertices (core plus overlap) and the shapes that
+move inside it (max displacement in r above ``shape_threshold`` × the region's largest). For every region
+holding markers the bounded least-squares problem of ``solvers.weight_solve`` (Joshi Eq. 2 with Ma et al.
+2016 Eq. 3–4 sparsity and the λ_r term to the current pose) is solved for the region's shapes; the region's
+other shapes keep their weights, and their contribution at the markers is subtracted from the targets.
+Regions without markers keep their weights; the background row (last) keeps the global weights.
+The result is a (R+1, K) regional pose, evaluated as ``x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v)``
+(``model.pose.PoseEvaluator.evaluate_regional(W, blend)``).
+
+Everything is set up once per (markers, level) in ``RegionalSolver`` (per-region ``AᵀA`` factors), so one
+drag step costs a few small QPs: for ~8 regions and a handful of markers, well under a millisecond each.
+"""
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from model.errors import RigInputError
+
+from .weight_solve import WeightSolver
+
+
+def shape_region_max(deltas: np.ndarray, regions: list[np.ndarray]) -> np.ndarray:
+    """(R, K) the largest displacement ‖d_k(v)‖ of each shape k over each region's vertices (Joshi §2 maps)."""
+    D = np.asarray(deltas)
+    K = D.shape[0]
+    out = np.zeros((len(regions), K))
+    if not regions:
+        return out
+    union = np.unique(np.concatenate([np.asarray(r, dtype=np.int64) for r in regions]))
+    pos = np.full(D.shape[1], -1, dtype=np.int64)
+    pos[union] = np.arange(union.size)
+    norms = np.sqrt(np.einsum("kvc,kvc->kv", D[:, union], D[:, union]))  # (K, U)
+    for r, verts in enumerate(regions):
+        idx = pos[np.asarray(verts, dtype=np.int64)]
+        if idx.size:
+            out[r] = norms[:, idx].max(axis=1)
+    return out
+
+
+def region_shapes(region_max: np.ndarray, threshold: float = 0.02) -> list[np.ndarray]:
+    """Per region, the shapes whose max displacement there is above ``threshold`` × the region's largest."""
+    M = np.asarray(region_max)
+    out = []
+    for row in M:
+        top = row.max(initial=0.0)
+        out.append(np.flatnonzero(row > threshold * top) if top > 0 else np.zeros(0, dtype=np.int64))
+    return out
+
+
+def markers_in_regions(sampling: sp.spmatrix, regions: list[np.ndarray]) -> list[np.ndarray]:
+    """Per region, the markers (rows of ``sampling`` (M, V)) that put weight on a vertex of the region."""
+    S = sp.csr_matrix(sampling)
+    V = S.shape[1]
+    out = []
+    for verts in regions:
+        mask = np.zeros(V, dtype=np.float64)
+        mask[np.asarray(verts, dtype=np.int64)] = 1.0
+        out.append(np.flatnonzero(np.asarray(abs(S) @ mask).reshape(-1) > 0))
+    return out
+
+
+class RegionalSolver:
+    """Per-region bounded least-squares weight solves for one hierarchy level (Joshi et al. 2003, §4, Eq. 2;
+    Ma et al. 2016, Eq. 3–4), set up once per marker set and level.
+
+    regions        R vertex index arrays (core plus overlap) of the level's non-background regions.
+    sampling       (M, V) sparse marker sampling (``MarkerSet.S``).
+    marker_rows    (3M, K) marker rows of the deltas (``MarkerSet.delta_rows``), row 3j + c.
+    deltas         (K, V, 3) shape deltas, used only to find which shapes move in each region; or give
+                   ``region_max`` (R, K) (``shape_region_max``) instead.
+    solve_background  also solve the background row globally from all markers (default: keep it).
+    Other keywords go to ``WeightSolver`` (mode, lam_sparsity, lam_temporal, lam_reg, lower, upper).
+    """
+
+    def __init__(self, regions: list[np.ndarray], sampling: sp.spmatrix, marker_rows: np.ndarray, *,
+                 deltas: np.ndarray | None = None, region_max: np.ndarray | None = None,
+                 shape_threshold: float = 0.02, solve_background: bool = False, mode: str = "box",
+                 lam_sparsity: float = 0.0, lam_temporal: float = 0.0, lam_reg: float = 1e-3,
+                 lower=0.0, upper=1.0) -> None:
+        A = np.asarray(marker_rows, dtype=np.float64)
+        S = sp.csr_matrix(sampling)
+        M = S.shape[0]
+        if A.ndim != 2 or A.shape[0] != 3 * M:
+            raise RigInputError(f"The regional solve needs {3 * M} marker rows for {M} markers, not {A.shape[0]}.")
+        self.K = A.shape[1]
+        self.R = len(regions)
+        self.n_markers = M
+        self.A = A
+        if region_max is None:
+            if deltas is None:
+                raise RigInputError("The regional solve needs the deltas or the per-region shape displacement.")
+            region_max = shape_region_max(deltas, regions)
+        region_max = np.asarray(region_max)
+        if region_max.shape != (self.R, self.K):
+            raise RigInputError(f"The per-region shape displacement must be ({self.R}, {self.K}), not {region_max.shape}.")
+        self.shapes = region_shapes(region_max, shape_threshold)
+        self.markers = markers_in_regions(S, regions)
+        lo = np.broadcast_to(np.asarray(lower, dtype=np.float64), (self.K,))
+        hi = np.broadcast_to(np.asarray(upper, dtype=np.float64), (self.K,))
+        opts = dict(mode=mode, lam_sparsity=lam_sparsity, lam_temporal=lam_temporal, lam_reg=lam_reg)
+        self._problems: list[tuple | None] = []  # (r, rows, shapes, other shapes, solver, A_others)
+        for r in range(self.R):
+            mk, sh = self.markers[r], self.shapes[r]
+            if mk.size == 0 or sh.size == 0:
+                self._problems.append(None)
+                continue
+            rows = (3 * mk[:, None] + np.arange(3)).reshape(-1)
+            others = np.setdiff1d(np.arange(self.K), sh)
+            Ar = A[rows]
+            solver = WeightSolver(Ar[:, sh], lower=lo[sh], upper=hi[sh], **opts)
+            self._problems.append((r, rows, sh, others, solver, Ar[:, others]))
+        self._background = None
+        if solve_background and M:
+            self._background = WeightSolver(A, lower=lo, upper=hi, **opts)
+
+    @property
+    def active_regions(self) -> list[int]:
+        """Regions that hold markers and shapes (the ones a solve changes)."""
+        return [p[0] for p in self._problems if p is not None]
+
+    def solve(self, b: np.ndarray, weights: np.ndarray, *, w_prev: np.ndarray | None = None) -> np.ndarray:
+        """New (R+1, K) regional weights for targets ``b`` (3M,) = marker targets − neutral at the markers
+        (NaN for markers to ignore), starting from and regularised toward the current ``weights`` (R+1, K).
+        ``w_prev`` (R+1, K) feeds the temporal term when ``lam_temporal`` > 0."""
+        W = np.asarray(weights, dtype=np.float64)
+        if W.shape != (self.R + 1, self.K):
+            raise RigInputError(f"The regional weights must be ({self.R + 1}, {self.K}), not {W.shape}.")
+        b = np.asarray(b, dtype=np.float64).reshape(-1)
+        if b.shape[0] != 3 * self.n_markers:
+            raise RigInputError(f"The regional solve got {b.shape[0]} target values for {self.n_markers} markers.")
+        out = W.copy()
+        for prob in self._problems:
+            if prob is None:
+                continue
+            r, rows, sh, others, solver, A_others = prob
+            br = b[rows]
+            if not np.isfinite(br).any():
+                continue
+            if others.size:
+                br = br - A_others @ W[r, others]
+            wr = W[r, sh]
+            prev = None if w_prev is None else np.asarray(w_prev)[r, sh]
+            out[r, sh] = solver.solve(br, w_ref=wr, w_start=wr, w_prev=prev)
+        if self._background is not None:
+            wr = W[self.R]
+            prev = None if w_prev is None else np.asarray(w_prev)[self.R]
+            out[self.R] = self._background.solve(b, w_ref=wr, w_start=wr, w_prev=prev)
+        return out
+
+
+def solve_regions(regions: list[np.ndarray], sampling: sp.spmatrix, marker_rows: np.ndarray, b: np.ndarray,
+                  weights: np.ndarray, *, deltas: np.ndarray | None = None, region_max: np.ndarray | None = None,
+                  **options) -> np.ndarray:
+    """One-off per-region solve (Joshi et al. 2003, §4, Eq. 2): builds a ``RegionalSolver`` and solves once.
+    Returns the new (R+1, K) regional weights. Use the class during a drag (it caches the set-up)."""
+    return RegionalSolver(regions, sampling, marker_rows, deltas=deltas, region_max=region_max,
+                          **options).solve(b, weights)
