@@ -122,6 +122,20 @@ def cmd_export(args) -> int:
     return 0
 
 
+def cmd_segment(args) -> int:
+    from model.atomic import atomic_write
+    from model.segmentation import SegmentationSettings, segment_rig, segmentation_to_json
+    rig = _load(args)
+    settings = SegmentationSettings(t=args.threshold, levels=args.levels, map_kind=args.map,
+                                    min_region_size=args.min_size, overlap_rings=args.overlap, method=args.method)
+    seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, settings)
+    atomic_write(args.output, json.dumps(segmentation_to_json(seg)).encode("utf-8"))
+    counts = ", ".join(str(lvl.n_regions) for lvl in seg.levels)
+    print(f"wrote {args.output}: {len(seg.levels)} levels with {counts} regions "
+          f"({seg.seconds.get('total', 0.0) * 1000:.0f} ms)")
+    return 0
+
+
 def cmd_sample(args) -> int:
     from resources.sample_rig import write_sample
     out = write_sample(args.output)
@@ -167,6 +181,17 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", required=True, help="OBJ file to write")
     sp.set_defaults(func=cmd_export)
 
+    sp = sub.add_parser("segment", help="segment the face into regions and a hierarchy (JSON)")
+    rig_arg(sp)
+    sp.add_argument("--threshold", type=float, default=0.75, help="quantile t in [0, 1] of the map (default 0.75)")
+    sp.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: until one region)")
+    sp.add_argument("--map", default="laplacian", choices=["laplacian", "displacement"])
+    sp.add_argument("--method", default="threshold", choices=["threshold", "region-growing"])
+    sp.add_argument("--min-size", type=int, default=30, help="smallest region in vertices (default 30)")
+    sp.add_argument("--overlap", type=int, default=1, help="overlap rings between regions (default 1)")
+    sp.add_argument("-o", "--output", required=True, help="JSON file to write")
+    sp.set_defaults(func=cmd_segment)
+
     sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder")
     sp.add_argument("-o", "--output", required=True, help="folder to write")
     sp.set_defaults(func=cmd_sample)
@@ -176,6 +201,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    from app.runtime import limit_blas_threads
+    limit_blas_threads()
     if not argv or (argv[0] not in _COMMANDS and not argv[0].startswith("-")):
         from app.gui import run_gui
         return run_gui(argv[0] if argv else None)

@@ -22,3 +22,62 @@ class SetWeightsCommand(QUndoCommand):
 
     def undo(self) -> None:
         self.document.set_weights(self.old)
+
+
+class SetSectionCommand(QUndoCommand):
+    """Replace a project section (e.g. the segmentation settings) with a new value."""
+
+    def __init__(self, document, name: str, old, new, text: str) -> None:
+        super().__init__(text)
+        import copy
+        self.document, self.name = document, name
+        self.old, self.new = copy.deepcopy(old), copy.deepcopy(new)
+
+    def redo(self) -> None:
+        self.document.set_section(self.name, self.new)
+
+    def undo(self) -> None:
+        self.document.set_section(self.name, self.old)
+
+
+class SetEditOffsetCommand(QUndoCommand):
+    """A sculpt stroke or a region nudge: the pending offset before and after."""
+
+    def __init__(self, document, old, new, text: str) -> None:
+        super().__init__(text)
+        self.document = document
+        self.old = None if old is None else np.array(old)
+        self.new = None if new is None else np.array(new)
+
+    def redo(self) -> None:
+        self.document.set_edit_offset(self.new)
+
+    def undo(self) -> None:
+        self.document.set_edit_offset(self.old)
+
+
+class AddShapeCommand(QUndoCommand):
+    """Add a new shape (e.g. from a nudged region) with weight 0, taking the pending offset with it."""
+
+    def __init__(self, document, name: str, delta: np.ndarray, text: str | None = None) -> None:
+        super().__init__(text or f"Add shape {name}")
+        self.document, self.name = document, name
+        self.delta = np.array(delta, dtype=np.float64)
+        self.offset = None if document.edit_offset is None else document.edit_offset.copy()
+
+    def redo(self) -> None:
+        rig, project = self.document.rig, self.document.project
+        rig.shape_names = rig.shape_names + [self.name]
+        rig.deltas = np.concatenate([rig.deltas, self.delta[None]], axis=0)
+        project.weights = np.append(project.weights, 0.0)
+        self.document.edit_offset = None
+        self.document.rig_edited()
+
+    def undo(self) -> None:
+        rig, project = self.document.rig, self.document.project
+        k = rig.shape_names.index(self.name)
+        rig.shape_names = rig.shape_names[:k] + rig.shape_names[k + 1:]
+        rig.deltas = np.delete(rig.deltas, k, axis=0)
+        project.weights = np.delete(project.weights, k)
+        self.document.edit_offset = self.offset
+        self.document.rig_edited()

@@ -20,6 +20,8 @@ class Document(QtCore.QObject):
     shapes_changed = QtCore.Signal()   # shapes or correctives edited on the same topology
     pose_changed = QtCore.Signal()     # weights changed — re-evaluate the surface
     path_changed = QtCore.Signal()
+    section_changed = QtCore.Signal(str)   # a project section (e.g. 'segmentation') was edited
+    offset_changed = QtCore.Signal()       # the pending sculpt/nudge offset changed
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
@@ -28,6 +30,7 @@ class Document(QtCore.QObject):
         self.path: Path | None = None
         self.evaluator: PoseEvaluator | None = None
         self._surface: np.ndarray | None = None
+        self.edit_offset: np.ndarray | None = None  # pending sculpt/nudge (V, 3), shown on top of the pose
 
     # --- whole document ----------------------------------------------------------------------------
     def set_project(self, project: Project, path: str | Path | None) -> None:
@@ -36,6 +39,7 @@ class Document(QtCore.QObject):
         self.path = Path(path) if path else None
         self.evaluator = PoseEvaluator(project.rig)
         self._surface = None
+        self.edit_offset = None
         self.undo_stack.clear()
         self.rig_changed.emit()
         self.path_changed.emit()
@@ -71,11 +75,30 @@ class Document(QtCore.QObject):
         self._surface = None
         self.pose_changed.emit()
 
-    def surface(self) -> np.ndarray:
-        """(V, 3) float32 posed surface, cached until the pose or shapes change."""
+    def posed_surface(self) -> np.ndarray:
+        """(V, 3) float32 surface of the pose alone (no pending sculpt), cached."""
         if self._surface is None:
             self._surface = self.evaluator.evaluate(self.project.weights)
         return self._surface
+
+    def surface(self) -> np.ndarray:
+        """(V, 3) float32 surface shown: the pose plus any pending sculpt/nudge offset."""
+        x = self.posed_surface()
+        return x if self.edit_offset is None else x + self.edit_offset.astype(np.float32)
+
+    def set_edit_offset(self, offset: np.ndarray | None) -> None:
+        self.edit_offset = None if offset is None else np.array(offset, dtype=np.float64)
+        self.offset_changed.emit()
+        self.pose_changed.emit()
+
+    # --- sections ----------------------------------------------------------------------------------
+    def section(self, name: str, default=None):
+        return self.project.sections.get(name, default)
+
+    def set_section(self, name: str, value) -> None:
+        import copy
+        self.project.sections[name] = copy.deepcopy(value)
+        self.section_changed.emit(name)
 
     def rig_edited(self) -> None:
         """Shapes or correctives changed in place (same topology): rebuild the evaluator."""

@@ -16,6 +16,7 @@ from app.loading import LoadWorker
 from model.errors import RigInputError
 from model.project import Project
 from widgets.scene import focus_vertices
+from widgets.segmentation_panel import SegmentationPanel
 from widgets.shapes_panel import ShapesPanel
 from widgets.viewport import Viewport
 
@@ -41,9 +42,13 @@ class MainWindow(QtWidgets.QMainWindow):
         self._progress: QtWidgets.QProgressDialog | None = None
         self._drag_old: np.ndarray | None = None
         self._redraw_pending = False
+        self.segmentation_panel = SegmentationPanel(self)
+        self.segmentation_dock = self._add_dock("Segmentation", self.segmentation_panel, QtCore.Qt.LeftDockWidgetArea)
         self._build_actions()
         self._build_status_bar()
         self._connect()
+        from app.segmentation_controller import SegmentationController
+        self.segmentation = SegmentationController(self, self.segmentation_panel)
         self._restore_layout()
 
     # --- construction ------------------------------------------------------------------------------
@@ -108,6 +113,7 @@ class MainWindow(QtWidgets.QMainWindow):
         v.addSeparator()
         self.panels_menu = v.addMenu("&Panels")
         self.panels_menu.addAction(self.shapes_dock.toggleViewAction())
+        self.panels_menu.addAction(self.segmentation_dock.toggleViewAction())
         self.undo_view = QtWidgets.QUndoView(self.document.undo_stack)
         self.undo_view.setEmptyLabel("<opened>")
         self.history_dock = self._add_dock("History", self.undo_view, QtCore.Qt.RightDockWidgetArea)
@@ -145,12 +151,19 @@ class MainWindow(QtWidgets.QMainWindow):
         self.shapes_panel.set_shapes(rig.shape_names, sorted(rig.presets))
         self.viewport.set_surface(self.document.surface(), rig.face_counts, rig.face_indices,
                                   focus=focus_vertices(rig.neutral, rig.deltas))
-        self.counts_label.setText(f"{rig.n_vertices:,} vertices · {rig.n_faces:,} faces · "
-                                  f"{rig.n_shapes} shapes · {len(rig.correctives)} correctives · {rig.units}")
+        self._update_counts()
         self._update_title()
 
+    def _update_counts(self) -> None:
+        rig = self.document.rig
+        self.counts_label.setText(f"{rig.n_vertices:,} vertices · {rig.n_faces:,} faces · "
+                                  f"{rig.n_shapes} shapes · {len(rig.correctives)} correctives · {rig.units}")
+
     def _on_rig_shapes_change(self) -> None:
-        self._on_rig_change()
+        rig = self.document.rig
+        self.shapes_panel.set_shapes(rig.shape_names, sorted(rig.presets))
+        self.shapes_panel.set_weights(self.document.weights)
+        self._update_counts()
 
     def _on_pose_change(self) -> None:
         self.shapes_panel.set_weights(self.document.weights)

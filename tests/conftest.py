@@ -9,6 +9,10 @@ from pathlib import Path
 
 import pytest
 
+from app.runtime import limit_blas_threads
+
+limit_blas_threads()  # as the app and the command line run
+
 REPO = Path(__file__).resolve().parents[1]
 DATA = Path(os.environ.get("BLENDSHAPE_STUDIO_DATA", REPO.parent / "shared" / "data"))
 ICT_DIR = DATA / "ict-facekit"

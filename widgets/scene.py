@@ -49,6 +49,7 @@ class ColorMap:
     clim: tuple[float, float] | None = None
     rgb: bool = False
     categorical: bool = False
+    legend: list[tuple[str, tuple[float, float, float]]] | None = None  # swatches for categorical/RGB views
 
 
 def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: bool = False, name="surface"):
@@ -58,6 +59,13 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
                   reset_camera=False)
     if colormap is None:
         return plotter.add_mesh(mesh, color=SKIN, **kwargs)
+    if colormap.legend:
+        entries = colormap.legend if len(colormap.legend) <= 10 else \
+            colormap.legend[:9] + [(f"… {len(colormap.legend) - 9} more", (0.7, 0.7, 0.7))]
+        plotter.add_legend(entries, bcolor=(0.1, 0.1, 0.12), border=False, face="rectangle", name="legend",
+                           size=(0.24, 0.035 * len(entries)), loc="upper left")
+        if colormap.title:
+            plotter.add_text(colormap.title, position="lower_right", font_size=10, color="white", name="legend_title")
     if colormap.rgb:
         mesh.point_data["colors"] = np.asarray(colormap.scalars, dtype=np.uint8)
         return plotter.add_mesh(mesh, scalars="colors", rgb=True, **kwargs)

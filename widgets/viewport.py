@@ -30,6 +30,10 @@ class Viewport(QtWidgets.QWidget):
         self._colormap: ColorMap | None = None
         self._wireframe = False
         self._camera = "front"
+        self._press_pos = None
+        iren = self.plotter.iren
+        iren.add_observer("LeftButtonPressEvent", self._on_left_press)
+        iren.add_observer("LeftButtonReleaseEvent", self._on_left_release)
 
     # --- content -----------------------------------------------------------------------------------
     def set_surface(self, points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
@@ -76,6 +80,35 @@ class Viewport(QtWidgets.QWidget):
             if key in self.mesh.point_data:
                 del self.mesh.point_data[key]
         add_surface(self.plotter, self.mesh, self._colormap, wireframe=self._wireframe)
+
+    # --- picking -----------------------------------------------------------------------------------
+    def pick(self, x: int, y: int):
+        """(vertex index, point) under display pixel (x, y from the bottom-left), or None."""
+        import vtk
+        if self.mesh is None:
+            return None
+        picker = vtk.vtkCellPicker()
+        picker.SetTolerance(0.0005)
+        if not picker.Pick(x, y, 0, self.plotter.renderer) or picker.GetCellId() < 0:
+            return None
+        if picker.GetDataSet() is None or picker.GetDataSet().GetNumberOfPoints() != self.mesh.n_points:
+            return None
+        point = np.array(picker.GetPickPosition())
+        cell = self.mesh.get_cell(picker.GetCellId())
+        ids = np.asarray(cell.point_ids)
+        pts = np.asarray(self.mesh.points)[ids]
+        return int(ids[np.argmin(np.linalg.norm(pts - point, axis=1))]), point
+
+    def _on_left_press(self, *args) -> None:
+        self._press_pos = self.plotter.iren.get_event_position()
+
+    def _on_left_release(self, *args) -> None:
+        pos = self.plotter.iren.get_event_position()
+        if self._press_pos is not None and abs(pos[0] - self._press_pos[0]) + abs(pos[1] - self._press_pos[1]) <= 3:
+            hit = self.pick(*pos)
+            if hit is not None:
+                self.picked.emit(hit[0], hit[1])
+        self._press_pos = None
 
     # --- camera ------------------------------------------------------------------------------------
     def set_camera(self, name: str) -> None:

@@ -1,0 +1,219 @@
+"""Connects the Segmentation panel, the document and the viewport; runs segmentation off the GUI thread.
+
+Everything that depends only on the rig (graph, Laplacian, maps, sorted values) lives in one
+SegmentationCache, so moving the threshold or the level redraws live (ALGORITHMS.md §2–3).
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from PySide6 import QtCore, QtWidgets
+
+from app.background import BackgroundRunner
+from app.commands import AddShapeCommand, SetEditOffsetCommand, SetSectionCommand
+from app.map_views import deformation_colormap, region_palette, segmentation_colormap
+from model.errors import RigInputError
+from model.segmentation import SegmentationCache, SegmentationSettings, region_statistics, segment_rig
+from solvers.region_nudge import nudge_region
+
+SECTION = "segmentation"
+
+
+class SegmentationController(QtCore.QObject):
+    segmentation_ready = QtCore.Signal()   # a new segmentation is shown (tests wait on it)
+
+    def __init__(self, window, panel, parent=None) -> None:
+        super().__init__(parent or window)
+        self.window, self.panel = window, panel
+        self.document, self.viewport = window.document, window.viewport
+        self.cache = SegmentationCache()
+        self.runner = BackgroundRunner(self)
+        self.segmentation = None
+        self.maps = None
+        self.level = 0
+        self.view = "shaded"
+        self.shape_map = -1
+        self.highlight: int | None = None
+        self.last_seconds = 0.0
+        d = self.document
+        d.rig_changed.connect(self._on_rig_change)
+        d.shapes_changed.connect(self._on_rig_change)
+        d.section_changed.connect(self._on_section_change)
+        p = panel
+        p.view_changed.connect(self._on_view_change)
+        p.shape_map_changed.connect(self._on_shape_map_change)
+        p.settings_previewed.connect(self.recompute)
+        p.settings_committed.connect(self.commit_settings)
+        p.level_changed.connect(self._on_level_change)
+        p.region_selected.connect(self._on_region_selected)
+        p.nudge_requested.connect(self.nudge)
+        p.save_nudge_requested.connect(self.save_nudge_as_shape)
+        self.viewport.picked.connect(self._on_picked)
+
+    # --- settings ----------------------------------------------------------------------------------
+    def settings(self) -> dict:
+        stored = self.document.section(SECTION) if self.document.project else None
+        try:
+            return SegmentationSettings.from_dict(stored or {}).to_dict()
+        except RigInputError:
+            return SegmentationSettings().to_dict()
+
+    def commit_settings(self, new: dict) -> None:
+        try:
+            SegmentationSettings.from_dict(new)
+        except RigInputError as exc:
+            self.panel.set_status(str(exc))
+            return
+        old = self.document.section(SECTION)
+        if old != new:
+            self.document.undo_stack.push(SetSectionCommand(self.document, SECTION, old, new, "Segmentation settings"))
+
+    def _on_section_change(self, name: str) -> None:
+        if name == SECTION:
+            self.panel.set_settings(self.settings())
+            self.recompute(self.settings())
+
+    def _on_rig_change(self) -> None:
+        self.cache = SegmentationCache()  # the old one may still be in use by a running job
+        self.segmentation = None
+        self.maps = None
+        self.highlight = None
+        self.panel.set_shapes(self.document.rig.shape_names)
+        self.panel.set_settings(self.settings())
+        self.recompute(self.settings())
+
+    # --- background work ---------------------------------------------------------------------------
+    def recompute(self, settings: dict) -> None:
+        rig = self.document.rig
+        if rig is None:
+            return
+        cache = self.cache
+        s = SegmentationSettings.from_dict(settings)
+        arrays = (rig.neutral, rig.face_counts, rig.face_indices, rig.deltas)
+        names = list(rig.shape_names)
+
+        def job():
+            t0 = time.perf_counter()
+            seg = segment_rig(*arrays, s, cache=cache)
+            maps = cache.maps(s.laplacian)
+            stats = [region_statistics(seg, maps, names, level=i) for i in range(len(seg.levels))]
+            return seg, maps, stats, time.perf_counter() - t0
+
+        self.panel.set_status("segmenting…")
+        self.runner.submit(job, self._on_done, self._on_failed)
+
+    def _on_done(self, result) -> None:
+        self.segmentation, self.maps, self.stats, self.last_seconds = result
+        counts = [lvl.n_regions for lvl in self.segmentation.levels]
+        self.level = min(self.level, len(counts) - 1)
+        self.panel.set_levels(counts, self.level)
+        self.highlight = None
+        self._show_regions()
+        self.panel.set_status(f"{counts[0]} regions at level 0 · {len(counts)} levels · "
+                              f"{self.last_seconds * 1000:.0f} ms")
+        self.refresh_view()
+        self.segmentation_ready.emit()
+
+    def _on_failed(self, message: str) -> None:
+        self.segmentation = None
+        self.panel.set_status(f"No segmentation: {message}")
+        self.panel.set_regions([], [])
+        if self.view != "shaded":
+            self.refresh_view()
+        self.segmentation_ready.emit()
+
+    # --- view --------------------------------------------------------------------------------------
+    def _show_regions(self) -> None:
+        if self.segmentation is None:
+            return
+        rows = self.stats[self.level]
+        self.panel.set_regions(rows, region_palette(len(rows)))
+
+    def _on_view_change(self, view: str) -> None:
+        self.view = view
+        self.refresh_view()
+
+    def _on_shape_map_change(self, k: int) -> None:
+        self.shape_map = k
+        self.refresh_view()
+
+    def _on_level_change(self, level: int) -> None:
+        self.level = level
+        self.highlight = None
+        self._show_regions()
+        self.refresh_view()
+
+    def _on_region_selected(self, region: int) -> None:
+        self.highlight = region if region >= 0 else None
+        if self.view == "segmentation":
+            self.refresh_view()
+
+    def _on_picked(self, vertex: int, point) -> None:
+        if self.segmentation is None or self.view != "segmentation":
+            return
+        labels = self.segmentation.levels[self.level].core_labels()
+        region = int(labels[vertex])
+        self.highlight = region if region >= 0 else None
+        self.panel.select_region(region)
+        self.refresh_view()
+
+    def colormap(self):
+        rig = self.document.rig
+        if self.view == "shaded" or self.segmentation is None:
+            return None
+        if self.view in ("deformation", "deformation-rgb"):
+            if self.maps is None:
+                return None
+            k = self.shape_map if self.shape_map >= 0 else None
+            return deformation_colormap(self.cache, rig, self.view, k, self.segmentation.map_kind)
+        return segmentation_colormap(self.segmentation, self.level, self.highlight)
+
+    def refresh_view(self) -> None:
+        self.viewport.set_colormap(self.colormap())
+
+    def wait(self) -> None:
+        self.runner.wait()
+
+    # --- nudge (Acosta) ----------------------------------------------------------------------------
+    def nudge(self, direction: str, amount: float) -> None:
+        if self.segmentation is None or self.highlight is None:
+            self.window.statusBar().showMessage("Select a region to nudge (click it in the list or the viewport).", 5000)
+            return
+        rig, doc = self.document.rig, self.document
+        lvl = self.segmentation.levels[self.level]
+        region = lvl.regions[self.highlight]
+        phi = np.asarray(lvl.blend[region.vertices, self.highlight].todense()).ravel()
+        if direction in ("out", "in"):
+            vec = direction
+        else:
+            cam = self.viewport.plotter.camera
+            up = np.array(cam.up, dtype=float)
+            forward = np.array(cam.focal_point) - np.array(cam.position)
+            right = np.cross(forward, up)
+            right /= np.linalg.norm(right)
+            vec = {"up": up, "down": -up, "right": right, "left": -right}[direction]
+        current = doc.surface().astype(np.float64)
+        moved = nudge_region(current, region.vertices, amount, direction=vec, weights=phi,
+                             face_counts=rig.face_counts, face_indices=rig.face_indices)
+        old = doc.edit_offset
+        new = (np.zeros_like(current) if old is None else old) + (moved - current)
+        doc.undo_stack.push(SetEditOffsetCommand(doc, old, new, f"Nudge region {self.highlight} {direction}"))
+
+    def save_nudge_as_shape(self, name: str | None = None) -> None:
+        doc = self.document
+        if doc.edit_offset is None:
+            self.window.statusBar().showMessage("Nothing to save: nudge a region first.", 5000)
+            return
+        rig = doc.rig
+        if name is None:
+            name, ok = QtWidgets.QInputDialog.getText(self.window, "Save as New Shape", "Shape name:",
+                                                      text=f"nudge{len(rig.shape_names)}")
+            if not ok or not name.strip():
+                return
+        name = name.strip()
+        if name in rig.shape_names:
+            self.window.show_error("Could not add the shape", f"A shape named '{name}' already exists.")
+            return
+        delta = doc.surface().astype(np.float64) - rig.neutral
+        doc.undo_stack.push(AddShapeCommand(doc, name, delta))

@@ -1,0 +1,42 @@
+"""Helpers for GUI tests: a main window on the sample rig with settings kept in a temp folder."""
+from __future__ import annotations
+
+from PySide6 import QtCore, QtGui, QtWidgets
+
+
+def isolate_settings(tmp_path) -> None:
+    QtCore.QSettings.setPath(QtCore.QSettings.IniFormat, QtCore.QSettings.UserScope, str(tmp_path / "settings"))
+
+
+def make_window(qtbot, tmp_path, size=(1200, 800)):
+    from app.main_window import MainWindow
+    isolate_settings(tmp_path)
+    w = MainWindow()
+    w.confirm_discard = False
+    qtbot.addWidget(w)
+    w.resize(*size)
+    w.show()
+    qtbot.waitExposed(w)
+    w.open_sample()
+    QtWidgets.QApplication.processEvents()
+    return w
+
+
+def open_and_wait(qtbot, window, path, timeout=60000):
+    """Open a rig or project through the window's background loader and wait until it is done."""
+    window.open_path(path)
+    qtbot.waitUntil(lambda: window._worker is None, timeout=timeout)
+    QtWidgets.QApplication.processEvents()
+
+
+def mouse(widget, kind, pos, buttons=QtCore.Qt.LeftButton, button=QtCore.Qt.LeftButton):
+    """Send a real mouse event (press/move/release) at widget-local ``pos`` with buttons held."""
+    types = {"press": QtCore.QEvent.MouseButtonPress, "move": QtCore.QEvent.MouseMove,
+             "release": QtCore.QEvent.MouseButtonRelease}
+    local = QtCore.QPointF(pos)
+    glob = QtCore.QPointF(widget.mapToGlobal(pos))
+    held = QtCore.Qt.NoButton if kind == "release" else buttons
+    ev = QtGui.QMouseEvent(types[kind], local, glob, button if kind != "move" else QtCore.Qt.NoButton,
+                           held, QtCore.Qt.NoModifier)
+    QtWidgets.QApplication.sendEvent(widget, ev)
+    QtWidgets.QApplication.processEvents()

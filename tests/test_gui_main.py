@@ -1,0 +1,108 @@
+"""The main window with pytest-qt: posing with a real slider drag, undo, open, save, bad input."""
+from __future__ import annotations
+
+import numpy as np
+from PySide6 import QtCore, QtWidgets
+
+from tests.gui_helpers import make_window, mouse, open_and_wait
+from tests.rig_files import write_rig_folder
+
+
+def _drag_slider(slider, fraction):
+    """Press on the slider handle, move to ``fraction`` of the groove, release (real mouse events)."""
+    opt = QtWidgets.QStyleOptionSlider()
+    slider.initStyleOption(opt)
+    style = slider.style()
+    handle = style.subControlRect(QtWidgets.QStyle.CC_Slider, opt, QtWidgets.QStyle.SC_SliderHandle, slider)
+    groove = style.subControlRect(QtWidgets.QStyle.CC_Slider, opt, QtWidgets.QStyle.SC_SliderGroove, slider)
+    start = handle.center()
+    mouse(slider, "press", start)
+    x_end = groove.left() + int(fraction * groove.width())
+    for x in np.linspace(start.x(), x_end, 6)[1:]:
+        mouse(slider, "move", QtCore.QPoint(int(x), start.y()))
+    mouse(slider, "release", QtCore.QPoint(x_end, start.y()))
+
+
+def test_opens_sample_face(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    rig = w.document.rig
+    assert rig.name == "sample" and rig.n_vertices >= 5000 and rig.n_shapes >= 24
+    assert w.viewport.points().shape == (rig.n_vertices, 3)
+    assert f"{rig.n_vertices:,} vertices" in w.counts_label.text()
+
+
+def test_slider_drag_moves_mesh_and_undo_restores(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    rig = w.document.rig
+    k = rig.shape_index("jawOpen")
+    row = w.shapes_panel.row("jawOpen")
+    w.shapes_dock.raise_()
+    before = w.viewport.points().copy()
+    _drag_slider(row.slider, 0.8)
+    qtbot.waitUntil(lambda: not w._redraw_pending)
+    weight = w.document.weights[k]
+    assert 0.5 < weight <= 1.0
+    moved = np.linalg.norm(w.viewport.points() - before, axis=1)
+    jaw = np.linalg.norm(rig.deltas[k], axis=1)
+    assert moved[jaw > 0.5 * jaw.max()].min() > 0.25 * weight * jaw.max()  # the jaw moved, by its weight
+    assert w.document.undo_stack.count() == 1  # one drag is one undo step
+    w.undo_action.trigger()
+    qtbot.waitUntil(lambda: not w._redraw_pending)
+    assert w.document.weights[k] == 0
+    np.testing.assert_array_equal(w.viewport.points(), before)
+    assert row.slider.value() == 0
+    w.redo_action.trigger()
+    assert w.document.weights[k] == weight
+
+
+def test_preset_reset_and_typed_value_are_undo_steps(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    w.apply_preset("happy")
+    happy = w.document.weights
+    assert happy.sum() > 0
+    w.shapes_panel.row("jawOpen").box.setValue(0.3)
+    w.reset_pose()
+    assert w.document.weights.sum() == 0
+    assert w.document.undo_stack.count() == 3
+    w.document.undo_stack.undo()
+    w.document.undo_stack.undo()
+    np.testing.assert_array_equal(w.document.weights, happy)
+
+
+def test_save_and_reopen_project(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    w.apply_preset("surprised")
+    pose = w.document.weights
+    path = tmp_path / "face.bsproj"
+    assert w.save_to(path)
+    assert not w.isWindowModified() and path.exists()
+    w.reset_pose()
+    open_and_wait(qtbot, w, path)
+    np.testing.assert_array_equal(w.document.weights, pose)
+    assert w.document.path == path and w.document.rig.n_shapes >= 24
+    assert str(path) in [a.text() for a in w.recent_menu.actions()][0]
+
+
+def test_bad_folder_keeps_the_open_rig(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    w.apply_preset("happy")
+    rig, pose = w.document.rig, w.document.weights
+    bad = tmp_path / "bad"
+    write_rig_folder(bad)
+    (bad / "raise.obj").write_text("v 0 0 nan\n")
+    with qtbot.waitSignal(w.load_failed, timeout=30000) as blocker:
+        w.open_path(bad)
+    qtbot.waitUntil(lambda: w._worker is None)
+    assert "raise.obj" in blocker.args[0] and "raise.obj" in w.last_error
+    assert w.document.rig is rig
+    np.testing.assert_array_equal(w.document.weights, pose)
+
+
+def test_open_obj_folder_in_background(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    folder = tmp_path / "grid"
+    write_rig_folder(folder)
+    open_and_wait(qtbot, w, folder)
+    assert w.last_error is None
+    assert w.document.rig.n_vertices == 36 and w.document.rig.shape_names == ["push", "raise"]
+    assert w.viewport.points().shape == (36, 3)
