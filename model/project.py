@@ -125,13 +125,14 @@ def load_project(path: str | Path) -> Project:
 
         try:
             meta = manifest["rig"]
-            from .correctives import Corrective
             rig = Rig(neutral=array("rig/neutral"), face_counts=array("rig/face_counts"),
                       face_indices=array("rig/face_indices"), shape_names=meta["shape_names"],
                       deltas=array("rig/deltas"), units=meta.get("units", "cm"), name=meta.get("name", path.stem),
                       source=str(path), presets=meta.get("presets", {}))
-            rig.correctives = [Corrective(name=c["name"], drivers=list(c["drivers"]), rule=c["rule"],
-                                          delta=array(c["delta"])) for c in manifest.get("correctives", [])]
+            if manifest.get("correctives"):
+                from .correctives import Corrective
+                rig.correctives = [Corrective(name=c["name"], drivers=list(c["drivers"]), rule=c["rule"],
+                                              delta=array(c["delta"])) for c in manifest["correctives"]]
             for c in rig.correctives:
                 if c.delta.shape != rig.neutral.shape:
                     raise RigInputError(f"{path}: corrective '{c.name}' has {c.delta.shape[0]} vertices, "
