@@ -5,6 +5,7 @@ Every error in the input is one sentence on stderr naming the file and the probl
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -136,6 +137,45 @@ def cmd_segment(args) -> int:
     return 0
 
 
+def cmd_corrective(args) -> int:
+    """Smith §4.5 from a scan: e = (x_scan − x_cur) / a(w) at full drivers (or fit weights first with --fit)."""
+    from model.correctives import Corrective, RULES, activation_for, add_corrective, authoring_surface
+    from model.obj_io import read_obj
+    from model.project import Project, load_project, save_project
+    from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
+    path = Path(args.rig)
+    project = load_project(path) if path.suffix.lower() == ".bsproj" else Project(rig=_load(args))
+    rig = project.rig
+    drivers = [d.strip() for d in args.drivers.split(",") if d.strip()]
+    if len(drivers) < 2:
+        raise RigInputError(f"--drivers: a corrective needs two or more driver shapes, got {len(drivers)}.")
+    for d in drivers:
+        rig.shape_index(d)
+    if args.rule not in RULES:
+        raise RigInputError(f"--rule: unknown rule '{args.rule}'; use one of {', '.join(RULES)}.")
+    scan = read_obj(args.target).vertices
+    if scan.shape != rig.neutral.shape:
+        raise RigInputError(f"{args.target}: has {scan.shape[0]} vertices but the rig has {rig.n_vertices}; "
+                            "the scan must have the rig's vertices in order.")
+    if args.fit:
+        idx = [rig.shape_index(d) for d in drivers]
+        w = fit_scan_weights(rig.neutral, rig.deltas, scan)
+        others = [c for c in rig.correctives if frozenset(c.drivers) != frozenset(drivers)]
+        from model.pose import PoseEvaluator
+        x_fit = PoseEvaluator(dataclasses.replace(rig, correctives=others), dtype=np.float64).evaluate(w)
+        a = activation_for(drivers, args.rule, rig.shape_names, w)
+        delta = corrective_from_scan(scan, x_fit, driver_region(rig.deltas[idx]), a)
+    else:
+        x_cur, w = authoring_surface(rig, drivers)
+        delta = corrective_delta(scan, x_cur, activation_for(drivers, args.rule, rig.shape_names, w))
+    corrective = Corrective(drivers=drivers, delta=delta, rule=args.rule, name=args.name or "")
+    add_corrective(rig, corrective)
+    save_project(project, args.output)
+    print(f"wrote {args.output} with corrective {corrective.name} ({args.rule}); "
+          f"largest correction {np.linalg.norm(delta, axis=1).max():.4g} {rig.units}")
+    return 0
+
+
 def cmd_sample(args) -> int:
     from resources.sample_rig import write_sample
     out = write_sample(args.output)
@@ -191,6 +231,17 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--overlap", type=int, default=1, help="overlap rings between regions (default 1)")
     sp.add_argument("-o", "--output", required=True, help="JSON file to write")
     sp.set_defaults(func=cmd_segment)
+
+    sp = sub.add_parser("corrective", help="add a corrective shape for a driver combination from a scan (Smith)")
+    rig_arg(sp)
+    sp.add_argument("--drivers", required=True, help="A,B[,C...] driver shapes (two or more)")
+    sp.add_argument("--target", required=True, help="OBJ of the desired surface with the drivers at 1 (rig vertex order)")
+    sp.add_argument("--rule", default="product", help="activation: product, hierarchical, min or smooth-min")
+    sp.add_argument("--name", help="corrective name (default: the drivers joined by '+')")
+    sp.add_argument("--fit", action="store_true",
+                    help="the scan is a free performance: fit the weights first and keep the residual over the drivers' region")
+    sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
+    sp.set_defaults(func=cmd_corrective)
 
     sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder")
     sp.add_argument("-o", "--output", required=True, help="folder to write")

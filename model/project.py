@@ -130,9 +130,9 @@ def load_project(path: str | Path) -> Project:
                       deltas=array("rig/deltas"), units=meta.get("units", "cm"), name=meta.get("name", path.stem),
                       source=str(path), presets=meta.get("presets", {}))
             if manifest.get("correctives"):
-                from .correctives import Corrective
-                rig.correctives = [Corrective(name=c["name"], drivers=list(c["drivers"]), rule=c["rule"],
-                                              delta=array(c["delta"])) for c in manifest["correctives"]]
+                from .correctives import Corrective, set_correctives
+                set_correctives(rig, [Corrective(name=c["name"], drivers=list(c["drivers"]), rule=c["rule"],
+                                                 delta=array(c["delta"])) for c in manifest["correctives"]])
             for c in rig.correctives:
                 if c.delta.shape != rig.neutral.shape:
                     raise RigInputError(f"{path}: corrective '{c.name}' has {c.delta.shape[0]} vertices, "
