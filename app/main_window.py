@@ -229,10 +229,10 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # --- files -------------------------------------------------------------------------------------
     def open_sample(self) -> None:
-        from resources.sample_rig import build_sample_rig
+        from resources.sample_rig import build_sample_rig, sample_project_sections
         if not self._maybe_discard():
             return
-        self.document.set_project(Project(rig=build_sample_rig()), None)
+        self.document.set_project(Project(rig=build_sample_rig(), sections=sample_project_sections()), None)
         self.loaded.emit()
 
     def open_folder_dialog(self) -> None:

@@ -384,3 +384,25 @@ def test_sample_rig_segmentation(sample_rig):
     stats = region_statistics(seg, cache.maps(), sample_rig.shape_names)
     assert len(stats) == counts[0]
     assert all(name in sample_rig.shape_names for st in stats for name, _ in st["shapes"])
+
+
+def test_sample_rig_regions_are_sensible(sample_rig):
+    """At the sample's own threshold its brows, eyes and mouth fall in different regions, cores disjoint."""
+    from resources.sample_rig import SAMPLE_SEGMENTATION_T
+    r = sample_rig
+    cache = SegmentationCache()
+    seg = segment_rig(r.neutral, r.face_counts, r.face_indices, r.deltas, SegmentationSettings(t=SAMPLE_SEGMENTATION_T),
+                      cache=cache)
+    labels = seg.levels[0].core_labels()
+    per_shape = cache.maps().per_shape
+
+    def strongest(name):  # where the shape deforms the surface most (largest ‖L d_k‖)
+        return int(np.argmax(per_shape[:, r.shape_index(name)]))
+    brow_l, brow_r = strongest("browInnerUp_L"), strongest("browInnerUp_R")
+    mouth_l, mouth_r = strongest("mouthSmile_L"), strongest("mouthSmile_R")
+    eye_l, nose = strongest("eyeBlink_L"), strongest("noseSneer_L")
+    for v in (brow_l, brow_r, mouth_l, mouth_r, eye_l, nose):
+        assert labels[v] >= 0, "the strongest point of a shape must be in a region, not the background"
+    assert labels[brow_l] != labels[mouth_l] and labels[brow_r] != labels[mouth_r]
+    assert len({labels[brow_l], labels[eye_l], labels[nose], labels[mouth_l]}) == 4
+    assert 4 <= seg.levels[0].n_regions <= 40 and seg.levels[-1].n_regions == 1
