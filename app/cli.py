@@ -243,6 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
     sp.set_defaults(func=cmd_corrective)
 
+    from app import cli_solve
+    cli_solve.add_parser(sub, rig_arg)
+
     sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder")
     sp.add_argument("-o", "--output", required=True, help="folder to write")
     sp.set_defaults(func=cmd_sample)
