@@ -5,14 +5,44 @@ whose redo/undo call the setters here, which emit signals the views listen to.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import scipy.sparse as sp
 from PySide6 import QtCore
 from PySide6.QtGui import QUndoStack
 
 from model.pose import PoseEvaluator
 from model.project import Project, save_project
+
+
+@dataclass(frozen=True)
+class PoseState:
+    """Everything that says what pose is shown (DESIGN.md "Pose"), stored exactly by undo commands.
+
+    weights         (K,) the global weight vector.
+    region_weights  (R+1, K) per-region weights of segmentation level ``level`` (last row: background),
+                    or None for a global pose.
+    blend           (V, R+1) partition of unity of that level (shared, never modified), or None.
+    """
+
+    weights: np.ndarray
+    region_weights: np.ndarray | None = None
+    blend: sp.csr_matrix | None = None
+    level: int | None = None
+
+    @property
+    def is_regional(self) -> bool:
+        return self.region_weights is not None
+
+    def equals(self, other: "PoseState") -> bool:
+        if not np.array_equal(self.weights, other.weights) or self.is_regional != other.is_regional:
+            return False
+        if not self.is_regional:
+            return True
+        return (self.level == other.level and self.blend is other.blend
+                and np.array_equal(self.region_weights, other.region_weights))
 
 
 class Document(QtCore.QObject):
@@ -31,6 +61,12 @@ class Document(QtCore.QObject):
         self.evaluator: PoseEvaluator | None = None
         self._surface: np.ndarray | None = None
         self.edit_offset: np.ndarray | None = None  # pending sculpt/nudge (V, 3), shown on top of the pose
+        # Regional pose (Joshi §4): per-region weights of one segmentation level, or None for a global pose.
+        self.region_weights: np.ndarray | None = None
+        self.region_blend: sp.csr_matrix | None = None
+        self.region_level: int | None = None
+        self.edit_region: int | None = None   # the region the Shapes panel edits (None: all of them)
+        self._collapsed: tuple | None = None  # (global weights set, regional state before): exact undo
 
     # --- whole document ----------------------------------------------------------------------------
     def set_project(self, project: Project, path: str | Path | None) -> None:
@@ -40,6 +76,9 @@ class Document(QtCore.QObject):
         self.evaluator = PoseEvaluator(project.rig)
         self._surface = None
         self.edit_offset = None
+        self.region_weights = self.region_blend = self.region_level = None
+        self.edit_region = None
+        self._collapsed = None
         self.undo_stack.clear()
         self.rig_changed.emit()
         self.path_changed.emit()
@@ -62,23 +101,124 @@ class Document(QtCore.QObject):
 
     # --- pose --------------------------------------------------------------------------------------
     @property
+    def is_regional(self) -> bool:
+        return self.region_weights is not None
+
+    @property
     def weights(self) -> np.ndarray:
-        return self.project.weights.copy()
+        """The weight vector the Shapes panel shows: the global pose, or for a regional pose the edited
+        region's row (the background row, which is solved globally, when no region is selected)."""
+        if self.region_weights is None:
+            return self.project.weights.copy()
+        r = self.edit_region if self.edit_region is not None else self.region_weights.shape[0] - 1
+        return self.region_weights[r].copy()
 
     def set_weights(self, weights: np.ndarray) -> None:
+        """Set a global pose. On a regional pose this replaces it by the global one; setting the previous
+        global weights right after (an undo) brings the regional pose back exactly."""
         w = np.asarray(weights, dtype=np.float64)
         if w.shape != self.project.weights.shape:
             raise ValueError(f"expected {self.project.weights.shape[0]} weights, got {w.shape}")
+        if self.region_weights is not None:
+            self._collapsed = (w.copy(), self.pose_state(), self.weights)
+            self.region_weights = self.region_blend = self.region_level = None
+            self.project.weights = w.copy()
+            self._surface = None
+            self.pose_changed.emit()
+            return
+        c, self._collapsed = self._collapsed, None
+        if c is not None and np.array_equal(self.project.weights, c[0]) and np.array_equal(w, c[2]):
+            self.set_pose_state(c[1])
+            return
         if np.array_equal(w, self.project.weights):
             return
         self.project.weights = w.copy()
         self._surface = None
         self.pose_changed.emit()
 
+    def pose_state(self) -> PoseState:
+        """A copy of the whole pose (global or regional) that ``set_pose_state`` restores exactly."""
+        rw = None if self.region_weights is None else self.region_weights.copy()
+        return PoseState(self.project.weights.copy(), rw, self.region_blend if rw is not None else None,
+                         self.region_level if rw is not None else None)
+
+    def set_pose_state(self, state: PoseState) -> None:
+        """Show ``state`` (global or regional per-region weights with their level's blend)."""
+        w = np.asarray(state.weights, dtype=np.float64)
+        if w.shape != self.project.weights.shape:
+            raise ValueError(f"expected {self.project.weights.shape[0]} weights, got {w.shape}")
+        if state.region_weights is not None:
+            W = np.asarray(state.region_weights, dtype=np.float64)
+            if state.blend is None or W.shape != (state.blend.shape[1], w.size):
+                raise ValueError(f"regional weights {W.shape} do not fit the blend of level {state.level}")
+        self._collapsed = None
+        self.project.weights = w.copy()
+        self.region_weights = None if state.region_weights is None else np.array(state.region_weights, dtype=np.float64)
+        self.region_blend = state.blend if state.region_weights is not None else None
+        self.region_level = state.level if state.region_weights is not None else None
+        if self.edit_region is not None and (self.region_weights is None
+                                             or self.edit_region >= self.region_weights.shape[0] - 1):
+            self.edit_region = None
+        self._surface = None
+        self.pose_changed.emit()
+
+    def set_region_weights_live(self, region_weights: np.ndarray) -> None:
+        """Replace the regional weights (same level and blend) during a drag; not an undo step by itself."""
+        self.region_weights = np.asarray(region_weights, dtype=np.float64)
+        self._collapsed = None
+        self._surface = None
+        self.pose_changed.emit()
+
+    def set_edit_region(self, region: int | None) -> None:
+        """Which region's row the Shapes panel shows and edits (None: the background / all regions)."""
+        if region is not None and (self.region_weights is None or not 0 <= region < self.region_weights.shape[0] - 1):
+            region = None
+        if region != self.edit_region:
+            self.edit_region = region
+            self.pose_changed.emit()
+
+    def evaluate_state(self, state: PoseState, dtype=np.float32) -> np.ndarray:
+        """(V, 3) surface of any pose state (for export and playback), without touching the document."""
+        ev = self.evaluator if dtype == np.float32 else PoseEvaluator(self.project.rig, dtype=dtype)
+        if state.region_weights is None:
+            return ev.evaluate(state.weights)
+        return ev.evaluate_regional(state.region_weights, state.blend)
+
+    def _evaluate_regional(self, W: np.ndarray, blend: sp.csr_matrix) -> np.ndarray:
+        """x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v) (Joshi §4) as one gemv per region over the region's own
+        vertices (set up once per blend), so a drag step costs about one global evaluation. Rigs with
+        correctives use ``PoseEvaluator.evaluate_regional`` (per-vertex activations)."""
+        rig = self.project.rig
+        if rig.correctives:
+            return self.evaluator.evaluate_regional(W, blend)
+        cache = getattr(self, "_regional_cache", None)
+        if cache is None or cache[0] is not blend or cache[1] is not rig.deltas:
+            B = sp.csc_matrix(blend)
+            parts = []
+            for r in range(B.shape[1]):
+                lo, hi = B.indptr[r], B.indptr[r + 1]
+                verts, phi = B.indices[lo:hi], B.data[lo:hi]
+                keep = np.abs(rig.deltas[:, verts]).max(axis=(0, 2)) > 0 if verts.size else verts.astype(bool)
+                verts, phi = verts[keep], phi[keep]
+                D = np.ascontiguousarray(rig.deltas[:, verts].reshape(rig.n_shapes, -1), dtype=np.float32)
+                cols = (verts[:, None] * 3 + np.arange(3)).reshape(-1)
+                parts.append((cols, np.repeat(phi, 3).astype(np.float32), D))
+            cache = (blend, rig.deltas, parts, rig.neutral.astype(np.float32).reshape(-1))
+            self._regional_cache = cache
+        out = cache[3].copy()
+        Wf = np.asarray(W, dtype=np.float32)
+        for r, (cols, phi, D) in enumerate(cache[2]):
+            if cols.size and Wf[r].any():
+                out[cols] += phi * (Wf[r] @ D)
+        return out.reshape(-1, 3)
+
     def posed_surface(self) -> np.ndarray:
         """(V, 3) float32 surface of the pose alone (no pending sculpt), cached."""
         if self._surface is None:
-            self._surface = self.evaluator.evaluate(self.project.weights)
+            if self.region_weights is not None:
+                self._surface = self._evaluate_regional(self.region_weights, self.region_blend)
+            else:
+                self._surface = self.evaluator.evaluate(self.project.weights)
         return self._surface
 
     def surface(self) -> np.ndarray:
@@ -100,8 +240,26 @@ class Document(QtCore.QObject):
         self.project.sections[name] = copy.deepcopy(value)
         self.section_changed.emit(name)
 
+    def set_section_arrays(self, name: str, value, arrays: dict[str, np.ndarray | None]) -> None:
+        """Replace a section and the project arrays it refers to (None removes an array)."""
+        import copy
+        for key, a in arrays.items():
+            if a is None:
+                self.project.arrays.pop(key, None)
+            else:
+                self.project.arrays[key] = np.array(a)
+        if value is None:
+            self.project.sections.pop(name, None)
+        else:
+            self.project.sections[name] = copy.deepcopy(value)
+        self.section_changed.emit(name)
+
     def rig_edited(self) -> None:
         """Shapes or correctives changed in place (same topology): rebuild the evaluator."""
+        if self.region_weights is not None and self.region_weights.shape[1] != self.project.rig.n_shapes:
+            self.region_weights = self.region_blend = self.region_level = None  # the shape set changed
+            self.edit_region = None
+        self._collapsed = None
         self.evaluator = PoseEvaluator(self.project.rig)
         self._surface = None
         self.shapes_changed.emit()

@@ -49,6 +49,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self._connect()
         from app.segmentation_controller import SegmentationController
         self.segmentation = SegmentationController(self, self.segmentation_panel)
+        from app import keyframe_controller, marker_controller
+        marker_controller.install(self)
+        keyframe_controller.install(self)
         self._restore_layout()
 
     # --- construction ------------------------------------------------------------------------------
@@ -338,7 +341,7 @@ class MainWindow(QtWidgets.QMainWindow):
         from model.obj_io import write_obj
         from model.pose import PoseEvaluator
         rig = self.document.rig
-        points = PoseEvaluator(rig, dtype=np.float64).evaluate(self.document.weights)
+        points = self.document.evaluate_state(self.document.pose_state(), dtype=np.float64)
         try:
             write_obj(path, points, rig.face_counts, rig.face_indices, header=f"Blendshape Studio pose of {rig.name}")
         except OSError as exc:

@@ -34,10 +34,59 @@ def vtk_faces(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
     return out
 
 
+def fan_triangles(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
+    """(T, 3) triangles of the polygons (fan from each first corner), for display normals."""
+    counts = np.asarray(face_counts, dtype=np.int64)
+    idx = np.asarray(face_indices, dtype=np.int64)
+    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    ntri = np.maximum(counts - 2, 0)
+    first = np.repeat(starts, ntri)
+    k = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri)
+    return np.stack([idx[first], idx[first + k + 1], idx[first + k + 2]], axis=1)
+
+
+class DisplayNormals:
+    """Smooth-shading vertex normals recomputed for every new set of points (area-weighted, ~2 ms on
+    ICT FaceKit). Replaces VTK's normals filter, which costs ~20 ms a frame on the same mesh."""
+
+    def __init__(self, face_counts: np.ndarray, face_indices: np.ndarray, n_points: int) -> None:
+        self.tris = fan_triangles(face_counts, face_indices)
+        self.n = n_points
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        p = np.asarray(points, dtype=np.float32)
+        a, b, c = p[self.tris[:, 0]], p[self.tris[:, 1]], p[self.tris[:, 2]]
+        fn = np.cross(b - a, c - a)
+        out = np.empty((self.n, 3), dtype=np.float32)
+        corners = self.tris.ravel()
+        for axis in range(3):
+            out[:, axis] = np.bincount(corners, weights=np.repeat(fn[:, axis], 3), minlength=self.n)
+        length = np.linalg.norm(out, axis=1, keepdims=True)
+        out /= np.where(length > 0, length, 1.0)
+        return out
+
+
 def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray):
-    """A pyvista PolyData of the surface (float32 points for display)."""
+    """A pyvista PolyData of the surface (float32 points for display) with smooth-shading normals.
+
+    ``mesh.field_data`` is left alone; the normals function is kept on the mesh object as
+    ``mesh._display_normals`` so set_points() can refresh them.
+    """
     import pyvista as pv
-    return pv.PolyData(np.asarray(points, dtype=np.float32), vtk_faces(face_counts, face_indices))
+    mesh = pv.PolyData(np.asarray(points, dtype=np.float32), vtk_faces(face_counts, face_indices))
+    normals = DisplayNormals(face_counts, face_indices, mesh.n_points)
+    object.__setattr__(mesh, "_display_normals", normals)
+    mesh.point_data["Normals"] = normals(mesh.points)
+    mesh.point_data.active_normals_name = "Normals"
+    return mesh
+
+
+def set_points(mesh, points: np.ndarray) -> None:
+    """Move a rig mesh's vertices in place and refresh its normals."""
+    pts = np.asarray(points, dtype=np.float32)
+    mesh.points = pts
+    mesh.point_data["Normals"] = mesh._display_normals(pts)
+    mesh.point_data.active_normals_name = "Normals"
 
 
 @dataclass
@@ -54,7 +103,8 @@ class ColorMap:
 
 def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: bool = False, name="surface"):
     """Add the rig surface with smooth shading; colour by ``colormap`` with a legend if given."""
-    kwargs = dict(smooth_shading=True, name=name, show_edges=wireframe, edge_color=(0.15, 0.15, 0.18),
+    # Smooth shading comes from the mesh's own "Normals" (rig_mesh/set_points), not VTK's filter.
+    kwargs = dict(smooth_shading=False, interpolation="gouraud", name=name, show_edges=wireframe, edge_color=(0.15, 0.15, 0.18),
                   line_width=0.5, specular=0.25, specular_power=20, diffuse=0.85, ambient=0.12,
                   reset_camera=False)
     if colormap is None:

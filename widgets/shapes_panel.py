@@ -50,11 +50,11 @@ class _ShapeRow(QtWidgets.QWidget):
 
     def _pressed(self) -> None:
         self._dragging = True
-        self.panel.drag_started.emit(self.index)
+        (self.panel.routed_drag_started if self.panel.routed else self.panel.drag_started).emit(self.index)
 
     def _released(self) -> None:
         self._dragging = False
-        self.panel.drag_finished.emit(self.index)
+        (self.panel.routed_drag_finished if self.panel.routed else self.panel.drag_finished).emit(self.index)
 
     def _slider_moved(self, v: int) -> None:
         value = v / SLIDER_STEPS
@@ -62,12 +62,12 @@ class _ShapeRow(QtWidgets.QWidget):
         self.box.setValue(value)
         self.box.blockSignals(False)
         if self._dragging:
-            self.panel.weight_dragged.emit(self.index, value)
+            self.panel._emit_dragged(self.index, value)
         else:  # keyboard, wheel or a click on the groove: one step each
-            self.panel.weight_committed.emit(self.index, value)
+            self.panel._emit_committed(self.index, value)
 
     def _box_changed(self, value: float) -> None:
-        self.panel.weight_committed.emit(self.index, float(value))
+        self.panel._emit_committed(self.index, float(value))
 
 
 class ShapesPanel(QtWidgets.QWidget):
@@ -79,11 +79,25 @@ class ShapesPanel(QtWidgets.QWidget):
     weight_committed = QtCore.Signal(int, float)  # a complete edit: one undo step
     reset_requested = QtCore.Signal()
     preset_requested = QtCore.Signal(str)
+    # The same gestures while the pose is regional (set_target(..., routed=True)): the marker controller
+    # turns them into edits of the selected region's weights (or of every region).
+    routed_drag_started = QtCore.Signal(int)
+    routed_weight_dragged = QtCore.Signal(int, float)
+    routed_drag_finished = QtCore.Signal(int)
+    routed_weight_committed = QtCore.Signal(int, float)
+    routed_reset_requested = QtCore.Signal()
+    routed_preset_requested = QtCore.Signal(str)
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
         self.setMinimumWidth(400)
         lay = QtWidgets.QVBoxLayout(self)
+        self.routed = False
+        self.target = QtWidgets.QLabel("Editing the global pose")
+        self.target.setWordWrap(True)
+        self.target.setToolTip("Which weights the sliders edit: the global pose, or one region's weights of a "
+                               "regional pose (select the region in the Segmentation panel)")
+        lay.addWidget(self.target)
         top = QtWidgets.QHBoxLayout()
         self.filter = QtWidgets.QLineEdit()
         self.filter.setPlaceholderText("Filter shapes (e.g. brow, _L)")
@@ -104,7 +118,8 @@ class ShapesPanel(QtWidgets.QWidget):
         self.apply_preset.clicked.connect(self._preset_clicked)
         self.reset = QtWidgets.QPushButton("Reset all")
         self.reset.setToolTip("Set every weight to 0 (undoable)")
-        self.reset.clicked.connect(self.reset_requested)
+        self.reset.clicked.connect(lambda: (self.routed_reset_requested if self.routed
+                                            else self.reset_requested).emit())
         row.addWidget(QtWidgets.QLabel("Preset"))
         row.addWidget(self.presets, 1)
         row.addWidget(self.apply_preset)
@@ -159,4 +174,15 @@ class ShapesPanel(QtWidgets.QWidget):
 
     def _preset_clicked(self) -> None:
         if self.presets.currentText():
-            self.preset_requested.emit(self.presets.currentText())
+            (self.routed_preset_requested if self.routed else self.preset_requested).emit(self.presets.currentText())
+
+    def set_target(self, text: str, routed: bool) -> None:
+        """Say which weights the sliders edit; ``routed`` sends the gestures to the routed_* signals."""
+        self.target.setText(text)
+        self.routed = bool(routed)
+
+    def _emit_dragged(self, k: int, value: float) -> None:
+        (self.routed_weight_dragged if self.routed else self.weight_dragged).emit(k, value)
+
+    def _emit_committed(self, k: int, value: float) -> None:
+        (self.routed_weight_committed if self.routed else self.weight_committed).emit(k, value)

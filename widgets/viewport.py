@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from .scene import ColorMap, add_surface, rig_mesh, set_camera, style_plotter
+from .scene import ColorMap, add_surface, rig_mesh, set_camera, set_points, style_plotter
 
 
 class Viewport(QtWidgets.QWidget):
@@ -18,7 +18,9 @@ class Viewport(QtWidgets.QWidget):
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
         from pyvistaqt import QtInteractor
-        self.plotter = QtInteractor(self, auto_update=False)
+        # No multi-sampling: on software OpenGL (Xvfb, llvmpipe) 4x MSAA makes a frame of ICT FaceKit
+        # cost ~150 ms instead of ~30 ms; interactive speed matters more here than smooth edges.
+        self.plotter = QtInteractor(self, auto_update=False, multi_samples=0)
         style_plotter(self.plotter)
         self.plotter.enable_trackball_style()
         lay = QtWidgets.QVBoxLayout(self)
@@ -31,6 +33,8 @@ class Viewport(QtWidgets.QWidget):
         self._wireframe = False
         self._camera = "front"
         self._press_pos = None
+        self._mouse_filters: list = []
+        self.plotter.interactor.installEventFilter(self)
         iren = self.plotter.iren
         iren.add_observer("LeftButtonPressEvent", self._on_left_press)
         iren.add_observer("LeftButtonReleaseEvent", self._on_left_release)
@@ -51,7 +55,7 @@ class Viewport(QtWidgets.QWidget):
         """Move the surface's vertices (same order and count) and redraw."""
         if self.mesh is None:
             return
-        self.mesh.points = np.asarray(points, dtype=np.float32)
+        set_points(self.mesh, points)
         self.render()
 
     def points(self) -> np.ndarray | None:
@@ -109,6 +113,67 @@ class Viewport(QtWidgets.QWidget):
             if hit is not None:
                 self.picked.emit(hit[0], hit[1])
         self._press_pos = None
+
+    # --- mouse hooks (marker dragging) -------------------------------------------------------------
+    def add_mouse_filter(self, handler) -> None:
+        """``handler(kind, x, y, button) -> bool`` sees every mouse press/move/release on the view first,
+        with (x, y) in VTK display pixels (bottom-left origin, device pixels). Returning True consumes the
+        event, so the camera does not move (e.g. while a marker is dragged)."""
+        self._mouse_filters.append(handler)
+
+    def eventFilter(self, obj, event) -> bool:  # Qt override
+        kinds = {QtCore.QEvent.MouseButtonPress: "press", QtCore.QEvent.MouseMove: "move",
+                 QtCore.QEvent.MouseButtonRelease: "release"}
+        kind = kinds.get(event.type())
+        if kind is not None and self._mouse_filters and obj is self.plotter.interactor:
+            x, y = self.qt_to_display(event.position().x(), event.position().y())
+            for handler in self._mouse_filters:
+                if handler(kind, x, y, event.button()):
+                    return True
+        return super().eventFilter(obj, event)
+
+    def pixel_ratio(self) -> float:
+        return float(self.plotter.interactor.devicePixelRatioF())
+
+    def qt_to_display(self, x: float, y: float) -> tuple[int, int]:
+        """Widget-local Qt position → VTK display pixel (as QVTKRenderWindowInteractor maps events)."""
+        s = self.pixel_ratio()
+        return int(round(x * s)), int(round((self.plotter.interactor.height() - y - 1) * s))
+
+    def display_to_qt(self, x: float, y: float) -> QtCore.QPointF:
+        """VTK display pixel → widget-local Qt position of the interactor widget."""
+        s = self.pixel_ratio()
+        return QtCore.QPointF(x / s, self.plotter.interactor.height() - 1 - y / s)
+
+    def world_to_display(self, points: np.ndarray) -> np.ndarray:
+        """(N, 3) world points → (N, 3) display coordinates (x, y in pixels, z depth in [0, 1])."""
+        ren = self.plotter.renderer
+        out = []
+        for p in np.asarray(points, dtype=np.float64).reshape(-1, 3):
+            ren.SetWorldPoint(float(p[0]), float(p[1]), float(p[2]), 1.0)
+            ren.WorldToDisplay()
+            out.append(ren.GetDisplayPoint())
+        return np.array(out).reshape(-1, 3)
+
+    def display_to_world(self, x: float, y: float, z: float) -> np.ndarray:
+        ren = self.plotter.renderer
+        ren.SetDisplayPoint(float(x), float(y), float(z))
+        ren.DisplayToWorld()
+        p = np.array(ren.GetWorldPoint())
+        return p[:3] / p[3]
+
+    def view_plane_point(self, x: float, y: float, origin: np.ndarray) -> np.ndarray:
+        """Where the ray under display pixel (x, y) meets the plane through ``origin`` facing the camera."""
+        near, far = self.display_to_world(x, y, 0.0), self.display_to_world(x, y, 1.0)
+        cam = self.plotter.camera
+        n = np.array(cam.focal_point) - np.array(cam.position)
+        n /= np.linalg.norm(n)
+        d = far - near
+        denom = float(d @ n)
+        if abs(denom) < 1e-12:
+            return np.asarray(origin, dtype=np.float64).copy()
+        t = float((np.asarray(origin) - near) @ n) / denom
+        return near + t * d
 
     # --- camera ------------------------------------------------------------------------------------
     def set_camera(self, name: str) -> None:

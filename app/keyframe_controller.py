@@ -1,0 +1,288 @@
+"""Keyframes: set keys of the current pose, scrub and play the interpolated animation, export it
+(ALGORITHMS.md §8: keys store poses; a timeline interpolates them — ``model.keyframes.Timeline``).
+
+A key stores the whole pose: a global weight vector, or per-region weights of one segmentation level. All
+keys of a project share one form; a global key set on a regional timeline is the same vector in every region,
+and a regional timeline keeps its level's partition of unity with it, so it plays back exactly after the
+segmentation changes or the project is reopened. Saved in the project: ``sections['keyframes']`` (times,
+interpolation, frame rate, length, level) and ``arrays['keyframes/...']`` (the key weights and the blend).
+Setting or removing a key and changing the settings are undo steps; scrubbing and playing are not edits.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from app.document import PoseState
+from app.marker_commands import SetSectionArraysCommand
+from app.marker_controller import pose_at_level, same_blend
+from model.errors import RigInputError
+from model.keyframes import Keyframe, Timeline
+from model.pc2 import write_pc2
+from model.weights_csv import write_weights_csv
+from widgets.timeline import TimelinePanel
+
+SECTION = "keyframes"
+ARRAY_KEYS = ("keyframes/weights", "keyframes/blend_data", "keyframes/blend_indices", "keyframes/blend_indptr")
+DEFAULTS = {"interpolation": "smooth", "fps": 24.0, "duration": 2.0}
+
+
+class KeyframeController(QtCore.QObject):
+    time_changed = QtCore.Signal(float)
+
+    def __init__(self, window, panel: TimelinePanel, parent=None) -> None:
+        super().__init__(parent or window)
+        self.window, self.panel, self.document = window, panel, window.document
+        self.timeline = Timeline()
+        self.blend: sp.csr_matrix | None = None
+        self.level: int | None = None
+        self.fps = DEFAULTS["fps"]
+        self.duration = DEFAULTS["duration"]
+        self.time = 0.0
+        self.timer = QtCore.QTimer(self)
+        self.timer.timeout.connect(self._tick)
+        d = self.document
+        d.rig_changed.connect(self._load)
+        d.section_changed.connect(lambda name: self._load() if name == SECTION else None)
+        p = panel
+        p.time_changed.connect(self.scrub)
+        p.play_toggled.connect(self.set_playing)
+        p.set_key_requested.connect(self.set_key)
+        p.remove_key_requested.connect(self.remove_key)
+        p.interpolation_changed.connect(lambda v: self.set_settings(interpolation=v))
+        p.fps_changed.connect(lambda v: self.set_settings(fps=v))
+        p.duration_changed.connect(lambda v: self.set_settings(duration=v))
+        p.export_csv_requested.connect(self.export_csv_dialog)
+        p.export_pc2_requested.connect(self.export_pc2_dialog)
+        if d.project is not None:
+            self._load()
+
+    # --- the project section --------------------------------------------------------------------------
+    def _stored(self) -> tuple[dict | None, dict]:
+        proj = self.document.project
+        return proj.sections.get(SECTION), {k: proj.arrays.get(k) for k in ARRAY_KEYS}
+
+    def _load(self) -> None:
+        """Rebuild the timeline from the project (after open, set key, undo, ...)."""
+        sec, arrays = self._stored()
+        sec = dict(DEFAULTS, **(sec or {}))
+        self.fps, self.duration = float(sec["fps"]), float(sec["duration"])
+        self.level = sec.get("level")
+        old_blend, self.blend = self.blend, None
+        keys = []
+        try:
+            W = arrays["keyframes/weights"]
+            if sec.get("times") and W is not None:
+                keys = [Keyframe(t, w) for t, w in zip(sec["times"], W)]
+            if self.level is not None and arrays["keyframes/blend_data"] is not None:
+                shape = tuple(sec["blend_shape"])
+                self.blend = sp.csr_matrix((arrays["keyframes/blend_data"], arrays["keyframes/blend_indices"],
+                                            arrays["keyframes/blend_indptr"]), shape=shape)
+                if same_blend(old_blend, self.blend):
+                    self.blend = old_blend  # keep the object the document's pose refers to
+            self.timeline = Timeline(keys, interpolation=sec["interpolation"])
+        except (RigInputError, KeyError, ValueError, TypeError) as exc:
+            self.timeline = Timeline()
+            self.window.statusBar().showMessage(f"The project's keyframes were not loaded: {exc}", 10000)
+        self.time = min(self.time, self.duration)
+        self._show()
+
+    def _snapshot(self, timeline: Timeline, blend, level, fps=None, duration=None) -> tuple[dict, dict]:
+        sec = {"interpolation": timeline.interpolation, "fps": float(fps or self.fps),
+               "duration": float(duration or self.duration), "level": level,
+               "times": [k.time for k in timeline.keys]}
+        arrays = {k: None for k in ARRAY_KEYS}
+        if timeline.keys:
+            arrays["keyframes/weights"] = np.stack([k.weights for k in timeline.keys])
+        if blend is not None:
+            b = sp.csr_matrix(blend)
+            sec["blend_shape"] = list(b.shape)
+            arrays.update({"keyframes/blend_data": b.data, "keyframes/blend_indices": b.indices,
+                           "keyframes/blend_indptr": b.indptr})
+        return sec, arrays
+
+    def _push(self, new: tuple, text: str) -> None:
+        self.document.undo_stack.push(SetSectionArraysCommand(self.document, SECTION, self._stored(), new, text))
+
+    # --- edits ----------------------------------------------------------------------------------------
+    def set_key(self, time: float | None = None) -> None:
+        """Key the current pose at ``time`` (default: the current time); one undo step."""
+        t = self.time if time is None else float(time)
+        state = self.document.pose_state()
+        tl = Timeline([Keyframe(k.time, k.weights) for k in self.timeline.keys],
+                      interpolation=self.timeline.interpolation)
+        blend, level = self.blend, self.level
+        note = ""
+        if blend is None and state.is_regional:
+            blend, level = state.blend, state.level
+            for k in tl.keys:  # the global keys become the same vector in every region
+                k.weights = np.tile(k.weights, (blend.shape[1], 1))
+        if blend is None:
+            w = state.weights
+        else:
+            if state.is_regional and not same_blend(state.blend, blend):
+                note = f" (averaged onto the keys' level {level})"
+            w = pose_at_level(state, blend)
+        tl.set_key(t, w)
+        if t > self.duration:
+            self.duration = t
+        self._push(self._snapshot(tl, blend, level), f"Set key at {t:.3g} s")
+        self.window.statusBar().showMessage(f"Key set at {t:.3f} s{note}.", 4000)
+
+    def remove_key(self, time: float | None = None) -> bool:
+        t = self.time if time is None else float(time)
+        if self.timeline.key_at(t) is None:
+            self.window.statusBar().showMessage(f"There is no key at {t:.3f} s.", 4000)
+            return False
+        tl = Timeline([Keyframe(k.time, k.weights) for k in self.timeline.keys if abs(k.time - t) >= 1e-6],
+                      interpolation=self.timeline.interpolation)
+        keep = tl.keys and self.blend is not None
+        self._push(self._snapshot(tl, self.blend if keep else None, self.level if keep else None),
+                   f"Remove key at {t:.3g} s")
+        return True
+
+    def set_settings(self, *, interpolation: str | None = None, fps: float | None = None,
+                     duration: float | None = None) -> None:
+        tl = Timeline(self.timeline.keys, interpolation=interpolation or self.timeline.interpolation)
+        new = self._snapshot(tl, self.blend, self.level, fps=fps, duration=duration)
+        if new[0] != self._snapshot(self.timeline, self.blend, self.level)[0]:
+            self._push(new, "Timeline settings")
+
+    # --- time -----------------------------------------------------------------------------------------
+    def pose_at(self, t: float) -> PoseState:
+        """The interpolated pose at time ``t`` (the timeline must have keys)."""
+        w = self.timeline.evaluate(t)
+        if self.blend is None:
+            return PoseState(w)
+        return PoseState(self.document.project.weights.copy(), w, self.blend, self.level)
+
+    def scrub(self, t: float) -> None:
+        """Go to time ``t`` and show the interpolated pose (navigation, not an undo step)."""
+        self.time = min(max(float(t), 0.0), self.duration)
+        if self.timeline.keys:
+            self.document.set_pose_state(self.pose_at(self.time))
+        self._show()
+        self.time_changed.emit(self.time)
+
+    def set_playing(self, on: bool) -> None:
+        if on and not self.timeline.keys:
+            self.window.statusBar().showMessage("Set a key first (S) to play an animation.", 4000)
+            on = False
+        if on:
+            self.timer.start(max(1, int(round(1000.0 / self.fps))))
+        else:
+            self.timer.stop()
+        self.panel.set_playing(on)
+
+    def toggle_play(self) -> None:
+        self.set_playing(not self.timer.isActive())
+
+    @property
+    def playing(self) -> bool:
+        return self.timer.isActive()
+
+    def _tick(self) -> None:
+        t = self.time + 1.0 / self.fps
+        self.scrub(0.0 if t > self.duration + 1e-9 else t)
+
+    def _show(self) -> None:
+        self.panel.set_state(self.time, self.duration, self.fps, [k.time for k in self.timeline.keys],
+                             self.timeline.interpolation)
+
+    # --- export ---------------------------------------------------------------------------------------
+    def frame_times(self) -> np.ndarray:
+        return np.arange(int(round(self.duration * self.fps)) + 1) / self.fps
+
+    def _require_keys(self) -> None:
+        if not self.timeline.keys:
+            raise RigInputError("There are no keys to export: set a key first (S).")
+
+    def export_csv(self, path: str | Path) -> int:
+        """Write the keyed animation's weights per frame (frame, time, weights). A regional timeline writes
+        the background row under the shape names and each region's row as ``<shape>@region<r>``.
+        Returns the number of frames."""
+        self._require_keys()
+        rig = self.document.rig
+        times = self.frame_times()
+        W = np.stack([self.timeline.evaluate(t) for t in times])
+        names = list(rig.shape_names)
+        if W.ndim == 3:
+            R = W.shape[1] - 1
+            names = [f"{n}@region{r}" for r in range(R) for n in rig.shape_names] + names
+            W = W.reshape(W.shape[0], -1)
+        write_weights_csv(path, W, names, times=times)
+        return len(times)
+
+    def export_pc2(self, path: str | Path) -> int:
+        """Write the keyed animation as a PC2 point cache (one sample per frame). Returns the frame count."""
+        self._require_keys()
+        times = self.frame_times()
+        doc = self.document
+        frames = (doc.evaluate_state(self.pose_at(t), dtype=np.float64) for t in times)
+        return write_pc2(path, frames, n_points=doc.rig.n_vertices, start_frame=0.0, sample_rate=1.0)
+
+    def _export_dialog(self, title: str, suffix: str, filt: str, fn) -> None:
+        if self.document.project is None:
+            return
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self.window, title, f"{self.document.rig.name}_keys{suffix}", filt)
+        if not path:
+            return
+        try:
+            n = fn(path)
+        except (RigInputError, OSError) as exc:
+            self.window.show_error("Could not export", str(exc))
+            return
+        self.window.statusBar().showMessage(f"Exported {n} frames to {path}", 5000)
+
+    def export_csv_dialog(self) -> None:
+        self._export_dialog("Export Keyed Weights as CSV", ".csv", "CSV (*.csv)", self.export_csv)
+
+    def export_pc2_dialog(self) -> None:
+        self._export_dialog("Export Keyed Animation as PC2", ".pc2", "Point cache (*.pc2)", self.export_pc2)
+
+
+def install(window) -> KeyframeController:
+    """Add the timeline under the viewport, Set Key (S), Play/Pause (Space) and the export actions."""
+    panel = TimelinePanel(window)
+    window.timeline_panel = panel
+    window.timeline_dock = window._add_dock("Timeline", panel, QtCore.Qt.BottomDockWidgetArea)
+    window.panels_menu.addAction(window.timeline_dock.toggleViewAction())
+    controller = KeyframeController(window, panel)
+    window.keyframes = controller
+    menus = {a.text().replace("&", ""): a.menu() for a in window.menuBar().actions()}
+    anim = window.menuBar().insertMenu(menus["Help"].menuAction(), QtWidgets.QMenu("&Animation", window)) \
+        if "Help" in menus else None
+    anim_menu = anim.menu() if anim is not None else window.menuBar().addMenu("&Animation")
+
+    def action(menu, text, slot, shortcut=None, tip=""):
+        act = QtGui.QAction(text, window)
+        if shortcut:
+            act.setShortcut(QtGui.QKeySequence(shortcut))
+        act.setToolTip(tip)
+        act.setStatusTip(tip)
+        act.triggered.connect(slot)
+        menu.addAction(act)
+        window.addAction(act)
+        return act
+
+    window.set_key_action = action(anim_menu, "&Set Key", lambda: controller.set_key(), "S",
+                                   "Key the current pose at the current time")
+    window.play_action = action(anim_menu, "&Play / Pause", controller.toggle_play, "Space",
+                                "Play or pause the keyed animation")
+    action(anim_menu, "&Remove Key", lambda: controller.remove_key(), None, "Remove the key at the current time")
+    file_menu = menus.get("File")
+    if file_menu is not None:
+        quit_act = next((a for a in file_menu.actions() if a.text().replace("&", "") == "Quit"), None)
+        for text, slot, tip in (("Export Keyed &Weights as CSV…", controller.export_csv_dialog,
+                                 "Write the keyed animation's weights per frame as CSV"),
+                                ("Export Keyed Animation as P&C2…", controller.export_pc2_dialog,
+                                 "Write the keyed animation as a PC2 point cache")):
+            act = QtGui.QAction(text, window)
+            act.setToolTip(tip)
+            act.setStatusTip(tip)
+            act.triggered.connect(slot)
+            file_menu.insertAction(quit_act, act) if quit_act is not None else file_menu.addAction(act)
+    return controller

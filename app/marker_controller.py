@@ -1,0 +1,521 @@
+"""Drag markers to solve keyframes, coarse to fine, region by region (Joshi et al. 2003, §4; ALGORITHMS.md
+§4 and §8).
+
+In marker mode (View ▸ Marker Mode, M) a click on the surface adds a marker (a vertex, or a face point with
+barycentric weights), a right-click on a marker removes it, and dragging a marker moves its target in the
+plane through the marker facing the camera, damped by the motion-damping gain at that point
+(``solvers.damping``); the other markers stay pinned where they are. Each mouse move re-solves the regions of
+the hierarchy level chosen in the Markers panel (``solvers.regional_solve.RegionalSolver``, λ_r toward the
+pose at the press) and shows the regional pose (``PoseEvaluator.evaluate_regional``). The solver is built
+once per press (it depends on the markers and the level); one drag is one undo step.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from app.document import PoseState
+from app.marker_commands import SetMarkersCommand, SetPoseCommand
+from model.errors import RigInputError
+from model.markers import Marker, MarkerSet
+from solvers.damping import damping_gains, point_mobility
+from solvers.regional_solve import RegionalSolver, shape_region_max
+from widgets.marker_overlay import MarkerOverlay
+from widgets.markers_panel import MarkersPanel
+
+SECTION = "markers"
+PICK_RADIUS_PX = 12.0       # a press this close (logical pixels) to a marker grabs it
+MIN_SPACING = 0.002         # markers closer than this fraction of the face size are refused
+
+
+@dataclass
+class DragState:
+    """Everything one drag needs, set up at the press (the solver depends on the markers and the level)."""
+
+    index: int
+    old: PoseState
+    level: int | None
+    blend: sp.csr_matrix | None
+    W0: np.ndarray                 # (R+1, K) regional pose at the press (the λ_r reference)
+    solver: RegionalSolver
+    neutral_at: np.ndarray         # (M, 3) markers on the neutral
+    start: np.ndarray              # (M, 3) markers on the surface at the press (the pins)
+    targets: np.ndarray            # (M, 3) current targets
+    gain: float                    # damping gain of the dragged marker
+    press_world: np.ndarray | None = None
+    moved: bool = False
+    W: np.ndarray | None = None    # (R+1, K) pose after the last move
+
+
+def same_blend(a: sp.spmatrix | None, b: sp.spmatrix | None) -> bool:
+    """Whether two partitions of unity are the same (the same object, or equal shape and entries)."""
+    if a is b:
+        return True
+    if a is None or b is None or a.shape != b.shape or a.nnz != b.nnz:
+        return False
+    return (sp.csr_matrix(a) != sp.csr_matrix(b)).nnz == 0
+
+
+def pose_at_level(state: PoseState, blend: sp.csr_matrix | None) -> np.ndarray:
+    """(R+1, K) per-region weights for ``blend`` (V, R+1) that reproduce ``state`` as well as a regional pose
+    of that level can: a global pose is the same vector in every region; a regional pose of another level is
+    averaged per region with the new level's blend weights, ``W_r = Σ_v φ_r(v) w(v) / Σ_v φ_r(v)``."""
+    if blend is None:
+        return np.asarray(state.weights, dtype=np.float64)[None].copy()
+    R1 = blend.shape[1]
+    if state.region_weights is None:
+        return np.tile(np.asarray(state.weights, dtype=np.float64), (R1, 1))
+    if same_blend(state.blend, blend):
+        return np.array(state.region_weights, dtype=np.float64)
+    per_vertex = np.asarray(state.blend @ state.region_weights)            # (V, K)
+    B = sp.csc_matrix(blend)
+    mass = np.asarray(B.sum(axis=0)).reshape(-1)
+    W = np.asarray(B.T @ per_vertex) / np.maximum(mass, 1e-12)[:, None]
+    return np.clip(W, 0.0, 1.0)
+
+
+class MarkerController(QtCore.QObject):
+    """Markers, marker mode and drags; owns the Markers panel and the viewport glyphs."""
+
+    markers_changed = QtCore.Signal()
+    drag_updated = QtCore.Signal()
+
+    def __init__(self, window, panel: MarkersPanel, parent=None) -> None:
+        super().__init__(parent or window)
+        self.window, self.panel = window, panel
+        self.document, self.viewport = window.document, window.viewport
+        self.overlay = MarkerOverlay(self.viewport.plotter)
+        self.markers: MarkerSet | None = None
+        self.mode = False
+        self.lam_reg = 1e-3
+        self.drag: DragState | None = None
+        self.last_message = ""
+        self._gains: np.ndarray | None = None
+        self._region_max: dict[int, tuple] = {}
+        self._tri_of_vertex: sp.csr_matrix | None = None
+        self._triangles: np.ndarray | None = None
+        self._slider_old: PoseState | None = None
+        self._selected: int | None = None
+        d = self.document
+        d.rig_changed.connect(self._on_rig_change)
+        d.shapes_changed.connect(self._on_shapes_change)
+        d.section_changed.connect(self._on_section_change)
+        d.pose_changed.connect(self._on_pose_change)
+        self.viewport.add_mouse_filter(self._on_mouse)
+        self.viewport.picked.connect(self._on_picked)
+        seg = window.segmentation
+        seg.segmentation_ready.connect(self._on_segmentation_ready)
+        sp_panel = window.segmentation_panel
+        sp_panel.region_selected.connect(lambda _r: self.sync_edit_region())
+        sp_panel.level_changed.connect(lambda _l: self.sync_edit_region())
+        self.viewport.picked.connect(lambda *_: self.sync_edit_region())
+        panel.level_changed.connect(self._on_level_change)
+        panel.remove_requested.connect(self.remove_marker)
+        panel.marker_selected.connect(self._on_marker_selected)
+        panel.lam_reg_changed.connect(lambda v: setattr(self, "lam_reg", float(v)))
+        sh = window.shapes_panel
+        sh.routed_drag_started.connect(self._on_region_slider_started)
+        sh.routed_weight_dragged.connect(self._on_region_slider_dragged)
+        sh.routed_drag_finished.connect(self._on_region_slider_finished)
+        sh.routed_weight_committed.connect(self._on_region_weight_committed)
+        sh.routed_reset_requested.connect(self._on_region_reset)
+        sh.routed_preset_requested.connect(self._on_region_preset)
+        if d.project is not None:
+            self._on_rig_change()
+            if seg.segmentation is not None:
+                self._on_segmentation_ready()
+
+    # --- state --------------------------------------------------------------------------------------
+    @property
+    def level(self) -> int | None:
+        """The hierarchy level drags solve (None: no segmentation yet, a global solve)."""
+        return self.panel.current_level()
+
+    def _level_obj(self, level: int | None):
+        seg = self.window.segmentation.segmentation
+        if seg is None or level is None or not 0 <= level < len(seg.levels):
+            return None
+        return seg.levels[level]
+
+    def set_mode(self, on: bool) -> None:
+        self.mode = bool(on)
+        self.panel.set_mode(self.mode)
+        if self.mode:
+            self.message("Marker mode: click the face to add a marker, drag a marker to pose, right-click removes.")
+        self.refresh_overlay(render=True)
+
+    def message(self, text: str, timeout: int = 8000) -> None:
+        self.last_message = text
+        self.window.statusBar().showMessage(text, timeout)
+        self.panel.set_status(text)
+
+    def _on_rig_change(self) -> None:
+        rig = self.document.rig
+        self._gains = damping_gains(point_mobility(rig.deltas)) if rig.n_shapes else np.zeros(rig.n_vertices)
+        self._region_max.clear()
+        self._triangles = rig.triangles()
+        T = self._triangles
+        self._tri_of_vertex = sp.csr_matrix((np.ones(T.size), (T.reshape(-1), np.repeat(np.arange(len(T)), 3))),
+                                            shape=(rig.n_vertices, len(T)))
+        self._face_size = float(np.linalg.norm(np.ptp(rig.neutral, axis=0)))
+        self.drag = None
+        self._load_markers()
+
+    def _on_shapes_change(self) -> None:
+        self._on_rig_change()
+
+    def _load_markers(self) -> None:
+        data = self.document.section(SECTION)
+        self.markers = None
+        if data:
+            try:
+                self.markers = MarkerSet.from_dict(data, self.document.rig, source="project")
+            except RigInputError as exc:
+                self.message(f"The project's markers were not loaded: {exc}")
+        if self.markers is None:
+            self.markers = MarkerSet.for_rig(self.document.rig, [])
+        if self._selected is not None and self._selected >= len(self.markers):
+            self._selected = None
+        self.panel.set_markers(self.markers.names, self.markers.background)
+        self.markers_changed.emit()
+        self.refresh_overlay(render=True)
+
+    def _on_section_change(self, name: str) -> None:
+        if name == SECTION:
+            self._load_markers()
+
+    def _on_segmentation_ready(self) -> None:
+        seg = self.window.segmentation.segmentation
+        counts = [] if seg is None else [lvl.n_regions for lvl in seg.levels]
+        self.panel.set_levels(counts)
+        self._region_max.clear()
+        self.sync_edit_region()
+
+    def _on_level_change(self, level: int) -> None:
+        self.message(f"Drags solve the {self._level_obj(level).n_regions} regions of level {level}."
+                     if self._level_obj(level) is not None else "Drags solve one global pose.", 4000)
+
+    def _on_marker_selected(self, index: int) -> None:
+        self._selected = index if index >= 0 else None
+        self.refresh_overlay(render=True)
+
+    # --- glyphs ---------------------------------------------------------------------------------------
+    def marker_positions(self) -> np.ndarray:
+        """(M, 3) markers on the surface shown."""
+        if self.markers is None or not len(self.markers):
+            return np.zeros((0, 3))
+        return self.markers.positions(self.document.surface().astype(np.float64))
+
+    def refresh_overlay(self, render: bool = False) -> None:
+        if self.document.project is None or self.markers is None:
+            return
+        visible = self.mode or self.drag is not None
+        if not visible or not len(self.markers):
+            self.overlay.show(np.zeros((0, 3)))
+        else:
+            targets = self.drag.targets if self.drag is not None else None
+            self.overlay.show(self.marker_positions(), targets, self._selected)
+        if render:  # coalesced with the window's pose redraws: one render per event-loop turn
+            self.window._schedule_redraw()
+
+    def _on_pose_change(self) -> None:
+        self.refresh_overlay()  # the window's scheduled redraw renders
+        self.sync_edit_region()
+
+    # --- markers --------------------------------------------------------------------------------------
+    def _next_name(self) -> str:
+        used = set(self.markers.names)
+        i = len(used)
+        while f"M{i:02d}" in used:
+            i += 1
+        return f"M{i:02d}"
+
+    def marker_for_point(self, vertex: int, point, name: str) -> Marker:
+        """A marker at a picked surface point: the face point of a triangle around ``vertex`` holding it
+        (barycentric), or the vertex itself when the point is on it."""
+        X = self.document.surface().astype(np.float64)
+        p = np.asarray(point, dtype=np.float64)
+        tris = self._tri_of_vertex[vertex].indices
+        best, best_bary, best_score = None, None, -np.inf
+        for t in tris:
+            a, b, c = X[self._triangles[t]]
+            v0, v1, v2 = b - a, c - a, p - a
+            d00, d01, d11, d20, d21 = v0 @ v0, v0 @ v1, v1 @ v1, v2 @ v0, v2 @ v1
+            den = d00 * d11 - d01 * d01
+            if den <= 1e-18:
+                continue
+            l1 = (d11 * d20 - d01 * d21) / den
+            l2 = (d00 * d21 - d01 * d20) / den
+            bary = np.array([1.0 - l1 - l2, l1, l2])
+            score = bary.min()
+            if score > best_score:
+                best, best_bary, best_score = int(t), bary, score
+        if best is None or best_score < -0.05:
+            return Marker(name, vertex=int(vertex))
+        bary = np.clip(best_bary, 0.0, None)
+        bary /= bary.sum()
+        if bary.max() > 0.995:
+            return Marker(name, vertex=int(self._triangles[best][int(np.argmax(bary))]))
+        return Marker(name, face=best, bary=tuple(bary))
+
+    def add_marker_at(self, vertex: int, point=None, name: str | None = None) -> bool:
+        """Add a marker at a picked point (one undo step). Duplicates are refused with a message; a marker
+        on the background (no shape moves it) is allowed with a warning."""
+        if self.document.project is None:
+            return False
+        name = name or self._next_name()
+        try:
+            marker = Marker(name, vertex=int(vertex)) if point is None else self.marker_for_point(vertex, point, name)
+            new = self.markers.with_marker(marker)
+        except RigInputError as exc:
+            self.message(f"Marker not added: {exc}")
+            return False
+        X = self.document.surface().astype(np.float64)
+        if len(self.markers):
+            P = new.positions(X)
+            dist = np.linalg.norm(P[:-1] - P[-1], axis=1)
+            j = int(np.argmin(dist))
+            if dist[j] < MIN_SPACING * self._face_size:
+                self.message(f"Marker not added: it would sit on marker {self.markers.names[j]} "
+                             f"({dist[j]:.3g} {self.document.rig.units} away); drag that one instead.")
+                return False
+        old = self.document.section(SECTION)
+        self.document.undo_stack.push(SetMarkersCommand(self.document, old, new.to_dict(), f"Add marker {name}"))
+        if name in new.background:
+            self.message(f"Marker {name} is on the background: no shape moves the surface there, so it stays "
+                         f"pinned and cannot be dragged.")
+        else:
+            where = f"vertex {marker.vertex}" if marker.vertex is not None else f"triangle {marker.face}"
+            self.message(f"Added marker {name} on {where}.", 4000)
+        return True
+
+    def remove_marker(self, name: str) -> bool:
+        if self.markers is None or name not in self.markers.names:
+            return False
+        old = self.document.section(SECTION)
+        new = self.markers.without(name)
+        self.document.undo_stack.push(SetMarkersCommand(self.document, old, new.to_dict(), f"Remove marker {name}"))
+        self.message(f"Removed marker {name}.", 4000)
+        return True
+
+    def _on_picked(self, vertex: int, point) -> None:
+        if self.mode and self.drag is None:
+            self.add_marker_at(vertex, point)
+
+    def marker_at(self, x: float, y: float) -> int | None:
+        """The marker nearest display pixel (x, y) within the grab radius, or None."""
+        if self.markers is None or not len(self.markers):
+            return None
+        d = self.viewport.world_to_display(self.marker_positions())
+        dist = np.hypot(d[:, 0] - x, d[:, 1] - y)
+        i = int(np.argmin(dist))
+        return i if dist[i] <= PICK_RADIUS_PX * self.viewport.pixel_ratio() else None
+
+    # --- dragging -------------------------------------------------------------------------------------
+    def _region_max_for(self, lvl) -> np.ndarray:
+        key = id(lvl.blend)
+        hit = self._region_max.get(key)
+        if hit is None or hit[0] is not lvl.blend:
+            hit = (lvl.blend, shape_region_max(self.document.rig.deltas, [r.vertices for r in lvl.regions]))
+            self._region_max[key] = hit
+        return hit[1]
+
+    def begin_drag(self, index: int, display_xy=None) -> DragState:
+        """Set up a drag of marker ``index``: the regional solver of the chosen level for the current markers,
+        the pins (every marker where it is now) and the damping gain of the dragged marker."""
+        rig, doc = self.document.rig, self.document
+        old = doc.pose_state()
+        level = self.level
+        lvl = self._level_obj(level)
+        if lvl is not None:
+            blend, regions = lvl.blend, [r.vertices for r in lvl.regions]
+            region_max = self._region_max_for(lvl)
+        else:
+            level, blend, regions, region_max = None, None, [], np.zeros((0, rig.n_shapes))
+        W0 = pose_at_level(old, blend)
+        ms = self.markers
+        solver = RegionalSolver(regions, ms.S, ms.delta_rows(rig.deltas), region_max=region_max,
+                                solve_background=True, lam_reg=self.lam_reg)
+        if blend is not None and not (old.is_regional and same_blend(old.blend, blend)):
+            doc.set_pose_state(PoseState(old.weights, W0, blend, level))  # same pose, now per region
+        start = self.marker_positions()
+        gain = float(np.asarray(ms.S[index] @ self._gains).reshape(-1)[0])
+        self.drag = DragState(index=index, old=old, level=level, blend=blend, W0=W0, solver=solver,
+                              neutral_at=ms.positions(rig.neutral), start=start, targets=start.copy(), gain=gain,
+                              W=W0.copy())
+        if display_xy is not None:
+            self.drag.press_world = self.viewport.view_plane_point(display_xy[0], display_xy[1], start[index])
+        self._selected = index
+        self.refresh_overlay(render=True)
+        return self.drag
+
+    def drag_to(self, x: float, y: float) -> np.ndarray:
+        """Move the dragged marker's target to display pixel (x, y) (projected to the view plane)."""
+        dr = self.drag
+        hit = self.viewport.view_plane_point(x, y, dr.start[dr.index])
+        if dr.press_world is None:
+            dr.press_world = hit
+        return self.drag_by(hit - dr.press_world)
+
+    def drag_by(self, mouse_delta: np.ndarray) -> np.ndarray:
+        """Target = press position + damped ``mouse_delta`` (world units); re-solve and show. Returns W."""
+        dr = self.drag
+        dr.targets = dr.start.copy()
+        dr.targets[dr.index] = dr.start[dr.index] + dr.gain * np.asarray(mouse_delta, dtype=np.float64)
+        b = (dr.targets - dr.neutral_at).reshape(-1)
+        # From the current pose, λ_r toward it (Joshi §4): warm-started, so a move costs a few solver steps.
+        W = dr.solver.solve(b, dr.W)
+        dr.W = W
+        dr.moved = True
+        if dr.blend is None:
+            self.document.set_pose_state(PoseState(W[0], None, None, None))
+        else:
+            self.document.set_region_weights_live(W)
+        self.drag_updated.emit()
+        return W
+
+    def end_drag(self) -> bool:
+        """Finish the drag: one undo step from the pose at the press to the pose now (if it changed)."""
+        dr, self.drag = self.drag, None
+        if dr is None:
+            return False
+        new = self.document.pose_state()
+        changed = dr.moved and not new.equals(dr.old)
+        if changed:
+            name = self.markers.names[dr.index]
+            where = f"level {dr.level}" if dr.level is not None else "global"
+            self.document.undo_stack.push(SetPoseCommand(self.document, dr.old, new, f"Drag marker {name} ({where})"))
+        elif not new.equals(dr.old):
+            self.document.set_pose_state(dr.old)
+        self.refresh_overlay(render=True)
+        return changed
+
+    def _on_mouse(self, kind: str, x: int, y: int, button) -> bool:
+        if self.drag is not None:
+            if kind == "move":
+                self.drag_to(x, y)  # the window redraws once per event-loop turn (coalesced)
+                return True
+            if kind == "release":
+                self.end_drag()
+                return True
+            return True
+        if kind != "press" or not self.mode or self.document.project is None:
+            return False
+        i = self.marker_at(x, y)
+        if i is None:
+            return False
+        if button == QtCore.Qt.RightButton:
+            self.remove_marker(self.markers.names[i])
+            return True
+        if button == QtCore.Qt.LeftButton:
+            if i in [self.markers.index(n) for n in self.markers.background]:
+                self.message(f"Marker {self.markers.names[i]} is on the background: no shape can move it.")
+            self.begin_drag(i, (x, y))
+            self.panel.select_marker(i)
+            return True
+        return False
+
+    # --- the Shapes panel on a regional pose ------------------------------------------------------------
+    def sync_edit_region(self) -> None:
+        """The Shapes panel edits the region selected in the Segmentation panel when the pose is regional
+        at that level; otherwise all regions (or the global pose)."""
+        doc, seg = self.document, self.window.segmentation
+        if doc.project is None:
+            return
+        region = None
+        lvl = self._level_obj(seg.level)
+        if (doc.is_regional and lvl is not None and seg.highlight is not None
+                and same_blend(lvl.blend, doc.region_blend)):
+            region = seg.highlight
+        doc.set_edit_region(region)
+        sh = self.window.shapes_panel
+        if not doc.is_regional:
+            sh.set_target("Editing the global pose", routed=False)
+        elif doc.edit_region is not None:
+            sh.set_target(f"Editing region {doc.edit_region} of level {doc.region_level} "
+                          f"(selected in the Segmentation panel)", routed=True)
+        else:
+            sh.set_target(f"Regional pose (level {doc.region_level}): sliders show the background row and set "
+                          f"every region; select a region to edit it alone", routed=True)
+
+    def _region_rows(self) -> np.ndarray:
+        doc = self.document
+        R1 = doc.region_weights.shape[0]
+        return np.array([doc.edit_region]) if doc.edit_region is not None else np.arange(R1)
+
+    def _regional_with(self, k: int, value: float) -> np.ndarray:
+        W = self.document.region_weights.copy()
+        W[self._region_rows(), k] = value
+        return W
+
+    def _on_region_slider_started(self, k: int) -> None:
+        self._slider_old = self.document.pose_state()
+
+    def _on_region_slider_dragged(self, k: int, value: float) -> None:
+        if self.document.is_regional:
+            self.document.set_region_weights_live(self._regional_with(k, value))
+
+    def _on_region_slider_finished(self, k: int) -> None:
+        old, self._slider_old = self._slider_old, None
+        new = self.document.pose_state()
+        if old is not None and not new.equals(old):
+            self.document.undo_stack.push(SetPoseCommand(self.document, old, new,
+                                                         f"Drag {self.document.rig.shape_names[k]} (regional)"))
+
+    def _on_region_weight_committed(self, k: int, value: float) -> None:
+        doc = self.document
+        if not doc.is_regional:
+            return
+        old = doc.pose_state()
+        new = PoseState(old.weights, self._regional_with(k, value), old.blend, old.level)
+        if not new.equals(old):
+            doc.undo_stack.push(SetPoseCommand(doc, old, new, f"Set {doc.rig.shape_names[k]} to {value:.3g} (regional)"))
+
+    def _set_rows(self, w: np.ndarray, text: str) -> None:
+        doc = self.document
+        old = doc.pose_state()
+        if doc.edit_region is None:
+            new = PoseState(np.asarray(w, dtype=np.float64), None, None, None)  # every region: a global pose
+        else:
+            W = old.region_weights.copy()
+            W[doc.edit_region] = w
+            new = PoseState(old.weights, W, old.blend, old.level)
+        if not new.equals(old):
+            doc.undo_stack.push(SetPoseCommand(doc, old, new, text))
+
+    def _on_region_reset(self) -> None:
+        if self.document.is_regional:
+            self._set_rows(np.zeros(self.document.rig.n_shapes), "Reset pose" if self.document.edit_region is None
+                           else f"Reset region {self.document.edit_region}")
+
+    def _on_region_preset(self, name: str) -> None:
+        rig = self.document.rig
+        if self.document.is_regional:
+            self._set_rows(rig.weights_from_dict(rig.presets[name]), f"Preset {name}")
+
+
+def install(window) -> MarkerController:
+    """Add the Markers panel, the marker-mode action (M) and the controller to a MainWindow."""
+    panel = MarkersPanel(window)
+    window.markers_panel = panel
+    window.markers_dock = window._add_dock("Markers", panel, QtCore.Qt.LeftDockWidgetArea)
+    window.panels_menu.addAction(window.markers_dock.toggleViewAction())
+    controller = MarkerController(window, panel)
+    window.markers = controller
+    act = QtGui.QAction("&Marker Mode", window)
+    act.setCheckable(True)
+    act.setShortcut(QtGui.QKeySequence("M"))
+    tip = ("Marker mode: click the face to add a marker, drag a marker to pose the face region by region "
+           "(damped where the face barely moves), right-click a marker to remove it")
+    act.setToolTip(tip)
+    act.setStatusTip(tip)
+    act.toggled.connect(controller.set_mode)
+    panel.mode_toggled.connect(act.setChecked)
+    view_menu = next((a.menu() for a in window.menuBar().actions() if a.text().replace("&", "") == "View"), None)
+    (view_menu or window.menuBar()).addAction(act)
+    window.addAction(act)
+    window.marker_mode_action = act
+    return controller

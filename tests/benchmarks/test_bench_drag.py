@@ -1,0 +1,78 @@
+"""Marker drag speed on ICT FaceKit (ALGORITHMS.md §8): one regional solve, and one drag-to-redraw step."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from model.markers import Marker, MarkerSet
+from model.pose import PoseEvaluator
+from solvers.regional_solve import RegionalSolver
+
+LANDMARKS = (30, 48, 54, 19, 24, 8)   # iBUG: nose tip, mouth corners, brows, chin
+
+
+@pytest.fixture(scope="module")
+def ict_drag(ict_rig, ict_dir):
+    from model.segmentation import segment_rig
+    seg = segment_rig(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, ict_rig.deltas)
+    level = seg.levels[(len(seg.levels) - 1) // 2]
+    lm = json.loads((ict_dir / "vertex_indices.json").read_text())["idx_to_landmark_verts"]
+    ms = MarkerSet.for_rig(ict_rig, [Marker(f"M{i}", vertex=int(lm[i])) for i in LANDMARKS])
+    return seg, level, ms
+
+
+def test_bench_one_drag_solve(benchmark, ict_rig, ict_drag):
+    _, level, ms = ict_drag
+    solver = RegionalSolver([r.vertices for r in level.regions], ms.S, ms.delta_rows(ict_rig.deltas),
+                            deltas=ict_rig.deltas, solve_background=True)
+    W = np.zeros((level.n_regions + 1, ict_rig.n_shapes))
+    targets = ms.positions(ict_rig.neutral)
+    targets[1] += np.array([0.5, 0.4, 0.0])  # pull a mouth corner
+    b = (targets - ms.positions(ict_rig.neutral)).reshape(-1)
+    # During a drag each move starts from the pose of the previous move (the controller's warm start).
+    W_prev = solver.solve(b, W)
+    targets[1] += np.array([0.01, 0.01, 0.0])
+    b2 = (targets - ms.positions(ict_rig.neutral)).reshape(-1)
+    out = benchmark(solver.solve, b2, W_prev)
+    assert out.min() >= 0 and out.max() <= 1 and out.any()
+    benchmark.extra_info["regions"] = level.n_regions
+    assert benchmark.stats.stats.median < 0.005
+
+
+def test_bench_drag_to_redraw_step(benchmark, qtbot, tmp_path, ict_rig, ict_drag):
+    """Solve + regional evaluation + viewport point update + render, through the window's marker controller."""
+    from app.marker_controller import install
+    from model.project import Project
+    from tests.gui_helpers import make_window
+    seg, level, ms = ict_drag
+    w = make_window(qtbot, tmp_path)
+    c = install(w)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
+    w.document.set_project(Project(rig=ict_rig.copy()), None)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=120000)
+    w.segmentation.runner.wait() if hasattr(w.segmentation.runner, "wait") else None
+    qtbot.waitUntil(lambda: w.markers_panel.level.count() > 1, timeout=120000)
+    for m in ms.markers:
+        assert c.add_marker_at(m.vertex, name=m.name)
+    c.begin_drag(1)
+    step = [0]
+
+    def drag_step():
+        step[0] += 1
+        c.drag_by(np.array([0.02 * (step[0] % 25), 0.015 * (step[0] % 25), 0.0]))
+        w.redraw_now()  # viewport point update + render
+
+    import time
+    t0 = time.perf_counter()
+    for _ in range(10):  # the same step without the render, for the report
+        step[0] += 1
+        c.drag_by(np.array([0.02 * (step[0] % 25), 0.015 * (step[0] % 25), 0.0]))
+        w.viewport.mesh.points = w.document.surface()
+    benchmark.extra_info["step_without_render_ms"] = (time.perf_counter() - t0) / 10 * 1000
+    benchmark.pedantic(drag_step, rounds=20, iterations=1, warmup_rounds=2)
+    w.grab().save(str(tmp_path / "ict_drag.png"))
+    c.end_drag()
+    benchmark.extra_info["regions"] = w.segmentation.segmentation.levels[c.level].n_regions
+    assert benchmark.stats.stats.median < 0.050

@@ -1,0 +1,278 @@
+"""Marker dragging, regional poses and keyframes in the main window (pytest-qt, sample rig, real mouse events)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PySide6 import QtCore
+
+from tests.gui_helpers import make_window, mouse, open_and_wait
+
+
+@pytest.fixture(scope="module")
+def geometry():
+    from resources.sample_rig import sample_geometry
+    return sample_geometry()
+
+
+@pytest.fixture(scope="module")
+def nose_tip(sample_rig, geometry):
+    """The skin vertex farthest forward on the midline: the tip of the nose."""
+    p = sample_rig.neutral
+    mid = np.flatnonzero(geometry.skin & (np.arange(len(p)) < geometry.n_grid) & (np.abs(p[:, 0]) < 0.3))
+    return int(mid[np.argmax(p[mid, 2])])
+
+
+def _window(qtbot, tmp_path, keyframes=False):
+    from app import keyframe_controller, marker_controller
+    w = make_window(qtbot, tmp_path)
+    marker_controller.install(w)
+    if keyframes:
+        keyframe_controller.install(w)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
+    return w
+
+
+def _pins(w, geometry, nose_tip):
+    """Markers on both mouth corners, the nose tip and the chin; returns the controller."""
+    c = w.markers
+    chin = int(geometry.mouth.lower[len(geometry.mouth.lower) // 2]) - 3 * geometry.n_cols
+    for v in (int(geometry.mouth.upper[0]), int(geometry.mouth.upper[-1]), nose_tip, chin):
+        assert c.add_marker_at(v), c.last_message
+    return c
+
+
+def _screen(w, points):
+    """Widget-local Qt positions of world points on the viewport's interactor widget."""
+    d = w.viewport.world_to_display(points)
+    return [w.viewport.display_to_qt(x, y) for x, y, _ in d]
+
+
+def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, tmp_path, geometry, nose_tip):
+    w = _window(qtbot, tmp_path)
+    c = _pins(w, geometry, nose_tip)
+    w.marker_mode_action.trigger()
+    assert c.mode and "Marker mode" in w.statusBar().currentMessage()
+    lvl = w.segmentation.segmentation.levels[c.level]
+    assert 1 < lvl.n_regions < w.segmentation.segmentation.levels[0].n_regions  # a middle level by default
+    doc = w.document
+    before_state = doc.pose_state()
+    before_pts = w.viewport.points().copy()
+    P0 = c.marker_positions()
+    corner = 0
+    widget = w.viewport.plotter.interactor
+    q = _screen(w, P0[corner:corner + 1])[0]
+    start = QtCore.QPoint(round(q.x()), round(q.y()))
+    drag = QtCore.QPoint(-36, -24)  # outward (screen left is the character's right) and up
+    mouse(widget, "press", start)
+    assert c.drag is not None and c.drag.index == corner
+    cam_before = np.array(w.viewport.plotter.camera.position)
+    for i in range(1, 7):
+        mouse(widget, "move", start + drag * i / 6)
+    qtbot.waitUntil(lambda: not w._redraw_pending)
+    assert doc.is_regional and doc.region_level == c.level
+    np.testing.assert_array_equal(w.viewport.points(), doc.surface())  # the face updated during the drag
+    targets = c.drag.targets.copy()
+    w.grab().save(str(tmp_path / "drag.png"))
+    mouse(widget, "release", start + drag)
+    np.testing.assert_array_equal(np.array(w.viewport.plotter.camera.position), cam_before)  # camera stayed
+    assert doc.undo_stack.count() == 5  # 4 markers + one drag
+    P1 = c.marker_positions()
+    moved, wanted = P1[corner] - P0[corner], targets[corner] - P0[corner]
+    assert np.linalg.norm(wanted) > 0.3  # the damped target moved (cm)
+    along = moved @ wanted / np.linalg.norm(wanted)
+    assert along > 0.5 * np.linalg.norm(wanted)  # the corner follows its target
+    # In screen space it went the way the mouse went.
+    q1 = _screen(w, P1[corner:corner + 1])[0]
+    d_screen = np.array([q1.x() - q.x(), q1.y() - q.y()])
+    assert d_screen @ np.array([drag.x(), drag.y()]) > 0.5 * np.hypot(drag.x(), drag.y()) * np.linalg.norm(d_screen)
+    others = [1, 2, 3]
+    assert np.linalg.norm(P1[others] - P0[others], axis=1).max() < 0.25 * np.linalg.norm(moved)  # pins stay
+    W = doc.region_weights
+    assert W.min() >= 0.0 and W.max() <= 1.0
+    w.undo_action.trigger()
+    qtbot.waitUntil(lambda: not w._redraw_pending)
+    assert doc.pose_state().equals(before_state) and not doc.is_regional
+    np.testing.assert_array_equal(doc.weights, before_state.weights)
+    np.testing.assert_array_equal(w.viewport.points(), before_pts)
+    w.redo_action.trigger()
+    np.testing.assert_array_equal(doc.region_weights, W)
+
+
+def test_the_same_drag_moves_the_nose_tip_less_than_a_mouth_corner(qtbot, tmp_path, geometry, nose_tip):
+    w = _window(qtbot, tmp_path)
+    c = _pins(w, geometry, nose_tip)
+    delta = np.array([0.0, 0.6, 0.0])  # 6 mm up in the view plane
+
+    def drag(i):
+        P0 = c.marker_positions()
+        c.begin_drag(i)
+        c.drag_by(delta)
+        c.end_drag()
+        moved = np.linalg.norm(c.marker_positions()[i] - P0[i])
+        w.document.undo_stack.undo()
+        return moved
+
+    nose, corner = c.markers.index("M02"), c.markers.index("M00")
+    assert c.markers.markers[nose].vertex == nose_tip
+    at_nose, at_corner = drag(nose), drag(corner)
+    assert at_corner > 0.3
+    assert at_nose < 0.3 * at_corner
+
+
+def test_bad_marker_input(qtbot, tmp_path, geometry, nose_tip):
+    w = _window(qtbot, tmp_path)
+    c = _pins(w, geometry, nose_tip)
+    rig = w.document.rig
+    count = len(c.markers)
+    # Duplicate: refused, with a message, nothing pushed.
+    steps = w.document.undo_stack.count()
+    assert not c.add_marker_at(nose_tip)
+    assert len(c.markers) == count and w.document.undo_stack.count() == steps
+    assert "Marker not added" in w.statusBar().currentMessage() and "same surface point" in c.last_message
+    # Background (no shape moves it): allowed, with a message.
+    still = int(np.flatnonzero(np.abs(rig.deltas).max(axis=(0, 2)) == 0)[0])
+    assert c.add_marker_at(still)
+    assert len(c.markers) == count + 1 and "background" in w.statusBar().currentMessage()
+    assert "(background)" in w.markers_panel.list.item(count).text()
+    # A target far out of reach: the weights stay within [0, 1].
+    c.begin_drag(c.markers.index("M00"))
+    W = c.drag_by(np.array([-40.0, 60.0, 25.0]))
+    c.end_drag()
+    assert np.isfinite(W).all() and W.min() >= 0.0 and W.max() <= 1.0
+    assert w.document.region_weights.max() == pytest.approx(1.0)
+
+
+def test_click_adds_right_click_removes_and_markers_are_saved(qtbot, tmp_path, geometry, nose_tip):
+    w = _window(qtbot, tmp_path)
+    c = w.markers
+    w.marker_mode_action.trigger()
+    widget = w.viewport.plotter.interactor
+    corner = int(geometry.mouth.upper[0])
+    # A click beside the corner, on the cheek: a marker on the surface where the click was.
+    target = w.document.surface()[corner] + np.array([-0.8, 0.4, 0.0], dtype=np.float32)
+    q = _screen(w, target[None])[0]
+    pos = QtCore.QPoint(round(q.x()), round(q.y()))
+    mouse(widget, "press", pos)
+    mouse(widget, "release", pos)
+    assert len(c.markers) == 1, c.last_message
+    P = c.marker_positions()[0]
+    q1 = _screen(w, P[None])[0]
+    assert abs(q1.x() - pos.x()) < 3 and abs(q1.y() - pos.y()) < 3  # it sits under the click
+    assert w.markers_panel.list.count() == 1 and w.markers.overlay.n_markers == 1
+    pos2 = QtCore.QPoint(round(q1.x()), round(q1.y()))
+    mouse(widget, "press", pos2, buttons=QtCore.Qt.RightButton, button=QtCore.Qt.RightButton)
+    mouse(widget, "release", pos2, buttons=QtCore.Qt.RightButton, button=QtCore.Qt.RightButton)
+    assert len(c.markers) == 0
+    w.document.undo_stack.undo()
+    assert len(c.markers) == 1
+    _pins(w, geometry, nose_tip)
+    names = c.markers.names
+    path = tmp_path / "markers.bsproj"
+    assert w.save_to(path)
+    w.document.undo_stack.undo()
+    assert len(c.markers) == len(names) - 1
+    open_and_wait(qtbot, w, path)
+    assert w.markers.markers.names == names
+    np.testing.assert_allclose(w.markers.marker_positions()[0], P, atol=1e-5)
+
+
+def test_shapes_panel_edits_the_selected_region_of_a_regional_pose(qtbot, tmp_path, geometry, nose_tip):
+    w = _window(qtbot, tmp_path)
+    c = _pins(w, geometry, nose_tip)
+    c.begin_drag(0)
+    c.drag_by(np.array([-0.5, 0.5, 0.0]))
+    c.end_drag()
+    doc = w.document
+    assert doc.is_regional and "background row" in w.shapes_panel.target.text()
+    seg = w.segmentation
+    w.segmentation_panel.level.setValue(c.level)
+    seg._on_level_change(c.level)
+    w.segmentation_panel.region_selected.emit(0)
+    qtbot.waitUntil(lambda: doc.edit_region == 0)
+    assert "region 0" in w.shapes_panel.target.text()
+    before = doc.region_weights.copy()
+    k = doc.rig.shape_index("jawOpen")
+    w.shapes_panel.row("jawOpen").box.setValue(0.7)
+    after = doc.region_weights
+    assert after[0, k] == 0.7
+    np.testing.assert_array_equal(np.delete(after, 0, axis=0), np.delete(before, 0, axis=0))  # others kept
+    w.document.undo_stack.undo()
+    np.testing.assert_array_equal(doc.region_weights, before)
+    # "Reset all" in the panel resets the selected region only.
+    w.shapes_panel.row("jawOpen").box.setValue(0.7)
+    w.shapes_panel.reset.click()
+    assert not doc.region_weights[0].any()
+    np.testing.assert_array_equal(doc.region_weights[1:], before[1:])
+    w.document.undo_stack.undo()
+    w.document.undo_stack.undo()
+    np.testing.assert_array_equal(doc.region_weights, before)
+    # Edit ▸ Reset Pose with no region selected makes a global pose; undo brings the regional one back exactly.
+    w.segmentation_panel.region_selected.emit(-1)
+    assert doc.edit_region is None and doc.weights.any()  # the background row, solved from all markers
+    w.reset_pose()
+    assert not doc.is_regional and not doc.weights.any()
+    w.document.undo_stack.undo()
+    np.testing.assert_array_equal(doc.region_weights, before)
+
+
+def test_keys_interpolate_play_save_and_export(qtbot, tmp_path, geometry, nose_tip):
+    from model.pc2 import read_pc2
+    from model.weights_csv import read_weights_csv
+    w = _window(qtbot, tmp_path, keyframes=True)
+    c, k = _pins(w, geometry, nose_tip), w.keyframes
+    doc = w.document
+    k.scrub(0.0)
+    w.set_key_action.trigger()
+    assert len(k.timeline) == 1 and k.timeline.keys[0].weights.ndim == 1  # a global key
+    k.scrub(1.0)  # go to 1 s (shows the key's pose), then pose by dragging and key it
+    c.begin_drag(0)
+    c.drag_by(np.array([-0.5, 0.6, 0.0]))
+    c.end_drag()
+    W1 = doc.region_weights.copy()
+    k.set_key()
+    assert len(k.timeline) == 2 and k.timeline.keys[1].weights.shape == W1.shape  # now regional keys
+    np.testing.assert_array_equal(k.timeline.keys[1].weights, W1)
+    np.testing.assert_array_equal(k.timeline.keys[0].weights, np.zeros_like(W1))
+    k.set_settings(interpolation="linear")
+    k.scrub(0.5)
+    np.testing.assert_allclose(doc.region_weights, 0.5 * W1)
+    assert "◆" not in w.timeline_panel.time_label.text()
+    k.scrub(1.0)
+    assert "◆" in w.timeline_panel.time_label.text()
+    # Undo the settings change and the second key.
+    doc.undo_stack.undo()
+    assert k.timeline.interpolation == "smooth"
+    doc.undo_stack.undo()
+    assert len(k.timeline) == 1
+    doc.undo_stack.redo()
+    doc.undo_stack.redo()
+    assert len(k.timeline) == 2 and k.timeline.interpolation == "linear"
+    # Play advances time.
+    k.scrub(0.0)
+    w.play_action.trigger()
+    assert k.playing
+    qtbot.waitUntil(lambda: k.time > 0.1, timeout=5000)
+    w.play_action.trigger()
+    assert not k.playing
+    # Export.
+    csv_path, pc2_path = tmp_path / "keys.csv", tmp_path / "keys.pc2"
+    n = k.export_csv(csv_path)
+    assert n == int(round(k.duration * k.fps)) + 1
+    frames, times, names, Wcsv = read_weights_csv(csv_path)
+    assert len(frames) == n and f"jawOpen@region0" in names and "jawOpen" in names
+    fi = int(round(1.0 * k.fps))
+    np.testing.assert_allclose(Wcsv[fi], W1.reshape(-1))
+    assert k.export_pc2(pc2_path) == n
+    cache, _, _ = read_pc2(pc2_path)
+    assert cache.shape == (n, doc.rig.n_vertices, 3)
+    np.testing.assert_allclose(cache[0], doc.rig.neutral, atol=1e-5)
+    expect = doc.evaluate_state(k.pose_at(1.0), dtype=np.float64)
+    np.testing.assert_allclose(cache[fi], expect, atol=1e-5)
+    # Saved in the project, and played back the same after reopening.
+    path = tmp_path / "keys.bsproj"
+    assert w.save_to(path)
+    open_and_wait(qtbot, w, path)
+    assert len(w.keyframes.timeline) == 2 and w.keyframes.timeline.interpolation == "linear"
+    np.testing.assert_array_equal(w.keyframes.timeline.keys[1].weights, W1)
+    w.keyframes.scrub(1.0)
+    np.testing.assert_allclose(doc.surface(), expect, atol=1e-5)
