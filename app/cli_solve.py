@@ -25,7 +25,10 @@ def add_parser(sub, rig_arg) -> None:
     sp.add_argument("--level", type=int, default=None, help="hierarchy level whose regions are solved")
     sp.add_argument("--residual", choices=["none", "joshi", "gaussian", "multiquadric"], default=None,
                     help="RBF residual kernel added to the blendshape fit (default: the best measured)")
-    sp.add_argument("--calibration-frames", type=int, default=30, help="neutral frames at the start of the take")
+    sp.add_argument("--calibration-frames", type=int, default=30, help="neutral frames at the start of the take that settle scale and pose (0: none)")
+    sp.add_argument("--fixed-head", action="store_true",
+                    help="the markers are already head-stabilised in rig space (e.g. a keyframe): no calibration, "
+                         "no head motion")
     sp.add_argument("-o", "--output", required=True, help="weights CSV to write")
     sp.add_argument("--cache", help="PC2 point cache of the dense result to write")
     sp.add_argument("--report", help="JSON report to write")
@@ -67,7 +70,12 @@ def cmd_solve(args) -> int:
             raise RigInputError(f"--level {level} does not exist: levels 0 to {len(seg.levels) - 1} at t={t:g}.")
         lvl = seg.levels[level]
         options.update(regions=[r.vertices for r in lvl.regions], blend=lvl.blend)
-    sol = solve_take(rig, take, marker_map, calibration_frames=args.calibration_frames, **options)
+    if args.fixed_head:
+        options["head_motion"] = False
+    if take.n_frames == 1:  # no neighbouring frame: temporal smoothness does not apply
+        options.update(lam_temporal=0.0, two_pass=False)
+    calibration = 0 if args.fixed_head else args.calibration_frames
+    sol = solve_take(rig, take, marker_map, calibration_frames=calibration, **options)
     write_weights_csv(args.output, sol.weights, rig.shape_names, rate=take.rate)
     if args.cache:
         write_pc2(args.cache, sol.iter_dense(), n_points=rig.n_vertices, start_frame=0, sample_rate=1.0)
@@ -91,4 +99,6 @@ def cmd_solve(args) -> int:
 
 
 # Defaults of the command, chosen by measurement (see README, Motion capture).
+# On the ICT Live Link take a global solve measured 0.205 mm dense RMS against the actor's true surface and
+# a two-region solve 0.212 mm: per-region solves are offered, the global solve is the default.
 SOLVE_DEFAULTS = {"regional": False, "threshold": 0.75, "level": 2}

@@ -1,0 +1,313 @@
+"""Marker maps: which rig surface point each take marker sits on.
+
+JSON: ``{"rig_units": "cm", "take_units": "mm", "markers": {"M00": 1234, "M01": {"face": f, "bary": [a, b, c]}}}``.
+A value is a vertex index, or a polygon index (file order) with barycentric weights: one per polygon corner,
+or three for the polygon's first three corners. ``binding(rig)`` turns a map into a sparse (M, V) matrix
+whose rows give each marker's rest position as a weighted sum of vertices, so every solver sees markers
+as plain rows of the rig.
+
+``auto_marker_map`` builds a map from the neutral calibration frames of a take: a similarity alignment
+of the mean calibration marker cloud to the rig (Umeyama 1991 inside an ICP loop, Besl & McKay 1992),
+then each marker bound to its nearest surface point.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import scipy.sparse as sp
+
+from .errors import RigInputError
+from .rig import UNIT_IN_METRES, Rig, unit_scale
+from .takes import MarkerTake
+
+
+@dataclass
+class MarkerMap:
+    """Marker label -> vertex index (int) or ``{"face": f, "bary": [...]}``, in the order of ``labels``."""
+
+    markers: dict[str, int | dict]
+    rig_units: str = "cm"
+    take_units: str | None = None
+    source: str = ""
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def labels(self) -> list[str]:
+        return list(self.markers)
+
+    def __post_init__(self) -> None:
+        where = self.source or "marker map"
+        for u in (self.rig_units, self.take_units):
+            if u is not None and u not in UNIT_IN_METRES:
+                raise RigInputError(f"{where}: unknown units '{u}' (use mm, cm or m).")
+        if not self.markers:
+            raise RigInputError(f"{where}: maps no markers.")
+        for label, v in self.markers.items():
+            if isinstance(v, (bool, float)) or not isinstance(v, (int, np.integer, dict)):
+                raise RigInputError(f"{where}: marker {label} must map to a vertex index or {{'face', 'bary'}}.")
+            if isinstance(v, dict) and ("face" not in v or "bary" not in v):
+                raise RigInputError(f"{where}: marker {label} needs both 'face' and 'bary'.")
+
+    # --- binding to a rig ------------------------------------------------------------------------
+    def binding(self, rig: Rig, labels: list[str] | None = None) -> sp.csr_matrix:
+        """(M, V) sparse matrix: row i gives marker ``labels[i]`` as a weighted sum of rig vertices."""
+        where = self.source or "marker map"
+        labels = self.labels if labels is None else labels
+        V = rig.n_vertices
+        starts = np.concatenate(([0], np.cumsum(rig.face_counts)))
+        rows, cols, vals = [], [], []
+        for i, label in enumerate(labels):
+            if label not in self.markers:
+                raise RigInputError(f"{where}: has no marker labelled '{label}'.")
+            v = self.markers[label]
+            if isinstance(v, dict):
+                f = int(v["face"])
+                if not 0 <= f < rig.n_faces:
+                    raise RigInputError(f"{where}: marker {label} is on face {f}, but the rig has {rig.n_faces} faces.")
+                corners = rig.face_indices[starts[f]:starts[f + 1]]
+                bary = np.asarray(v["bary"], dtype=np.float64)
+                if bary.size not in (3, corners.size) or not np.isfinite(bary).all():
+                    raise RigInputError(f"{where}: marker {label} needs 3 or {corners.size} barycentric weights.")
+                if abs(bary.sum() - 1.0) > 1e-3:
+                    raise RigInputError(f"{where}: marker {label}'s barycentric weights must sum to 1.")
+                rows += [i] * bary.size
+                cols += list(corners[:bary.size])
+                vals += list(bary)
+            else:
+                if not 0 <= int(v) < V:
+                    raise RigInputError(f"{where}: marker {label} is bound to vertex {int(v)}, "
+                                        f"but the rig has {V} vertices.")
+                rows.append(i)
+                cols.append(int(v))
+                vals.append(1.0)
+        return sp.csr_matrix((vals, (rows, cols)), shape=(len(labels), V))
+
+    def match(self, take: MarkerTake) -> tuple[list[str], np.ndarray]:
+        """(labels in both, their column in the take). Raises if the take and the map share no label."""
+        where = self.source or "marker map"
+        common = [label for label in self.labels if label in take.labels]
+        if not common:
+            raise RigInputError(f"{where}: none of its {len(self.labels)} marker labels appear in the take "
+                                f"{take.source or ''} (the take has {', '.join(take.labels[:5])}...).".replace("  ", " "))
+        return common, np.array([take.labels.index(label) for label in common], dtype=np.int64)
+
+    def missing_from(self, take: MarkerTake) -> list[str]:
+        """Labels of the map that the take does not have."""
+        return [label for label in self.labels if label not in take.labels]
+
+    def validate(self, rig: Rig, take: MarkerTake | None = None, *, min_markers: int = 3) -> list[str]:
+        """Check the map against a rig (and a take); returns warnings (labels absent from the take).
+
+        Raises RigInputError for vertices beyond the rig or a take that shares too few markers.
+        """
+        self.binding(rig)
+        warnings = []
+        if take is not None:
+            common, _ = self.match(take)
+            if len(common) < min_markers:
+                raise RigInputError(f"{self.source or 'marker map'}: only {len(common)} of its markers appear in "
+                                    f"{take.source or 'the take'}; a solve needs at least {min_markers}.")
+            absent = self.missing_from(take)
+            if absent:
+                warnings.append(f"{len(absent)} mapped markers are not in the take: {', '.join(absent)}.")
+            unmapped = [label for label in take.labels if label not in self.markers]
+            if unmapped:
+                warnings.append(f"{len(unmapped)} take markers are not mapped: {', '.join(unmapped)}.")
+        return warnings
+
+    # --- files -----------------------------------------------------------------------------------
+    def to_json(self) -> dict:
+        out = {"rig_units": self.rig_units}
+        if self.take_units:
+            out["take_units"] = self.take_units
+        out["markers"] = {k: (int(v) if not isinstance(v, dict) else
+                              {"face": int(v["face"]), "bary": [float(x) for x in v["bary"]]})
+                          for k, v in self.markers.items()}
+        return out
+
+    def save(self, path: str | Path) -> None:
+        from .atomic import atomic_write
+        atomic_write(path, (json.dumps(self.to_json(), indent=1) + "\n").encode())
+
+
+def load_marker_map(path: str | Path) -> MarkerMap:
+    """Read a marker map JSON file."""
+    path = Path(path)
+    if not path.is_file():
+        raise RigInputError(f"{path}: does not exist.")
+    text = path.read_text(encoding="utf-8", errors="replace")
+    if not text.strip():
+        raise RigInputError(f"{path}: the file is empty.")
+    try:
+        d = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise RigInputError(f"{path}: is not valid JSON ({exc.msg} at line {exc.lineno}).") from None
+    if not isinstance(d, dict) or not isinstance(d.get("markers"), dict):
+        raise RigInputError(f"{path}: a marker map needs a 'markers' object of label: vertex.")
+    extra = {k: v for k, v in d.items() if k not in ("rig_units", "take_units", "markers")}
+    return MarkerMap(markers=d["markers"], rig_units=d.get("rig_units", "cm"), take_units=d.get("take_units"),
+                     source=str(path), extra=extra)
+
+
+# --- automatic mapping ---------------------------------------------------------------------------
+def calibration_cloud(take: MarkerTake, frames: int | slice = 30, units: str | None = None) -> np.ndarray:
+    """(M, 3) mean marker positions over the calibration frames (NaN-aware), optionally converted."""
+    sl = slice(0, frames) if isinstance(frames, int) else frames
+    pos = take.positions[sl]
+    with np.errstate(invalid="ignore"):
+        seen = np.isfinite(pos).all(axis=2).sum(axis=0)
+    if (seen == 0).any():
+        bad = [take.labels[i] for i in np.flatnonzero(seen == 0)]
+        raise RigInputError(f"{take.source or 'take'}: markers {', '.join(bad)} are missing in every calibration frame.")
+    cloud = np.nanmean(pos, axis=0)
+    return cloud * unit_scale(take.units, units) if units else cloud
+
+
+def auto_marker_map(rig: Rig, take: MarkerTake, *, calibration_frames: int = 30, vertices: np.ndarray | None = None,
+                    landmarks: dict[str, int] | None = None, iterations: int = 60,
+                    surface_points: bool = False) -> tuple[MarkerMap, dict]:
+    """Bind each take marker to the rig from the neutral calibration frames.
+
+    The mean calibration cloud (converted to rig units) is similarity-aligned to the rig: from
+    ``landmarks`` ({label: vertex}) by Umeyama 1991 if given, else by ICP (Besl & McKay 1992) with a
+    per-iteration Umeyama similarity fit to the nearest rig points, tried from a few start rotations.
+    Each marker is then bound to its nearest vertex of ``vertices`` (default: every vertex a shape moves,
+    i.e. the deforming face), or with ``surface_points`` to the nearest point on a polygon (face + bary).
+    Returns (map, info) with info = {"scale", "rotation", "translation", "rms", "distances"} (rig units).
+    """
+    from scipy.spatial import cKDTree
+    from solvers.rigid import umeyama
+
+    cloud = calibration_cloud(take, calibration_frames, rig.units)
+    if vertices is None:
+        vertices = np.flatnonzero(np.abs(rig.deltas).max(axis=(0, 2)) > 0)
+    vertices = np.asarray(vertices, dtype=np.int64)
+    pts = rig.neutral[vertices]
+    tree = cKDTree(pts)
+    if landmarks:
+        lab = [k for k in landmarks if k in take.labels]
+        if len(lab) < 3:
+            raise RigInputError("Automatic marker mapping needs at least 3 landmark markers found in the take.")
+        src = cloud[[take.labels.index(k) for k in lab]]
+        dst = rig.neutral[[landmarks[k] for k in lab]]
+        s, R, t = umeyama(src, dst, scale=True)
+        starts = [(s, R, t)]
+    else:
+        c_src, c_dst = cloud.mean(axis=0), pts.mean(axis=0)
+        starts = []
+        for ax, ang in ((0, 0.0), (1, np.pi), (0, np.pi), (2, np.pi)):
+            c, sn = np.cos(ang), np.sin(ang)
+            R = np.eye(3)
+            i, j = [a for a in range(3) if a != ax]
+            R[i, i], R[i, j], R[j, i], R[j, j] = c, -sn, sn, c
+            # Start from the take's own frame (often already the rig's) and from centroid alignment.
+            starts.append((1.0, R, np.zeros(3)))
+            starts.append((1.0, R, c_dst - R @ c_src))
+    best = None
+    for s, R, t in starts:
+        for it in range(iterations):
+            moved = s * cloud @ R.T + t
+            d, nn = tree.query(moved)
+            if not landmarks:
+                # Trim the worst 10 % (markers over holes or off the mesh) for robustness.
+                keep = d <= np.quantile(d, 0.9)
+            else:
+                keep = np.ones(d.size, bool)
+            s2, R2, t2 = umeyama(cloud[keep], pts[nn[keep]], scale=it > 5)
+            if it > 5 and np.allclose(R2, R, atol=1e-10) and abs(s2 - s) < 1e-10 and np.allclose(t2, t, atol=1e-10):
+                s, R, t = s2, R2, t2
+                break
+            s, R, t = s2, R2, t2
+        moved = s * cloud @ R.T + t
+        d, nn = tree.query(moved)
+        rms = float(np.sqrt(np.mean(d ** 2)))
+        if best is None or rms < best[0]:
+            best = (rms, s, R, t, d, nn, moved)
+    rms, s, R, t, d, nn, moved = best
+    markers: dict[str, int | dict] = {}
+    dist = d.copy()
+    if surface_points:
+        faces, bary, dist = _nearest_on_polygons(rig, moved, vertices)
+        for label, f, b in zip(take.labels, faces, bary):
+            markers[label] = {"face": int(f), "bary": [float(x) for x in b]}
+    else:
+        for label, j in zip(take.labels, nn):
+            markers[label] = int(vertices[j])
+    mm = MarkerMap(markers=markers, rig_units=rig.units, take_units=take.units, source="automatic marker map")
+    return mm, {"scale": float(s), "rotation": R, "translation": t, "rms": rms, "distances": dist}
+
+
+def _nearest_on_polygons(rig: Rig, points: np.ndarray, vertices: np.ndarray):
+    """Nearest point on the rig's polygons (those touching ``vertices``) to each point: polygon index,
+    barycentric weights per polygon corner, distance (Ericson, Real-Time Collision Detection §5.1.5)."""
+    tris = rig.triangles()
+    counts = rig.face_counts.astype(np.int64)
+    face_of_tri = np.repeat(np.arange(counts.size), np.maximum(counts - 2, 0))
+    corner_k = np.arange(tris.shape[0]) - np.repeat(np.cumsum(np.maximum(counts - 2, 0)) - np.maximum(counts - 2, 0),
+                                                   np.maximum(counts - 2, 0))
+    mask = np.zeros(rig.n_vertices, bool)
+    mask[vertices] = True
+    use = mask[tris].all(axis=1)
+    tris, face_of_tri, corner_k = tris[use], face_of_tri[use], corner_k[use]
+    A, B, C = (rig.neutral[tris[:, i]] for i in range(3))
+    centroid = (A + B + C) / 3
+    from scipy.spatial import cKDTree
+    tree = cKDTree(centroid)
+    _, cand = tree.query(points, k=min(16, len(tris)))
+    faces, barys, dists = [], [], []
+    for p, cs in zip(points, np.atleast_2d(cand)):
+        best = None
+        for c in cs:
+            uvw = _closest_bary(p, A[c], B[c], C[c])
+            q = uvw @ np.stack([A[c], B[c], C[c]])
+            dd = float(np.linalg.norm(p - q))
+            if best is None or dd < best[0]:
+                best = (dd, c, uvw)
+        dd, c, uvw = best
+        f = face_of_tri[c]
+        n = int(counts[f])
+        b = np.zeros(n)
+        k = int(corner_k[c])
+        b[0] += uvw[0]
+        b[k + 1] += uvw[1]
+        b[k + 2] += uvw[2]
+        if n == 3:
+            b = b[:3]
+        faces.append(f)
+        barys.append(b)
+        dists.append(dd)
+    return np.array(faces), barys, np.array(dists)
+
+
+def _closest_bary(p, a, b, c) -> np.ndarray:
+    """Barycentric weights of the closest point to p on triangle abc (Ericson 2005, §5.1.5)."""
+    ab, ac, ap = b - a, c - a, p - a
+    d1, d2 = ab @ ap, ac @ ap
+    if d1 <= 0 and d2 <= 0:
+        return np.array([1.0, 0, 0])
+    bp = p - b
+    d3, d4 = ab @ bp, ac @ bp
+    if d3 >= 0 and d4 <= d3:
+        return np.array([0, 1.0, 0])
+    vc = d1 * d4 - d3 * d2
+    if vc <= 0 and d1 >= 0 and d3 <= 0:
+        v = d1 / (d1 - d3)
+        return np.array([1 - v, v, 0])
+    cp = p - c
+    d5, d6 = ab @ cp, ac @ cp
+    if d6 >= 0 and d5 <= d6:
+        return np.array([0, 0, 1.0])
+    vb = d5 * d2 - d1 * d6
+    if vb <= 0 and d2 >= 0 and d6 <= 0:
+        w = d2 / (d2 - d6)
+        return np.array([1 - w, 0, w])
+    va = d3 * d6 - d5 * d4
+    if va <= 0 and (d4 - d3) >= 0 and (d5 - d6) >= 0:
+        w = (d4 - d3) / ((d4 - d3) + (d5 - d6))
+        return np.array([0, 1 - w, w])
+    denom = 1.0 / (va + vb + vc)
+    v, w = vb * denom, vc * denom
+    return np.array([1 - v - w, v, w])

@@ -1,0 +1,539 @@
+"""Solve a motion capture take onto a blendshape rig (ALGORITHMS.md §4, §5, §7).
+
+Pipeline (all in rig units):
+1. Units: take markers are multiplied by ``unit_factor`` (take units -> rig units), then lightly low-passed
+   in time (``marker_smoothing``, σ in frames; NaN-aware), since optical noise is white in time.
+2. Calibration (Ma et al. 2016, §3.1): a similarity transform (Umeyama 1991, Eq. 40–42) from the mean
+   marker cloud of the first neutral frames to the rig's markers at rest settles scale, units and pose.
+3. Per frame, alternate a few times, started from the previous frame (Ma §3.1):
+   rigid head motion by weighted Kabsch with the weights fixed, then the weight QP of Joshi et al. 2003,
+   Eq. 2 with Ma Eq. 3–4's sparsity ``λ_s (Σw)²`` and temporal ``λ_t ‖w − w_prev‖²`` terms
+   on the head-stabilised markers. Kabsch weights trust markers the expression moves little
+   (``1 / (rigid_noise² + rigid_weighting² ‖d(w)‖²)``: the rig's misfit grows with displacement). With
+   ``two_pass`` a backward sweep is run too and the two causal solutions are averaged, cancelling the
+   lag of the causal temporal term.
+4. Optionally per region (Joshi §4): the same QP per region of a segmentation level over the markers inside
+   it and the shapes that move there; the surface blends the region weights by a partition of unity.
+5. The remaining marker misfit, low-passed in time (``residual_smoothing``), is interpolated by RBFs and
+   added to the dense result (Joshi Eq. 3; Fidaleo Eq. 1–5; ``solvers.rbf``).
+The box QP of a take solve runs in ``_CachedBoxQP`` (same problem as ``solvers.weight_solve``, whose
+general solver is about 2.5× slower per call here; that one is still used for convex mode).
+Missing markers (NaN) are dropped per frame. Everything that depends only on the rig and the marker set
+(normal matrices, kernel factorisations per missing-marker mask) is built once.
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable, Iterator, Optional
+
+import numpy as np
+import scipy.sparse as sp
+
+from .rbf import KERNELS, RBFResidual, phantom_points
+from .rigid import to_matrix, umeyama
+from .weight_solve import WeightSolver
+
+Progress = Optional[Callable[[int, int, str], None]]
+
+# Defaults chosen by measurement on the ICT Live Link take (see tests/benchmarks/test_bench_take_solve.py).
+DEFAULTS = dict(lam_sparsity=0.0, lam_temporal=1.0, iterations=3, two_pass=True, marker_smoothing=0.7,
+                residual="gaussian", rbf_scale=2.0, rbf_lambda=1.0, residual_smoothing=6.0, n_phantoms=48,
+                phantom_distance=2.0, calibration_frames=30, rigid_weighting=0.1, rigid_noise=0.05,
+                lam_region=0.1)
+
+
+def _mean_rigid(Ra: np.ndarray, ta: np.ndarray, Rb: np.ndarray, tb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame mean of two rigid trajectories: translations averaged, rotations by the chordal L2 mean
+    (Hartley et al. 2013, "Rotation averaging", §5.3): average the matrices, project onto SO(3) by SVD."""
+    U, _, Vt = np.linalg.svd(0.5 * (Ra + Rb))
+    d = np.sign(np.linalg.det(U @ Vt))
+    U[:, :, 2] *= d[:, None]
+    return U @ Vt, 0.5 * (ta + tb)
+
+
+def _smooth_in_time(values: np.ndarray, sigma: float) -> np.ndarray:
+    """Gaussian low-pass of (F, M, 3) trajectories along frames, ignoring NaN samples (normalised
+    convolution, Knutsson & Westin 1993); NaN stays NaN. Optical noise is white in time, the rig's misfit
+    is not, so this separates them before the residual interpolation."""
+    from scipy.ndimage import gaussian_filter1d
+    ok = np.isfinite(values)
+    filled = np.where(ok, values, 0.0)
+    num = gaussian_filter1d(filled, sigma, axis=0, mode="nearest")
+    den = gaussian_filter1d(ok.astype(np.float64), sigma, axis=0, mode="nearest")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        out = num / den
+    out[~ok] = np.nan
+    return out
+
+
+class SolveCancelled(Exception):
+    """Raised when the cancel flag is set during a take solve."""
+
+
+def _kabsch(P: np.ndarray, Y: np.ndarray, p: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted Kabsch / Umeyama 1991 (Eq. 40–41) for one frame: Y ≈ R P + t, point weights p (sum 1)."""
+    if p is None:
+        mp, my = P.mean(axis=0), Y.mean(axis=0)
+        U, _, Vt = np.linalg.svd((Y - my).T @ (P - mp))
+    else:
+        mp, my = p @ P, p @ Y
+        U, _, Vt = np.linalg.svd((Y - my).T @ ((P - mp) * p[:, None]))
+    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        U[:, 2] = -U[:, 2]
+    R = U @ Vt
+    return R, my - R @ mp
+
+
+class _CachedBoxQP:
+    """Box-constrained QP ``min ½wᵀHw − gᵀw, lo ≤ w ≤ hi`` for one fixed H (one marker subset), by the
+    primal active-set method (Nocedal & Wright, *Numerical Optimization*, Algorithm 16.3) with the
+    Cholesky factor of every free-variable block cached: along a take the same working sets recur, so
+    most frames cost a back-substitution or two. H here is ``AᵀA + λ_s 11ᵀ + λ_t I`` (Joshi et al. 2003,
+    Eq. 2; Ma et al. 2016, Eq. 3–4)."""
+
+    def __init__(self, H: np.ndarray, lo: float = 0.0, hi: float = 1.0, max_iter: int = 200) -> None:
+        import scipy.linalg as la
+        self._la = la
+        self.H = np.ascontiguousarray(H)
+        self.K = H.shape[0]
+        self.lo, self.hi = lo, hi
+        self.max_iter = max_iter
+        self._factors: dict[bytes, tuple] = {}
+        self._seen: dict[bytes, int] = {}
+        self._posv = la.get_lapack_funcs("posv", (self.H,))
+        self.tol = 1e-12 * max(1.0, float(np.abs(H).max()))
+
+    def _factor(self, free: np.ndarray):
+        key = free.tobytes()
+        hit = self._factors.get(key)
+        if hit is None:
+            idx = np.flatnonzero(free)
+            # H is well conditioned (λ_t I on the diagonal): keep the inverse of the free block, so a
+            # solve is one small matrix-vector product. Working sets seen only once are not kept.
+            Hff = self.H[np.ix_(idx, idx)]
+            seen = self._seen.get(key, 0) + 1
+            if seen < 2:
+                self._seen[key] = seen
+                return idx, None, Hff
+            hit = (idx, self._la.cho_solve(self._la.cho_factor(Hff), np.eye(idx.size)), None)
+            if len(self._factors) > 4096:
+                self._factors.clear()
+                self._seen.clear()
+            self._factors[key] = hit
+        return hit
+
+    def solve(self, g: np.ndarray, w0: np.ndarray) -> np.ndarray:
+        H, lo, hi = self.H, self.lo, self.hi
+        w = np.clip(w0, lo, hi)
+        at_lo = w <= lo
+        at_hi = w >= hi
+        for _ in range(self.max_iter):
+            free = ~(at_lo | at_hi)
+            idx, inv, Hff = self._factor(free)
+            if idx.size:
+                wb = w.copy()
+                wb[idx] = 0.0
+                r = g[idx] - H[idx] @ wb
+                x = inv @ r if inv is not None else self._posv(Hff, r)[1]
+                cur = w[idx]
+                out_lo = x < lo
+                out_hi = x > hi
+                if out_lo.any() or out_hi.any():
+                    # blocked: step to the first bound on the way and hold that variable there
+                    p = x - cur
+                    ratio = np.full(idx.size, np.inf)
+                    ratio[out_lo] = (lo - cur[out_lo]) / p[out_lo]
+                    ratio[out_hi] = (hi - cur[out_hi]) / p[out_hi]
+                    j = int(np.argmin(ratio))
+                    w[idx] = cur + max(ratio[j], 0.0) * p
+                    v = idx[j]
+                    if out_lo[j]:
+                        w[v], at_lo[v] = lo, True
+                    else:
+                        w[v], at_hi[v] = hi, True
+                    continue
+                w[idx] = x
+            grad = H @ w - g
+            viol = np.zeros(self.K)
+            viol[at_lo] = -grad[at_lo]
+            viol[at_hi] = grad[at_hi]
+            j = int(np.argmax(viol))
+            if viol[j] <= self.tol:
+                break
+            at_lo[j] = at_hi[j] = False
+        np.clip(w, lo, hi, out=w)
+        return w
+
+
+@dataclass
+class TakeSolution:
+    """The result of a take solve.
+
+    weights         (F, K) global weights (for a regional solve, the background row of each frame).
+    region_weights  (F, R+1, K) per-region weights, or None for a global solve.
+    head            (F, 4, 4) head transforms: rig space -> take space (take units), ``m ≈ head_f · x``.
+    marker_rmse     (F,) RMS distance between the head-stabilised markers and the rig fit (rig units).
+    marker_rmse_residual (F,) the same after adding the RBF residual (0-ish unless λ smooths it).
+    coefficients    (F, M+P, 3) RBF residual coefficients (None when residual is 'none').
+    """
+
+    weights: np.ndarray
+    head: np.ndarray
+    marker_rmse: np.ndarray
+    marker_rmse_residual: np.ndarray
+    region_weights: np.ndarray | None = None
+    coefficients: np.ndarray | None = None
+    calibration: np.ndarray | None = None
+    misfit: np.ndarray | None = None
+    labels: list | None = None
+    solve_seconds: float = 0.0
+    solver: "TakeSolver | None" = field(default=None, repr=False)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.weights.shape[0])
+
+    @property
+    def frames_per_second(self) -> float:
+        return self.n_frames / self.solve_seconds if self.solve_seconds > 0 else float("inf")
+
+    def dense(self, frame: int) -> np.ndarray:
+        """(V, 3) float64 surface of ``frame``, head-stabilised in rig space and rig units."""
+        s = self.solver
+        if self.region_weights is not None:
+            x = s.pose_regional(self.region_weights[frame])
+        else:
+            x = s.pose(self.weights[frame])
+        if self.coefficients is not None and s.rbf is not None:
+            x[s.residual_vertices] += s.rbf.evaluate(self.coefficients[frame])
+        return x
+
+    def iter_dense(self) -> Iterator[np.ndarray]:
+        """Yield every frame's dense surface in order (e.g. for a PC2 writer)."""
+        for f in range(self.n_frames):
+            yield self.dense(f)
+
+
+class TakeSolver:
+    """Everything of a take solve that depends only on the rig and the marker set, built once.
+
+    neutral (V, 3), deltas (K, V, 3): the rig; binding (M, V) sparse (or (M,) vertex indices): markers as
+    weighted sums of vertices. Options (defaults in ``DEFAULTS``):
+    lam_sparsity, lam_temporal (Ma Eq. 3–4), iterations (rigid/weight alternations per frame),
+    mode ('box' or 'convex'), residual (one of rbf.KERNELS), rbf_scale (kernel length, rig units),
+    rbf_lambda (Tikhonov λ), n_phantoms / phantom_distance (zero-residual ring, rig units),
+    residual_vertices (vertices that receive the residual; default: those nearer to a marker than the
+    phantom ring), regions (list of vertex index arrays) and blend ((V, R+1) partition of unity, last
+    column the background) for a per-region solve.
+    """
+
+    def __init__(self, neutral: np.ndarray, deltas: np.ndarray, binding, *, mode: str = "box",
+                 lam_sparsity: float = DEFAULTS["lam_sparsity"], lam_temporal: float = DEFAULTS["lam_temporal"],
+                 iterations: int = DEFAULTS["iterations"], residual: str = DEFAULTS["residual"],
+                 rbf_scale: float = DEFAULTS["rbf_scale"], rbf_lambda: float = DEFAULTS["rbf_lambda"],
+                 n_phantoms: int = DEFAULTS["n_phantoms"], phantom_distance: float = DEFAULTS["phantom_distance"],
+                 residual_vertices: np.ndarray | None = None, regions: list[np.ndarray] | None = None,
+                 blend=None, min_region_markers: int = 3,
+                 residual_smoothing: float = DEFAULTS["residual_smoothing"],
+                 two_pass: bool = DEFAULTS["two_pass"],
+                 marker_smoothing: float = DEFAULTS["marker_smoothing"],
+                 head_motion: bool = True,
+                 rigid_weighting: float = DEFAULTS["rigid_weighting"],
+                 rigid_noise: float = DEFAULTS["rigid_noise"],
+                 lam_region: float = DEFAULTS["lam_region"]) -> None:
+        if residual not in KERNELS:
+            raise ValueError(f"Unknown residual '{residual}': use one of {', '.join(KERNELS)}.")
+        self.neutral = np.asarray(neutral, dtype=np.float64)
+        self.deltas = np.asarray(deltas, dtype=np.float64)
+        K, V, _ = self.deltas.shape
+        self.K, self.V = K, V
+        if not sp.issparse(binding):
+            idx = np.asarray(binding, dtype=np.int64)
+            binding = sp.csr_matrix((np.ones(idx.size), (np.arange(idx.size), idx)), shape=(idx.size, V))
+        self.binding = sp.csr_matrix(binding)
+        M = self.binding.shape[0]
+        self.M = M
+        self.iterations = int(iterations)
+        self.residual_smoothing = float(residual_smoothing)
+        self.two_pass = bool(two_pass)
+        self.marker_smoothing = float(marker_smoothing)
+        self.head_motion = bool(head_motion)  # False: markers are already head-stabilised in rig space
+        self.rigid_weighting = float(rigid_weighting)
+        self.rigid_noise = float(rigid_noise)
+        self.rest = np.asarray(self.binding @ self.neutral)  # (M, 3) markers at rest
+        Dm = np.stack([self.binding @ self.deltas[k] for k in range(K)])  # (K, M, 3)
+        self.Dm = Dm.reshape(K, 3 * M)  # w @ Dm -> (3M,)
+        self.A = np.ascontiguousarray(self.Dm.T)  # (3M, K)
+        self.mode, self.lam_sparsity, self.lam_temporal = mode, float(lam_sparsity), float(lam_temporal)
+        self.lower, self.upper = 0.0, 1.0
+        self._qps: dict[bytes, tuple] = {}
+        self.weight_solver = WeightSolver(self.A, mode=mode, lam_sparsity=lam_sparsity, lam_temporal=lam_temporal)
+        # Dense pose: deltas as (K, 3V) over the vertices any shape moves.
+        self._moving = np.flatnonzero(np.abs(self.deltas).max(axis=(0, 2)) > 0)
+        self._Dv = np.ascontiguousarray(self.deltas[:, self._moving].reshape(K, -1))
+        # Regions.
+        self.lam_region = float(lam_region)
+        self.regions = None
+        if regions is not None:
+            self._setup_regions(regions, blend, min_region_markers, mode, lam_sparsity, lam_temporal)
+        # Residual.
+        self.residual = residual
+        self.rbf: RBFResidual | None = None
+        self.residual_vertices = np.zeros(0, dtype=np.int64)
+        if residual != "none":
+            from scipy.spatial import cKDTree
+            if residual_vertices is None:
+                d, _ = cKDTree(self.rest).query(self.neutral)
+                residual_vertices = np.flatnonzero(d < phantom_distance)
+            self.residual_vertices = np.asarray(residual_vertices, dtype=np.int64)
+            ph = phantom_points(self.neutral, self.rest, phantom_distance, n_phantoms) if n_phantoms else []
+            self.rbf = RBFResidual(self.rest, self.neutral[ph] if len(ph) else None,
+                                   self.neutral[self.residual_vertices], kernel=residual, scale=rbf_scale,
+                                   lam=rbf_lambda)
+
+    # --- regions (Joshi §4) ----------------------------------------------------------------------
+    def _setup_regions(self, regions, blend, min_markers, mode, lam_s, lam_t) -> None:
+        blend = sp.csr_matrix(blend)
+        R = len(regions)
+        if blend.shape != (self.V, R + 1):
+            raise ValueError(f"The region blend must be (V, R+1) = ({self.V}, {R + 1}), not {blend.shape}.")
+        self.blend = blend
+        self.marker_blend = np.asarray((self.binding @ blend).todense())  # (M, R+1)
+        main_vertex = np.asarray(self.binding.argmax(axis=1)).ravel()
+        self.regions = []
+        Dfull = np.abs(self.deltas)
+        for verts in regions:
+            verts = np.asarray(verts, dtype=np.int64)
+            inside = np.isin(main_vertex, verts)
+            mk = np.flatnonzero(inside)
+            moving = Dfull[:, verts].max(axis=(1, 2))
+            shapes = np.flatnonzero(moving > 1e-6 * max(float(moving.max(initial=0.0)), 1e-300))
+            if mk.size < min_markers or shapes.size == 0:
+                self.regions.append(None)
+                continue
+            rows = (mk[:, None] * 3 + np.arange(3)).ravel()
+            A = self.A[np.ix_(rows, shapes)]
+            self.regions.append((mk, rows, shapes,
+                                 WeightSolver(A, mode=mode, lam_sparsity=lam_s, lam_temporal=lam_t,
+                                              lam_reg=self.lam_region)))
+
+    # --- poses -----------------------------------------------------------------------------------
+    def markers_at(self, w: np.ndarray) -> np.ndarray:
+        """(M, 3) rig markers for global weights w."""
+        return self.rest + (w @ self.Dm).reshape(-1, 3)
+
+    def markers_regional(self, W: np.ndarray) -> np.ndarray:
+        """(M, 3) rig markers for region weights W (R+1, K): Joshi §4 blend at the markers."""
+        per_marker = self.marker_blend @ W  # (M, K)
+        return self.rest + np.einsum("mk,kmc->mc", per_marker, self.Dm.reshape(self.K, self.M, 3))
+
+    def pose(self, w: np.ndarray) -> np.ndarray:
+        """(V, 3) surface for global weights (ALGORITHMS.md §1)."""
+        x = self.neutral.copy()
+        x[self._moving] += (np.asarray(w) @ self._Dv).reshape(-1, 3)
+        return x
+
+    def pose_regional(self, W: np.ndarray) -> np.ndarray:
+        """(V, 3) surface for region weights: x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v) (Joshi §4)."""
+        per_vertex = np.asarray(self.blend[self._moving] @ W)  # (U, K)
+        x = self.neutral.copy()
+        D = self._Dv.reshape(self.K, -1, 3)
+        x[self._moving] += np.einsum("uk,kuc->uc", per_vertex, D)
+        return x
+
+    # --- calibration (Ma §3.1; Umeyama 1991) -----------------------------------------------------
+    def calibrate(self, markers: np.ndarray, frames: int) -> np.ndarray:
+        """4×4 similarity taking the take (rig units) onto the rig at rest, from the mean of the first
+        ``frames`` (neutral) frames: Umeyama 1991, Eq. 40–42."""
+        pos = markers[:max(1, frames)]
+        with np.errstate(invalid="ignore"):
+            cloud = np.nanmean(pos, axis=0)
+        ok = np.isfinite(cloud).all(axis=1)
+        if ok.sum() < 3:
+            raise ValueError("Calibration needs at least 3 markers seen in the neutral frames.")
+        s, R, t = umeyama(cloud[ok], self.rest[ok], scale=True)
+        return to_matrix(s, R, t)
+
+    # --- the solve -------------------------------------------------------------------------------
+    def solve(self, markers: np.ndarray, *, unit_factor: float = 1.0,
+              calibration_frames: int = DEFAULTS["calibration_frames"], calibrate: bool = True,
+              progress: Progress = None, cancel: Callable[[], bool] | None = None) -> TakeSolution:
+        """Solve every frame of ``markers`` (F, M, 3) (take units, NaN where missing; columns in the order
+        of the binding rows). Ma et al. 2016 §3.1 alternation of Kabsch and the QP of Joshi Eq. 2 /
+        Ma Eq. 3–4 frame by frame (forward, and with ``two_pass`` also backward, averaged), optional
+        per-region QPs (Joshi §4), then the RBF residual (Joshi Eq. 3; Fidaleo Eq. 1–5)."""
+        t0 = time.perf_counter()
+        X = np.asarray(markers, dtype=np.float64) * float(unit_factor)
+        if X.ndim != 3 or X.shape[2] != 3:
+            raise ValueError(f"Marker positions must be frames x markers x 3, not {X.shape}.")
+        F, M, _ = X.shape
+        if self.marker_smoothing and F > 1:  # optical noise is white in time: a light low-pass
+            X = _smooth_in_time(X, self.marker_smoothing)
+        if M != self.M:
+            raise ValueError(f"The take has {M} marker columns but the solver was built for {self.M}.")
+        if F == 0:
+            raise ValueError("The take has no frames.")
+        cal = self.calibrate(X, calibration_frames) if calibrate else np.eye(4)
+        Y = X @ cal[:3, :3].T + cal[:3, 3]  # calibrated take, rig space up to head motion
+        passes = 2 if self.two_pass else 1
+        report = None
+        if progress is not None:
+            step = max(1, F // 50)
+
+            def report(i: int, offset: int) -> None:
+                if i % step == 0 or i == F - 1:
+                    progress(offset + i + 1, passes * F, "solving")
+        W, Rs, ts, solved = self._pass(Y, range(F), np.zeros(self.K), np.eye(3), np.zeros(3), cancel,
+                                       report and (lambda i: report(i, 0)))
+        if self.two_pass:
+            # Backward pass from the last frame's forward solution; the average of the two causal
+            # solutions cancels their lag (a forward–backward smoother, cf. Rauch–Tung–Striebel).
+            last = F - 1
+            Wb, Rb, tb, _ = self._pass(Y, range(F - 1, -1, -1), W[last], Rs[last], ts[last], cancel,
+                                       report and (lambda i: report(i, F)))
+            W = 0.5 * (W + Wb)
+            Rs, ts = _mean_rigid(Rs, ts, Rb, tb)
+        Z = np.einsum("fmc,fck->fmk", Y - ts[:, None], Rs)  # head-stabilised markers
+        RW = None
+        if self.regions is not None:
+            RW = np.zeros((F, len(self.regions) + 1, self.K))
+            for f in range(F):
+                if cancel is not None and cancel():
+                    raise SolveCancelled(f"Take solve cancelled at frame {f} of {F}.")
+                RW[f] = self._solve_regions(Z[f], W[f], RW[f - 1] if f else None) if solved[f] else \
+                    (RW[f - 1] if f else W[f])
+            fit = self.rest + np.einsum("mr,frk,kmc->fmc", self.marker_blend, RW,
+                                        self.Dm.reshape(self.K, self.M, 3))
+        else:
+            fit = self.rest + (W @ self.Dm).reshape(F, M, 3)
+        misfit = np.where(solved[:, None, None], Z - fit, np.nan)
+        heads = np.einsum("ij,fjk->fik", np.linalg.inv(cal), to_matrix(np.ones(F), Rs, ts))
+        heads[:, :3, :] /= float(unit_factor)  # to take units
+        with np.errstate(invalid="ignore"):
+            rmse = np.sqrt(np.nanmean(np.einsum("fmc,fmc->fm", misfit, misfit), axis=1))
+        coeffs, rmse_res = None, rmse.copy()
+        if self.rbf is not None:
+            if progress is not None:
+                progress(passes * F, passes * F, "residual")
+            target = _smooth_in_time(misfit, self.residual_smoothing) if self.residual_smoothing else misfit
+            coeffs = self.residual_coefficients(target)
+            after = misfit - np.einsum("mn,fnc->fmc", self.rbf.Phi[:self.M], coeffs)
+            with np.errstate(invalid="ignore"):
+                rmse_res = np.sqrt(np.nanmean(np.einsum("fmc,fmc->fm", after, after), axis=1))
+        return TakeSolution(weights=W, head=heads, marker_rmse=rmse, marker_rmse_residual=rmse_res,
+                            region_weights=RW, coefficients=coeffs, calibration=cal, misfit=misfit,
+                            solve_seconds=time.perf_counter() - t0, solver=self)
+
+    def _pass(self, Y, order, w, R, t, cancel, report):
+        """One causal sweep over ``order``: per frame, ``iterations`` alternations of weighted Kabsch
+        (Umeyama 1991) and the weight QP (Joshi Eq. 2; Ma Eq. 3–4, λ_t to the previous frame), started
+        from the previous frame (Ma et al. 2016, §3.1). Frames with fewer than 3 markers hold the pose."""
+        F = Y.shape[0]
+        W = np.zeros((F, self.K))
+        Rs = np.zeros((F, 3, 3))
+        ts = np.zeros((F, 3))
+        solved = np.zeros(F, dtype=bool)
+        rest, Dm = self.rest, self.Dm
+        rw, rw0 = self.rigid_weighting ** 2, self.rigid_noise ** 2
+        w_prev = None
+        for i, f in enumerate(order):
+            if cancel is not None and cancel():
+                raise SolveCancelled(f"Take solve cancelled at frame {f} of {F}.")
+            y = Y[f]
+            valid = np.isfinite(y).all(axis=1)
+            if valid.sum() >= 3:
+                yv = y[valid]
+                if not self.head_motion:  # the head is fixed: one weight QP is the whole solve
+                    w = self._qp(valid, (y - rest).reshape(-1), w if w_prev is None else w_prev, w)
+                    w_prev = w
+                    solved[f] = True
+                    W[f], Rs[f], ts[f] = w, np.eye(3), np.zeros(3)
+                    if report is not None:
+                        report(i)
+                    continue
+                for _ in range(self.iterations):
+                    disp = (w @ Dm).reshape(-1, 3)
+                    if rw:  # trust markers the expression moves little: the rig's misfit grows with motion
+                        dv = disp[valid]
+                        pw = 1.0 / (rw0 + rw * np.einsum("mc,mc->m", dv, dv))
+                        R, t = _kabsch(rest[valid] + dv, yv, pw / pw.sum())
+                    else:
+                        R, t = _kabsch(rest[valid] + disp[valid], yv)
+                    z = (y - t) @ R  # Rᵀ (y − t): head-stabilised markers
+                    w = self._qp(valid, (z - rest).reshape(-1), w if w_prev is None else w_prev, w)
+                w_prev = w
+                solved[f] = True
+            W[f], Rs[f], ts[f] = w, R, t
+            if report is not None:
+                report(i)
+        return W, Rs, ts, solved
+
+    def residual_coefficients(self, misfit: np.ndarray) -> np.ndarray:
+        """(F, M+P, 3) RBF coefficients for per-frame misfits (F, M, 3) (NaN rows = missing markers):
+        frames sharing a missing-marker mask share one factorisation and one multi-right-hand-side solve
+        (Joshi Eq. 3; Fidaleo Eq. 1–5)."""
+        F = misfit.shape[0]
+        out = np.zeros((F, self.rbf.centres.shape[0], 3))
+        present = np.isfinite(misfit).all(axis=2)
+        keys, inverse = np.unique(np.packbits(present, axis=1), axis=0, return_inverse=True)
+        inverse = inverse.ravel()
+        for g in range(keys.shape[0]):
+            fr = np.flatnonzero(inverse == g)
+            if present[fr[0]].sum() == 0:
+                continue
+            out[fr] = self.rbf.coefficients_batch(misfit[fr])
+        return out
+
+    def _qp(self, valid: np.ndarray, b: np.ndarray, w_prev: np.ndarray, w_start: np.ndarray) -> np.ndarray:
+        """The frame's weight QP (Joshi Eq. 2 + Ma Eq. 3–4): ``‖Aw − b‖² + λ_s(Σw)² + λ_t‖w − w_prev‖²``
+        over the present markers, in the box; one cached solver per missing-marker subset."""
+        key = valid.tobytes()
+        qp = self._qps.get(key)
+        if qp is None:
+            rows = np.repeat(valid, 3)
+            A = self.A[rows]
+            H = A.T @ A + self.lam_sparsity + (self.lam_temporal + 1e-10) * np.eye(self.K)
+            qp = self._qps[key] = (rows, _CachedBoxQP(H, self.lower, self.upper))
+        rows, solver = qp
+        if self.mode != "box":
+            return self.weight_solver.solve(np.where(rows, b, np.nan), w_prev=w_prev, w_start=w_start)
+        g = self.A[rows].T @ b[rows] + self.lam_temporal * w_prev if not rows.all() else \
+            self.A.T @ b + self.lam_temporal * w_prev
+        return solver.solve(g, w_start)
+
+    def _solve_regions(self, z: np.ndarray, w: np.ndarray, prev: np.ndarray | None) -> np.ndarray:
+        """Per-region QPs (Joshi et al. 2003, Eq. 2 per region; Ma Eq. 3–4 terms) with the head fixed."""
+        out = np.repeat(w[None], len(self.regions) + 1, axis=0)
+        b_all = (z - self.rest).reshape(-1)
+        for r, reg in enumerate(self.regions):
+            if reg is None:
+                continue
+            mk, rows, shapes, solver = reg
+            b = b_all[rows]
+            if np.isfinite(b).sum() < 9:
+                continue
+            wp = prev[r, shapes] if prev is not None else None
+            out[r, shapes] = solver.solve(b, w_prev=wp, w_ref=w[shapes],
+                                          w_start=w[shapes] if prev is None else prev[r, shapes])
+        return out
+
+
+def solve_take(rig, take, marker_map, *, progress: Progress = None, cancel=None,
+               calibration_frames: int = DEFAULTS["calibration_frames"], **options) -> TakeSolution:
+    """Convenience: solve a ``model.takes.MarkerTake`` onto a ``model.rig.Rig`` with a ``MarkerMap``.
+
+    Uses the take's and rig's units (the map's ``take_units`` if the take has none); markers of the map
+    missing from the take are dropped. ``options`` go to ``TakeSolver``. The solution's marker columns
+    follow ``marker_map.match(take)``.
+    """
+    from model.rig import unit_scale
+    labels, cols = marker_map.match(take)
+    binding = marker_map.binding(rig, labels)
+    solver = TakeSolver(rig.neutral, rig.deltas, binding, **options)
+    factor = unit_scale(take.units, rig.units)
+    sol = solver.solve(take.positions[:, cols], unit_factor=factor, calibration_frames=calibration_frames,
+                       calibrate=calibration_frames > 0,
+                       progress=progress, cancel=cancel)
+    sol.labels = labels
+    return sol

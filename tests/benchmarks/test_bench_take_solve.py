@@ -1,0 +1,85 @@
+"""Take solve speed and accuracy on the real ICT Live Link take (358 frames, 60 markers).
+
+Target (issue "Motion capture: solve takes onto the rig"): ≥ 500 frames/s for the solve including the
+residual coefficients, and dense RMS < 0.22 mm against truth_dense_face.npz. Figures go into
+``benchmark.extra_info`` (see ``--benchmark-json``) and are printed with ``-s``.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from model.marker_map import load_marker_map
+from model.take_c3d import read_c3d
+from solvers.take_solve import TakeSolver
+
+
+@pytest.fixture(scope="module")
+def setup(ict_rig, take_dir):
+    take = read_c3d(take_dir / "take.c3d")
+    mm = load_marker_map(take_dir / "marker_map.json")
+    labels, cols = mm.match(take)
+    return mm.binding(ict_rig, labels), take.positions[:, cols], np.load(take_dir / "truth_dense_face.npz")
+
+
+def dense_rms_mm(sol, truth) -> float:
+    moving, pos = truth["moving"], truth["positions"].astype(np.float64)
+    errs = [np.sqrt(np.mean(np.sum((sol.dense(int(f))[: pos.shape[1]][moving] - pos[i][moving]) ** 2, axis=1)))
+            for i, f in enumerate(truth["frames"])]
+    return float(np.mean(errs)) * 10.0
+
+
+def test_bench_take_solve(benchmark, ict_rig, setup):
+    B, X, truth = setup
+    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B)  # everything rig/marker-set dependent, once
+    sol = benchmark.pedantic(solver.solve, args=(X,), kwargs={"unit_factor": 0.1}, rounds=5, iterations=1)
+    err = dense_rms_mm(sol, truth)
+    fps = X.shape[0] / benchmark.stats.stats.min
+    benchmark.extra_info.update(frames=X.shape[0], dense_rms_mm=err, frames_per_second_best=fps,
+                                marker_rmse_cm=float(np.nanmean(sol.marker_rmse)))
+    print(f"\ntake solve: {X.shape[0]} frames, best {benchmark.stats.stats.min:.3f} s = {fps:.0f} fps, "
+          f"dense RMS {err:.4f} mm")
+    assert err < 0.22
+
+
+def test_bench_take_dense_all_frames(benchmark, ict_rig, setup):
+    B, X, _ = setup
+    sol = TakeSolver(ict_rig.neutral, ict_rig.deltas, B).solve(X, unit_factor=0.1)
+
+    def all_frames():
+        n = 0
+        for x in sol.iter_dense():
+            n += x.shape[0]
+        return n
+
+    assert benchmark.pedantic(all_frames, rounds=2, iterations=1) == X.shape[0] * ict_rig.n_vertices
+
+
+@pytest.mark.parametrize("residual", ["none", "joshi", "gaussian", "multiquadric"])
+def test_bench_take_solve_residual_kernels(benchmark, ict_rig, setup, residual):
+    """Accuracy of each residual kernel with the solver's defaults otherwise (scale/λ per kernel below)."""
+    B, X, truth = setup
+    opts = {"joshi": dict(rbf_scale=3.0, rbf_lambda=0.3), "multiquadric": dict(rbf_lambda=0.01)}.get(residual, {})
+    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, residual=residual, **opts)
+    sol = benchmark.pedantic(solver.solve, args=(X,), kwargs={"unit_factor": 0.1}, rounds=1, iterations=1)
+    err = dense_rms_mm(sol, truth)
+    benchmark.extra_info.update(residual=residual, dense_rms_mm=err)
+    print(f"\nresidual {residual}: dense RMS {err:.4f} mm")
+
+
+def test_bench_take_solve_regional(benchmark, ict_rig, setup):
+    """Per-region solve (two overlapping face halves, upper/lower) vs the global solve."""
+    B, X, truth = setup
+    y = ict_rig.neutral[:, 1]
+    upper, lower = np.flatnonzero(y > 0.0), np.flatnonzero(y <= 1.0)
+    blend = np.zeros((ict_rig.n_vertices, 3))
+    blend[upper, 0] = 1.0
+    blend[lower, 1] = 1.0
+    both = np.intersect1d(upper, lower)
+    blend[both, 0] = blend[both, 1] = 0.5
+    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, regions=[upper, lower], blend=sp.csr_matrix(blend))
+    sol = benchmark.pedantic(solver.solve, args=(X,), kwargs={"unit_factor": 0.1}, rounds=1, iterations=1)
+    err = dense_rms_mm(sol, truth)
+    benchmark.extra_info.update(dense_rms_mm=err)
+    print(f"\nregional (2 regions): dense RMS {err:.4f} mm")

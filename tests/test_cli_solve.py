@@ -1,0 +1,89 @@
+"""`solve` on the command line: the real marker take within 0.22 mm of the actor's true surface, and a
+one-frame TRC keyframe (--global --residual none) recovering known weights."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from model.pc2 import read_pc2
+from model.weights_csv import read_weights_csv
+from tests.cli_runner import run_cli
+
+
+def dense_rms_mm(frames: np.ndarray, truth) -> float:
+    """The data README's measure: RMS over `moving` of the distance to `positions`, averaged over frames."""
+    pos, moving = truth["positions"], truth["moving"]
+    errs = [np.sqrt(np.mean(np.sum((frames[f, : pos.shape[1]][moving] - pos[i][moving]) ** 2, axis=1)))
+            for i, f in enumerate(truth["frames"])]
+    return float(np.mean(errs)) * 10.0  # cm -> mm
+
+
+def test_solve_real_take_defaults(ict_dir, take_dir, tmp_path):
+    out, cache, report = tmp_path / "w.csv", tmp_path / "dense.pc2", tmp_path / "report.json"
+    run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json", "-o", out,
+            "--cache", cache, "--report", report)
+    rep = json.loads(report.read_text())
+    assert rep["frames"] == 358 and rep["marker_rmse"] < 0.1 and rep["frames_per_second"] > 0
+    frames, _, _ = read_pc2(cache)
+    assert frames.shape == (358, 26719, 3)
+    rms = dense_rms_mm(frames, np.load(take_dir / "truth_dense_face.npz"))
+    assert rms < 0.22, f"dense RMS {rms:.4f} mm"
+    _, _, names, W = read_weights_csv(out)
+    assert W.shape == (358, 57) and W.min() >= 0 and W.max() <= 1
+    truth = np.genfromtxt(take_dir / "truth_weights.csv", delimiter=",", names=True)
+    jaw = names.index("jawOpen")
+    assert np.corrcoef(W[:, jaw], truth["jawOpen"])[0, 1] > 0.9
+
+
+def _write_trc(path, labels, points_mm):
+    n = len(labels)
+    lines = ["PathFileType\t4\t(X/Y/Z)\tkey.trc",
+             "DataRate\tCameraRate\tNumFrames\tNumMarkers\tUnits\tOrigDataRate\tOrigDataStartFrame\tOrigNumFrames",
+             f"24\t24\t1\t{n}\tmm\t24\t1\t1",
+             "Frame#\tTime\t" + "\t\t\t".join(labels),
+             "\t\t" + "\t".join(f"X{i + 1}\tY{i + 1}\tZ{i + 1}" for i in range(n)),
+             "",
+             "1\t0.0\t" + "\t".join(f"{v:.6f}" for v in points_mm.ravel())]
+    path.write_text("\n".join(lines) + "\n")
+
+
+def test_one_frame_trc_global_recovers_weights(ict_rig, ict_dir, tmp_path):
+    rig = ict_rig
+    truth_w = rig.weights_from_dict({"jawOpen": 0.6, "mouthSmile_L": 0.8, "browInnerUp_R": 0.5,
+                                     "eyeBlink_L": 0.9, "mouthPucker": 0.3, "cheekPuff_R": 0.4})
+    posed = rig.neutral + np.einsum("k,kvc->vc", truth_w, rig.deltas)
+    face = np.arange(9409)
+    moving = face[np.linalg.norm(rig.deltas[:, face], axis=2).max(axis=0) > 1e-4]
+    markers = moving[np.linspace(0, moving.size - 1, 50).astype(int)]
+    labels = [f"K{i:02d}" for i in range(50)]
+    _write_trc(tmp_path / "key.trc", labels, posed[markers] * 10.0)
+    (tmp_path / "map.json").write_text(json.dumps({"rig_units": "cm", "take_units": "mm",
+                                                   "markers": {l: int(v) for l, v in zip(labels, markers)}}))
+    run_cli("solve", ict_dir, tmp_path / "key.trc", "--map", tmp_path / "map.json", "--global", "--residual", "none",
+            "--fixed-head", "-o", tmp_path / "w.csv", "--cache", tmp_path / "d.pc2")
+    frames, _, _ = read_pc2(tmp_path / "d.pc2")
+    err = np.linalg.norm(frames[0][moving] - posed[moving], axis=1)
+    assert np.sqrt(np.mean(err ** 2)) * 10 < 0.1, f"{np.sqrt(np.mean(err ** 2)) * 10:.4f} mm"
+
+
+@pytest.mark.parametrize("case", ["absent", "beyond", "weights"])
+def test_solve_bad_input(ict_dir, take_dir, llf_csv, tmp_path, case):
+    if case == "weights":
+        proc = run_cli("solve", ict_dir, llf_csv, "-o", tmp_path / "w.csv", check=False)
+        words = "weight take"
+    else:
+        m = json.loads((take_dir / "marker_map.json").read_text())
+        if case == "absent":
+            m["markers"] = {f"X{i}": v for i, v in enumerate(m["markers"].values())}
+            words = "map.json"
+        else:
+            m["markers"]["M00"] = 999999
+            words = "999999"
+        (tmp_path / "map.json").write_text(json.dumps(m))
+        proc = run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", tmp_path / "map.json",
+                       "-o", tmp_path / "w.csv", check=False)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith("error: ") and words in proc.stderr, proc.stderr
+    assert not (tmp_path / "w.csv").exists()

@@ -1,0 +1,216 @@
+"""Take readers (C3D, TRC, CSV, Live Link Face), marker maps and rigid alignment, on the real data."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from model.errors import RigInputError
+from model.livelink import read_livelink_csv
+from model.marker_map import MarkerMap, auto_marker_map, load_marker_map
+from model.take_c3d import read_c3d, write_c3d
+from model.take_csv import read_marker_csv, write_marker_csv
+from model.take_trc import read_trc
+from model.takes import MarkerTake, load_take
+from solvers.rigid import kabsch, umeyama
+
+
+@pytest.fixture(scope="module")
+def c3d(take_dir):
+    return read_c3d(take_dir / "take.c3d")
+
+
+@pytest.fixture(scope="module")
+def trc(take_dir):
+    return read_trc(take_dir / "take.trc")
+
+
+# --- C3D / TRC ---------------------------------------------------------------------------------
+def test_c3d_header_and_parameters(c3d):
+    assert c3d.positions.shape == (358, 60, 3)
+    assert c3d.labels[:3] == ["M00", "M01", "M02"] and len(set(c3d.labels)) == 60
+    assert c3d.rate == 60.0 and c3d.units == "mm"
+
+
+def test_c3d_and_trc_agree(c3d, trc):
+    assert trc.labels == c3d.labels
+    assert trc.rate == c3d.rate and trc.units == c3d.units
+    assert np.array_equal(np.isnan(trc.positions), np.isnan(c3d.positions))
+    # TRC prints 4 decimals: equal to print precision
+    assert np.nanmax(np.abs(trc.positions - c3d.positions)) < 1e-4 + 1e-9
+
+
+def test_gaps_are_nan_whole_markers(c3d):
+    miss = c3d.missing
+    assert 0 < miss.sum() < 0.01 * miss.size  # a few occlusion gaps
+    nan = np.isnan(c3d.positions)
+    assert np.array_equal(nan.any(axis=2), nan.all(axis=2))  # a missing marker loses x, y and z
+    assert np.isfinite(c3d.positions[~miss]).all()
+
+
+def test_c3d_integer_format_round_trip(c3d, tmp_path):
+    path = tmp_path / "int.c3d"
+    write_c3d(path, c3d, integer=True, scale=0.01)
+    back = read_c3d(path)
+    assert back.labels == c3d.labels and back.rate == c3d.rate
+    assert np.array_equal(np.isnan(back.positions), np.isnan(c3d.positions))
+    assert np.nanmax(np.abs(back.positions - c3d.positions)) <= 0.005 + 1e-5  # half the int16 scale (+ float32 scale rounding)
+
+
+def test_truncated_c3d_names_the_file(take_dir, tmp_path):
+    data = (take_dir / "take.c3d").read_bytes()
+    bad = tmp_path / "cut.c3d"
+    bad.write_bytes(data[: len(data) // 2])
+    with pytest.raises(RigInputError, match="cut.c3d.*truncated"):
+        read_c3d(bad)
+    head_only = tmp_path / "head.c3d"
+    head_only.write_bytes(data[:520])
+    with pytest.raises(RigInputError, match="head.c3d"):
+        read_c3d(head_only)
+
+
+def test_empty_and_not_c3d(tmp_path):
+    empty = tmp_path / "empty.c3d"
+    empty.write_bytes(b"")
+    with pytest.raises(RigInputError, match="empty.c3d.*empty"):
+        read_c3d(empty)
+    junk = tmp_path / "junk.c3d"
+    junk.write_bytes(b"hello" * 200)
+    with pytest.raises(RigInputError, match="junk.c3d.*not a C3D"):
+        read_c3d(junk)
+
+
+def test_trc_missing_columns(take_dir, tmp_path):
+    lines = (take_dir / "take.trc").read_text().splitlines()
+    lines[4] = "\t".join(lines[4].split("\t")[:-6])  # drop the last markers' X/Y/Z headers
+    bad = tmp_path / "short.trc"
+    bad.write_text("\n".join(lines))
+    with pytest.raises(RigInputError, match="short.trc.*X/Y/Z columns"):
+        read_trc(bad)
+
+
+def test_trc_unknown_units_and_empty(take_dir, tmp_path):
+    lines = (take_dir / "take.trc").read_text().splitlines()
+    lines[2] = lines[2].replace("\tmm\t", "\tfurlongs\t")
+    bad = tmp_path / "units.trc"
+    bad.write_text("\n".join(lines))
+    with pytest.raises(RigInputError, match="units.trc.*unknown units 'furlongs'"):
+        read_trc(bad)
+    empty = tmp_path / "empty.trc"
+    empty.write_text("")
+    with pytest.raises(RigInputError, match="empty.trc.*empty"):
+        read_trc(empty)
+
+
+def test_marker_csv_round_trip_and_dispatch(c3d, tmp_path):
+    path = tmp_path / "traj.csv"
+    write_marker_csv(path, c3d)
+    back = load_take(path)
+    assert isinstance(back, MarkerTake) and back.labels == c3d.labels
+    assert np.array_equal(np.isnan(back.positions), np.isnan(c3d.positions))
+    assert np.nanmax(np.abs(back.positions - c3d.positions)) < 1e-5
+    bad = tmp_path / "bad.csv"
+    bad.write_text("frame,A_X,A_Y\n0,1,2\n")
+    with pytest.raises(RigInputError, match="bad.csv"):
+        read_marker_csv(bad)
+
+
+# --- Live Link Face ------------------------------------------------------------------------------
+def test_livelink_maps_to_ict(llf_csv, ict_rig):
+    take = read_livelink_csv(llf_csv, ict_rig.shape_names)
+    assert take.weights.shape == (328, ict_rig.n_shapes) and take.names == ict_rig.shape_names
+    assert take.rate == 60.0 and len(take.timecodes) == 328
+    assert take.unmapped == ["TongueOut"]
+    raw = read_livelink_csv(llf_csv)
+    col = {n: raw.weights[:, i] for i, n in enumerate(raw.names)}
+    k = ict_rig.shape_names.index
+    assert np.array_equal(take.weights[:, k("eyeBlink_L")], col["EyeBlinkLeft"])
+    assert np.array_equal(take.weights[:, k("mouthSmile_R")], col["MouthSmileRight"])
+    for side in ("_L", "_R"):  # one ARKit column drives both ICT sides
+        assert np.array_equal(take.weights[:, k("browInnerUp" + side)], col["BrowInnerUp"])
+        assert np.array_equal(take.weights[:, k("cheekPuff" + side)], col["CheekPuff"])
+    assert not take.weights[:, k("cheekRaiser_L")].any()  # no ARKit column drives it
+    assert {"HeadYaw", "LeftEyePitch"} <= set(take.channels)
+
+
+def test_livelink_on_a_smaller_rig_and_edited_mapping(llf_csv):
+    names = ["jawOpen", "eyeBlink_L", "mouthSmile"]
+    take = read_livelink_csv(llf_csv, names, mapping={"MouthSmileLeft": "mouthSmile"})
+    assert take.weights.shape == (328, 3)
+    assert "EyeBlinkRight" in take.unmapped and "MouthSmileLeft" not in take.unmapped
+    raw = read_livelink_csv(llf_csv)
+    assert np.array_equal(take.weights[:, 2], raw.weights[:, raw.names.index("MouthSmileLeft")])
+    with pytest.raises(RigInputError, match="does not have"):
+        read_livelink_csv(llf_csv, names, mapping={"JawOpen": "nope"})
+
+
+def test_livelink_bad_input(tmp_path):
+    bad = tmp_path / "bad_llf.csv"
+    bad.write_text("Timecode,BlendShapeCount,JawOpen\n00:00:00:01.000,1,0.5,9\n")
+    with pytest.raises(RigInputError, match="bad_llf.csv.*columns"):
+        read_livelink_csv(bad)
+
+
+# --- marker maps ---------------------------------------------------------------------------------
+def test_marker_map_binding_and_validation(take_dir, ict_rig, c3d):
+    mm = load_marker_map(take_dir / "marker_map.json")
+    assert mm.rig_units == "cm" and mm.take_units == "mm" and len(mm.labels) == 60
+    B = mm.binding(ict_rig)
+    verts = [mm.markers[label] for label in mm.labels]
+    assert np.allclose(B @ ict_rig.neutral, ict_rig.neutral[verts])
+    assert mm.validate(ict_rig, c3d) == []
+    bad = MarkerMap(markers={"M00": ict_rig.n_vertices + 5}, source="far.json")
+    with pytest.raises(RigInputError, match="far.json.*vertex 26724.*26719 vertices"):
+        bad.binding(ict_rig)
+    alien = MarkerMap(markers={"X1": 3, "X2": 4}, source="alien.json")
+    with pytest.raises(RigInputError, match="alien.json.*none of its 2 marker labels"):
+        alien.match(c3d)
+    partial = MarkerMap(markers={**{label: mm.markers[label] for label in mm.labels}, "EXTRA": 5})
+    assert any("EXTRA" in w for w in partial.validate(ict_rig, c3d))
+
+
+def test_marker_map_bary_and_file_errors(ict_rig, tmp_path):
+    corners = ict_rig.polygons()[100]
+    mm = MarkerMap(markers={"A": {"face": 100, "bary": [0.2, 0.3, 0.5]}})
+    p = (mm.binding(ict_rig) @ ict_rig.neutral)[0]
+    assert np.allclose(p, ict_rig.neutral[corners[:3]].T @ [0.2, 0.3, 0.5])
+    path = tmp_path / "m.json"
+    mm.save(path)
+    assert load_marker_map(path).markers == mm.markers
+    empty = tmp_path / "empty.json"
+    empty.write_text("")
+    with pytest.raises(RigInputError, match="empty.json.*empty"):
+        load_marker_map(empty)
+    (tmp_path / "x.json").write_text(json.dumps({"markers": {"A": 1}, "rig_units": "parsecs"}))
+    with pytest.raises(RigInputError, match="x.json.*unknown units"):
+        load_marker_map(tmp_path / "x.json")
+
+
+def test_auto_marker_map_recovers_the_given_map(take_dir, ict_rig, c3d):
+    given = load_marker_map(take_dir / "marker_map.json")
+    auto, info = auto_marker_map(ict_rig, c3d)
+    exact = sum(auto.markers[label] == given.markers[label] for label in c3d.labels)
+    dist = np.array([np.linalg.norm(ict_rig.neutral[auto.markers[label]] - ict_rig.neutral[given.markers[label]])
+                     for label in c3d.labels])
+    assert exact >= 55, exact
+    assert dist.max() < 0.1  # cm: every marker within 1 mm of the given vertex
+    assert abs(info["scale"] - 1.0) < 0.01 and info["rms"] < 0.05
+
+
+# --- rigid ---------------------------------------------------------------------------------------
+def test_umeyama_recovers_similarity_batched_and_weighted():
+    rng = np.random.default_rng(3)
+    X = rng.normal(size=(4, 30, 3))
+    ang = rng.uniform(-1, 1, size=(4, 3))
+    from scipy.spatial.transform import Rotation
+    R = Rotation.from_rotvec(ang).as_matrix()
+    t = rng.normal(size=(4, 3))
+    Y = 0.1 * np.einsum("fij,fnj->fni", R, X) + t[:, None]
+    Y[:, :5] += 10.0  # outliers, given zero weight
+    w = np.ones((4, 30))
+    w[:, :5] = 0.0
+    s2, R2, t2 = umeyama(X, Y, w, scale=True)
+    assert np.allclose(s2, 0.1) and np.allclose(R2, R) and np.allclose(t2, t)
+    R3, t3 = kabsch(X[0, 5:], np.einsum("ij,nj->ni", R[0], X[0, 5:]) + t[0])
+    assert np.allclose(R3, R[0]) and np.allclose(t3, t[0]) and np.isclose(np.linalg.det(R3), 1.0)
