@@ -59,8 +59,32 @@ def load_obj_folder(folder: str | Path, neutral: str | None = None, units: str =
         deltas[k] -= base.vertices
     if progress:
         progress(total, total, "done")
-    return Rig(neutral=base.vertices, face_counts=base.face_counts, face_indices=base.face_indices,
-               shape_names=stems, deltas=deltas, units=units, name=folder.name, source=str(folder))
+    rig = Rig(neutral=base.vertices, face_counts=base.face_counts, face_indices=base.face_indices,
+              shape_names=stems, deltas=deltas, units=units, name=folder.name, source=str(folder))
+    rig.presets = read_presets(folder / PRESETS_FILE, stems)
+    return rig
+
+
+PRESETS_FILE = "presets.json"
+
+
+def read_presets(path: Path, shape_names: list[str]) -> dict[str, dict[str, float]]:
+    """Optional named weight sets beside the OBJs: {"happy": {"mouthSmile_L": 1.0, ...}, ...}."""
+    import json
+    if not path.is_file():
+        return {}
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise RigInputError(f"{path}: is not valid JSON ({exc}).") from None
+    if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
+        raise RigInputError(f"{path}: presets must be an object of name: {{shape: weight}}.")
+    names = set(shape_names)
+    for preset, weights in data.items():
+        unknown = sorted(set(weights) - names)
+        if unknown:
+            raise RigInputError(f"{path}: preset '{preset}' names shapes the rig does not have: {', '.join(unknown)}.")
+    return {p: {k: float(v) for k, v in w.items()} for p, w in data.items()}
 
 
 def load_rig(path: str | Path, neutral: str | None = None, units: str | None = None,

@@ -126,3 +126,17 @@ def test_write_obj_keeps_order_and_polygons(tmp_path):
     back = read_obj(tmp_path / "o.obj")
     np.testing.assert_allclose(back.vertices, verts)
     assert back.face_indices.tolist() == np.concatenate(faces).tolist()
+
+
+def test_presets_json_beside_the_objs(tmp_path):
+    write_rig_folder(tmp_path / "rig")
+    (tmp_path / "rig" / "presets.json").write_text('{"lift": {"raise": 1.0, "push": 0.5}}')
+    assert load_rig(tmp_path / "rig").presets == {"lift": {"raise": 1.0, "push": 0.5}}
+    (tmp_path / "rig" / "presets.json").write_text('{"lift": {"smile": 1.0}}')
+    _expect(tmp_path / "rig", "presets.json", "smile")
+
+
+def test_sample_folder_carries_its_presets(tmp_path):
+    from resources.sample_rig import build_sample_rig, write_sample
+    write_sample(tmp_path / "s")
+    assert load_rig(tmp_path / "s").presets == build_sample_rig().presets
