@@ -15,8 +15,10 @@ import numpy as np
 
 from .errors import RigInputError
 
-# A run of consecutive "v x y z" lines: the fast path for files written by every DCC we know.
-_V_BLOCK = re.compile(rb"(?:^v[ \t][^\n]*\n?)+", re.M)
+# The start of a 'v' line and of any other line: finding the one run of consecutive "v x y z" lines
+# this way is the fast path for files written by every DCC we know.
+_V_NEXT = re.compile(rb"\nv[ \t]")
+_NOT_V_NEXT = re.compile(rb"\n(?!v[ \t])")
 _V_LINE = re.compile(rb"^v[ \t]+([^\n]*)", re.M)
 _F_LINE = re.compile(rb"^f[ \t]+([^\n]*)", re.M)
 
@@ -47,15 +49,29 @@ def _read_bytes(path: Path) -> bytes:
     return data
 
 
+def _vertex_block(data: bytes) -> bytes | None:
+    """The bytes of the one run of consecutive 'v' lines, or None when 'v' records are scattered."""
+    start = 0 if data[:2] in (b"v ", b"v\t") else -1
+    if start < 0:
+        m = _V_NEXT.search(data)
+        if m is None:
+            return None
+        start = m.start() + 1
+    m = _NOT_V_NEXT.search(data, start)
+    end = m.start() + 1 if m else len(data)
+    if _V_NEXT.search(data, end - 1) is not None:
+        return None  # more 'v' records later in the file
+    return data[start:end]
+
+
 def _parse_vertices(path: Path, data: bytes) -> np.ndarray:
-    n_lines = data.count(b"\nv ") + data.count(b"\nv\t") + (data[:2] in (b"v ", b"v\t"))
-    if n_lines == 0:
+    block = _vertex_block(data)
+    if block is None and _V_NEXT.search(data) is None and data[:2] not in (b"v ", b"v\t"):
         raise RigInputError(f"{path}: has no vertex ('v') records.")
-    m = _V_BLOCK.search(data)
     verts = None
-    if m is not None and m.group(0).count(b"\n") + (not m.group(0).endswith(b"\n")) == n_lines:
+    if block is not None:
         try:
-            verts = np.loadtxt(io.BytesIO(m.group(0)), usecols=(1, 2, 3), dtype=np.float64, ndmin=2,
+            verts = np.loadtxt(io.BytesIO(block), usecols=(1, 2, 3), dtype=np.float64, ndmin=2,
                                comments=None)
         except ValueError:
             verts = None  # ragged lines (colours on some, w on others): take the careful path
