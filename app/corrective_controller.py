@@ -1,0 +1,700 @@
+"""Corrective shapes in the GUI (ALGORITHMS.md §6; Smith 2006 §4.5, §5.6–5.8): the Correctives panel,
+sculpt strokes on the viewport, saving a sculpt as a corrective, correctives from scans, and the
+interference finder with its heat map.
+
+``install(window)`` adds the dock, the menu and this controller to a MainWindow. Every edit is an undo
+command on ``window.document.undo_stack``: a sculpt stroke is one ``SetEditOffsetCommand``; saving,
+importing, renaming, editing drivers or rule and deleting are ``SetCorrectivesCommand``s.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from app.commands import SetEditOffsetCommand, SetWeightsCommand
+from app.corrective_commands import SetCorrectivesCommand
+from model.correctives import (Corrective, activation_for, authoring_surface, corrective_activation,
+                               corrective_activations, driver_pose, find_corrective, validate_correctives)
+from model.errors import RigInputError
+from solvers import sculpt
+from solvers.correctives import (corrective_delta, corrective_from_scan, driver_region, fit_scan_weights,
+                                 interference_heat, rank_interference, shape_overlap)
+from widgets.correctives_panel import CorrectivesPanel
+from widgets.scene import ColorMap
+
+_UNSET = object()
+_OBSERVER_PRIORITY = 10.0   # above the interactor style (0): a stroke on the face does not turn the camera
+_DAB = 0.1                  # inflate/deflate per dab: this fraction of the radius times the strength
+
+
+def pose_surface64(rig, weights, skip_drivers=None) -> np.ndarray:
+    """(V, 3) float64 ``b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c`` (ALGORITHMS.md §1), leaving out the corrective on
+    exactly the driver set ``skip_drivers`` (the one being authored), summed over the non-zero terms only."""
+    w = np.asarray(weights, dtype=np.float64)
+    x = rig.neutral.astype(np.float64).copy()
+    for k in np.flatnonzero(w):
+        x += w[k] * rig.deltas[k]
+    if rig.correctives:
+        skip = frozenset(skip_drivers) if skip_drivers is not None else None
+        a = corrective_activations(rig.correctives, rig.shape_names, w)
+        for c, ac in zip(rig.correctives, a):
+            if ac != 0 and frozenset(c.drivers) != skip:
+                x += ac * c.delta
+    return x
+
+
+class CorrectiveController(QtCore.QObject):
+    sculpting_changed = QtCore.Signal(bool)
+
+    def __init__(self, window, panel: CorrectivesPanel, dock=None) -> None:
+        super().__init__(window)
+        self.window, self.panel, self.dock = window, panel, dock
+        self.document, self.viewport = window.document, window.viewport
+        self.authoring: list[str] | None = None   # drivers being sculpted (sculpt mode on when not None)
+        self.new_rule = "product"
+        self.mesh: sculpt.SculptMesh | None = None
+        self._tags: dict[str, int] = {}
+        self._stroke: dict | None = None
+        self._cursor = None
+        self._cursor_unit = None
+        self._overlap: dict[bool, np.ndarray] = {}
+        self.pairs: list[tuple[int, int, float]] = []
+        self._saved_colormap = _UNSET
+        self.heat: np.ndarray | None = None
+        self._heat_colormap: ColorMap | None = None
+        d = self.document
+        d.rig_changed.connect(self._on_rig_change)
+        d.shapes_changed.connect(self._on_shapes_change)
+        d.pose_changed.connect(self._on_pose_change)
+        d.offset_changed.connect(self._on_offset_change)
+        p = panel
+        p.new_requested.connect(self.new_from_combination)
+        p.use_pose_requested.connect(self.tick_posed_shapes)
+        p.save_requested.connect(self.save)
+        p.discard_requested.connect(self.discard_sculpt)
+        p.cancel_requested.connect(self.stop_sculpting)
+        p.scan_requested.connect(self.from_scan)
+        p.edit_shape_requested.connect(self.sculpt_selected)
+        p.rename_requested.connect(self.rename)
+        p.drivers_requested.connect(self.edit_drivers)
+        p.delete_requested.connect(self.delete)
+        p.rule_requested.connect(self.set_rule)
+        p.find_requested.connect(self.find_pairs)
+        p.pair_selected.connect(self.show_pair)
+        p.create_pair_requested.connect(self.create_for_pair)
+        p.tab_changed.connect(self._on_tab_change)
+        p.brush_changed.connect(self._update_cursor_radius)
+        seg = getattr(window, "segmentation", None)
+        if seg is not None and hasattr(seg, "segmentation_ready"):
+            # the segmentation view repaints the surface when it finishes: keep the heat map on top
+            seg.segmentation_ready.connect(self._reapply_heat_map)
+        if dock is not None:
+            dock.visibilityChanged.connect(lambda vis: None if vis else self.leave_heat_map())
+        if d.project is not None:
+            self._on_rig_change()
+
+    # --- document signals --------------------------------------------------------------------------
+    def _on_rig_change(self) -> None:
+        self.stop_sculpting()
+        self.leave_heat_map()
+        self.mesh = None
+        self._overlap.clear()
+        self.pairs = []
+        self.panel.set_pairs([])
+        rig = self.document.rig
+        self.panel.set_shapes(rig.shape_names)
+        lo, hi = rig.neutral.min(axis=0), rig.neutral.max(axis=0)
+        self.panel.radius.setValue(float(f"{0.08 * np.linalg.norm(hi - lo):.2g}"))
+        self._refresh_table()
+
+    def _on_shapes_change(self) -> None:
+        rig = self.document.rig
+        names = [self.panel.drivers.item(i).text() for i in range(self.panel.drivers.count())]
+        if names != rig.shape_names:
+            ticked = self.panel.ticked_drivers()
+            self.panel.set_shapes(rig.shape_names)
+            self.panel.set_ticked(ticked)
+            self._overlap.clear()
+        self._refresh_table()
+
+    def _on_pose_change(self) -> None:
+        self.panel.set_activations(self.activations())
+
+    def _on_offset_change(self) -> None:
+        self.panel.set_sculpting(self.authoring, self.document.edit_offset is not None)
+
+    def activations(self) -> np.ndarray:
+        rig = self.document.rig
+        if rig is None or not rig.correctives:
+            return np.zeros(0)
+        return corrective_activations(rig.correctives, rig.shape_names, self.document.weights)
+
+    def _refresh_table(self) -> None:
+        rig = self.document.rig
+        rows = [(c.name, list(c.drivers), c.rule) for c in rig.correctives]
+        self.panel.set_correctives(rows, self.activations())
+
+    # --- helpers -----------------------------------------------------------------------------------
+    def _error(self, message: str) -> None:
+        self.window.show_error("Corrective shapes", message)
+
+    def _check_cycle(self, drivers) -> None:
+        rig = self.document.rig
+        names = {c.name for c in rig.correctives} - set(rig.shape_names)
+        for d in drivers:
+            if d in names:
+                raise RigInputError(f"'{d}' is a corrective, not a shape: a corrective driven by a corrective "
+                                    "would make the hierarchy a cycle.")
+
+    def _check_drivers(self, drivers) -> list[str]:
+        """The drivers as a validated list (raises RigInputError with one sentence)."""
+        rig = self.document.rig
+        drivers = [str(d).strip() for d in drivers if str(d).strip()]
+        self._check_cycle(drivers)
+        if len(drivers) < 2:
+            raise RigInputError(f"A corrective needs two or more driver shapes, got {len(drivers)}; tick at "
+                                "least two shapes in the Drivers list.")
+        probe = Corrective(drivers=drivers, delta=np.zeros((0, 3)))
+        key = frozenset(drivers)
+        others = [c for c in rig.correctives if frozenset(c.drivers) != key and c.name != probe.name]
+        validate_correctives(others + [probe], rig.shape_names)
+        return drivers
+
+    def _push_correctives(self, new, text: str, **offsets) -> bool:
+        rig = self.document.rig
+        try:
+            validate_correctives(new, rig.shape_names, rig.n_vertices)
+        except RigInputError as exc:
+            self._error(str(exc))
+            return False
+        self.document.undo_stack.push(SetCorrectivesCommand(self.document, rig.correctives, new, text, **offsets))
+        return True
+
+    def corrective(self, name: str | None) -> Corrective | None:
+        for c in self.document.rig.correctives:
+            if c.name == name:
+                return c
+        return None
+
+    # --- authoring (Smith §5.6) --------------------------------------------------------------------
+    def tick_posed_shapes(self) -> None:
+        rig = self.document.rig
+        w = self.document.weights
+        self.panel.set_ticked([n for n, x in zip(rig.shape_names, w) if x > 0])
+
+    def new_from_combination(self) -> None:
+        """Start a corrective on the ticked drivers, or on the shapes whose weight is > 0 if none are ticked."""
+        if self.document.rig is None:
+            return
+        drivers = self.panel.ticked_drivers()
+        if not drivers:
+            w = self.document.weights
+            drivers = [n for n, x in zip(self.document.rig.shape_names, w) if x > 0]
+        self.start_authoring(drivers, self.panel.current_rule())
+
+    def start_authoring(self, drivers, rule: str | None = None) -> bool:
+        """Set the drivers to 1 and every other shape to 0 (one undoable pose change), enter sculpt mode."""
+        try:
+            drivers = self._check_drivers(drivers)
+        except RigInputError as exc:
+            self._error(str(exc))
+            return False
+        rig = self.document.rig
+        own = find_corrective(rig.correctives, drivers)
+        self.new_rule = own.rule if own is not None else (rule or self.panel.current_rule())
+        self.window.set_pose(driver_pose(rig, drivers), f"Pose {'+'.join(drivers)} for a corrective")
+        self.authoring = drivers
+        self.panel.set_ticked(drivers)
+        self._enable_sculpt()
+        if self.dock is not None:
+            self.dock.show()
+            self.dock.raise_()
+        self.panel.tabs.setCurrentIndex(0)
+        self.panel.set_sculpting(drivers, self.document.edit_offset is not None)
+        self.window.statusBar().showMessage(
+            f"Sculpt the corrective for {' + '.join(drivers)}: drag on the face, then Save corrective.", 8000)
+        self.sculpting_changed.emit(True)
+        return True
+
+    def sculpt_selected(self) -> None:
+        c = self.corrective(self.panel.selected_name())
+        if c is not None:
+            self.start_authoring(c.drivers, c.rule)
+
+    def stop_sculpting(self) -> None:
+        was = self.authoring is not None
+        self.authoring = None
+        self._disable_sculpt()
+        self.panel.set_sculpting(None, self.document.edit_offset is not None)
+        if was:
+            self.sculpting_changed.emit(False)
+
+    @property
+    def sculpting(self) -> bool:
+        return self.authoring is not None
+
+    def save(self) -> bool:
+        """Store e = (x_des − x_cur) / a (Smith §5.6): x_des the surface shown (pose + sculpt), x_cur from
+        ``authoring_surface`` (every lower-order corrective applied); clears the sculpt. One undo step."""
+        doc, rig = self.document, self.document.rig
+        if self.authoring is None:
+            self._error("Start a corrective first: tick two or more drivers and press New corrective.")
+            return False
+        drivers = self.authoring
+        w = doc.weights
+        idx = [rig.shape_index(d) for d in drivers]
+        others = np.delete(w, idx)
+        if np.any(others != 0):
+            self._error(f"Set every shape except {' + '.join(drivers)} to 0 before saving: a corrective is "
+                        "authored at its drivers' pose.")
+            return False
+        own = find_corrective(rig.correctives, drivers)
+        if doc.edit_offset is None and own is None:
+            self._error("Nothing to save yet: sculpt the surface with a brush first.")
+            return False
+        x_cur, _ = authoring_surface(rig, drivers, weights=w[idx])
+        x_des = x_cur.copy()
+        if own is not None:
+            x_des += corrective_activation(own, rig.shape_names, w) * own.delta
+        if doc.edit_offset is not None:
+            x_des += doc.edit_offset
+        rule = own.rule if own is not None else self.new_rule
+        name = own.name if own is not None else "+".join(drivers)
+        try:
+            delta = corrective_delta(x_des, x_cur, activation_for(drivers, rule, rig.shape_names, w))
+            made = Corrective(name=name, drivers=drivers, rule=rule, delta=delta)
+        except RigInputError as exc:
+            self._error(str(exc))
+            return False
+        new = [c for c in rig.correctives if frozenset(c.drivers) != frozenset(drivers)] + [made]
+        if not self._push_correctives(new, f"Save corrective {name}", new_offset=None):
+            return False
+        self.stop_sculpting()
+        self.panel.select(name)
+        self.window.statusBar().showMessage(f"Saved corrective {name}.", 5000)
+        return True
+
+    def discard_sculpt(self) -> None:
+        doc = self.document
+        if doc.edit_offset is not None:
+            doc.undo_stack.push(SetEditOffsetCommand(doc, doc.edit_offset, None, "Discard sculpt"))
+
+    # --- from a scan (Smith, future work 1) --------------------------------------------------------
+    def from_scan(self, path=None, drivers=None, mode: str | None = None) -> bool:
+        """Make the corrective of ``drivers`` (default: the sculpted, else the ticked drivers) from an OBJ scan.
+
+        mode 'drivers': the scan is the drivers at 1, e = (scan − x_cur) / a. mode 'fit': fit all weights
+        (bounded least squares), keep the residual over the drivers' region (``corrective_from_scan``).
+        """
+        from model.obj_io import read_obj
+        doc, rig = self.document, self.document.rig
+        if rig is None:
+            return False
+        if drivers is None:
+            drivers = self.authoring or self.panel.ticked_drivers()
+        try:
+            drivers = self._check_drivers(drivers)
+        except RigInputError as exc:
+            self._error(str(exc))
+            return False
+        if path is None:
+            path, _ = QtWidgets.QFileDialog.getOpenFileName(self.window, "Corrective from Scan", "", "OBJ (*.obj)")
+            if not path:
+                return False
+        path = Path(path)
+        mode = mode or self.panel.scan_mode.currentData()
+        try:
+            scan = read_obj(path).vertices.astype(np.float64)
+            if scan.shape[0] != rig.n_vertices:
+                raise RigInputError(f"{path.name} has {scan.shape[0]} vertices but the rig has {rig.n_vertices}; "
+                                    "a scan must have the rig's vertices in the same order.")
+            if not np.isfinite(scan).all():
+                raise RigInputError(f"{path.name} has NaN or infinite coordinates.")
+            own = find_corrective(rig.correctives, drivers)
+            rule = own.rule if own is not None else self.panel.current_rule()
+            name = own.name if own is not None else "+".join(drivers)
+            idx = [rig.shape_index(d) for d in drivers]
+            if mode == "fit":
+                w = fit_scan_weights(rig.neutral, rig.deltas, scan)
+                a = activation_for(drivers, rule, rig.shape_names, w)
+                if a < 1e-3:
+                    raise RigInputError(f"{path.name} does not show {' + '.join(drivers)}: the fitted weights leave "
+                                        f"the corrective's activation at {a:.2g}.")
+                x_fit = pose_surface64(rig, w, skip_drivers=drivers)
+                delta = corrective_from_scan(scan, x_fit, driver_region(rig.deltas[idx]), a)
+            else:
+                x_cur, w = authoring_surface(rig, drivers)
+                delta = corrective_delta(scan, x_cur, activation_for(drivers, rule, rig.shape_names, w))
+            made = Corrective(name=name, drivers=drivers, rule=rule, delta=delta)
+            new = [c for c in rig.correctives if frozenset(c.drivers) != frozenset(drivers)] + [made]
+            validate_correctives(new, rig.shape_names, rig.n_vertices)
+        except RigInputError as exc:
+            self._error(str(exc))
+            return False
+        except OSError as exc:
+            self._error(f"{path}: could not be read ({exc.strerror or exc}).")
+            return False
+        stack = doc.undo_stack
+        stack.beginMacro(f"Corrective {name} from {path.name}")
+        stack.push(SetCorrectivesCommand(doc, rig.correctives, new, f"Corrective {name} from {path.name}",
+                                         new_offset=None))
+        if not np.array_equal(w, doc.weights):
+            stack.push(SetWeightsCommand(doc, doc.weights, w, f"Pose of {path.name}"))
+        stack.endMacro()
+        self.stop_sculpting()
+        self.panel.select(name)
+        self.window.statusBar().showMessage(f"Made corrective {name} from {path.name}.", 5000)
+        return True
+
+    # --- rename, drivers, rule, delete -------------------------------------------------------------
+    def _selected(self, name):
+        c = self.corrective(name if name is not None else self.panel.selected_name())
+        if c is None:
+            self._error("Select a corrective in the list first.")
+        return c
+
+    def rename(self, name: str | None = None, new_name: str | None = None) -> bool:
+        c = self._selected(name)
+        if c is None:
+            return False
+        if new_name is None:
+            new_name, ok = QtWidgets.QInputDialog.getText(self.window, "Rename Corrective", "Name:", text=c.name)
+            if not ok:
+                return False
+        new_name = new_name.strip()
+        if not new_name:
+            self._error("A corrective needs a name; the name was empty.")
+            return False
+        if new_name == c.name:
+            return False
+        new = [Corrective(name=new_name, drivers=x.drivers, rule=x.rule, delta=x.delta) if x is c else x
+               for x in self.document.rig.correctives]
+        ok = self._push_correctives(new, f"Rename corrective {c.name} to {new_name}")
+        if ok:
+            self.panel.select(new_name)
+        return ok
+
+    def edit_drivers(self, name: str | None = None, drivers=None) -> bool:
+        c = self._selected(name)
+        if c is None:
+            return False
+        if drivers is None:
+            text, ok = QtWidgets.QInputDialog.getText(self.window, "Corrective Drivers",
+                                                      "Driver shapes, separated by commas:", text=", ".join(c.drivers))
+            if not ok:
+                return False
+            drivers = text.split(",")
+        try:
+            drivers = [str(d).strip() for d in drivers if str(d).strip()]
+            self._check_cycle(drivers)
+            new_name = "+".join(drivers) if c.name == "+".join(c.drivers) else c.name
+            made = Corrective(name=new_name, drivers=drivers, rule=c.rule, delta=c.delta)
+        except RigInputError as exc:
+            self._error(str(exc))
+            return False
+        new = [made if x is c else x for x in self.document.rig.correctives]
+        ok = self._push_correctives(new, f"Drivers of {c.name}: {', '.join(drivers)}")
+        if ok:
+            self.panel.select(new_name)
+        return ok
+
+    def set_rule(self, rule: str, name: str | None = None) -> bool:
+        c = self._selected(name)
+        if c is None or c.rule == rule:
+            return False
+        new = [Corrective(name=x.name, drivers=x.drivers, rule=rule, delta=x.delta) if x is c else x
+               for x in self.document.rig.correctives]
+        return self._push_correctives(new, f"Rule of {c.name}: {rule}")
+
+    def delete(self, name: str | None = None) -> bool:
+        c = self._selected(name)
+        if c is None:
+            return False
+        new = [x for x in self.document.rig.correctives if x is not c]
+        return self._push_correctives(new, f"Delete corrective {c.name}")
+
+    # --- sculpt mode: VTK observers on the viewport ------------------------------------------------
+    def _vtk_interactor(self):
+        return self.viewport.plotter.iren.interactor
+
+    def _enable_sculpt(self) -> None:
+        rig = self.document.rig
+        if self.mesh is None:
+            self.mesh = sculpt.SculptMesh.build(rig.neutral, rig.triangles(), symmetric=True)
+        if self._tags:
+            return
+        iren = self._vtk_interactor()
+        for event, fn in (("LeftButtonPressEvent", self._on_press), ("MouseMoveEvent", self._on_move),
+                          ("LeftButtonReleaseEvent", self._on_release)):
+            self._tags[event] = iren.AddObserver(event, fn, _OBSERVER_PRIORITY)
+        self._set_brush_actions(True)
+
+    def _disable_sculpt(self) -> None:
+        if self._stroke is not None:
+            self.end_stroke()
+        iren = self._vtk_interactor() if hasattr(self.viewport, "plotter") else None
+        for tag in self._tags.values():
+            if iren is not None:
+                iren.RemoveObserver(tag)
+        self._tags.clear()
+        self._hide_cursor()
+        self._set_brush_actions(False)
+
+    def _set_brush_actions(self, on: bool) -> None:
+        for act in getattr(self, "brush_actions", []):
+            act.setEnabled(on)
+
+    def _abort(self, obj, event: str) -> None:
+        cmd = obj.GetCommand(self._tags[event]) if event in self._tags else None
+        if cmd is not None:
+            cmd.SetAbortFlag(1)
+
+    def _on_press(self, obj, event) -> None:
+        x, y = obj.GetEventPosition()
+        if self.begin_stroke(x, y):
+            self._abort(obj, event)
+
+    def _on_move(self, obj, event) -> None:
+        x, y = obj.GetEventPosition()
+        if self._stroke is not None:
+            self.move_stroke(x, y)
+            self._abort(obj, event)
+        else:
+            hit = self.viewport.pick(x, y)
+            self._show_cursor(None if hit is None else hit[1])
+
+    def _on_release(self, obj, event) -> None:
+        if self._stroke is not None:
+            self.end_stroke()
+            self._abort(obj, event)
+
+    # --- strokes (display pixels from the bottom-left, like VTK) -----------------------------------
+    def _to_display(self, p) -> np.ndarray:
+        r = self.viewport.plotter.renderer
+        r.SetWorldPoint(float(p[0]), float(p[1]), float(p[2]), 1.0)
+        r.WorldToDisplay()
+        return np.array(r.GetDisplayPoint())
+
+    def _to_world(self, x: float, y: float, z: float) -> np.ndarray:
+        r = self.viewport.plotter.renderer
+        r.SetDisplayPoint(float(x), float(y), float(z))
+        r.DisplayToWorld()
+        wp = np.array(r.GetWorldPoint())
+        return wp[:3] / wp[3]
+
+    def begin_stroke(self, x: float, y: float) -> bool:
+        """Start a stroke at display pixel (x, y) if it is on the face; False otherwise (the view turns)."""
+        if self.authoring is None or self.document.project is None:
+            return False
+        hit = self.viewport.pick(int(x), int(y))
+        if hit is None:
+            return False
+        doc = self.document
+        s = self.panel.brush_settings()
+        base = doc.surface().astype(np.float64)
+        old = None if doc.edit_offset is None else doc.edit_offset.copy()
+        self._stroke = {"settings": s, "old": old, "base": base, "center": np.asarray(hit[1], dtype=np.float64),
+                        "depth": self._to_display(hit[1])[2], "changed": False}
+        if s["brush"] != "grab":
+            self._dab(hit[1])
+        self._show_cursor(hit[1])
+        return True
+
+    def move_stroke(self, x: float, y: float) -> None:
+        st = self._stroke
+        if st is None:
+            return
+        s = st["settings"]
+        if s["brush"] == "grab":
+            drag = self._to_world(x, y, st["depth"]) - self._to_world(*self._to_display(st["center"])[:2], st["depth"])
+            new = sculpt.grab(st["base"], st["center"], drag, s["radius"], s["falloff"], s["strength"],
+                              mesh=self.mesh, symmetric=s["symmetric"], reference=st["base"])
+            base_offset = np.zeros_like(st["base"]) if st["old"] is None else st["old"]
+            self.document.set_edit_offset(base_offset + (new - st["base"]))
+            st["changed"] = True
+            self._show_cursor(st["center"] + drag)
+        else:
+            hit = self.viewport.pick(int(x), int(y))
+            if hit is not None:
+                self._dab(hit[1])
+                self._show_cursor(hit[1])
+
+    def _dab(self, center) -> None:
+        st, doc = self._stroke, self.document
+        s = st["settings"]
+        cur = doc.surface().astype(np.float64)
+        if s["brush"] == "smooth":
+            new = sculpt.smooth(cur, center, s["radius"], self.mesh, s["falloff"], 0.5 * s["strength"],
+                                symmetric=s["symmetric"])
+        else:
+            amount = _DAB * s["radius"] * s["strength"] * (1.0 if s["brush"] == "inflate" else -1.0)
+            new = sculpt.inflate(cur, center, s["radius"], self.mesh, amount, s["falloff"], symmetric=s["symmetric"])
+        offset = np.zeros_like(cur) if doc.edit_offset is None else doc.edit_offset.copy()
+        doc.set_edit_offset(offset + (new - cur))
+        st["changed"] = True
+
+    def end_stroke(self) -> None:
+        """One stroke is one undo step (SetEditOffsetCommand from the offset before to the one after)."""
+        st, self._stroke = self._stroke, None
+        if st is None or not st["changed"]:
+            return
+        doc = self.document
+        new = doc.edit_offset
+        doc.undo_stack.push(SetEditOffsetCommand(doc, st["old"], new, f"Sculpt ({st['settings']['brush']})"))
+
+    # --- brush cursor ------------------------------------------------------------------------------
+    def _show_cursor(self, center) -> None:
+        plotter = self.viewport.plotter
+        if center is None or self.authoring is None:
+            self._hide_cursor()
+            return
+        import pyvista as pv
+        r = self.panel.radius.value()
+        if self._cursor is None:
+            sphere = pv.Sphere(radius=1.0, theta_resolution=16, phi_resolution=9)
+            self._cursor_unit = np.asarray(sphere.points, dtype=np.float64)
+            self._cursor = (sphere, plotter.add_mesh(sphere, name="brush_cursor", style="wireframe",
+                                                     color=(1.0, 0.75, 0.3), opacity=0.3, line_width=1,
+                                                     pickable=False, reset_camera=False, lighting=False))
+        sphere, actor = self._cursor
+        sphere.points = (self._cursor_unit * r + np.asarray(center, dtype=np.float64)).astype(np.float32)
+        actor.SetVisibility(True)
+        self.viewport.render()
+
+    def _update_cursor_radius(self) -> None:
+        if self._cursor is not None and self._cursor[1].GetVisibility():
+            pts = np.asarray(self._cursor[0].points, dtype=np.float64)
+            self._show_cursor(pts.mean(axis=0))
+
+    def _hide_cursor(self) -> None:
+        if self._cursor is not None and self._cursor[1].GetVisibility():
+            self._cursor[1].SetVisibility(False)
+            self.viewport.render()
+
+    # --- interference finder -----------------------------------------------------------------------
+    def find_pairs(self) -> list[tuple[int, int, float]]:
+        rig = self.document.rig
+        if rig is None:
+            return []
+        directional = self.panel.measure.currentData() == "directional"
+        if directional not in self._overlap:
+            QtWidgets.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
+            try:
+                self._overlap[directional] = shape_overlap(rig.deltas, directional=directional)
+            finally:
+                QtWidgets.QApplication.restoreOverrideCursor()
+        self.pairs = rank_interference(None, top=self.panel.top.value(), overlap=self._overlap[directional])
+        names = rig.shape_names
+        self.panel.set_pairs([(names[i], names[j], s) for i, j, s in self.pairs])
+        self.leave_heat_map()
+        return self.pairs
+
+    def show_pair(self, row: int) -> None:
+        """Colour the face by min(‖d_i‖, ‖d_j‖) of the selected pair (a colour bar in rig units)."""
+        if row < 0 or row >= len(self.pairs):
+            self.leave_heat_map()
+            return
+        rig = self.document.rig
+        i, j, score = self.pairs[row]
+        self.heat = interference_heat(rig.deltas[i], rig.deltas[j])
+        if self._saved_colormap is _UNSET:
+            self._saved_colormap = getattr(self.viewport, "_colormap", None)
+        top = float(self.heat.max())
+        self._heat_colormap = ColorMap(self.heat, title=f"interference ({rig.units})", cmap="YlOrRd",
+                                       clim=(0.0, top if top > 0 else 1.0))
+        self.viewport.set_colormap(self._heat_colormap)
+        n = int((self.heat > 0.1 * top).sum()) if top > 0 else 0
+        self.panel.pair_info.setText(f"{rig.shape_names[i]} × {rig.shape_names[j]}: overlap {score:.3f}; "
+                                     f"min(‖d_i‖, ‖d_j‖) up to {top:.3g} {rig.units}, above 10% on {n:,} vertices.")
+
+    def _reapply_heat_map(self) -> None:
+        if self._saved_colormap is not _UNSET and getattr(self.viewport, "_colormap", None) is not self._heat_colormap:
+            self._saved_colormap = getattr(self.viewport, "_colormap", None)
+            self.viewport.set_colormap(self._heat_colormap)
+
+    def leave_heat_map(self) -> None:
+        """Restore the view that was shown before the heat map."""
+        if self._saved_colormap is not _UNSET:
+            saved, self._saved_colormap = self._saved_colormap, _UNSET
+            self.heat = None
+            self.viewport.set_colormap(saved)
+            self.panel.pair_info.setText("")
+
+    def _on_tab_change(self, index: int) -> None:
+        if index != 1:
+            self.leave_heat_map()
+        elif self.panel.selected_pair_row() >= 0:
+            self.show_pair(self.panel.selected_pair_row())
+
+    def create_for_pair(self) -> None:
+        row = self.panel.selected_pair_row()
+        if row < 0 or row >= len(self.pairs):
+            return
+        i, j, _ = self.pairs[row]
+        names = self.document.rig.shape_names
+        self.leave_heat_map()
+        self.start_authoring([names[i], names[j]], self.panel.current_rule())
+
+    # --- brush shortcuts ---------------------------------------------------------------------------
+    def set_brush(self, brush: str) -> None:
+        self.panel.brush.setCurrentIndex(max(0, self.panel.brush.findData(brush)))
+
+    def scale_radius(self, factor: float) -> None:
+        self.panel.radius.setValue(self.panel.radius.value() * factor)
+
+
+def install(window) -> CorrectiveController:
+    """Add the Correctives dock, its menu and its controller to ``window`` (a MainWindow); returns the controller.
+
+    Idempotent: a window that already has one gets the same controller back."""
+    existing = getattr(window, "correctives", None)
+    if isinstance(existing, CorrectiveController):
+        return existing
+    panel = CorrectivesPanel(window)
+    dock = window._add_dock("Correctives", panel, QtCore.Qt.LeftDockWidgetArea)
+    seg = getattr(window, "segmentation_dock", None)
+    if seg is not None:
+        window.tabifyDockWidget(seg, dock)
+        seg.raise_()
+    window.correctives_panel, window.correctives_dock = panel, dock
+    window.panels_menu.addAction(dock.toggleViewAction())
+    ctrl = CorrectiveController(window, panel, dock)
+    window.correctives = ctrl
+
+    menu = QtWidgets.QMenu("&Correctives", window)
+    help_menu = next((a for a in window.menuBar().actions() if a.text().replace("&", "") == "Help"), None)
+    if help_menu is not None:
+        window.menuBar().insertMenu(help_menu, menu)
+    else:
+        window.menuBar().addMenu(menu)
+    act = window._action
+    act(menu, "&New Corrective from Combination", lambda _=False: ctrl.new_from_combination(), "Ctrl+Shift+N",
+        "Set the ticked drivers (or the posed shapes) to 1 and sculpt their corrective")
+    act(menu, "Corrective from &Scan…", lambda _=False: ctrl.from_scan(), "Ctrl+Shift+I",
+        "Make the corrective of the ticked drivers from an OBJ of the desired combination")
+    act(menu, "&Save Corrective", lambda _=False: ctrl.save(), "Ctrl+Return", "Store the sculpt as the corrective: e = (x_des − x_cur) / a")
+    act(menu, "&Discard Sculpt", lambda _=False: ctrl.discard_sculpt(), None, "Drop the pending sculpt (undoable)")
+    act(menu, "S&top Sculpting", lambda _=False: ctrl.stop_sculpting(), None, "Leave sculpt mode")
+    menu.addSeparator()
+
+    def _find():
+        dock.show()
+        dock.raise_()
+        panel.tabs.setCurrentIndex(1)
+        ctrl.find_pairs()
+    act(menu, "&Find Interfering Pairs", lambda _=False: _find(), "Ctrl+Shift+F", "Rank shape pairs by the overlap of their displacements")
+    menu.addSeparator()
+    brushes = menu.addMenu("&Brush")
+    ctrl.brush_actions = [
+        act(brushes, "&Grab", lambda _=False: ctrl.set_brush("grab"), "G", "Grab brush: drag the surface"),
+        act(brushes, "&Smooth", lambda _=False: ctrl.set_brush("smooth"), "Shift+S", "Smooth brush: relax the surface"),
+        act(brushes, "&Inflate", lambda _=False: ctrl.set_brush("inflate"), "I", "Inflate brush: push along the normals"),
+        act(brushes, "&Deflate", lambda _=False: ctrl.set_brush("deflate"), "D", "Deflate brush: pull along the normals"),
+        act(brushes, "S&ymmetric", lambda _=False: panel.symmetric.toggle(), "X", "Mirror strokes across x = 0"),
+        act(brushes, "S&maller Brush", lambda _=False: ctrl.scale_radius(1 / 1.25), "[", "Shrink the brush radius"),
+        act(brushes, "&Larger Brush", lambda _=False: ctrl.scale_radius(1.25), "]", "Grow the brush radius"),
+    ]
+    ctrl._set_brush_actions(False)
+    return ctrl

@@ -1,0 +1,285 @@
+"""Corrective shapes in the GUI (pytest-qt, sample rig): a real sculpt stroke saved as a corrective,
+undo, a corrective from a scan, the live activation list, the interference heat map, bad input."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PySide6 import QtCore
+
+from app.corrective_controller import install
+from model.obj_io import write_obj
+from model.pose import PoseEvaluator
+from tests.gui_helpers import make_window, mouse
+
+PAIR = ["browInnerUp_L", "browInnerUp_R"]
+
+
+@pytest.fixture
+def win(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    ctrl = install(w)
+    w.correctives_dock.show()
+    w.correctives_dock.raise_()
+    QtCore.QCoreApplication.processEvents()
+    return w, ctrl
+
+
+def _settle(qtbot, w):
+    qtbot.waitUntil(lambda: not w._redraw_pending)
+    QtCore.QCoreApplication.processEvents()
+
+
+def _display_xy(w, point):
+    """Qt widget coordinates of a world point on the viewport (VTK display y is flipped, device pixels)."""
+    r = w.viewport.plotter.renderer
+    r.SetWorldPoint(*map(float, point), 1.0)
+    r.WorldToDisplay()
+    xd, yd, _ = r.GetDisplayPoint()
+    widget = w.viewport.plotter.interactor
+    ratio = widget.devicePixelRatioF()
+    return QtCore.QPointF(xd / ratio, widget.height() - 1 - yd / ratio), (xd, yd)
+
+
+def _forehead_vertex(rig, surface):
+    """A front-facing vertex between the brows that both drivers move."""
+    a, b = (np.linalg.norm(rig.deltas[rig.shape_index(n)], axis=1) for n in PAIR)
+    both = np.flatnonzero((a > 0.2 * a.max()) & (b > 0.2 * b.max()))
+    assert both.size > 0
+    return int(both[np.argmax(surface[both, 2] - 0.5 * np.abs(surface[both, 0]))])
+
+
+def _pose(w, weights):
+    w.document.set_weights(weights)
+    return w.document.surface().copy()
+
+
+def test_real_sculpt_stroke_saved_as_corrective_and_undone(qtbot, win):
+    w, ctrl = win
+    doc, rig = w.document, w.document.rig
+    ctrl.panel.set_ticked(PAIR)
+    ctrl.panel.new_button.click()
+    _settle(qtbot, w)
+    assert ctrl.sculpting and ctrl.authoring == PAIR
+    full = np.zeros(rig.n_shapes)
+    full[[rig.shape_index(n) for n in PAIR]] = 1
+    np.testing.assert_array_equal(doc.weights, full)   # the drivers at 1: one undoable pose change
+    steps = doc.undo_stack.count()
+    before = doc.surface().copy()
+    ctrl.set_brush("grab")
+    ctrl.panel.radius.setValue(2.0)
+    ctrl.panel.symmetric.setChecked(True)
+    v = _forehead_vertex(rig, before)
+    start, (xd, yd) = _display_xy(w, before[v])
+    hit = w.viewport.pick(int(round(xd)), int(round(yd)))
+    assert hit is not None and np.linalg.norm(rig.neutral[hit[0]] - rig.neutral[v]) < 1.0
+    widget = w.viewport.plotter.interactor
+    camera_before = np.array(w.viewport.plotter.camera.position)
+    mouse(widget, "press", start)
+    for dy in (8, 16, 24, 32, 40):
+        mouse(widget, "move", start + QtCore.QPointF(0, -dy))
+    mouse(widget, "release", start + QtCore.QPointF(0, -40))
+    _settle(qtbot, w)
+    np.testing.assert_array_equal(np.array(w.viewport.plotter.camera.position), camera_before)  # no rotation
+    assert doc.undo_stack.count() == steps + 1          # one stroke, one undo step
+    moved = np.linalg.norm(doc.edit_offset, axis=1)
+    assert moved[hit[0]] > 0.2 and moved.max() < 10.0   # the brow was pulled up by the drag
+    assert doc.edit_offset[hit[0], 1] > 0.2             # upwards on screen is +y from the front camera
+    centre = np.asarray(hit[1])
+    far = (np.linalg.norm(before - centre, axis=1) > 2.4) & \
+        (np.linalg.norm(before * [-1, 1, 1] - centre, axis=1) > 2.4)   # outside the brush and its mirror
+    assert far.sum() > rig.n_vertices // 2 and np.all(moved[far] == 0)
+    np.testing.assert_allclose(w.viewport.points(), doc.surface())
+    sculpted = doc.surface().copy()
+
+    assert ctrl.save()
+    _settle(qtbot, w)
+    assert doc.undo_stack.count() == steps + 2 and doc.edit_offset is None and not ctrl.sculpting
+    assert [c.name for c in rig.correctives] == ["browInnerUp_L+browInnerUp_R"]
+    assert ctrl.panel.names() == ["browInnerUp_L+browInnerUp_R"]
+    np.testing.assert_allclose(doc.surface(), sculpted, atol=1e-5)       # drivers at 1: the sculpt
+    np.testing.assert_allclose(w.viewport.points(), sculpted, atol=1e-5)
+    # one driver at 0: the corrective adds exactly nothing
+    one = full.copy()
+    one[rig.shape_index(PAIR[1])] = 0
+    with_corr = _pose(w, one)
+    bare = rig.copy()
+    bare.correctives = []
+    assert PoseEvaluator(rig).activations(one)[0] == 0.0
+    np.testing.assert_array_equal(with_corr, PoseEvaluator(bare).evaluate(one))
+    doc.set_weights(full)
+    # undo the save, then the stroke: exact restoration
+    doc.undo_stack.undo()
+    assert rig.correctives == [] and doc.edit_offset is not None
+    np.testing.assert_array_equal(doc.surface(), sculpted)
+    doc.undo_stack.undo()
+    assert doc.edit_offset is None
+    np.testing.assert_array_equal(doc.surface(), before)
+    _settle(qtbot, w)
+    np.testing.assert_array_equal(w.viewport.points(), before)
+
+
+def test_smooth_and_inflate_strokes_are_one_step_each(qtbot, win):
+    w, ctrl = win
+    doc = w.document
+    assert ctrl.start_authoring(PAIR)
+    _settle(qtbot, w)
+    v = _forehead_vertex(doc.rig, doc.surface())
+    start, _ = _display_xy(w, doc.surface()[v])
+    widget = w.viewport.plotter.interactor
+    n0 = doc.undo_stack.count()
+    ctrl.set_brush("inflate")
+    mouse(widget, "press", start)
+    mouse(widget, "move", start + QtCore.QPointF(4, 0))
+    mouse(widget, "release", start + QtCore.QPointF(4, 0))
+    assert doc.undo_stack.count() == n0 + 1
+    grown = np.linalg.norm(doc.edit_offset, axis=1).max()
+    assert grown > 0
+    ctrl.set_brush("smooth")
+    mouse(widget, "press", start)
+    mouse(widget, "release", start)
+    assert doc.undo_stack.count() == n0 + 2
+    doc.undo_stack.undo()
+    assert np.linalg.norm(doc.edit_offset, axis=1).max() == grown
+    # dragging off the face turns the view instead of sculpting
+    corner = QtCore.QPointF(5, 5)
+    mouse(widget, "press", corner)
+    mouse(widget, "move", corner + QtCore.QPointF(30, 30))
+    mouse(widget, "release", corner + QtCore.QPointF(30, 30))
+    assert doc.undo_stack.count() == n0 + 2 and doc.undo_stack.index() == n0 + 1   # no new step
+    ctrl.stop_sculpting()
+    assert not ctrl._tags  # the observers are gone outside sculpt mode
+
+
+def test_corrective_from_scan_reproduces_the_scan(qtbot, win, tmp_path):
+    w, ctrl = win
+    doc, rig = w.document, w.document.rig
+    x_pair = PoseEvaluator(rig, dtype=np.float64).evaluate(np.where(
+        np.isin(rig.shape_names, PAIR), 1.0, 0.0))
+    centre = x_pair[_forehead_vertex(rig, x_pair)]
+    r = np.linalg.norm(x_pair - centre, axis=1) / 2.0
+    bump = (np.clip(1 - r, 0, None) ** 2 * 0.4)[:, None] * np.array([0.0, 0.3, 1.0])
+    scan = x_pair + bump
+    path = tmp_path / "scan.obj"
+    write_obj(path, scan, rig.face_counts, rig.face_indices)
+    ctrl.panel.set_ticked(PAIR)
+    n0 = doc.undo_stack.count()
+    assert ctrl.from_scan(path, mode="drivers")
+    _settle(qtbot, w)
+    assert doc.undo_stack.count() == n0 + 1
+    np.testing.assert_allclose(doc.surface(), scan, atol=1e-5)
+    np.testing.assert_allclose(w.viewport.points(), scan, atol=1e-5)
+    assert ctrl.panel.activation_texts() == ["1.000"]
+    doc.undo_stack.undo()
+    assert rig.correctives == []
+    # fitting the weights: the fit finds the pair, the residual over the drivers' region is kept
+    assert ctrl.from_scan(path, mode="fit")
+    w_fit = doc.weights
+    assert w_fit[[rig.shape_index(n) for n in PAIR]].min() > 0.5
+    from solvers.correctives import driver_region
+    region = driver_region(rig.deltas[[rig.shape_index(n) for n in PAIR]])
+    posed = PoseEvaluator(rig, dtype=np.float64).evaluate(w_fit)
+    from model.obj_io import read_obj
+    on_file = read_obj(path).vertices.astype(np.float64)   # the scan as written (6 decimals)
+    assert np.abs(posed[region == 1] - on_file[region == 1]).max() < 1e-9
+    assert np.abs(posed - on_file).max() < 0.5 * np.abs(bump).max()
+
+
+def test_bad_input_is_refused_with_one_clear_sentence(qtbot, win, tmp_path):
+    w, ctrl = win
+    doc, rig = w.document, w.document.rig
+    path = tmp_path / "small.obj"
+    path.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    assert not ctrl.from_scan(path, drivers=PAIR)
+    assert w.last_error == (f"small.obj has 3 vertices but the rig has {rig.n_vertices}; a scan must have the "
+                            "rig's vertices in the same order.")
+    assert rig.correctives == [] and doc.undo_stack.count() == 0
+    assert not ctrl.start_authoring(["browInnerUp_L"])
+    assert "two or more driver shapes" in w.last_error
+    assert not ctrl.start_authoring(["browInnerUp_L", "browSideways_L"])
+    assert "no shape named 'browSideways_L'" in w.last_error
+    assert not ctrl.sculpting and doc.undo_stack.count() == 0
+    ctrl.panel.set_ticked([])
+    ctrl.panel.new_button.click()                    # nothing ticked and nothing posed
+    assert "two or more" in w.last_error
+    # a cycle: drivers naming a corrective
+    assert ctrl.start_authoring(PAIR)
+    ctrl.panel.radius.setValue(1.0)
+    doc.set_edit_offset(np.full((doc.rig.n_vertices, 3), 0.01))
+    assert ctrl.save()
+    name = doc.rig.correctives[0].name
+    assert not ctrl.edit_drivers(name, [name, "browOuterUp_L"])
+    assert w.last_error == (f"'{name}' is a corrective, not a shape: a corrective driven by a corrective "
+                            "would make the hierarchy a cycle.")
+    assert not ctrl.start_authoring([name, "browOuterUp_L"])
+    assert "cycle" in w.last_error
+    assert not ctrl.rename(name, "jawOpen")
+    assert "same name as a shape" in w.last_error
+    assert [c.drivers for c in doc.rig.correctives] == [PAIR]
+
+
+def test_panel_lists_correctives_with_live_activation_and_undoable_edits(qtbot, win):
+    w, ctrl = win
+    doc, rig = w.document, w.document.rig
+    assert ctrl.start_authoring(PAIR, "product")
+    doc.set_edit_offset(np.where(np.arange(rig.n_vertices)[:, None] % 7 == 0, 0.02, 0.0) * np.ones(3))
+    assert ctrl.save()
+    ctrl.panel.set_ticked(["browOuterUp_L", "browOuterUp_R"])
+    ctrl.panel.new_button.click()
+    doc.set_edit_offset(np.full((rig.n_vertices, 3), 0.01))
+    assert ctrl.save()
+    assert sorted(ctrl.panel.names()) == ["browInnerUp_L+browInnerUp_R", "browOuterUp_L+browOuterUp_R"]
+    row = ctrl.panel.names().index("browInnerUp_L+browInnerUp_R")
+    w_ = np.zeros(rig.n_shapes)
+    w_[rig.shape_index(PAIR[0])], w_[rig.shape_index(PAIR[1])] = 0.5, 0.8
+    w.set_pose(w_, "test pose")                              # pose_changed updates the activations
+    assert ctrl.panel.activation_texts()[row] == "0.400"
+    assert ctrl.panel.activation_texts()[1 - row] == "0.000"
+    n = doc.undo_stack.count()
+    ctrl.panel.select("browInnerUp_L+browInnerUp_R")
+    ctrl.panel.rule.setCurrentIndex(ctrl.panel.rule.findData("min"))   # rule edit from the panel
+    assert doc.undo_stack.count() == n + 1
+    assert ctrl.panel.activation_texts()[ctrl.panel.names().index("browInnerUp_L+browInnerUp_R")] == "0.500"
+    assert ctrl.rename("browInnerUp_L+browInnerUp_R", "innerBrows")
+    assert "innerBrows" in ctrl.panel.names()
+    assert ctrl.delete("innerBrows")
+    assert ctrl.panel.names() == ["browOuterUp_L+browOuterUp_R"]
+    for _ in range(3):
+        doc.undo_stack.undo()
+    c = next(c for c in rig.correctives if c.drivers == PAIR)
+    assert c.name == "browInnerUp_L+browInnerUp_R" and c.rule == "product"
+    assert ctrl.panel.activation_texts()[ctrl.panel.names().index(c.name)] == "0.400"
+
+
+def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
+    w, ctrl = win
+    rig = w.document.rig
+    ctrl.panel.tabs.setCurrentIndex(1)
+    pairs = ctrl.find_pairs()
+    assert len(pairs) == ctrl.panel.top.value() and ctrl.panel.pairs.topLevelItemCount() == len(pairs)
+    scores = [s for _, _, s in pairs]
+    assert scores == sorted(scores, reverse=True) and 0 < scores[0] <= 1
+    ctrl.panel.measure.setCurrentIndex(1)
+    directional = ctrl.find_pairs()
+    assert all(s <= 1 for *_, s in directional)
+    ctrl.panel.select_pair(0)
+    i, j, _ = directional[0]
+    cm = w.viewport._colormap
+    assert cm is not None and rig.units in cm.title
+    np.testing.assert_allclose(cm.scalars, np.minimum(np.linalg.norm(rig.deltas[i], axis=1),
+                                                      np.linalg.norm(rig.deltas[j], axis=1)))
+    assert w.viewport.plotter.scalar_bars
+    heat = w.viewport._colormap
+    with qtbot.waitSignal(w.segmentation.segmentation_ready, timeout=30000):
+        w.segmentation.recompute(w.segmentation.settings())   # a finished segmentation repaints the face...
+    assert w.viewport._colormap is heat                       # ...but the heat map stays on top
+    img = tmp_path / "interference.png"
+    w.grab().save(str(img))
+    ctrl.panel.tabs.setCurrentIndex(0)                     # leaving restores the previous (shaded) view
+    assert w.viewport._colormap is None
+    ctrl.panel.tabs.setCurrentIndex(1)
+    ctrl.panel.select_pair(0)
+    assert w.viewport._colormap is not None
+    ctrl.panel.create_pair_button.click()
+    assert w.viewport._colormap is None and ctrl.sculpting
+    assert set(ctrl.authoring) == {rig.shape_names[i], rig.shape_names[j]}
+    assert w.document.weights[[i, j]].tolist() == [1.0, 1.0] and w.document.weights.sum() == 2.0

@@ -1,0 +1,335 @@
+"""The Correctives panel (ALGORITHMS.md §6; Smith 2006 §4.5, §5.6–5.8): the corrective list with live
+activations, the driver picker, the sculpt brush settings and the interference finder.
+
+It shows state and emits requests; the corrective controller does the work.
+"""
+from __future__ import annotations
+
+import numpy as np
+from PySide6 import QtCore, QtGui, QtWidgets
+
+RULE_LABELS = [("product", "Product (Maya multiplication)"), ("hierarchical", "Hierarchical (Smith)"),
+               ("min", "Lowest weight"), ("smooth-min", "Lowest weight, smooth")]
+BRUSHES = [("grab", "Grab"), ("smooth", "Smooth"), ("inflate", "Inflate"), ("deflate", "Deflate")]
+FALLOFF_LABELS = [("smooth", "Smooth"), ("linear", "Linear"), ("constant", "Constant")]
+
+
+def _combo(items, tip: str) -> QtWidgets.QComboBox:
+    box = QtWidgets.QComboBox()
+    for key, label in items:
+        box.addItem(label, key)
+    box.setToolTip(tip)
+    return box
+
+
+def _button(text: str, tip: str, signal=None) -> QtWidgets.QPushButton:
+    b = QtWidgets.QPushButton(text)
+    b.setToolTip(tip)
+    if signal is not None:
+        b.clicked.connect(lambda _=False: signal.emit())
+    return b
+
+
+class CorrectivesPanel(QtWidgets.QWidget):
+    new_requested = QtCore.Signal()            # new corrective from the ticked drivers
+    use_pose_requested = QtCore.Signal()       # tick the shapes whose weight is > 0
+    save_requested = QtCore.Signal()
+    discard_requested = QtCore.Signal()
+    cancel_requested = QtCore.Signal()
+    scan_requested = QtCore.Signal()
+    edit_shape_requested = QtCore.Signal()     # sculpt the selected corrective again
+    rename_requested = QtCore.Signal()
+    drivers_requested = QtCore.Signal()
+    delete_requested = QtCore.Signal()
+    rule_requested = QtCore.Signal(str)        # the selected corrective's new rule
+    brush_changed = QtCore.Signal()
+    find_requested = QtCore.Signal()
+    pair_selected = QtCore.Signal(int)         # row in the interference list, -1 = none
+    create_pair_requested = QtCore.Signal()
+    tab_changed = QtCore.Signal(int)
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        self._updating = False
+        self.setMinimumWidth(360)
+        lay = QtWidgets.QVBoxLayout(self)
+        lay.setContentsMargins(4, 4, 4, 4)
+        self.tabs = QtWidgets.QTabWidget()
+        self.tabs.addTab(self._build_correctives_tab(), "Correctives")
+        self.tabs.addTab(self._build_interference_tab(), "Interference")
+        self.tabs.currentChanged.connect(self.tab_changed)
+        lay.addWidget(self.tabs)
+
+    # --- construction ------------------------------------------------------------------------------
+    def _build_correctives_tab(self) -> QtWidgets.QWidget:
+        page = QtWidgets.QWidget()
+        lay = QtWidgets.QVBoxLayout(page)
+        self.table = QtWidgets.QTreeWidget()
+        self.table.setHeaderLabels(["Corrective", "Drivers", "Rule", "Activation"])
+        self.table.setRootIsDecorated(False)
+        self.table.setAlternatingRowColors(True)
+        self.table.setToolTip("Correctives of the rig, in evaluation order (lower orders first), with their "
+                              "activation a_c(w) at the current pose; double-click to sculpt one again")
+        self.table.setMinimumHeight(110)
+        self.table.itemSelectionChanged.connect(self._on_selection)
+        self.table.itemDoubleClicked.connect(lambda *_: self.edit_shape_requested.emit())
+        lay.addWidget(self.table, 2)
+        row = QtWidgets.QHBoxLayout()
+        self.rename_button = _button("Rename…", "Rename the selected corrective (undoable)", self.rename_requested)
+        self.drivers_button = _button("Drivers…", "Edit the selected corrective's driver shapes (undoable)",
+                                      self.drivers_requested)
+        self.edit_button = _button("Sculpt", "Set the selected corrective's drivers to 1 and sculpt it again",
+                                   self.edit_shape_requested)
+        self.delete_button = _button("Delete", "Delete the selected corrective (undoable)", self.delete_requested)
+        for b in (self.rename_button, self.drivers_button, self.edit_button, self.delete_button):
+            row.addWidget(b)
+        lay.addLayout(row)
+        rule_row = QtWidgets.QHBoxLayout()
+        rule_row.addWidget(QtWidgets.QLabel("Rule"))
+        self.rule = _combo(RULE_LABELS, "How the corrective's activation follows its drivers' weights "
+                                        "(for the selected corrective, or the next new one)")
+        self.rule.currentIndexChanged.connect(self._on_rule)
+        rule_row.addWidget(self.rule, 1)
+        lay.addLayout(rule_row)
+
+        drv = QtWidgets.QGroupBox("Drivers of a new corrective")
+        dl = QtWidgets.QVBoxLayout(drv)
+        self.driver_filter = QtWidgets.QLineEdit()
+        self.driver_filter.setPlaceholderText("Filter shapes")
+        self.driver_filter.setClearButtonEnabled(True)
+        self.driver_filter.setToolTip("Show only shapes whose name contains this text")
+        self.driver_filter.textChanged.connect(self._filter_drivers)
+        dl.addWidget(self.driver_filter)
+        self.drivers = QtWidgets.QListWidget()
+        self.drivers.setToolTip("Tick two or more shapes that need a corrective where they combine")
+        self.drivers.setMinimumHeight(90)
+        dl.addWidget(self.drivers, 1)
+        brow = QtWidgets.QHBoxLayout()
+        self.use_pose_button = _button("Use posed shapes", "Tick the shapes whose weight is above 0 now",
+                                       self.use_pose_requested)
+        self.new_button = _button("New corrective from combination",
+                                  "Set the ticked drivers (or, if none are ticked, the posed shapes) to 1 "
+                                  "and start sculpting the corrective (Ctrl+Shift+N)", self.new_requested)
+        brow.addWidget(self.use_pose_button)
+        brow.addWidget(self.new_button, 1)
+        dl.addLayout(brow)
+        self.scan_button = _button("From scan…", "Import an OBJ of the desired combination (same vertices "
+                                                 "as the rig, in order) and make the corrective from it",
+                                   self.scan_requested)
+        self.scan_mode = _combo([("drivers", "Scan is the drivers at 1"), ("fit", "Fit the scan's weights")],
+                                "How the scan's pose is found: the ticked drivers at 1 (the scan becomes the "
+                                "surface there), or a bounded least-squares fit of all weights with the "
+                                "residual over the drivers' region kept (Smith, future work 1)")
+        srow = QtWidgets.QHBoxLayout()
+        srow.addWidget(self.scan_button)
+        srow.addWidget(self.scan_mode, 1)
+        dl.addLayout(srow)
+        lay.addWidget(drv, 3)
+
+        sculpt = QtWidgets.QGroupBox("Sculpt")
+        self.sculpt_box = sculpt
+        form = QtWidgets.QFormLayout(sculpt)
+        self.sculpt_status = QtWidgets.QLabel("Not sculpting.")
+        self.sculpt_status.setWordWrap(True)
+        form.addRow(self.sculpt_status)
+        self.brush = _combo(BRUSHES, "Grab drags the surface with the mouse; Smooth relaxes it; Inflate and "
+                                     "Deflate push it along its normals (G, Shift+S, I, D)")
+        self.radius = QtWidgets.QDoubleSpinBox()
+        self.radius.setDecimals(3)
+        self.radius.setRange(0.001, 1e4)
+        self.radius.setToolTip("Brush radius in rig units ([ and ] change it)")
+        self.falloff = _combo(FALLOFF_LABELS, "Brush profile from the centre to the rim")
+        self.strength = QtWidgets.QDoubleSpinBox()
+        self.strength.setRange(0.01, 1.0)
+        self.strength.setSingleStep(0.05)
+        self.strength.setValue(1.0)
+        self.strength.setToolTip("Brush strength: the fraction of the drag (grab) or of the effect per dab")
+        self.symmetric = QtWidgets.QCheckBox("Symmetric across x = 0")
+        self.symmetric.setToolTip("Mirror every stroke to the other side of the face (X)")
+        for w in (self.brush, self.falloff):
+            w.currentIndexChanged.connect(lambda _: self.brush_changed.emit())
+        for w in (self.radius, self.strength):
+            w.valueChanged.connect(lambda _: self.brush_changed.emit())
+        self.symmetric.toggled.connect(lambda _: self.brush_changed.emit())
+        form.addRow("Brush", self.brush)
+        form.addRow("Radius", self.radius)
+        form.addRow("Falloff", self.falloff)
+        form.addRow("Strength", self.strength)
+        form.addRow(self.symmetric)
+        srow = QtWidgets.QHBoxLayout()
+        self.save_button = _button("Save corrective", "Store the sculpted difference as the corrective: "
+                                   "e = (x_des − x_cur) / a (Ctrl+Return)", self.save_requested)
+        self.discard_button = _button("Discard sculpt", "Drop the pending sculpt (undoable)", self.discard_requested)
+        self.cancel_button = _button("Stop", "Leave sculpt mode (the pending sculpt stays until discarded)",
+                                     self.cancel_requested)
+        srow.addWidget(self.save_button, 1)
+        srow.addWidget(self.discard_button)
+        srow.addWidget(self.cancel_button)
+        form.addRow(srow)
+        lay.addWidget(sculpt)
+        self.set_sculpting(None)
+        self._on_selection()
+        return page
+
+    def _build_interference_tab(self) -> QtWidgets.QWidget:
+        page = QtWidgets.QWidget()
+        lay = QtWidgets.QVBoxLayout(page)
+        row = QtWidgets.QHBoxLayout()
+        self.measure = _combo([("plain", "Overlap"), ("directional", "Overlap, same direction")],
+                              "Overlap: Σ min(‖d_i‖, ‖d_j‖) / min(Σ‖d_i‖, Σ‖d_j‖). Same direction also "
+                              "weights each vertex by max(0, cos θ), so opposing shapes drop out")
+        self.top = QtWidgets.QSpinBox()
+        self.top.setRange(1, 500)
+        self.top.setValue(20)
+        self.top.setToolTip("How many pairs to list")
+        self.find_button = _button("Find pairs", "Rank shape pairs by how much their displacements overlap",
+                                   self.find_requested)
+        row.addWidget(self.measure, 1)
+        row.addWidget(QtWidgets.QLabel("Top"))
+        row.addWidget(self.top)
+        row.addWidget(self.find_button)
+        lay.addLayout(row)
+        self.pairs = QtWidgets.QTreeWidget()
+        self.pairs.setHeaderLabels(["#", "Shape", "Shape", "Score"])
+        self.pairs.setRootIsDecorated(False)
+        self.pairs.setAlternatingRowColors(True)
+        self.pairs.setToolTip("Shape pairs that overlap most, best first; select one to see where they "
+                              "interfere (min(‖d_i‖, ‖d_j‖) per vertex)")
+        self.pairs.itemSelectionChanged.connect(self._on_pair)
+        lay.addWidget(self.pairs, 1)
+        self.pair_info = QtWidgets.QLabel("")
+        self.pair_info.setWordWrap(True)
+        lay.addWidget(self.pair_info)
+        self.create_pair_button = _button("Create corrective for this pair",
+                                          "Set the pair to 1 and start sculpting its corrective",
+                                          self.create_pair_requested)
+        self.create_pair_button.setEnabled(False)
+        lay.addWidget(self.create_pair_button)
+        return page
+
+    # --- state shown -------------------------------------------------------------------------------
+    def set_shapes(self, names: list[str]) -> None:
+        self.drivers.clear()
+        for n in names:
+            item = QtWidgets.QListWidgetItem(n)
+            item.setFlags(item.flags() | QtCore.Qt.ItemIsUserCheckable)
+            item.setCheckState(QtCore.Qt.Unchecked)
+            self.drivers.addItem(item)
+        self._filter_drivers(self.driver_filter.text())
+
+    def ticked_drivers(self) -> list[str]:
+        return [self.drivers.item(i).text() for i in range(self.drivers.count())
+                if self.drivers.item(i).checkState() == QtCore.Qt.Checked]
+
+    def set_ticked(self, names) -> None:
+        names = set(names)
+        for i in range(self.drivers.count()):
+            it = self.drivers.item(i)
+            it.setCheckState(QtCore.Qt.Checked if it.text() in names else QtCore.Qt.Unchecked)
+
+    def _filter_drivers(self, text: str) -> None:
+        t = text.strip().lower()
+        for i in range(self.drivers.count()):
+            it = self.drivers.item(i)
+            it.setHidden(bool(t) and t not in it.text().lower())
+
+    def set_correctives(self, rows: list[tuple[str, list[str], str]], activations) -> None:
+        """rows: (name, drivers, rule) in evaluation order; activations: (C,) at the current pose."""
+        selected = self.selected_name()
+        self._updating = True
+        self.table.clear()
+        labels = dict(RULE_LABELS)
+        for (name, drivers, rule), a in zip(rows, activations):
+            item = QtWidgets.QTreeWidgetItem([name, ", ".join(drivers), labels.get(rule, rule), f"{a:.3f}"])
+            item.setData(0, QtCore.Qt.UserRole, name)
+            item.setTextAlignment(3, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
+            self.table.addTopLevelItem(item)
+            if name == selected:
+                item.setSelected(True)
+        for c in range(3):
+            self.table.resizeColumnToContents(c)
+        self._updating = False
+        self._on_selection()
+
+    def set_activations(self, activations) -> None:
+        for i, a in enumerate(activations):
+            item = self.table.topLevelItem(i)
+            if item is not None:
+                item.setText(3, f"{a:.3f}")
+
+    def activation_texts(self) -> list[str]:
+        return [self.table.topLevelItem(i).text(3) for i in range(self.table.topLevelItemCount())]
+
+    def names(self) -> list[str]:
+        return [self.table.topLevelItem(i).text(0) for i in range(self.table.topLevelItemCount())]
+
+    def selected_name(self) -> str | None:
+        items = self.table.selectedItems()
+        return items[0].data(0, QtCore.Qt.UserRole) if items else None
+
+    def select(self, name: str | None) -> None:
+        for i in range(self.table.topLevelItemCount()):
+            it = self.table.topLevelItem(i)
+            it.setSelected(it.data(0, QtCore.Qt.UserRole) == name)
+
+    def _on_selection(self) -> None:
+        has = self.selected_name() is not None
+        for b in (self.rename_button, self.drivers_button, self.edit_button, self.delete_button):
+            b.setEnabled(has)
+        if has and not self._updating:
+            rule = self.table.selectedItems()[0].text(2)
+            key = {label: k for k, label in RULE_LABELS}.get(rule, rule)
+            self._updating = True
+            self.rule.setCurrentIndex(max(0, self.rule.findData(key)))
+            self._updating = False
+
+    def _on_rule(self, _index: int) -> None:
+        if not self._updating and self.selected_name() is not None:
+            self.rule_requested.emit(self.rule.currentData())
+
+    def current_rule(self) -> str:
+        return self.rule.currentData()
+
+    def set_sculpting(self, drivers: list[str] | None, has_offset: bool = False) -> None:
+        on = drivers is not None
+        if on:
+            self.sculpt_status.setText(f"Sculpting {' + '.join(drivers)}: drag on the face "
+                                       "(drag off the face to turn the view).")
+        else:
+            self.sculpt_status.setText("Not sculpting: start a new corrective, or select one and press Sculpt.")
+        self.save_button.setEnabled(on)
+        self.cancel_button.setEnabled(on)
+        self.discard_button.setEnabled(has_offset)
+        self.sculpt_box.setProperty("active", on)
+        self.sculpt_box.setStyleSheet("QGroupBox { border: 1px solid #d08a3a; margin-top: 6px; }"
+                                      "QGroupBox::title { color: #e0a050; }" if on else "")
+
+    def brush_settings(self) -> dict:
+        return {"brush": self.brush.currentData(), "radius": float(self.radius.value()),
+                "falloff": self.falloff.currentData(), "strength": float(self.strength.value()),
+                "symmetric": self.symmetric.isChecked()}
+
+    # --- interference ------------------------------------------------------------------------------
+    def set_pairs(self, rows: list[tuple[str, str, float]]) -> None:
+        self.pairs.clear()
+        for i, (a, b, s) in enumerate(rows):
+            item = QtWidgets.QTreeWidgetItem([str(i + 1), a, b, f"{s:.3f}"])
+            item.setTextAlignment(3, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
+            self.pairs.addTopLevelItem(item)
+        for c in range(3):
+            self.pairs.resizeColumnToContents(c)
+        self.create_pair_button.setEnabled(False)
+
+    def selected_pair_row(self) -> int:
+        items = self.pairs.selectedItems()
+        return self.pairs.indexOfTopLevelItem(items[0]) if items else -1
+
+    def select_pair(self, row: int) -> None:
+        item = self.pairs.topLevelItem(row)
+        if item is not None:
+            self.pairs.setCurrentItem(item)
+
+    def _on_pair(self) -> None:
+        row = self.selected_pair_row()
+        self.create_pair_button.setEnabled(row >= 0)
+        self.pair_selected.emit(row)
