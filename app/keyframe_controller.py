@@ -246,6 +246,9 @@ class KeyframeController(QtCore.QObject):
 
 def install(window) -> KeyframeController:
     """Add the timeline under the viewport, Set Key (S), Play/Pause (Space) and the export actions."""
+    existing = getattr(window, "keyframes", None)
+    if isinstance(existing, KeyframeController):  # the main window installs it; installing twice returns the same one
+        return existing
     panel = TimelinePanel(window)
     window.timeline_panel = panel
     window.timeline_dock = window._add_dock("Timeline", panel, QtCore.Qt.BottomDockWidgetArea)

@@ -52,6 +52,10 @@ class MainWindow(QtWidgets.QMainWindow):
         from app import keyframe_controller, marker_controller
         marker_controller.install(self)
         keyframe_controller.install(self)
+        from app import corrective_controller, mocap_controller
+        corrective_controller.install(self)
+        mocap_controller.install(self)
+        self._arrange_docks()
         self._restore_layout()
 
     # --- construction ------------------------------------------------------------------------------
@@ -128,6 +132,16 @@ class MainWindow(QtWidgets.QMainWindow):
         self._action(h, "&Keyboard Shortcuts", self.show_shortcuts, "F1")
         self._action(h, "&About Blendshape Studio", self.show_about)
         self._rebuild_recent_menu()
+
+    def _arrange_docks(self) -> None:
+        """Left: Segmentation, Markers, Correctives as tabs. Right: Shapes, History, Mocap. Bottom: the
+        timeline with the mocap views above it when they are shown."""
+        self.tabifyDockWidget(self.segmentation_dock, self.markers_dock)
+        self.tabifyDockWidget(self.markers_dock, self.correctives_dock)
+        self.tabifyDockWidget(self.history_dock, self.mocap_dock)
+        self.splitDockWidget(self.mocap_views_dock, self.timeline_dock, QtCore.Qt.Vertical)
+        self.segmentation_dock.raise_()
+        self.shapes_dock.raise_()
 
     def _build_status_bar(self) -> None:
         self.counts_label = QtWidgets.QLabel("no rig")

@@ -499,6 +499,9 @@ class MarkerController(QtCore.QObject):
 
 def install(window) -> MarkerController:
     """Add the Markers panel, the marker-mode action (M) and the controller to a MainWindow."""
+    existing = getattr(window, "markers", None)
+    if isinstance(existing, MarkerController):  # the main window installs it; installing twice returns the same one
+        return existing
     panel = MarkersPanel(window)
     window.markers_panel = panel
     window.markers_dock = window._add_dock("Markers", panel, QtCore.Qt.LeftDockWidgetArea)

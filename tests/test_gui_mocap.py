@@ -1,0 +1,146 @@
+"""Motion capture in the GUI: solve the real marker take on ICT, scrub the side-by-side views, exports,
+bad input, and Live Link Face weight takes playing on ICT and on the sample rig."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from PySide6 import QtWidgets
+
+from tests.gui_helpers import make_window, open_and_wait
+from tests.image_compare import assert_matches_reference
+
+
+def _install(qtbot, tmp_path, size=(1400, 1000)):
+    from app.mocap_controller import install
+    w = make_window(qtbot, tmp_path, size=size)
+    return w, install(w)
+
+
+def _not_background(img: np.ndarray) -> float:
+    """Fraction of pixels unlike the background gradient (which is constant along a row: column 0)."""
+    d = np.abs(img.astype(int) - img[:, :1].astype(int)).max(axis=2)
+    return float((d > 30).mean())
+
+
+def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, take_dir, llf_csv):
+    w, mc = _install(qtbot, tmp_path)
+    open_and_wait(qtbot, w, ict_dir)
+    assert w.document.rig.n_vertices == 26719
+    rig = w.document.rig
+
+    # bad input first: nothing is loaded yet, nothing gets loaded
+    truncated = tmp_path / "truncated.c3d"
+    truncated.write_bytes((take_dir / "take.c3d").read_bytes()[:3000])
+    assert not mc.load_take(truncated)
+    assert "truncated.c3d" in w.last_error and "truncated" in w.last_error
+    assert mc.take is None and w.document.rig is rig
+
+    assert mc.load_take(take_dir / "take.c3d")
+    assert mc.load_map(take_dir / "marker_map.json")
+    assert "60 markers" in w.mocap_panel.map_label.text()
+    with qtbot.waitSignal(mc.solved, timeout=120000):
+        mc.solve()
+    sol = mc.solution
+    assert sol.n_frames == 358 and sol.weights.shape == (358, rig.n_shapes)
+    assert mc.views.has_residual_bar()
+    assert w.mocap_views_dock.isVisible()
+    # the stabilised raw take markers sit on the rig's fit plus the solver's misfit, up to the optical noise
+    # the solver smooths away in time (about 0.3 mm in this take)
+    ok = np.isfinite(sol.misfit[100]).all(axis=1)
+    diff = mc.cache.markers[100][ok] - (mc.cache.fitted[100][ok] + sol.misfit[100][ok])
+    assert np.sqrt(np.mean(np.sum(diff ** 2, axis=1))) < 0.05
+    np.testing.assert_allclose(mc.cache.fitted[100], sol.solver.markers_at(sol.weights[100]), atol=1e-9)
+
+    # scrub: both views and the markers move; residual colours change; cursors follow
+    shots = {}
+    for f in (0, 120, 240):
+        w.mocap_panel.slider.setValue(f)
+        QtWidgets.QApplication.processEvents()
+        assert mc.frame == f and w.mocap_panel.frame_label.text().startswith(f"frame {f + 1}/358")
+        assert mc.weight_plot.cursor == f and mc.error_plot.cursor == f
+        shots[f] = (np.array(mc.views.left_mesh.points), np.array(mc.views.right_mesh.points),
+                    np.array(mc.views.right_mesh.point_data["values"]), np.array(mc.views.marker_cloud.points))
+    for a, b in ((0, 120), (120, 240)):
+        for i in range(4):
+            assert np.abs(shots[a][i] - shots[b][i]).max() > 1e-3, (a, b, i)
+    proj, dense, res = shots[240][:3]
+    np.testing.assert_allclose(res, np.linalg.norm(dense - proj, axis=1) * 10.0, rtol=1e-3, atol=1e-3)  # cm -> mm
+    np.testing.assert_allclose(dense, sol.dense(240), atol=1e-4)
+    assert res.max() > 0.05  # the residual is there and coloured
+
+    # screenshot of the side-by-side view: both halves show a face
+    mc.set_frame(180)
+    img = mc.views.grab_image(size=(560, 440))  # a fixed size, whatever the dock layout
+    half = img.shape[1] // 2
+    assert _not_background(img[:, :half]) > 0.1 and _not_background(img[:, half:]) > 0.1
+    assert_matches_reference(img, "mocap_side_by_side")
+
+    # exports
+    assert mc.export_weights_csv(tmp_path / "w.csv")
+    from model.weights_csv import read_weights_csv
+    frames, times, names, W = read_weights_csv(tmp_path / "w.csv")
+    assert names == rig.shape_names and W.shape == (358, rig.n_shapes)
+    np.testing.assert_allclose(W, sol.weights)
+    assert mc.export_report(tmp_path / "report.json")
+    rep = json.loads((tmp_path / "report.json").read_text())
+    assert rep["units"] == "mm" and len(rep["per_frame_rmse"]) == 358 and len(rep["per_marker_rmse"]) == 60
+    assert 0 < rep["summary"]["rmse_mean"] < 2.0
+
+    # a map naming markers the take lacks is refused; the solve and the map stay
+    bad = json.loads((take_dir / "marker_map.json").read_text())
+    bad["markers"]["NOPE1"] = 10
+    (tmp_path / "bad_map.json").write_text(json.dumps(bad))
+    kept_map = mc.marker_map
+    assert not mc.load_map(tmp_path / "bad_map.json")
+    assert "NOPE1" in w.last_error and "bad_map.json" in w.last_error
+    assert mc.marker_map is kept_map and mc.solution is sol and mc.take is not None
+    assert not mc.load_take(truncated)
+    assert mc.solution is sol and w.document.rig is rig
+
+    # a Live Link Face take plays on ICT in the main viewport, without undo steps
+    undo_before = w.document.undo_stack.count()
+    assert mc.load_take(llf_csv)
+    assert mc.take.unmapped == ["TongueOut"] and "TongueOut" in w.mocap_panel.take_label.text()
+    _check_weight_playback(qtbot, w, mc)
+    assert w.document.undo_stack.count() == undo_before
+
+
+def _check_weight_playback(qtbot, w, mc):
+    mc.set_frame(0)
+    w.redraw_now()
+    before = w.viewport.points().copy()
+    mc.panel.loop_check.setChecked(False)
+    mc.play()
+    qtbot.waitUntil(lambda: mc.frame >= 130, timeout=20000)  # the performance starts moving near frame 100
+    mc.pause()
+    w.redraw_now()
+    f = mc.frame
+    np.testing.assert_allclose(w.document.weights, mc.take.weights[f])
+    np.testing.assert_allclose(w.viewport.points(), w.document.evaluator.evaluate(mc.take.weights[f]), atol=1e-4)
+    moved = np.linalg.norm(w.viewport.points() - before, axis=1)
+    assert moved.max() > 0.1 * np.abs(w.document.rig.deltas).max()
+
+
+def test_live_link_face_plays_on_sample_rig(qtbot, tmp_path, llf_csv):
+    w, mc = _install(qtbot, tmp_path, size=(1100, 800))
+    rig = w.document.rig
+    assert mc.load_take(llf_csv)
+    take = mc.take
+    assert take.names == rig.shape_names and take.n_frames == 328
+    assert take.unmapped and all(c in w.mocap_panel.take_label.text() for c in take.unmapped)
+    assert not w.mocap_panel.solve_button.isEnabled()
+    _check_weight_playback(qtbot, w, mc)
+    assert w.document.undo_stack.count() == 0
+    assert mc.export_pc2(tmp_path / "llf.pc2")
+    from model.pc2 import read_pc2
+    data, _, _ = read_pc2(tmp_path / "llf.pc2")
+    assert data.shape == (328, rig.n_vertices, 3)
+    np.testing.assert_allclose(data[50], w.document.evaluator.evaluate(take.weights[50]), atol=1e-4)
+
+
+def test_solve_without_map_or_segmentation_says_why(qtbot, tmp_path, take_dir):
+    w, mc = _install(qtbot, tmp_path, size=(1100, 800))
+    assert mc.load_take(take_dir / "take.c3d")
+    mc.solve()
+    assert "marker map" in w.last_error and mc.solution is None

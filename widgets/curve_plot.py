@@ -1,0 +1,102 @@
+"""A small line plot of per-frame curves with a cursor at the current frame (QPainter, no matplotlib).
+
+Used under the mocap views for weight curves and per-frame marker error; clicking or dragging in the plot
+asks for that frame (``frame_requested``).
+"""
+from __future__ import annotations
+
+import numpy as np
+from PySide6 import QtCore, QtGui, QtWidgets
+
+PALETTE = [(230, 120, 60), (90, 170, 230), (120, 200, 110), (220, 90, 160), (230, 200, 80), (160, 130, 230),
+           (80, 200, 190), (200, 200, 200)]
+
+
+class CurvePlot(QtWidgets.QWidget):
+    frame_requested = QtCore.Signal(int)
+
+    def __init__(self, title: str = "", parent=None) -> None:
+        super().__init__(parent)
+        self.title = title
+        self.curves: list[tuple[str, np.ndarray, tuple[int, int, int]]] = []
+        self.cursor = 0
+        self.n_frames = 0
+        self.y_range: tuple[float, float] = (0.0, 1.0)
+        self.setMinimumHeight(70)
+        self.setSizePolicy(QtWidgets.QSizePolicy.Expanding, QtWidgets.QSizePolicy.Expanding)
+
+    def set_curves(self, curves: list[tuple[str, np.ndarray]], y_range: tuple[float, float] | None = None) -> None:
+        """Curves as (name, values (F,)); NaN values leave gaps. The y range defaults to the data's."""
+        self.curves = [(name, np.asarray(v, dtype=np.float64), PALETTE[i % len(PALETTE)])
+                       for i, (name, v) in enumerate(curves)]
+        self.n_frames = max((c[1].size for c in self.curves), default=0)
+        if y_range is None:
+            vals = np.concatenate([c[1][np.isfinite(c[1])] for c in self.curves]) if self.curves else np.zeros(0)
+            lo, hi = (float(vals.min()), float(vals.max())) if vals.size else (0.0, 1.0)
+            lo = min(lo, 0.0)
+            y_range = (lo, hi if hi > lo else lo + 1.0)
+        self.y_range = y_range
+        self.update()
+
+    def set_cursor(self, frame: int) -> None:
+        if frame != self.cursor:
+            self.cursor = int(frame)
+            self.update()
+
+    # --- geometry ----------------------------------------------------------------------------------
+    def _plot_rect(self) -> QtCore.QRectF:
+        return QtCore.QRectF(44, 16, max(10, self.width() - 52), max(10, self.height() - 24))
+
+    def _x(self, frame: float, r: QtCore.QRectF) -> float:
+        return r.left() + r.width() * (frame / max(1, self.n_frames - 1))
+
+    def frame_at(self, x: float) -> int:
+        r = self._plot_rect()
+        f = round((x - r.left()) / r.width() * max(1, self.n_frames - 1))
+        return int(np.clip(f, 0, max(0, self.n_frames - 1)))
+
+    # --- painting ----------------------------------------------------------------------------------
+    def paintEvent(self, event) -> None:  # Qt override
+        p = QtGui.QPainter(self)
+        p.setRenderHint(QtGui.QPainter.Antialiasing)
+        p.fillRect(self.rect(), QtGui.QColor(32, 33, 38))
+        r = self._plot_rect()
+        p.setPen(QtGui.QColor(90, 92, 100))
+        p.drawRect(r)
+        lo, hi = self.y_range
+        small = QtGui.QFont(self.font())
+        small.setPointSizeF(max(6.0, small.pointSizeF() * 0.8))
+        p.setFont(small)
+        p.setPen(QtGui.QColor(170, 170, 175))
+        p.drawText(QtCore.QPointF(2, r.bottom()), f"{lo:.3g}")
+        p.drawText(QtCore.QPointF(2, r.top() + 10), f"{hi:.3g}")
+        p.drawText(QtCore.QPointF(r.left(), 12), self.title)
+        x_legend = r.left() + p.fontMetrics().horizontalAdvance(self.title) + 16
+        for name, values, color in self.curves:
+            pen = QtGui.QPen(QtGui.QColor(*color), 1.4)
+            p.setPen(pen)
+            if values.size:
+                xs = r.left() + r.width() * np.arange(values.size) / max(1, self.n_frames - 1)
+                ys = r.bottom() - r.height() * (np.clip(values, lo, hi) - lo) / (hi - lo)
+                ok = np.isfinite(ys)
+                # one polyline per run of finite samples
+                breaks = np.flatnonzero(np.diff(ok.astype(np.int8)) != 0) + 1
+                for seg in np.split(np.arange(values.size), breaks):
+                    if seg.size > 1 and ok[seg[0]]:
+                        p.drawPolyline(QtGui.QPolygonF([QtCore.QPointF(float(xs[i]), float(ys[i])) for i in seg]))
+            p.drawText(QtCore.QPointF(x_legend, 12), name)
+            x_legend += p.fontMetrics().horizontalAdvance(name) + 12
+        if self.n_frames:
+            x = self._x(self.cursor, r)
+            p.setPen(QtGui.QPen(QtGui.QColor(255, 255, 255), 1.0))
+            p.drawLine(QtCore.QPointF(x, r.top()), QtCore.QPointF(x, r.bottom()))
+        p.end()
+
+    # --- scrubbing ---------------------------------------------------------------------------------
+    def mousePressEvent(self, event) -> None:  # Qt override
+        if self.n_frames:
+            self.frame_requested.emit(self.frame_at(event.position().x()))
+
+    def mouseMoveEvent(self, event) -> None:  # Qt override
+        if self.n_frames and event.buttons() & QtCore.Qt.LeftButton:
+            self.frame_requested.emit(self.frame_at(event.position().x()))

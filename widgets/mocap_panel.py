@@ -1,0 +1,194 @@
+"""The Mocap panel: load a take and a marker map, solver settings, solve, exports, and a take transport.
+
+A plain widget: it shows what it is given and emits requests; ``app.mocap_controller`` does the work.
+"""
+from __future__ import annotations
+
+from PySide6 import QtCore, QtWidgets
+
+from solvers.take_solve import DEFAULTS
+
+RESIDUALS = ("none", "joshi", "gaussian", "multiquadric")
+
+
+class MocapPanel(QtWidgets.QWidget):
+    load_take_requested = QtCore.Signal()
+    load_map_requested = QtCore.Signal()
+    auto_map_requested = QtCore.Signal()
+    solve_requested = QtCore.Signal()
+    export_weights_requested = QtCore.Signal()
+    export_pc2_requested = QtCore.Signal()
+    export_report_requested = QtCore.Signal()
+    frame_requested = QtCore.Signal(int)
+    play_toggled = QtCore.Signal(bool)
+    curves_changed = QtCore.Signal()
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        lay = QtWidgets.QVBoxLayout(self)
+
+        files = QtWidgets.QGroupBox("Take")
+        fl = QtWidgets.QGridLayout(files)
+        self.load_take_button = QtWidgets.QPushButton("Load Take…")
+        self.load_take_button.setToolTip("Open marker trajectories (C3D, TRC, CSV) or a Live Link Face CSV")
+        self.load_map_button = QtWidgets.QPushButton("Load Map…")
+        self.load_map_button.setToolTip("Open a marker map (JSON: marker label → rig vertex)")
+        self.auto_map_button = QtWidgets.QPushButton("Auto Map")
+        self.auto_map_button.setToolTip("Bind each marker to the rig from the neutral calibration frames")
+        fl.addWidget(self.load_take_button, 0, 0)
+        fl.addWidget(self.load_map_button, 0, 1)
+        fl.addWidget(self.auto_map_button, 0, 2)
+        self.take_label = QtWidgets.QLabel("no take")
+        self.take_label.setWordWrap(True)
+        self.map_label = QtWidgets.QLabel("no marker map")
+        self.map_label.setWordWrap(True)
+        fl.addWidget(self.take_label, 1, 0, 1, 3)
+        fl.addWidget(self.map_label, 2, 0, 1, 3)
+        lay.addWidget(files)
+
+        solve = QtWidgets.QGroupBox("Solve")
+        form = QtWidgets.QFormLayout(solve)
+        self.mode_combo = QtWidgets.QComboBox()
+        self.mode_combo.addItems(["global", "per region"])
+        self.level_spin = QtWidgets.QSpinBox()
+        self.level_spin.setRange(0, 20)
+        self.level_spin.setToolTip("Segmentation level for a per-region solve (0 = finest)")
+        self.residual_combo = QtWidgets.QComboBox()
+        self.residual_combo.addItems(RESIDUALS)
+        self.residual_combo.setCurrentText(DEFAULTS["residual"])
+        self.lam_sparsity = self._spin(DEFAULTS["lam_sparsity"], 0.0, 10.0, 4, "Sparsity λ_s (Ma et al. 2016, Eq. 3)")
+        self.lam_temporal = self._spin(DEFAULTS["lam_temporal"], 0.0, 10.0, 4, "Temporal λ_t (Ma et al. 2016, Eq. 4)")
+        self.rbf_scale = self._spin(DEFAULTS["rbf_scale"], 0.01, 100.0, 3, "RBF kernel length (rig units)")
+        self.rbf_lambda = self._spin(DEFAULTS["rbf_lambda"], 0.0, 10.0, 4, "RBF Tikhonov λ (Fidaleo)")
+        self.calibration_spin = QtWidgets.QSpinBox()
+        self.calibration_spin.setRange(1, 10000)
+        self.calibration_spin.setValue(int(DEFAULTS["calibration_frames"]))
+        self.calibration_spin.setToolTip("Neutral frames at the start of the take used for calibration")
+        form.addRow("Mode", self.mode_combo)
+        form.addRow("Level", self.level_spin)
+        form.addRow("Residual", self.residual_combo)
+        form.addRow("λ sparsity", self.lam_sparsity)
+        form.addRow("λ temporal", self.lam_temporal)
+        form.addRow("RBF scale", self.rbf_scale)
+        form.addRow("RBF λ", self.rbf_lambda)
+        form.addRow("Calibration frames", self.calibration_spin)
+        self.solve_button = QtWidgets.QPushButton("Solve")
+        form.addRow(self.solve_button)
+        exp = QtWidgets.QHBoxLayout()
+        self.export_weights_button = QtWidgets.QPushButton("Weights CSV…")
+        self.export_pc2_button = QtWidgets.QPushButton("PC2…")
+        self.export_report_button = QtWidgets.QPushButton("Error Report…")
+        for b in (self.export_weights_button, self.export_pc2_button, self.export_report_button):
+            exp.addWidget(b)
+        form.addRow("Export", exp)
+        lay.addWidget(solve)
+
+        play = QtWidgets.QGroupBox("Playback")
+        pl = QtWidgets.QGridLayout(play)
+        self.play_button = QtWidgets.QPushButton("Play")
+        self.play_button.setCheckable(True)
+        self.loop_check = QtWidgets.QCheckBox("Loop")
+        self.loop_check.setChecked(True)
+        self.slider = QtWidgets.QSlider(QtCore.Qt.Horizontal)
+        self.slider.setRange(0, 0)
+        self.frame_label = QtWidgets.QLabel("frame –")
+        self.fps_label = QtWidgets.QLabel("")
+        pl.addWidget(self.play_button, 0, 0)
+        pl.addWidget(self.loop_check, 0, 1)
+        pl.addWidget(self.frame_label, 0, 2)
+        pl.addWidget(self.fps_label, 0, 3)
+        pl.addWidget(self.slider, 1, 0, 1, 4)
+        self.curve_list = QtWidgets.QListWidget()
+        self.curve_list.setMaximumHeight(110)
+        self.curve_list.setToolTip("Shapes whose weight curves are plotted")
+        pl.addWidget(QtWidgets.QLabel("Curves"), 2, 0)
+        pl.addWidget(self.curve_list, 3, 0, 1, 4)
+        lay.addWidget(play)
+
+        self.status_label = QtWidgets.QLabel("")
+        self.status_label.setWordWrap(True)
+        lay.addWidget(self.status_label)
+        lay.addStretch(1)
+
+        self.load_take_button.clicked.connect(self.load_take_requested)
+        self.load_map_button.clicked.connect(self.load_map_requested)
+        self.auto_map_button.clicked.connect(self.auto_map_requested)
+        self.solve_button.clicked.connect(self.solve_requested)
+        self.export_weights_button.clicked.connect(self.export_weights_requested)
+        self.export_pc2_button.clicked.connect(self.export_pc2_requested)
+        self.export_report_button.clicked.connect(self.export_report_requested)
+        self.slider.valueChanged.connect(self.frame_requested)
+        self.play_button.toggled.connect(self._on_play_toggled)
+        self.curve_list.itemChanged.connect(lambda _item: self.curves_changed.emit())
+        self.set_marker_mode(False)
+
+    @staticmethod
+    def _spin(value, lo, hi, decimals, tip) -> QtWidgets.QDoubleSpinBox:
+        s = QtWidgets.QDoubleSpinBox()
+        s.setDecimals(decimals)
+        s.setRange(lo, hi)
+        s.setSingleStep(10 ** -decimals * 10)
+        s.setValue(value)
+        s.setToolTip(tip)
+        return s
+
+    def _on_play_toggled(self, on: bool) -> None:
+        self.play_button.setText("Pause" if on else "Play")
+        self.play_toggled.emit(on)
+
+    # --- state shown ------------------------------------------------------------------------------
+    def settings(self) -> dict:
+        """Solver options for ``solve_take`` plus ``mode`` ('global' / 'region') and ``level``."""
+        return {"mode": "region" if self.mode_combo.currentIndex() == 1 else "global",
+                "level": self.level_spin.value(), "residual": self.residual_combo.currentText(),
+                "lam_sparsity": self.lam_sparsity.value(), "lam_temporal": self.lam_temporal.value(),
+                "rbf_scale": self.rbf_scale.value(), "rbf_lambda": self.rbf_lambda.value(),
+                "calibration_frames": self.calibration_spin.value()}
+
+    def set_marker_mode(self, markers: bool, solved: bool = False) -> None:
+        """Enable what makes sense: map and solve for a marker take, exports once something is playable."""
+        for w in (self.load_map_button, self.auto_map_button, self.solve_button):
+            w.setEnabled(markers)
+        self.export_pc2_button.setEnabled(solved)
+        self.export_report_button.setEnabled(solved and markers)
+
+    def set_weights_exportable(self, on: bool) -> None:
+        self.export_weights_button.setEnabled(on)
+
+    def set_frames(self, n_frames: int, rate: float) -> None:
+        self.slider.blockSignals(True)
+        self.slider.setRange(0, max(0, n_frames - 1))
+        self.slider.setValue(0)
+        self.slider.blockSignals(False)
+        self.rate = rate
+
+    def show_frame(self, frame: int, n_frames: int, rate: float) -> None:
+        if self.slider.value() != frame:
+            self.slider.blockSignals(True)
+            self.slider.setValue(frame)
+            self.slider.blockSignals(False)
+        self.frame_label.setText(f"frame {frame + 1}/{n_frames} · {frame / rate:.2f} s")
+
+    def set_playing(self, on: bool) -> None:
+        if self.play_button.isChecked() != on:
+            self.play_button.blockSignals(True)
+            self.play_button.setChecked(on)
+            self.play_button.setText("Pause" if on else "Play")
+            self.play_button.blockSignals(False)
+
+    def set_curve_shapes(self, names: list[str], checked: list[str]) -> None:
+        self.curve_list.blockSignals(True)
+        self.curve_list.clear()
+        for n in names:
+            item = QtWidgets.QListWidgetItem(n)
+            item.setFlags(item.flags() | QtCore.Qt.ItemIsUserCheckable)
+            item.setCheckState(QtCore.Qt.Checked if n in checked else QtCore.Qt.Unchecked)
+            self.curve_list.addItem(item)
+        self.curve_list.blockSignals(False)
+
+    def checked_curves(self) -> list[str]:
+        return [self.curve_list.item(i).text() for i in range(self.curve_list.count())
+                if self.curve_list.item(i).checkState() == QtCore.Qt.Checked]
+
+    def set_status(self, text: str) -> None:
+        self.status_label.setText(text)
