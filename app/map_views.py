@@ -56,10 +56,10 @@ def deformation_colormap(cache: SegmentationCache, rig: Rig, kind: str, shape: i
                                 ("+z = blue", (0.5, 0.5, 1.0))])
     if map_kind == "displacement":
         values = np.linalg.norm(rig.deltas[shape], axis=1) if shape is not None else maps.displacement
-        title = f"{'‖d‖ ' + rig.shape_names[shape] if shape is not None else 'max ‖d‖'} ({rig.units})"
+        title = f"{'displacement of ' + rig.shape_names[shape] if shape is not None else 'max displacement'}\n({rig.units})"
     else:
         values = maps.per_shape[:, shape] if shape is not None else maps.combined
-        title = f"{'‖L d‖ ' + rig.shape_names[shape] if shape is not None else 'max ‖L d‖'} ({rig.units})"
+        title = f"{'Laplacian of ' + rig.shape_names[shape] if shape is not None else 'max Laplacian'}\n({rig.units})"
     # Saturate the top few percent so the structure of the map is visible, not only its peaks.
     top = float(np.percentile(values[values > 0], 97)) if (values > 0).any() else 1.0
     return ColorMap(scalars=values, title=title, cmap="inferno", clim=(0.0, top))

@@ -55,7 +55,8 @@ def test_main_window_viewport(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path, size=(1000, 700))
     w.apply_preset("happy")
     w.redraw_now()
-    img = w.viewport.grab_image()
+    img = w.viewport.grab_image(size=(640, 480))
+    assert img.shape == (480, 640, 3)
     assert _face_fraction(img) > 0.1
     assert_matches_reference(img, "window_viewport_happy", tolerance=0.03)
 
@@ -67,7 +68,31 @@ def test_comparison_catches_an_empty_viewport(qtbot, tmp_path, monkeypatch):
     w.apply_preset("happy")
     w.redraw_now()
     w.viewport.plotter.remove_actor("surface")
-    img = w.viewport.grab_image()
+    img = w.viewport.grab_image(size=(640, 480))
     assert _face_fraction(img) < 0.01
     with pytest.raises(AssertionError, match="differs from"):
         assert_matches_reference(img, "window_viewport_happy", tolerance=0.03)
+
+
+@pytest.mark.parametrize("view", ["deformation", "deformation-rgb", "segmentation"])
+def test_render_ict_map_views_with_legend(ict_dir, tmp_path, view):
+    img = _render(tmp_path, ict_dir, f"ict_{view}", "--view", view, "--threshold", "0.75")
+    h, w, _ = img.shape
+    if view == "deformation":
+        # the colour bar on the right runs from black to the bright yellow of the inferno map
+        bar = img[int(0.1 * h):int(0.9 * h), int(0.78 * w):]
+        assert ((bar[..., 0] > 200) & (bar[..., 1] > 200) & (bar[..., 2] < 150)).sum() > 20
+    else:
+        # the legend box (upper left) holds saturated colour swatches
+        box = img[: int(0.45 * h), : int(0.3 * w)].astype(int)
+        saturation = box.max(axis=2) - box.min(axis=2)
+        assert (saturation > 80).sum() > 30
+    assert _face_fraction(img) > 0.02 or view != "shaded"
+    assert_matches_reference(img, f"render_ict_{view}")
+
+
+def test_render_sample_segmentation(sample_dir, tmp_path):
+    img = _render(tmp_path, sample_dir, "sample_seg", "--view", "segmentation", "--threshold", "0.9")
+    colourful = (img.max(axis=2).astype(int) - img.min(axis=2)) > 80
+    assert colourful[:, int(0.3 * img.shape[1]):].mean() > 0.02  # regions drawn on the face, not only the legend
+    assert_matches_reference(img, "render_sample_segmentation")

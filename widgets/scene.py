@@ -120,7 +120,7 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
         mesh.point_data["colors"] = np.asarray(colormap.scalars, dtype=np.uint8)
         return plotter.add_mesh(mesh, scalars="colors", rgb=True, **kwargs)
     mesh.point_data["values"] = np.asarray(colormap.scalars, dtype=np.float32)
-    bar = dict(title=colormap.title or " ", vertical=True, position_x=0.86, position_y=0.12, height=0.76,
+    bar = dict(title=colormap.title or " ", vertical=True, position_x=0.82, position_y=0.12, height=0.76,
                width=0.06, title_font_size=14, label_font_size=12, n_labels=5, fmt="%.3g",
                color="white")
     if colormap.categorical:

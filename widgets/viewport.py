@@ -188,10 +188,11 @@ class Viewport(QtWidgets.QWidget):
     def render(self) -> None:
         self.plotter.render()
 
-    def grab_image(self) -> np.ndarray:
-        """The rendered image as an (H, W, 3) uint8 array."""
+    def grab_image(self, size: tuple[int, int] | None = None) -> np.ndarray:
+        """The rendered image as an (H, W, 3) uint8 array; ``size`` renders it at (w, h) pixels."""
         self.render()
-        return np.asarray(self.plotter.screenshot(return_img=True))
+        kw = {"window_size": list(size)} if size else {}
+        return np.asarray(self.plotter.screenshot(return_img=True, **kw))[:, :, :3]
 
     def close_viewport(self) -> None:
         self.plotter.close()
