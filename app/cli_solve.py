@@ -6,7 +6,6 @@ report with frames, solve_seconds, frames_per_second and marker_rmse in rig unit
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 

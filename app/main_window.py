@@ -13,7 +13,6 @@ from app import settings as app_settings
 from app.commands import SetWeightsCommand
 from app.document import Document
 from app.loading import LoadWorker
-from model.errors import RigInputError
 from model.project import Project
 from widgets.scene import focus_vertices
 from widgets.segmentation_panel import SegmentationPanel
@@ -353,7 +352,6 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def export_pose_to(self, path: str | Path) -> None:
         from model.obj_io import write_obj
-        from model.pose import PoseEvaluator
         rig = self.document.rig
         points = self.document.evaluate_state(self.document.pose_state(), dtype=np.float64)
         try:

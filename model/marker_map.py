@@ -135,16 +135,9 @@ class MarkerMap:
 
 def load_marker_map(path: str | Path) -> MarkerMap:
     """Read a marker map JSON file."""
+    from .json_file import read_json_file
     path = Path(path)
-    if not path.is_file():
-        raise RigInputError(f"{path}: does not exist.")
-    text = path.read_text(encoding="utf-8", errors="replace")
-    if not text.strip():
-        raise RigInputError(f"{path}: the file is empty.")
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise RigInputError(f"{path}: is not valid JSON ({exc.msg} at line {exc.lineno}).") from None
+    d = read_json_file(path)
     if not isinstance(d, dict) or not isinstance(d.get("markers"), dict):
         raise RigInputError(f"{path}: a marker map needs a 'markers' object of label: vertex.")
     extra = {k: v for k, v in d.items() if k not in ("rig_units", "take_units", "markers")}

@@ -269,17 +269,8 @@ def markers_from_json(d: dict, rig: Rig, source: str = "marker map") -> MarkerSe
 
 def read_marker_json(path: str | Path, rig: Rig) -> MarkerSet:
     """Read a marker map JSON file for ``rig``; bad files raise RigInputError naming the file."""
-    path = Path(path)
-    if not path.is_file():
-        raise RigInputError(f"{path}: does not exist.")
-    text = path.read_text(encoding="utf-8", errors="replace")
-    if not text.strip():
-        raise RigInputError(f"{path}: the file is empty.")
-    try:
-        d = json.loads(text)
-    except json.JSONDecodeError as exc:
-        raise RigInputError(f"{path}: is not valid JSON ({exc.msg} at line {exc.lineno}).") from None
-    return markers_from_json(d, rig, source=str(path))
+    from .json_file import read_json_file
+    return markers_from_json(read_json_file(path), rig, source=str(path))
 
 
 def write_marker_json(path: str | Path, markers: MarkerSet, rig: Rig) -> None:

@@ -70,13 +70,10 @@ PRESETS_FILE = "presets.json"
 
 def read_presets(path: Path, shape_names: list[str]) -> dict[str, dict[str, float]]:
     """Optional named weight sets beside the OBJs: {"happy": {"mouthSmile_L": 1.0, ...}, ...}."""
-    import json
+    from .json_file import read_json_file
     if not path.is_file():
         return {}
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, UnicodeDecodeError) as exc:
-        raise RigInputError(f"{path}: is not valid JSON ({exc}).") from None
+    data = read_json_file(path)
     if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
         raise RigInputError(f"{path}: presets must be an object of name: {{shape: weight}}.")
     names = set(shape_names)

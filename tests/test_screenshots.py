@@ -5,7 +5,6 @@ printed. Regenerate references with BLENDSHAPE_STUDIO_UPDATE_REFERENCES=1 (then 
 """
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
 from tests.cli_runner import run_cli

@@ -5,8 +5,7 @@ It shows state and emits requests; the corrective controller does the work.
 """
 from __future__ import annotations
 
-import numpy as np
-from PySide6 import QtCore, QtGui, QtWidgets
+from PySide6 import QtCore, QtWidgets
 
 RULE_LABELS = [("product", "Product (Maya multiplication)"), ("hierarchical", "Hierarchical (Smith)"),
                ("min", "Lowest weight"), ("smooth-min", "Lowest weight, smooth")]

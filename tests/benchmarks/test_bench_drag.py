@@ -7,7 +7,6 @@ import numpy as np
 import pytest
 
 from model.markers import Marker, MarkerSet
-from model.pose import PoseEvaluator
 from solvers.regional_solve import RegionalSolver
 
 LANDMARKS = (30, 48, 54, 19, 24, 8)   # iBUG: nose tip, mouth corners, brows, chin
