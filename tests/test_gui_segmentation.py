@@ -1,0 +1,103 @@
+"""The Segmentation panel with pytest-qt: live threshold and level, region picking, Acosta's nudge saved
+as a new shape, all undoable; settings saved in the project."""
+from __future__ import annotations
+
+import numpy as np
+from PySide6 import QtWidgets
+
+from tests.gui_helpers import make_window, open_and_wait
+
+
+def _ready(qtbot, w):
+    w.segmentation.wait()
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None and not w.segmentation.runner.busy, timeout=30000)
+    QtWidgets.QApplication.processEvents()
+
+
+def test_threshold_and_level_redraw_and_undo(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    _ready(qtbot, w)
+    seg0 = w.segmentation.segmentation
+    panel = w.segmentation_panel
+    panel.set_view("segmentation")
+    colors0 = np.array(w.viewport.mesh.point_data["colors"])
+    panel.t_box.setValue(0.95)  # one committed edit
+    _ready(qtbot, w)
+    seg1 = w.segmentation.segmentation
+    assert seg1 is not seg0 and seg1.threshold_t == 0.95
+    assert w.document.section("segmentation")["t"] == 0.95
+    colors1 = np.array(w.viewport.mesh.point_data["colors"])
+    assert (np.abs(colors1.astype(int) - colors0.astype(int)).max(axis=1) > 10).sum() > 100  # the view redrew
+    # a higher threshold gives fewer deforming vertices
+    core = lambda s: sum(r.core.size for r in s.levels[0].regions)
+    assert core(seg1) < core(seg0)
+    # the level slider shows the coarser levels, down to one region
+    top = panel.level.maximum()
+    panel.level.setValue(top)
+    assert w.segmentation.level == top and len(w.segmentation.segmentation.levels[top].regions) == 1
+    w.document.undo_stack.undo()
+    _ready(qtbot, w)
+    assert w.segmentation.segmentation.threshold_t == seg0.threshold_t
+    assert panel.t_box.value() == seg0.threshold_t
+
+
+def test_pick_region_nudge_and_save_as_shape(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    _ready(qtbot, w)
+    rig = w.document.rig
+    panel, ctrl = w.segmentation_panel, w.segmentation
+    panel.set_view("segmentation")
+    lvl = ctrl.segmentation.levels[0]
+    region = max(range(lvl.n_regions), key=lambda r: lvl.regions[r].core.size)
+    vertex = int(lvl.regions[region].core[0])
+    w.viewport.picked.emit(vertex, rig.neutral[vertex])  # what a click on the surface emits
+    assert ctrl.highlight == region and panel.selected_region() == region
+    before = w.document.surface().copy()
+    n_shapes = rig.n_shapes
+    panel.nudge_amount.setValue(0.2)
+    panel.nudge_buttons["out"].click()
+    moved = np.linalg.norm(w.document.surface() - before, axis=1)
+    inside = np.zeros(rig.n_vertices, bool)
+    inside[lvl.regions[region].vertices] = True
+    assert moved[lvl.regions[region].core].max() > 0.19 and moved[~inside].max() == 0
+    after = w.document.surface().astype(np.float64)
+    ctrl.save_nudge_as_shape("nudged")
+    assert w.document.rig.n_shapes == n_shapes + 1 and w.document.rig.shape_names[-1] == "nudged"
+    k = w.document.rig.shape_index("nudged")
+    np.testing.assert_allclose(w.document.rig.deltas[k], after - w.document.rig.neutral, atol=1e-5)
+    w.shapes_panel.row("nudged").box.setValue(1.0)  # the new shape at 1 reproduces the nudged surface
+    np.testing.assert_allclose(w.document.surface(), after, atol=1e-5)
+    w.document.undo_stack.undo()
+    # the new shape is a slider; undo removes it and brings the nudge back; undo again removes the nudge
+    assert w.shapes_panel.rows[-1].name == "nudged"
+    w.document.undo_stack.undo()
+    assert w.document.rig.n_shapes == n_shapes and w.document.edit_offset is not None
+    w.document.undo_stack.undo()
+    assert w.document.edit_offset is None
+    np.testing.assert_array_equal(w.document.surface(), before)
+
+
+def test_settings_saved_in_project_and_bad_rig_message(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    _ready(qtbot, w)
+    w.segmentation_panel.overlap.setValue(2)
+    _ready(qtbot, w)
+    path = tmp_path / "s.bsproj"
+    assert w.save_to(path)
+    w.segmentation_panel.overlap.setValue(1)
+    _ready(qtbot, w)
+    open_and_wait(qtbot, w, path)
+    _ready(qtbot, w)
+    assert w.document.section("segmentation")["overlap_rings"] == 2
+    assert w.segmentation_panel.overlap.value() == 2
+    # a rig whose shapes do not deform: a clear message in the panel, no crash
+    from tests.rig_files import grid, obj_text
+    folder = tmp_path / "flat"
+    folder.mkdir()
+    verts, faces = grid(5)
+    (folder / "neutral.obj").write_text(obj_text(verts, faces))
+    (folder / "shift.obj").write_text(obj_text(verts + 1.0, faces))  # a pure translation: no deformation
+    open_and_wait(qtbot, w, folder)
+    w.segmentation.wait()
+    qtbot.waitUntil(lambda: "No segmentation" in w.segmentation_panel.status.text(), timeout=10000)
+    assert "nothing to segment" in w.segmentation_panel.status.text()
