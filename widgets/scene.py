@@ -46,21 +46,28 @@ def fan_triangles(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarr
 
 
 class DisplayNormals:
-    """Smooth-shading vertex normals recomputed for every new set of points (area-weighted, ~2 ms on
-    ICT FaceKit). Replaces VTK's normals filter, which costs ~20 ms a frame on the same mesh."""
+    """Smooth-shading vertex normals recomputed for every new set of points (area-weighted): the
+    triangle normals summed onto their corners by one precomputed sparse (V, T) incidence product,
+    ~2 ms on ICT FaceKit. Replaces VTK's normals filter, which costs ~20 ms a frame on the same mesh."""
 
     def __init__(self, face_counts: np.ndarray, face_indices: np.ndarray, n_points: int) -> None:
+        import scipy.sparse as sp
         self.tris = fan_triangles(face_counts, face_indices)
-        self.n = n_points
+        self._flat = self.tris.ravel().astype(np.intp)
+        T = len(self.tris)
+        self.incidence = sp.csr_matrix((np.ones(3 * T, np.float32), (self.tris.ravel(), np.repeat(np.arange(T), 3))),
+                                       shape=(n_points, T))
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
         p = np.asarray(points, dtype=np.float32)
-        a, b, c = p[self.tris[:, 0]], p[self.tris[:, 1]], p[self.tris[:, 2]]
-        fn = np.cross(b - a, c - a)
-        out = np.empty((self.n, 3), dtype=np.float32)
-        corners = self.tris.ravel()
-        for axis in range(3):
-            out[:, axis] = np.bincount(corners, weights=np.repeat(fn[:, axis], 3), minlength=self.n)
+        corners = np.take(p, self._flat, axis=0).reshape(-1, 3, 3)  # (T, 3, 3): np.take is 5x fancy indexing
+        e1 = corners[:, 1] - corners[:, 0]
+        e2 = corners[:, 2] - corners[:, 0]
+        fn = np.empty_like(e1)                      # the cross product, written out (np.cross is slower)
+        fn[:, 0] = e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1]
+        fn[:, 1] = e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2]
+        fn[:, 2] = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
+        out = np.asarray(self.incidence @ fn, dtype=np.float32)
         length = np.linalg.norm(out, axis=1, keepdims=True)
         out /= np.where(length > 0, length, 1.0)
         return out
@@ -131,8 +138,17 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
 
 
 def style_plotter(plotter) -> None:
+    """Background gradient and two camera-attached lights: a key from above-left and a headlight fill.
+
+    Two lights, not VTK's five-light kit: on software OpenGL every light is paid per pixel, and the
+    kit makes a frame of ICT FaceKit ~15 ms slower (measured under Xvfb) for a barely different look.
+    """
+    import pyvista as pv
     plotter.set_background(BACKGROUND_BOTTOM, top=BACKGROUND_TOP)
-    plotter.enable_lightkit()
+    plotter.remove_all_lights()
+    plotter.add_light(pv.Light(position=(-0.6, 0.8, 1.0), focal_point=(0, 0, 0), light_type="camera light",
+                               intensity=0.75))
+    plotter.add_light(pv.Light(light_type="headlight", intensity=0.45))
 
 
 def camera_direction(name: str) -> tuple[np.ndarray, np.ndarray]:

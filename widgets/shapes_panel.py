@@ -34,6 +34,7 @@ class _ShapeRow(QtWidgets.QWidget):
         lay.addWidget(self.slider, 1)
         lay.addWidget(self.box)
         self._dragging = False
+        self._bold = False
         self.slider.sliderPressed.connect(self._pressed)
         self.slider.sliderReleased.connect(self._released)
         self.slider.valueChanged.connect(self._slider_moved)
@@ -46,7 +47,10 @@ class _ShapeRow(QtWidgets.QWidget):
         self.box.setValue(value)
         for w in (self.slider, self.box):
             w.blockSignals(False)
-        self.label.setStyleSheet("font-weight: bold;" if value > 0 else "")
+        active = value > 0
+        if active != self._bold:  # style sheets are slow: only touch the label when it changes
+            self._bold = active
+            self.label.setStyleSheet("font-weight: bold;" if active else "")
 
     def _pressed(self) -> None:
         self._dragging = True
