@@ -165,14 +165,19 @@ def camera_direction(name: str) -> tuple[np.ndarray, np.ndarray]:
     return d / np.linalg.norm(d), np.array([0.0, 1.0, 0.0])
 
 
-def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float = 30.0) -> None:
-    """Frame ``focus_points`` (e.g. the face area) from a preset direction."""
+def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float = 30.0,
+               size: tuple[int, int] | None = None) -> None:
+    """Frame ``focus_points`` (e.g. the face area) from a preset direction, for the plotter's window
+    size or the given (w, h)."""
     pts = np.asarray(focus_points, dtype=np.float64)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     center = (lo + hi) / 2
     radius = 0.5 * np.linalg.norm(hi - lo)
     d, up = camera_direction(name)
     dist = radius / np.tan(np.radians(view_angle / 2)) * 1.05
+    w, h = size or plotter.window_size
+    if 0 < w < h:  # the view angle is vertical: a tall, narrow view must step back to fit the width
+        dist *= h / w
     cam = plotter.camera
     cam.view_angle = view_angle
     cam.focal_point = center.tolist()

@@ -189,10 +189,19 @@ class Viewport(QtWidgets.QWidget):
         self.plotter.render()
 
     def grab_image(self, size: tuple[int, int] | None = None) -> np.ndarray:
-        """The rendered image as an (H, W, 3) uint8 array; ``size`` renders it at (w, h) pixels."""
+        """The rendered image as an (H, W, 3) uint8 array; ``size`` renders it at (w, h) pixels, framed
+        by the current camera preset as a viewport of that size would be."""
         self.render()
-        kw = {"window_size": list(size)} if size else {}
-        return np.asarray(self.plotter.screenshot(return_img=True, **kw))[:, :, :3]
+        if not size:
+            return np.asarray(self.plotter.screenshot(return_img=True))[:, :, :3]
+        saved = self.plotter.camera_position
+        if self._focus is not None:
+            set_camera(self.plotter, self._camera, self._focus, size=size)
+        try:
+            return np.asarray(self.plotter.screenshot(return_img=True, window_size=list(size)))[:, :, :3]
+        finally:
+            self.plotter.camera_position = saved
+            self.render()
 
     def close_viewport(self) -> None:
         self.plotter.close()
