@@ -25,6 +25,22 @@ from widgets.side_by_side import SideBySideView
 TAKE_FILTER = "Takes (*.c3d *.trc *.csv);;C3D (*.c3d);;TRC (*.trc);;CSV / Live Link Face (*.csv)"
 
 
+def captured_area_faces(rig, area: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The polygons whose corners all lie in ``area`` (the vertices the markers cover and the residual
+    reaches), as counts + indices; all polygons when the area is empty. The side-by-side views draw only
+    these: that is where a capture says anything, and half the geometry renders twice as fast."""
+    if area is None or len(area) == 0:
+        return rig.face_counts, rig.face_indices
+    inside = np.zeros(rig.n_vertices, bool)
+    inside[area] = True
+    corner_in = inside[rig.face_indices]
+    starts = np.concatenate(([0], np.cumsum(rig.face_counts)[:-1]))
+    keep = np.logical_and.reduceat(corner_in, starts)
+    if not keep.any():
+        return rig.face_counts, rig.face_indices
+    return rig.face_counts[keep], rig.face_indices[np.repeat(keep, rig.face_counts)]
+
+
 class FrameCache:
     """Per-frame display arrays of a solved take, computed lazily (or all at once in the background) and kept:
     projection and dense surfaces (F, V, 3) float32, residual magnitude (F, V) float32 in mm, and the
@@ -355,7 +371,8 @@ class MocapController(QtCore.QObject):
         mm = unit_scale(self.rig.units, "mm")
         rig = self.rig
         first, _, _ = self.cache.frame(0)
-        self.views.set_surface(first, rig.face_counts, rig.face_indices, focus=self._face_box(solution.solver.rest),
+        counts, indices = captured_area_faces(rig, solution.solver.residual_vertices)
+        self.views.set_surface(first, counts, indices, focus=self._face_box(solution.solver.rest),
                                n_markers=len(solution.labels), clim=self._residual_clim(),
                                residual_title="residual (mm)")
         self.views_dock.show()
