@@ -26,8 +26,8 @@ def add_parser(sub, rig_arg) -> None:
                     help="RBF residual kernel added to the blendshape fit (default: the best measured)")
     sp.add_argument("--calibration-frames", type=int, default=30, help="neutral frames at the start of the take that settle scale and pose (0: none)")
     sp.add_argument("--fixed-head", action="store_true",
-                    help="the markers are already head-stabilised in rig space (e.g. a keyframe): no calibration, "
-                         "no head motion")
+                    help="the markers are already head-stabilised in rig space: no calibration, no head motion "
+                         "(always so for a one-frame take)")
     sp.add_argument("-o", "--output", required=True, help="weights CSV to write")
     sp.add_argument("--cache", help="PC2 point cache of the dense result to write")
     sp.add_argument("--report", help="JSON report to write")
@@ -69,11 +69,14 @@ def cmd_solve(args) -> int:
             raise RigInputError(f"--level {level} does not exist: levels 0 to {len(seg.levels) - 1} at t={t:g}.")
         lvl = seg.levels[level]
         options.update(regions=[r.vertices for r in lvl.regions], blend=lvl.blend)
-    if args.fixed_head:
+    # A one-frame take (a keyframe) has no neutral frames to calibrate on and no motion to follow: its
+    # markers are taken as already in rig space, and temporal smoothness has no neighbour to act on.
+    fixed_head = args.fixed_head or take.n_frames == 1
+    if fixed_head:
         options["head_motion"] = False
-    if take.n_frames == 1:  # no neighbouring frame: temporal smoothness does not apply
+    if take.n_frames == 1:
         options.update(lam_temporal=0.0, two_pass=False)
-    calibration = 0 if args.fixed_head else args.calibration_frames
+    calibration = 0 if fixed_head else args.calibration_frames
     sol = solve_take(rig, take, marker_map, calibration_frames=calibration, **options)
     write_weights_csv(args.output, sol.weights, rig.shape_names, rate=take.rate)
     if args.cache:
@@ -86,6 +89,7 @@ def cmd_solve(args) -> int:
         "marker_rmse_with_residual": float(np.nanmean(sol.marker_rmse_residual)),
         "marker_rmse_per_frame": [float(x) for x in sol.marker_rmse],
         "mode": "regional" if regional else "global",
+        "head": "fixed" if fixed_head else "solved",
         "residual": options.get("residual", DEFAULTS["residual"]),
     }
     if args.report:

@@ -62,7 +62,8 @@ def test_one_frame_trc_global_recovers_weights(ict_rig, ict_dir, tmp_path):
     (tmp_path / "map.json").write_text(json.dumps({"rig_units": "cm", "take_units": "mm",
                                                    "markers": {l: int(v) for l, v in zip(labels, markers)}}))
     run_cli("solve", ict_dir, tmp_path / "key.trc", "--map", tmp_path / "map.json", "--global", "--residual", "none",
-            "--fixed-head", "-o", tmp_path / "w.csv", "--cache", tmp_path / "d.pc2")
+            "-o", tmp_path / "w.csv", "--cache", tmp_path / "d.pc2", "--report", tmp_path / "r.json")
+    assert json.loads((tmp_path / "r.json").read_text())["head"] == "fixed"
     frames, _, _ = read_pc2(tmp_path / "d.pc2")
     err = np.linalg.norm(frames[0][moving] - posed[moving], axis=1)
     assert np.sqrt(np.mean(err ** 2)) * 10 < 0.1, f"{np.sqrt(np.mean(err ** 2)) * 10:.4f} mm"

@@ -235,3 +235,34 @@ def test_pc2_streaming_round_trip_header_and_atomicity(tmp_path, ict_rig):
     (tmp_path / "cut.pc2").write_bytes(raw[:1000])
     with pytest.raises(RigInputError, match="truncated"):
         read_pc2(tmp_path / "cut.pc2")
+
+
+def test_regional_solve_at_the_finest_level_fits_markers_at_least_as_well_as_global(ict_rig):
+    """Joshi §4: per-region weights have more freedom than one global vector, so on targets that are not in
+    the rig's span (a smooth non-linear change on top of a known pose) they fit the markers at least as well."""
+    from model.segmentation import segment_rig
+    from solvers.weight_solve import WeightSolver
+    rig = ict_rig
+    seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas)
+    fine = seg.levels[0]
+    face = np.arange(9409)
+    moving = face[np.linalg.norm(rig.deltas[:, face], axis=2).max(axis=0) > 1e-3]
+    markers = moving[np.linspace(0, moving.size - 1, 50).astype(int)]
+    ms = MarkerSet.for_rig(rig, [Marker(f"K{i}", vertex=int(v)) for i, v in enumerate(markers)])
+    w_true = rig.weights_from_dict({"jawOpen": 0.5, "mouthSmile_L": 0.7, "browInnerUp_R": 0.6, "eyeBlink_L": 0.8})
+    ev = PoseEvaluator(rig, dtype=np.float64)
+    posed = ev.evaluate(w_true)
+    bend = 0.05 * np.sin(rig.neutral[:, :1] / 2.0) * np.array([0.0, 1.0, 0.5])  # not in the span of the shapes
+    targets = ms.positions(posed + bend)
+    A = ms.delta_rows(rig.deltas)
+    b = (targets - ms.positions(rig.neutral)).reshape(-1)
+    w_global = WeightSolver(A, lam_sparsity=0.0, lam_reg=0.0).solve(b)
+    global_fit = ms.positions(ev.evaluate(w_global))
+    regional = RegionalSolver([r.vertices for r in fine.regions], ms.S, A, deltas=rig.deltas,
+                              solve_background=True, lam_reg=1e-8)
+    W = regional.solve(b, np.repeat(w_global[None], fine.n_regions + 1, axis=0))
+    regional_fit = ms.positions(ev.evaluate_regional(W, fine.blend))
+    rms = lambda fit: float(np.sqrt(np.mean(np.sum((fit - targets) ** 2, axis=1))))
+    assert W.min() >= 0 and W.max() <= 1
+    print(f"marker RMS: regional {rms(regional_fit):.5f} cm, global {rms(global_fit):.5f} cm")
+    assert rms(regional_fit) <= rms(global_fit) + 1e-9, (rms(regional_fit), rms(global_fit))
