@@ -62,7 +62,11 @@ def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, 
     widget = w.viewport.plotter.interactor
     q = _screen(w, P0[corner:corner + 1])[0]
     start = QtCore.QPoint(round(q.x()), round(q.y()))
-    drag = QtCore.QPoint(-36, -24)  # outward (screen left is the character's right) and up
+    # Outward (screen left is the character's right) and up, by about 1.5 cm and 1 cm on the face, whatever
+    # the viewport's size: measure how many pixels a centimetre is at the corner.
+    q_cm = _screen(w, P0[corner:corner + 1] + np.array([[1.0, 0.0, 0.0]]))[0]
+    px_per_cm = np.hypot(q_cm.x() - q.x(), q_cm.y() - q.y())
+    drag = QtCore.QPoint(-round(1.5 * px_per_cm), -round(1.0 * px_per_cm))
     mouse(widget, "press", start)
     assert c.drag is not None and c.drag.index == corner
     cam_before = np.array(w.viewport.plotter.camera.position)
