@@ -41,12 +41,15 @@ class BackgroundRunner(QtCore.QObject):
         self.pool.setMaxThreadCount(1)
         self._queued: tuple | None = None
         self._busy = False
+        self._closed = False
 
     @property
     def busy(self) -> bool:
         return self._busy or self._queued is not None
 
     def submit(self, fn: Callable[[], Any], on_done: Callable[[Any], None], on_failed: Callable[[str], None]) -> None:
+        if self._closed:
+            return
         if self._busy:
             self._queued = (fn, on_done, on_failed)
             return
@@ -62,6 +65,8 @@ class BackgroundRunner(QtCore.QObject):
 
     def _finish(self, callback, value) -> None:
         self._busy = False
+        if self._closed:  # the owner is going away: deliver nothing
+            return
         queued, self._queued = self._queued, None
         if queued is not None:   # newer settings arrived meanwhile: this result is stale
             self._start(*queued)
@@ -71,3 +76,9 @@ class BackgroundRunner(QtCore.QObject):
     def wait(self, msecs: int = 60000) -> None:
         self.pool.waitForDone(msecs)
         QtCore.QCoreApplication.processEvents()
+
+    def shutdown(self) -> None:
+        """Drop any queued job, wait for the running one and deliver nothing more (the owner is closing)."""
+        self._closed = True
+        self._queued = None
+        self.pool.waitForDone()

@@ -422,7 +422,13 @@ class MainWindow(QtWidgets.QMainWindow):
         s = app_settings.settings()
         s.setValue("window/geometry", self.saveGeometry())
         s.setValue("window/state", self.saveState())
-        if self._worker is not None:
-            self._worker.wait()
+        self.shutdown_background()
         self.viewport.close_viewport()
         super().closeEvent(event)
+
+    def shutdown_background(self) -> None:
+        """Finish or stop every background job before the window goes: a thread must not outlive it."""
+        if self._worker is not None:
+            self._worker.wait()
+        self.segmentation.runner.shutdown()
+        self.mocap.shutdown()

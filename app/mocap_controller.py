@@ -115,6 +115,7 @@ class MocapController(QtCore.QObject):
         self.cache: FrameCache | None = None
         self.frame = 0
         self.runner = BackgroundRunner(self)
+        self._shut_down = False
         self._relay = _ProgressRelay(self)
         self._relay.progress.connect(self._on_progress)
         self._cancel = threading.Event()
@@ -639,16 +640,15 @@ class MocapController(QtCore.QObject):
                            lambda: atomic_write(path, (json.dumps(report, indent=1) + "\n").encode("utf-8")))
 
     # --- teardown ---------------------------------------------------------------------------------
-    def eventFilter(self, obj, event) -> bool:  # closes the views with the window
-        if obj is self.window and event.type() == QtCore.QEvent.Close and event.isAccepted():
-            QtCore.QTimer.singleShot(0, self.shutdown)
-        return False
-
     def shutdown(self) -> None:
+        """Stop playback and background work and close the views; the main window calls it on close."""
+        if self._shut_down:
+            return
+        self._shut_down = True
         self.pause()
         self._stop_fill()
         self._cancel.set()
-        self.runner.wait()
+        self.runner.shutdown()
         self.views.close_views()
 
 
@@ -682,6 +682,5 @@ def install(window) -> MocapController:
     window.panels_menu.addAction(window.mocap_views_dock.toggleViewAction())
     controller = MocapController(window, panel, views, weight_plot, error_plot, window)
     controller.views_dock = window.mocap_views_dock
-    window.installEventFilter(controller)
     window.mocap = controller
     return controller
