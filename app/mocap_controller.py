@@ -18,6 +18,7 @@ from app.background import BackgroundRunner
 from model.errors import RigInputError
 from model.rig import unit_scale
 from model.takes import MarkerTake, WeightTake
+from solvers.normals import VertexNormals
 from widgets.curve_plot import CurvePlot
 from widgets.mocap_panel import MocapPanel
 from widgets.side_by_side import SideBySideView
@@ -44,15 +45,21 @@ def captured_area_faces(rig, area: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 class FrameCache:
     """Per-frame display arrays of a solved take, computed lazily (or all at once in the background) and kept:
     projection and dense surfaces (F, V, 3) float32, residual magnitude (F, V) float32 in mm, and the
-    head-stabilised take markers and the rig's fitted markers (F, M, 3) in rig space."""
+    head-stabilised take markers and the rig's fitted markers (F, M, 3) in rig space. Given ``normals`` (the
+    views' VertexNormals), also both surfaces' shading normals (F, V, 3) int8, so that playback of a filled
+    cache draws without computing any (two normals are ~6 ms of a ~35 ms frame on ICT FaceKit)."""
 
-    def __init__(self, solution, take: MarkerTake, rig_units: str) -> None:
+    def __init__(self, solution, take: MarkerTake, rig_units: str, normals: VertexNormals | None = None) -> None:
         self.solution = solution
         s = solution.solver
         F, V = solution.n_frames, s.V
         self.projection = np.zeros((F, V, 3), np.float32)
         self.dense = np.zeros((F, V, 3), np.float32)
         self.residual_mm = np.zeros((F, V), np.float32)
+        self._normals = normals
+        if normals is not None:
+            self.projection_normals = np.zeros((F, V, 3), np.int8)
+            self.dense_normals = np.zeros((F, V, 3), np.int8)
         self.ready = np.zeros(F, dtype=bool)
         self.mm = unit_scale(rig_units, "mm")
         cols = [take.labels.index(label) for label in solution.labels]
@@ -75,13 +82,25 @@ class FrameCache:
             self._compute(f)
         return self.projection[f], self.dense[f], self.residual_mm[f]
 
+    def normals(self, f: int) -> tuple[np.ndarray, np.ndarray] | tuple[None, None]:
+        """(projection, dense) int8 shading normals of frame f, or (None, None) without a normals function."""
+        if self._normals is None:
+            return None, None
+        if not self.ready[f]:
+            self._compute(f)
+        return self.projection_normals[f], self.dense_normals[f]
+
     def _compute(self, f: int) -> None:
         sol, s = self.solution, self.solution.solver
         proj = s.pose_regional(sol.region_weights[f]) if sol.region_weights is not None else s.pose(sol.weights[f])
         dense = sol.dense(f)
         res = np.linalg.norm(dense - proj, axis=1) * self.mm
+        if self._normals is not None:
+            proj_n, dense_n = self._normals.quantised(proj), self._normals.quantised(dense)
         with self._lock:
             self.projection[f], self.dense[f], self.residual_mm[f] = proj, dense, res
+            if self._normals is not None:
+                self.projection_normals[f], self.dense_normals[f] = proj_n, dense_n
             self.ready[f] = True
 
     def fill(self, stop: threading.Event | None = None) -> None:
@@ -368,11 +387,11 @@ class MocapController(QtCore.QObject):
             return
         self._drop_solution()
         self.solution = solution
-        self.cache = FrameCache(solution, self.take, self.rig.units)
+        counts, indices = captured_area_faces(self.rig, solution.solver.residual_vertices)
+        self.cache = FrameCache(solution, self.take, self.rig.units,
+                                normals=VertexNormals(counts, indices, self.rig.n_vertices))
         mm = unit_scale(self.rig.units, "mm")
-        rig = self.rig
         first, _, _ = self.cache.frame(0)
-        counts, indices = captured_area_faces(rig, solution.solver.residual_vertices)
         self.views.set_surface(first, counts, indices, focus=self._face_box(solution.solver.rest),
                                n_markers=len(solution.labels), clim=self._residual_clim(),
                                residual_title="residual (mm)")
@@ -480,7 +499,8 @@ class MocapController(QtCore.QObject):
                 self.document.set_weights(self.take.weights[frame])
         elif self.cache is not None:
             proj, dense, res = self.cache.frame(frame)
-            self.views.show_frame(proj, dense, res, self.cache.markers[frame], self.cache.fitted[frame])
+            self.views.show_frame(proj, dense, res, self.cache.markers[frame], self.cache.fitted[frame],
+                                  normals=self.cache.normals(frame))
         self.panel.show_frame(frame, n, self.rate)
         self.weight_plot.set_cursor(frame)
         self.error_plot.set_cursor(frame)

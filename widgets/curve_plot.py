@@ -1,7 +1,8 @@
 """A small line plot of per-frame curves with a cursor at the current frame (QPainter, no matplotlib).
 
 Used under the mocap views for weight curves and per-frame marker error; clicking or dragging in the plot
-asks for that frame (``frame_requested``).
+asks for that frame (``frame_requested``). The curves are drawn once into a pixmap (redrawn when they or
+the size change); moving the cursor during playback repaints only the two strips it leaves and enters.
 """
 from __future__ import annotations
 
@@ -17,13 +18,24 @@ class CurvePlot(QtWidgets.QWidget):
 
     def __init__(self, title: str = "", parent=None) -> None:
         super().__init__(parent)
-        self.title = title
+        self._title = title
         self.curves: list[tuple[str, np.ndarray, tuple[int, int, int]]] = []
         self.cursor = 0
         self.n_frames = 0
         self.y_range: tuple[float, float] = (0.0, 1.0)
+        self._background: QtGui.QPixmap | None = None   # everything but the cursor, at the current size
         self.setMinimumHeight(70)
         self.setSizePolicy(QtWidgets.QSizePolicy.Expanding, QtWidgets.QSizePolicy.Expanding)
+
+    @property
+    def title(self) -> str:
+        return self._title
+
+    @title.setter
+    def title(self, text: str) -> None:
+        self._title = text
+        self._background = None
+        self.update()
 
     def set_curves(self, curves: list[tuple[str, np.ndarray]], y_range: tuple[float, float] | None = None) -> None:
         """Curves as (name, values (F,)); NaN values leave gaps. The y range defaults to the data's."""
@@ -36,12 +48,24 @@ class CurvePlot(QtWidgets.QWidget):
             lo = min(lo, 0.0)
             y_range = (lo, hi if hi > lo else lo + 1.0)
         self.y_range = y_range
+        self._background = None
         self.update()
 
     def set_cursor(self, frame: int) -> None:
         if frame != self.cursor:
+            old = self._cursor_strip()
             self.cursor = int(frame)
-            self.update()
+            self.update(old)
+            self.update(self._cursor_strip())
+
+    def _cursor_strip(self) -> QtCore.QRect:
+        r = self._plot_rect()
+        x = int(self._x(self.cursor, r))
+        return QtCore.QRect(x - 2, int(r.top()) - 1, 5, int(r.height()) + 3)
+
+    def resizeEvent(self, event) -> None:  # Qt override
+        self._background = None
+        super().resizeEvent(event)
 
     # --- geometry ----------------------------------------------------------------------------------
     def _plot_rect(self) -> QtCore.QRectF:
@@ -57,7 +81,21 @@ class CurvePlot(QtWidgets.QWidget):
 
     # --- painting ----------------------------------------------------------------------------------
     def paintEvent(self, event) -> None:  # Qt override
+        if self._background is None or self._background.size() != self.size():
+            self._background = QtGui.QPixmap(self.size())
+            self._paint_curves(self._background)
         p = QtGui.QPainter(self)
+        p.drawPixmap(event.rect(), self._background, event.rect())
+        if self.n_frames:
+            r = self._plot_rect()
+            x = self._x(self.cursor, r)
+            p.setPen(QtGui.QPen(QtGui.QColor(255, 255, 255), 1.0))
+            p.drawLine(QtCore.QPointF(x, r.top()), QtCore.QPointF(x, r.bottom()))
+        p.end()
+
+    def _paint_curves(self, target: QtGui.QPaintDevice) -> None:
+        """Frame, axis labels, title, legend and curves: everything but the cursor."""
+        p = QtGui.QPainter(target)
         p.setRenderHint(QtGui.QPainter.Antialiasing)
         p.fillRect(self.rect(), QtGui.QColor(32, 33, 38))
         r = self._plot_rect()
@@ -86,10 +124,6 @@ class CurvePlot(QtWidgets.QWidget):
                         p.drawPolyline(QtGui.QPolygonF([QtCore.QPointF(float(xs[i]), float(ys[i])) for i in seg]))
             p.drawText(QtCore.QPointF(x_legend, 12), name)
             x_legend += p.fontMetrics().horizontalAdvance(name) + 12
-        if self.n_frames:
-            x = self._x(self.cursor, r)
-            p.setPen(QtGui.QPen(QtGui.QColor(255, 255, 255), 1.0))
-            p.drawLine(QtCore.QPointF(x, r.top()), QtCore.QPointF(x, r.bottom()))
         p.end()
 
     # --- scrubbing ---------------------------------------------------------------------------------

@@ -8,7 +8,7 @@ on software OpenGL is what playback speed hangs on. Topology is uploaded once (`
 from __future__ import annotations
 
 import numpy as np
-from PySide6 import QtWidgets
+from PySide6 import QtCore, QtWidgets
 
 from .scene import ColorMap, add_surface, rig_mesh, set_camera, set_points, style_plotter
 
@@ -20,12 +20,12 @@ ERROR_SCALE = 10.0  # error vectors are drawn this many times longer than they a
 class SideBySideView(QtWidgets.QWidget):
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
-        from pyvistaqt import QtInteractor
+        from .native_plotter import NativePlotter
         # No multi-sampling (see Viewport): playback speed on software OpenGL matters more.
-        self.plotter = QtInteractor(self, auto_update=False, multi_samples=0, shape=(1, 2), border=False)
+        self.plotter = NativePlotter(self, multi_samples=0, shape=(1, 2), border=False)
         for col in (0, 1):
             self.plotter.subplot(0, col)
-            style_plotter(self.plotter)
+            style_plotter(self.plotter, playback=True)  # playback speed: see style_plotter
         self.plotter.enable_trackball_style()
         self.plotter.link_views()  # one camera for both: orbiting either view moves both
         self.setMinimumHeight(340)
@@ -37,6 +37,7 @@ class SideBySideView(QtWidgets.QWidget):
         self.residual_title = "residual (mm)"
         self._focus = None
         self._camera = "front"
+        self._framed = None  # the camera position a preset framing left, while the user has not moved it
         self.plotter.subplot(0, 0)
         self.plotter.add_text(f"blendshape projection, markers, errors x{ERROR_SCALE:g}", position="upper_left",
                               font_size=9, color="white", name="title_left")
@@ -55,7 +56,7 @@ class SideBySideView(QtWidgets.QWidget):
         self.left_mesh = rig_mesh(points, face_counts, face_indices)
         self.right_mesh = rig_mesh(points, face_counts, face_indices)
         p.subplot(0, 0)
-        add_surface(p, self.left_mesh, name="surface_left")
+        add_surface(p, self.left_mesh, name="surface_left", specular=0.0)
         for name in ("markers", "errors"):
             p.remove_actor(name)
         self.marker_cloud = self.error_lines = None
@@ -70,7 +71,7 @@ class SideBySideView(QtWidgets.QWidget):
         p.subplot(0, 1)
         cmap = ColorMap(np.zeros(self.right_mesh.n_points, np.float32), title=residual_title, cmap="inferno",
                         clim=clim)
-        self._right_actor = add_surface(p, self.right_mesh, cmap, name="surface_right")
+        self._right_actor = add_surface(p, self.right_mesh, cmap, name="surface_right", specular=0.0)
         self._focus = np.asarray(points if focus is None else focus)
         self.set_camera(self._camera)
 
@@ -79,12 +80,14 @@ class SideBySideView(QtWidgets.QWidget):
             self._right_actor.mapper.scalar_range = clim
 
     def show_frame(self, projection: np.ndarray, dense: np.ndarray, residual: np.ndarray,
-                   markers: np.ndarray | None = None, fitted: np.ndarray | None = None) -> None:
-        """Move both surfaces (V, 3), the residual scalars (V,) and markers / fitted markers (M, 3); render."""
+                   markers: np.ndarray | None = None, fitted: np.ndarray | None = None,
+                   normals: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> None:
+        """Move both surfaces (V, 3), the residual scalars (V,) and markers / fitted markers (M, 3); render.
+        ``normals``: both surfaces' shading normals if already known (else computed here)."""
         if self.left_mesh is None:
             return
-        set_points(self.left_mesh, projection)
-        set_points(self.right_mesh, dense)
+        set_points(self.left_mesh, projection, normals[0])
+        set_points(self.right_mesh, dense, normals[1])
         values = self.right_mesh.point_data["values"]
         values[:] = residual
         self.right_mesh.GetPointData().GetArray("values").Modified()
@@ -112,7 +115,19 @@ class SideBySideView(QtWidgets.QWidget):
             w, h = self.plotter.window_size
             self.plotter.subplot(0, 0)
             set_camera(self.plotter, name, self._focus, size=size or (max(1, w // 2), h))
+            self._framed = None if size else self.plotter.camera_position
             self.render()
+
+    def resizeEvent(self, event) -> None:  # Qt override
+        """Keep a preset framing fitted to the new size (the views were framed before the dock had its size);
+        a camera the user has orbited or zoomed is left alone."""
+        super().resizeEvent(event)
+        if self._framed is not None and self.plotter.camera_position == self._framed:
+            QtCore.QTimer.singleShot(0, self._reframe)
+
+    def _reframe(self) -> None:
+        if self._framed is not None and self.plotter.camera_position == self._framed:
+            self.set_camera(self._camera)
 
     def grab_image(self, size: tuple[int, int] | None = None) -> np.ndarray:
         """Both views side by side as one (H, W, 3) uint8 image; ``size`` renders each view at (w, h)."""

@@ -1,4 +1,4 @@
-"""The 3D viewport: a pyvistaqt interactor showing the rig surface, its colour maps and overlays.
+"""The 3D viewport: a VTK plotter (native window, see native_plotter) showing the rig surface, its colour maps and overlays.
 
 It shows what it is given and turns gestures into signals; it holds no algorithm.
 """
@@ -17,10 +17,10 @@ class Viewport(QtWidgets.QWidget):
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
-        from pyvistaqt import QtInteractor
+        from .native_plotter import NativePlotter
         # No multi-sampling: on software OpenGL (Xvfb, llvmpipe) 4x MSAA makes a frame of ICT FaceKit
         # cost ~150 ms instead of ~30 ms; interactive speed matters more here than smooth edges.
-        self.plotter = QtInteractor(self, auto_update=False, multi_samples=0)
+        self.plotter = NativePlotter(self, multi_samples=0)
         style_plotter(self.plotter)
         self.plotter.enable_trackball_style()
         lay = QtWidgets.QVBoxLayout(self)
