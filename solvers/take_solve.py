@@ -377,13 +377,12 @@ class TakeSolver:
         cal = self.calibrate(X, calibration_frames) if calibrate else np.eye(4)
         Y = X @ cal[:3, :3].T + cal[:3, 3]  # calibrated take, rig space up to head motion
         passes = 2 if self.two_pass else 1
-        report = None
-        if progress is not None:
-            step = max(1, F // 50)
+        step = max(1, F // 50)
 
-            def report(i: int, offset: int) -> None:
-                if i % step == 0 or i == F - 1:
-                    progress(offset + i + 1, passes * F, "solving")
+        def progress_at(i: int, offset: int) -> None:
+            if i % step == 0 or i == F - 1:
+                progress(offset + i + 1, passes * F, "solving")
+        report = progress_at if progress is not None else None
         W, Rs, ts, solved = self._pass(Y, range(F), np.zeros(self.K), np.eye(3), np.zeros(3), cancel,
                                        report and (lambda i: report(i, 0)))
         if self.two_pass:

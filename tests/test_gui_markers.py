@@ -263,7 +263,7 @@ def test_keys_interpolate_play_save_and_export(qtbot, tmp_path, geometry, nose_t
     n = k.export_csv(csv_path)
     assert n == int(round(k.duration * k.fps)) + 1
     frames, times, names, Wcsv = read_weights_csv(csv_path)
-    assert len(frames) == n and f"jawOpen@region0" in names and "jawOpen" in names
+    assert len(frames) == n and "jawOpen@region0" in names and "jawOpen" in names
     fi = int(round(1.0 * k.fps))
     np.testing.assert_allclose(Wcsv[fi], W1.reshape(-1))
     assert k.export_pc2(pc2_path) == n
