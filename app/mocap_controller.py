@@ -388,13 +388,13 @@ class MocapController(QtCore.QObject):
         self._drop_solution()
         self.solution = solution
         counts, indices = captured_area_faces(self.rig, solution.solver.residual_vertices)
-        self.cache = FrameCache(solution, self.take, self.rig.units,
-                                normals=VertexNormals(counts, indices, self.rig.n_vertices))
+        normals = VertexNormals(counts, indices, self.rig.n_vertices)  # one for the cache and both views
+        self.cache = FrameCache(solution, self.take, self.rig.units, normals=normals)
         mm = unit_scale(self.rig.units, "mm")
         first, _, _ = self.cache.frame(0)
         self.views.set_surface(first, counts, indices, focus=self._face_box(solution.solver.rest),
                                n_markers=len(solution.labels), clim=self._residual_clim(),
-                               residual_title="residual (mm)")
+                               residual_title="residual (mm)", normals=normals)
         self.views_dock.show()
         err = solution.marker_rmse * mm
         self.error_plot.title = "marker error RMS (mm)"

@@ -23,7 +23,7 @@ class CurvePlot(QtWidgets.QWidget):
         self.cursor = 0
         self.n_frames = 0
         self.y_range: tuple[float, float] = (0.0, 1.0)
-        self._background: QtGui.QPixmap | None = None   # everything but the cursor, at the current size
+        self._background: QtGui.QPixmap | None = None   # everything but the cursor; redrawn at a new size
         self.setMinimumHeight(70)
         self.setSizePolicy(QtWidgets.QSizePolicy.Expanding, QtWidgets.QSizePolicy.Expanding)
 
@@ -62,10 +62,6 @@ class CurvePlot(QtWidgets.QWidget):
         r = self._plot_rect()
         x = int(self._x(self.cursor, r))
         return QtCore.QRect(x - 2, int(r.top()) - 1, 5, int(r.height()) + 3)
-
-    def resizeEvent(self, event) -> None:  # Qt override
-        self._background = None
-        super().resizeEvent(event)
 
     # --- geometry ----------------------------------------------------------------------------------
     def _plot_rect(self) -> QtCore.QRectF:

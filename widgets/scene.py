@@ -37,15 +37,18 @@ def vtk_faces(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
     return out
 
 
-def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray):
+def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
+             normals: VertexNormals | None = None):
     """A pyvista PolyData of the surface (float32 points for display) with smooth-shading normals.
 
-    ``mesh.field_data`` is left alone; the normals function is kept on the mesh object as
-    ``mesh._display_normals`` so set_points() can refresh them.
+    ``mesh.field_data`` is left alone; the normals function (``normals``, to share one built for these
+    faces, else a new one) is kept on the mesh object as ``mesh._display_normals`` so set_points() can
+    refresh them.
     """
     import pyvista as pv
     mesh = pv.PolyData(np.asarray(points, dtype=np.float32), vtk_faces(face_counts, face_indices))
-    normals = VertexNormals(face_counts, face_indices, mesh.n_points)
+    if normals is None:
+        normals = VertexNormals(face_counts, face_indices, mesh.n_points)
     object.__setattr__(mesh, "_display_normals", normals)
     mesh.point_data["Normals"] = normals(mesh.points)
     mesh.point_data.active_normals_name = "Normals"

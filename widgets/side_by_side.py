@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
+from solvers.normals import VertexNormals
+
 from .scene import ColorMap, add_surface, rig_mesh, set_camera, set_points, style_plotter
 
 MARKER_COLOR = (0.15, 0.85, 0.35)
@@ -48,13 +50,16 @@ class SideBySideView(QtWidgets.QWidget):
     # --- content -----------------------------------------------------------------------------------
     def set_surface(self, points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray, *,
                     focus: np.ndarray | None = None, n_markers: int = 0, clim: tuple[float, float] = (0.0, 1.0),
-                    residual_title: str = "residual (mm)") -> None:
-        """Upload a surface (both views), ``n_markers`` marker spheres and error vectors, the colour range."""
+                    residual_title: str = "residual (mm)", normals: VertexNormals | None = None) -> None:
+        """Upload a surface (both views), ``n_markers`` marker spheres and error vectors, the colour range.
+        ``normals``: the VertexNormals of these faces if the caller has one (both views share it)."""
         import pyvista as pv
         p = self.plotter
         self.residual_title = residual_title
-        self.left_mesh = rig_mesh(points, face_counts, face_indices)
-        self.right_mesh = rig_mesh(points, face_counts, face_indices)
+        if normals is None:
+            normals = VertexNormals(face_counts, face_indices, len(points))
+        self.left_mesh = rig_mesh(points, face_counts, face_indices, normals)
+        self.right_mesh = rig_mesh(points, face_counts, face_indices, normals)
         p.subplot(0, 0)
         add_surface(p, self.left_mesh, name="surface_left", specular=0.0)
         for name in ("markers", "errors"):
