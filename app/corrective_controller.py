@@ -653,7 +653,7 @@ def install(window) -> CorrectiveController:
     if isinstance(existing, CorrectiveController):
         return existing
     panel = CorrectivesPanel(window)
-    dock = window._add_dock("Correctives", panel, QtCore.Qt.LeftDockWidgetArea)
+    dock = window._add_dock("Correctives", panel, QtCore.Qt.LeftDockWidgetArea, scroll=True)
     seg = getattr(window, "segmentation_dock", None)
     if seg is not None:
         window.tabifyDockWidget(seg, dock)

@@ -42,7 +42,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self._drag_old: np.ndarray | None = None
         self._redraw_pending = False
         self.segmentation_panel = SegmentationPanel(self)
-        self.segmentation_dock = self._add_dock("Segmentation", self.segmentation_panel, QtCore.Qt.LeftDockWidgetArea)
+        self.segmentation_dock = self._add_dock("Segmentation", self.segmentation_panel, QtCore.Qt.LeftDockWidgetArea,
+                                              scroll=True)
         self._build_actions()
         self._build_status_bar()
         self._connect()
@@ -58,9 +59,17 @@ class MainWindow(QtWidgets.QMainWindow):
         self._restore_layout()
 
     # --- construction ------------------------------------------------------------------------------
-    def _add_dock(self, title: str, widget: QtWidgets.QWidget, area) -> QtWidgets.QDockWidget:
+    def _add_dock(self, title: str, widget: QtWidgets.QWidget, area, *, scroll: bool = False) -> QtWidgets.QDockWidget:
+        """A dockable panel. ``scroll``: inside a scroll area, so a tall panel never forces the window taller
+        than the screen (the left panels are ~700 px high; the window opens at 1400x900)."""
         dock = QtWidgets.QDockWidget(title, self)
         dock.setObjectName(f"dock_{title.replace(' ', '_')}")
+        if scroll:
+            area_widget = QtWidgets.QScrollArea()
+            area_widget.setWidget(widget)
+            area_widget.setWidgetResizable(True)
+            area_widget.setFrameShape(QtWidgets.QFrame.NoFrame)
+            widget = area_widget
         dock.setWidget(widget)
         self.addDockWidget(area, dock)
         return dock

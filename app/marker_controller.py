@@ -504,7 +504,7 @@ def install(window) -> MarkerController:
         return existing
     panel = MarkersPanel(window)
     window.markers_panel = panel
-    window.markers_dock = window._add_dock("Markers", panel, QtCore.Qt.LeftDockWidgetArea)
+    window.markers_dock = window._add_dock("Markers", panel, QtCore.Qt.LeftDockWidgetArea, scroll=True)
     window.panels_menu.addAction(window.markers_dock.toggleViewAction())
     controller = MarkerController(window, panel)
     window.markers = controller

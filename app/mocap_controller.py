@@ -18,7 +18,7 @@ from app.background import BackgroundRunner
 from model.errors import RigInputError
 from model.rig import unit_scale
 from model.takes import MarkerTake, WeightTake
-from solvers.normals import VertexNormals
+from solvers.normals import VertexNormals, compact_faces
 from widgets.curve_plot import CurvePlot
 from widgets.mocap_panel import MocapPanel
 from widgets.side_by_side import SideBySideView
@@ -46,10 +46,12 @@ class FrameCache:
     """Per-frame display arrays of a solved take, computed lazily (or all at once in the background) and kept:
     projection and dense surfaces (F, V, 3) float32, residual magnitude (F, V) float32 in mm, and the
     head-stabilised take markers and the rig's fitted markers (F, M, 3) in rig space. Given ``normals`` (the
-    views' VertexNormals), also both surfaces' shading normals (F, V, 3) int8, so that playback of a filled
-    cache draws without computing any (two normals are ~6 ms of a ~35 ms frame on ICT FaceKit)."""
+    views' VertexNormals over the ``shown`` vertices, see ``compact_faces``), also both surfaces' shading
+    normals at those vertices (F, len(shown), 3) int8, so that playback of a filled cache draws without
+    computing any (two normals are ~6 ms of a ~35 ms frame on ICT FaceKit)."""
 
-    def __init__(self, solution, take: MarkerTake, rig_units: str, normals: VertexNormals | None = None) -> None:
+    def __init__(self, solution, take: MarkerTake, rig_units: str, normals: VertexNormals | None = None,
+                 shown: np.ndarray | None = None) -> None:
         self.solution = solution
         s = solution.solver
         F, V = solution.n_frames, s.V
@@ -57,9 +59,12 @@ class FrameCache:
         self.dense = np.zeros((F, V, 3), np.float32)
         self.residual_mm = np.zeros((F, V), np.float32)
         self._normals = normals
+        self._shown = np.arange(V) if shown is None else np.asarray(shown)
         if normals is not None:
-            self.projection_normals = np.zeros((F, V, 3), np.int8)
-            self.dense_normals = np.zeros((F, V, 3), np.int8)
+            if normals.n_points != len(self._shown):
+                raise ValueError(f"normals for {normals.n_points} points, but {len(self._shown)} shown vertices")
+            self.projection_normals = np.zeros((F, len(self._shown), 3), np.int8)
+            self.dense_normals = np.zeros((F, len(self._shown), 3), np.int8)
         self.ready = np.zeros(F, dtype=bool)
         self.mm = unit_scale(rig_units, "mm")
         cols = [take.labels.index(label) for label in solution.labels]
@@ -96,7 +101,8 @@ class FrameCache:
         dense = sol.dense(f)
         res = np.linalg.norm(dense - proj, axis=1) * self.mm
         if self._normals is not None:
-            proj_n, dense_n = self._normals.quantised(proj), self._normals.quantised(dense)
+            shown = self._shown
+            proj_n, dense_n = self._normals.quantised(proj[shown]), self._normals.quantised(dense[shown])
         with self._lock:
             self.projection[f], self.dense[f], self.residual_mm[f] = proj, dense, res
             if self._normals is not None:
@@ -388,14 +394,15 @@ class MocapController(QtCore.QObject):
         self._drop_solution()
         self.solution = solution
         counts, indices = captured_area_faces(self.rig, solution.solver.residual_vertices)
-        normals = VertexNormals(counts, indices, self.rig.n_vertices)  # one for the cache and both views
-        self.cache = FrameCache(solution, self.take, self.rig.units, normals=normals)
+        shown, local = compact_faces(indices)  # the views draw these vertices only
+        normals = VertexNormals(counts, local, len(shown))  # one for the cache and both views
+        self.cache = FrameCache(solution, self.take, self.rig.units, normals=normals, shown=shown)
         mm = unit_scale(self.rig.units, "mm")
         first, _, _ = self.cache.frame(0)
         self.views.set_surface(first, counts, indices, focus=self._face_box(solution.solver.rest),
                                n_markers=len(solution.labels), clim=self._residual_clim(),
                                residual_title="residual (mm)", normals=normals)
-        self.views_dock.show()
+        self._show_views_dock()
         err = solution.marker_rmse * mm
         self.error_plot.title = "marker error RMS (mm)"
         self.error_plot.set_curves([("projection", err), ("dense", solution.marker_rmse_residual * mm)])
@@ -409,6 +416,16 @@ class MocapController(QtCore.QObject):
         self.set_frame(0)
         self._start_fill()
         self.solved.emit()
+
+    def _show_views_dock(self) -> None:
+        """Show the Mocap Views dock; the first time, split it half views, half curves."""
+        first = not self.views_dock.isVisible() and not getattr(self, "_views_split", False)
+        self.views_dock.show()
+        splitter = self.views.parentWidget()
+        if first and isinstance(splitter, QtWidgets.QSplitter):
+            self._views_split = True
+            # once the dock has its size (the next turn of the event loop)
+            QtCore.QTimer.singleShot(0, lambda: splitter.setSizes([max(1, sum(splitter.sizes()) // 2)] * 2))
 
     @staticmethod
     def _face_box(markers: np.ndarray) -> np.ndarray:
@@ -679,23 +696,26 @@ def install(window) -> MocapController:
     if isinstance(existing, MocapController):  # the main window installs it; installing twice returns the same one
         return existing
     panel = MocapPanel(window)
-    scroll = QtWidgets.QScrollArea()
-    scroll.setWidget(panel)
-    scroll.setWidgetResizable(True)
     window.mocap_panel = panel
-    window.mocap_dock = window._add_dock("Mocap", scroll, QtCore.Qt.RightDockWidgetArea)
+    window.mocap_dock = window._add_dock("Mocap", panel, QtCore.Qt.RightDockWidgetArea, scroll=True)
     views = SideBySideView()
     weight_plot, error_plot = CurvePlot("weights"), CurvePlot("marker error RMS (mm)")
-    holder = QtWidgets.QSplitter(QtCore.Qt.Vertical)
+    # The two faces beside each other, the curves stacked on their right: a face is framed by the views' height,
+    # so views wider than about two squares would only add background -- which software OpenGL still pays for
+    # on every frame -- while the curves want width for their time axis.
+    holder = QtWidgets.QSplitter(QtCore.Qt.Horizontal)
+    holder.setObjectName("mocap_views_splitter")
     holder.addWidget(views)
     plots = QtWidgets.QWidget()
-    pl = QtWidgets.QHBoxLayout(plots)
+    pl = QtWidgets.QVBoxLayout(plots)
     pl.setContentsMargins(0, 0, 0, 0)
     pl.addWidget(weight_plot)
     pl.addWidget(error_plot)
     holder.addWidget(plots)
-    holder.setStretchFactor(0, 4)
+    holder.setStretchFactor(0, 1)
     holder.setStretchFactor(1, 1)
+    holder.setCollapsible(0, False)
+    holder.setCollapsible(1, False)
     window.mocap_views_dock = window._add_dock("Mocap Views", holder, QtCore.Qt.BottomDockWidgetArea)
     window.mocap_views_dock.hide()  # shown after the first solve
     window.panels_menu.addAction(window.mocap_dock.toggleViewAction())

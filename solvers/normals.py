@@ -24,6 +24,14 @@ def fan_triangles(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarr
     return np.stack([idx[first], idx[first + k + 1], idx[first + k + 2]], axis=1)
 
 
+def compact_faces(face_indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(used, local): the sorted vertex indices the polygons use, and the polygons' corners renumbered
+    into them (``used[local] == face_indices``). Drawing a part of a mesh then moves only its own points."""
+    idx = np.asarray(face_indices, dtype=np.int64)
+    used, local = np.unique(idx, return_inverse=True)
+    return used, local.reshape(idx.shape)
+
+
 class VertexNormals:
     """``normals(points)`` -> (V, 3) float32 unit vertex normals for the fixed faces given here
     (zero for vertices no face uses); ``normals.quantised(points)`` -> the same as int8 (x 127)."""
@@ -55,6 +63,6 @@ class VertexNormals:
         return np.rint(self(points) * NORMAL_SCALE).astype(np.int8)
 
 
-def dequantise(normals: np.ndarray) -> np.ndarray:
-    """int8 normals from ``VertexNormals.quantised`` back to float32 (near unit length)."""
-    return normals.astype(np.float32) * np.float32(1.0 / NORMAL_SCALE)
+def dequantise(normals: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    """int8 normals from ``VertexNormals.quantised`` back to float32 (near unit length), into ``out`` if given."""
+    return np.multiply(normals, np.float32(1.0 / NORMAL_SCALE), out=out, dtype=np.float32)

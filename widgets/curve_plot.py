@@ -24,7 +24,7 @@ class CurvePlot(QtWidgets.QWidget):
         self.n_frames = 0
         self.y_range: tuple[float, float] = (0.0, 1.0)
         self._background: QtGui.QPixmap | None = None   # everything but the cursor; redrawn at a new size
-        self.setMinimumHeight(70)
+        self.setMinimumSize(240, 70)
         self.setSizePolicy(QtWidgets.QSizePolicy.Expanding, QtWidgets.QSizePolicy.Expanding)
 
     @property

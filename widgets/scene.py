@@ -46,7 +46,8 @@ def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarr
     refresh them.
     """
     import pyvista as pv
-    mesh = pv.PolyData(np.asarray(points, dtype=np.float32), vtk_faces(face_counts, face_indices))
+    # A copy: set_points() writes into the mesh's own arrays, never into the caller's.
+    mesh = pv.PolyData(np.array(points, dtype=np.float32), vtk_faces(face_counts, face_indices))
     if normals is None:
         normals = VertexNormals(face_counts, face_indices, mesh.n_points)
     object.__setattr__(mesh, "_display_normals", normals)
@@ -61,11 +62,48 @@ def set_points(mesh, points: np.ndarray, normals: np.ndarray | None = None) -> N
     pts = np.asarray(points, dtype=np.float32)
     if normals is None:
         normals = mesh._display_normals(pts)
-    elif normals.dtype == np.int8:
-        normals = dequantise(normals)
-    mesh.points = pts
-    mesh.point_data["Normals"] = normals
-    mesh.point_data.active_normals_name = "Normals"
+    old_points, old_normals = mesh.points, mesh.point_data["Normals"]
+    if old_points.shape != pts.shape or old_normals.dtype != np.float32:
+        mesh.points = pts
+        mesh.point_data["Normals"] = dequantise(normals) if normals.dtype == np.int8 else normals
+        mesh.point_data.active_normals_name = "Normals"
+        return
+    # In place (playback moves ~27k points 30+ times a second): no new VTK arrays, two Modified() calls.
+    old_points[:] = pts
+    if normals.dtype == np.int8:
+        dequantise(normals, out=old_normals)
+    else:
+        old_normals[:] = normals
+    mesh.GetPoints().Modified()
+    mesh.GetPointData().GetNormals().Modified()
+
+
+class SurfaceArrays:
+    """Numpy views of a display mesh's own VTK arrays -- points, normals and optionally one scalar array --
+    for in-place updates many times a second (playback) without pyvista's wrapping on every access."""
+
+    def __init__(self, mesh, scalars: str | None = None) -> None:
+        from vtkmodules.util.numpy_support import vtk_to_numpy
+        pd = mesh.GetPointData()
+        self._vtk = [mesh.GetPoints(), pd.GetNormals()] + ([pd.GetArray(scalars)] if scalars else [])
+        self.points = vtk_to_numpy(mesh.GetPoints().GetData())
+        self.normals = vtk_to_numpy(pd.GetNormals())
+        self.scalars = vtk_to_numpy(pd.GetArray(scalars)) if scalars else None
+        self._normals_of = mesh._display_normals
+
+    def update(self, points: np.ndarray, normals: np.ndarray | None = None, scalars: np.ndarray | None = None) -> None:
+        """New points (same count); normals float or int8 (``VertexNormals.quantised``), computed if None."""
+        self.points[:] = points
+        if normals is None:
+            self.normals[:] = self._normals_of(self.points)
+        elif normals.dtype == np.int8:
+            dequantise(normals, out=self.normals)
+        else:
+            self.normals[:] = normals
+        if scalars is not None:
+            self.scalars[:] = scalars
+        for obj in self._vtk:
+            obj.Modified()
 
 
 @dataclass
@@ -98,16 +136,35 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
             plotter.add_text(colormap.title, position="lower_right", font_size=10, color="white", name="legend_title")
     if colormap.rgb:
         mesh.point_data["colors"] = np.asarray(colormap.scalars, dtype=np.uint8)
-        return plotter.add_mesh(mesh, scalars="colors", rgb=True, **kwargs)
+        actor = plotter.add_mesh(mesh, scalars="colors", rgb=True, **kwargs)
+        _map_directly(actor, mesh, "colors")
+        return actor
     mesh.point_data["values"] = np.asarray(colormap.scalars, dtype=np.float32)
     bar = dict(title=colormap.title or " ", vertical=True, position_x=0.82, position_y=0.12, height=0.76,
                width=0.06, title_font_size=14, label_font_size=12, n_labels=5, fmt="%.3g",
                color="white")
     if colormap.categorical:
-        return plotter.add_mesh(mesh, scalars="values", cmap=colormap.cmap, clim=colormap.clim,
-                                show_scalar_bar=False, interpolate_before_map=False, **kwargs)
-    return plotter.add_mesh(mesh, scalars="values", cmap=colormap.cmap, clim=colormap.clim,
-                            scalar_bar_args=bar, **kwargs)
+        actor = plotter.add_mesh(mesh, scalars="values", cmap=colormap.cmap, clim=colormap.clim,
+                                 show_scalar_bar=False, interpolate_before_map=False, **kwargs)
+    else:
+        actor = plotter.add_mesh(mesh, scalars="values", cmap=colormap.cmap, clim=colormap.clim,
+                                 scalar_bar_args=bar, **kwargs)
+    _map_directly(actor, mesh, "values")
+    return actor
+
+
+def _map_directly(actor, mesh, name: str) -> None:
+    """Feed the mesh to the mapper directly, colouring by point array ``name``.
+
+    pyvista puts a Python ``ActiveScalarsAlgorithm`` between a mesh and its mapper; it runs again (a shallow
+    copy through the VTK pipeline from Python) each time the mesh's points move, ~1-2 ms a frame in playback.
+    Our meshes are not shared between mappers, so the mapper can read the array by name itself.
+    """
+    mapper = actor.GetMapper()
+    mapper.SetInputData(mesh)
+    mapper.SetScalarModeToUsePointFieldData()
+    mapper.SelectColorArray(name)
+    mapper.ScalarVisibilityOn()
 
 
 def style_plotter(plotter, playback: bool = False) -> None:
@@ -119,6 +176,10 @@ def style_plotter(plotter, playback: bool = False) -> None:
     frame for two views in a 1400x340 window (measured under Xvfb); pair it with ``add_surface(specular=0)``.
     """
     import pyvista as pv
+    for renderer in plotter.renderers:
+        # No frustum culling: it asks every actor for its bounds each render, and for a mesh whose points
+        # moved that is a pass over all cells (~25% of a playback frame under Xvfb); a face is always in view.
+        renderer.GetCullers().RemoveAllItems()
     plotter.remove_all_lights()
     if playback:
         plotter.set_background(BACKGROUND_FLAT)

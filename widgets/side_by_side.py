@@ -2,17 +2,19 @@
 vectors (left), and the dense result coloured by residual magnitude (right).
 
 Both views are two renderers of ONE render window sharing one camera: a frame is one render pass, which
-on software OpenGL is what playback speed hangs on. Topology is uploaded once (``set_surface``);
-``show_frame`` moves points and scalars in place and renders.
+on software OpenGL is what playback speed hangs on. Topology is uploaded once (``set_surface``), and only the
+vertices the drawn faces use; ``show_frame`` writes points, normals and scalars into the meshes' own arrays
+and renders.
 """
 from __future__ import annotations
 
 import numpy as np
 from PySide6 import QtCore, QtWidgets
+from vtkmodules.util.numpy_support import vtk_to_numpy
 
-from solvers.normals import VertexNormals
+from solvers.normals import VertexNormals, compact_faces
 
-from .scene import ColorMap, add_surface, rig_mesh, set_camera, set_points, style_plotter
+from .scene import ColorMap, SurfaceArrays, add_surface, rig_mesh, set_camera, style_plotter
 
 MARKER_COLOR = (0.15, 0.85, 0.35)
 ERROR_COLOR = (1.0, 0.25, 0.2)
@@ -30,11 +32,12 @@ class SideBySideView(QtWidgets.QWidget):
             style_plotter(self.plotter, playback=True)  # playback speed: see style_plotter
         self.plotter.enable_trackball_style()
         self.plotter.link_views()  # one camera for both: orbiting either view moves both
-        self.setMinimumHeight(340)
+        self.setMinimumHeight(200)
         lay = QtWidgets.QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
         lay.addWidget(self.plotter.interactor)
         self.left_mesh = self.right_mesh = None
+        self.shown_vertices = np.zeros(0, np.int64)  # the rig vertices the views draw (those the faces use)
         self.marker_cloud = self.error_lines = None
         self.residual_title = "residual (mm)"
         self._focus = None
@@ -47,19 +50,26 @@ class SideBySideView(QtWidgets.QWidget):
         self.plotter.add_text("dense result (projection + residual)", position="upper_left", font_size=9,
                               color="white", name="title_right")
 
+    def sizeHint(self) -> QtCore.QSize:  # Qt override: two about-square views, each framing a face
+        return QtCore.QSize(680, 340)
+
     # --- content -----------------------------------------------------------------------------------
     def set_surface(self, points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray, *,
                     focus: np.ndarray | None = None, n_markers: int = 0, clim: tuple[float, float] = (0.0, 1.0),
                     residual_title: str = "residual (mm)", normals: VertexNormals | None = None) -> None:
-        """Upload a surface (both views), ``n_markers`` marker spheres and error vectors, the colour range.
-        ``normals``: the VertexNormals of these faces if the caller has one (both views share it)."""
+        """Upload a surface's faces with the vertices they use (both views), ``n_markers`` marker spheres and
+        error vectors, the colour range. ``normals``: the VertexNormals of these faces renumbered by
+        ``compact_faces`` if the caller has one (both views share it; so may the caller's frame cache)."""
         import pyvista as pv
         p = self.plotter
         self.residual_title = residual_title
-        if normals is None:
-            normals = VertexNormals(face_counts, face_indices, len(points))
-        self.left_mesh = rig_mesh(points, face_counts, face_indices, normals)
-        self.right_mesh = rig_mesh(points, face_counts, face_indices, normals)
+        self.shown_vertices, local = compact_faces(face_indices)
+        n = len(self.shown_vertices)
+        if normals is None or normals.n_points != n:
+            normals = VertexNormals(face_counts, local, n)
+        shown = np.asarray(points)[self.shown_vertices]
+        self.left_mesh = rig_mesh(shown, face_counts, local, normals)
+        self.right_mesh = rig_mesh(shown, face_counts, local, normals)
         p.subplot(0, 0)
         add_surface(p, self.left_mesh, name="surface_left", specular=0.0)
         for name in ("markers", "errors"):
@@ -73,10 +83,14 @@ class SideBySideView(QtWidgets.QWidget):
             self.error_lines = pv.PolyData(np.zeros((2 * n_markers, 3), np.float32), lines=lines.ravel())
             p.add_mesh(self.error_lines, color=ERROR_COLOR, line_width=3, name="errors", reset_camera=False,
                        lighting=False)
+            # numpy views of the clouds' own point arrays, rewritten in place each frame
+            self._marker_points = vtk_to_numpy(self.marker_cloud.GetPoints().GetData())
+            self._line_points = vtk_to_numpy(self.error_lines.GetPoints().GetData())
         p.subplot(0, 1)
-        cmap = ColorMap(np.zeros(self.right_mesh.n_points, np.float32), title=residual_title, cmap="inferno",
-                        clim=clim)
+        cmap = ColorMap(np.zeros(n, np.float32), title=residual_title, cmap="inferno", clim=clim)
         self._right_actor = add_surface(p, self.right_mesh, cmap, name="surface_right", specular=0.0)
+        self._left_arrays = SurfaceArrays(self.left_mesh)
+        self._right_arrays = SurfaceArrays(self.right_mesh, scalars="values")
         self._focus = np.asarray(points if focus is None else focus)
         self.set_camera(self._camera)
 
@@ -87,23 +101,25 @@ class SideBySideView(QtWidgets.QWidget):
     def show_frame(self, projection: np.ndarray, dense: np.ndarray, residual: np.ndarray,
                    markers: np.ndarray | None = None, fitted: np.ndarray | None = None,
                    normals: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> None:
-        """Move both surfaces (V, 3), the residual scalars (V,) and markers / fitted markers (M, 3); render.
-        ``normals``: both surfaces' shading normals if already known (else computed here)."""
+        """Move both surfaces -- (V, 3) arrays of the whole rig, of which the shown vertices are drawn -- set the
+        residual scalars (V,) and markers / fitted markers (M, 3); render. ``normals``: both surfaces' shading
+        normals at the shown vertices, (len(shown_vertices), 3), if already known (else computed here)."""
         if self.left_mesh is None:
             return
-        set_points(self.left_mesh, projection, normals[0])
-        set_points(self.right_mesh, dense, normals[1])
-        values = self.right_mesh.point_data["values"]
-        values[:] = residual
-        self.right_mesh.GetPointData().GetArray("values").Modified()
+        shown = self.shown_vertices
+        self._left_arrays.update(np.take(projection, shown, axis=0), normals[0])
+        self._right_arrays.update(np.take(dense, shown, axis=0), normals[1], np.take(residual, shown))
         if self.marker_cloud is not None and markers is not None:
             m = np.asarray(markers, dtype=np.float32)
             seen = np.isfinite(m).all(axis=1)
             # missing markers sit on their fitted point: no sphere off in space, a zero-length error line
             fit = np.asarray(fitted if fitted is not None else m, dtype=np.float32)
             m = np.where(seen[:, None], m, fit)
-            self.marker_cloud.points = m
-            self.error_lines.points = np.concatenate([fit, fit + ERROR_SCALE * (m - fit)])
+            self._marker_points[:] = m
+            self._line_points[:len(m)] = fit
+            self._line_points[len(m):] = fit + ERROR_SCALE * (m - fit)
+            for cloud in (self.marker_cloud, self.error_lines):
+                cloud.GetPoints().Modified()
         self.render()
 
     def render(self) -> None:
@@ -150,3 +166,4 @@ class SideBySideView(QtWidgets.QWidget):
 
     def close_views(self) -> None:
         self.plotter.close()
+

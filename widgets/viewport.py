@@ -59,7 +59,8 @@ class Viewport(QtWidgets.QWidget):
         self.render()
 
     def points(self) -> np.ndarray | None:
-        return None if self.mesh is None else np.asarray(self.mesh.points)
+        """A copy of the drawn vertices (the mesh's own array is rewritten in place on each update)."""
+        return None if self.mesh is None else np.array(self.mesh.points)
 
     def set_colormap(self, colormap: ColorMap | None) -> None:
         self._colormap = colormap
