@@ -20,7 +20,8 @@ from model.correctives import (Corrective, activation_for, authoring_surface, co
 from model.errors import RigInputError
 from solvers import sculpt
 from solvers.correctives import (corrective_delta, corrective_from_scan, driver_region, fit_scan_weights,
-                                 interference_heat, rank_interference, shape_overlap)
+                                 interference_heat, overshoot_heat, rank_interference, rank_partners,
+                                 shape_overlap, shape_overshoot)
 from widgets.correctives_panel import CorrectivesPanel
 from widgets.scene import ColorMap
 
@@ -59,7 +60,7 @@ class CorrectiveController(QtCore.QObject):
         self._stroke: dict | None = None
         self._cursor = None
         self._cursor_unit = None
-        self._overlap: dict[bool, np.ndarray] = {}
+        self._overlap: dict[str, np.ndarray] = {}  # (K, K) scores by measure, until the shapes change
         self.pairs: list[tuple[int, int, float]] = []
         self._saved_colormap = _UNSET
         self.heat: np.ndarray | None = None
@@ -578,36 +579,53 @@ class CorrectiveController(QtCore.QObject):
         rig = self.document.rig
         if rig is None:
             return []
-        directional = self.panel.measure.currentData() == "directional"
-        if directional not in self._overlap:
+        measure = self.measure
+        if measure not in self._overlap:
             QtWidgets.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
             try:
-                self._overlap[directional] = shape_overlap(rig.deltas, directional=directional)
+                self._overlap[measure] = shape_overshoot(rig.deltas) if measure == "overshoot" else \
+                    shape_overlap(rig.deltas, directional=measure == "directional")
             finally:
                 QtWidgets.QApplication.restoreOverrideCursor()
-        self.pairs = rank_interference(None, top=self.panel.top.value(), overlap=self._overlap[directional])
+        self._pairs_measure = measure
+        O, top = self._overlap[measure], self.panel.top.value()
+        shape = self.panel.partner_of.currentData()
+        if shape in rig.shape_names:   # the partners of one shape, as (shape, partner, score)
+            k = rig.shape_names.index(shape)
+            self.pairs = [(k, j, s) for j, s in rank_partners(O, k, top)]
+        else:
+            self.pairs = rank_interference(None, top=top, overlap=O)
         names = rig.shape_names
         self.panel.set_pairs([(names[i], names[j], s) for i, j, s in self.pairs])
         self.leave_heat_map()
         return self.pairs
 
+    @property
+    def measure(self) -> str:
+        """The finder's measure: "overshoot" (default), "plain" or "directional" overlap."""
+        return self.panel.measure.currentData()
+
     def show_pair(self, row: int) -> None:
-        """Colour the face by min(‖d_i‖, ‖d_j‖) of the selected pair (a colour bar in rig units)."""
+        """Colour the face by where the selected pair interferes (a colour bar in rig units): the overshoot of
+        their sum for the overshoot measure, else min(‖d_i‖, ‖d_j‖)."""
         if row < 0 or row >= len(self.pairs):
             self.leave_heat_map()
             return
         rig = self.document.rig
         i, j, score = self.pairs[row]
-        self.heat = interference_heat(rig.deltas[i], rig.deltas[j])
+        overshoot = getattr(self, "_pairs_measure", "overshoot") == "overshoot"
+        heat_of = overshoot_heat if overshoot else interference_heat
+        self.heat = heat_of(rig.deltas[i], rig.deltas[j])
         if self._saved_colormap is _UNSET:
             self._saved_colormap = getattr(self.viewport, "_colormap", None)
         top = float(self.heat.max())
-        self._heat_colormap = ColorMap(self.heat, title=f"interference ({rig.units})", cmap="YlOrRd",
-                                       clim=(0.0, top if top > 0 else 1.0))
+        title = f"overshoot ({rig.units})" if overshoot else f"interference ({rig.units})"
+        self._heat_colormap = ColorMap(self.heat, title=title, cmap="YlOrRd", clim=(0.0, top if top > 0 else 1.0))
         self.viewport.set_colormap(self._heat_colormap)
         n = int((self.heat > 0.1 * top).sum()) if top > 0 else 0
-        self.panel.pair_info.setText(f"{rig.shape_names[i]} × {rig.shape_names[j]}: overlap {score:.3f}; "
-                                     f"min(‖d_i‖, ‖d_j‖) up to {top:.3g} {rig.units}, above 10% on {n:,} vertices.")
+        what = "‖d_i + d_j‖ − max(‖d_i‖, ‖d_j‖)" if overshoot else "min(‖d_i‖, ‖d_j‖)"
+        self.panel.pair_info.setText(f"{rig.shape_names[i]} × {rig.shape_names[j]}: score {score:.3f}; "
+                                     f"{what} up to {top:.3g} {rig.units}, above 10% on {n:,} vertices.")
 
     def _reapply_heat_map(self) -> None:
         if self._saved_colormap is not _UNSET and getattr(self.viewport, "_colormap", None) is not self._heat_colormap:

@@ -4,8 +4,9 @@
 - ``fit_scan_weights`` / ``driver_region`` / ``corrective_from_scan``: a corrective from a scan of a
   combination (Smith §6, future work 1): fit the rig's weights to the scan by bounded least squares, keep
   the residual over the drivers' region.
-- ``shape_overlap`` / ``rank_interference`` / ``interference_heat``: which shape pairs interfere and need
-  a corrective, ranked by the overlap of their displacement fields.
+- ``shape_overlap`` / ``shape_overshoot`` / ``rank_interference`` / ``interference_heat``: which shape
+  pairs interfere and need a corrective, ranked by the overlap of their displacement fields or by how much
+  their sum overshoots where both act.
 """
 from __future__ import annotations
 
@@ -153,6 +154,48 @@ def shape_overlap(deltas, directional: bool = False) -> np.ndarray:
     return np.clip(O, 0.0, 1.0)
 
 
+OVERSHOOT_PRIOR = 10.0   # shrinkage of shape_overshoot, in vertices: a shared area of a few vertices scores ~0
+
+
+def shape_overshoot(deltas, prior: float = OVERSHOOT_PRIOR) -> np.ndarray:
+    """(K, K) overshoot of superposition where two shapes both act, in (-1, 1) (Smith §4.5: where shapes
+    overlap, their sum bunches or overshoots; the formulation is ours).
+
+    Per vertex, the sum's excess over the larger displacement relative to it:
+    e_ij(v) = (‖d_i(v) + d_j(v)‖ − m(v)) / m(v), m(v) = max(‖d_i(v)‖, ‖d_j(v)‖): 1 where the sum doubles the
+    motion (equal and parallel), 0 where it adds nothing to the larger one, −1 where the two cancel
+    (antagonists such as jawLeft/jawRight). Averaged where both shapes act, with each vertex weighted by how
+    strongly both do, w(v) = min(‖d_i(v)‖ / max‖d_i‖, ‖d_j(v)‖ / max‖d_j‖), and shrunk toward 0 for small
+    shared areas: O_ij = Σ_v w e / (Σ_v w + prior). A small shape inside a large one (a lip shape inside
+    jawOpen) scores low, since superposing them adds little to the large motion. The diagonal is 1.
+    One pass per shape over the vertices it moves, all partners at once.
+    """
+    D = np.asarray(deltas, dtype=np.float32)  # float32 terms, float64 sums: ~1e-6 relative, twice as fast
+    K = D.shape[0]
+    n = np.sqrt(np.einsum("kvc,kvc->kv", D, D))  # (K, V)
+    peak = n.max(axis=1)
+    rel = n / np.where(peak > 0, peak, 1.0)[:, None]  # (K, V) in [0, 1]
+    floor = 1e-3                                       # below a thousandth of its peak a shape does not act
+    O = np.zeros((K, K))
+    for a in range(K - 1):
+        cols = np.flatnonzero(rel[a] > floor)
+        if cols.size == 0:
+            continue
+        Da, na = D[a, cols], n[a, cols]                               # this shape where it acts: (C, 3), (C,)
+        Db, nb = D[a + 1:, cols], n[a + 1:, cols]                     # its partners there: (P, C, 3), (P, C)
+        w = np.minimum(rel[a, cols][None, :], rel[a + 1:, cols])      # (P, C)
+        w[w <= floor] = 0.0
+        m = np.maximum(na[None, :], nb)
+        Db += Da[None]                                                # d_i + d_j, in place (Db is a copy)
+        e = np.sqrt(np.einsum("pcx,pcx->pc", Db, Db))
+        e -= m
+        e /= np.where(m > 0, m, 1.0)
+        O[a, a + 1:] = np.einsum("pc,pc->p", w, e, dtype=np.float64) / (w.sum(axis=1, dtype=np.float64) + prior)
+    O = O + O.T
+    np.fill_diagonal(O, np.where(peak > 0, 1.0, 0.0))
+    return O
+
+
 def rank_partners(overlap, shape: int, top: int = 5) -> list[tuple[int, float]]:
     """The ``top`` shapes overlapping most with ``shape`` (from ``shape_overlap``): [(j, overlap), ...]."""
     row = np.asarray(overlap, dtype=np.float64)[shape].copy()
@@ -178,3 +221,11 @@ def interference_heat(delta_i, delta_j) -> np.ndarray:
     a = np.linalg.norm(np.asarray(delta_i, dtype=np.float64), axis=-1)
     b = np.linalg.norm(np.asarray(delta_j, dtype=np.float64), axis=-1)
     return np.minimum(a, b)
+
+
+def overshoot_heat(delta_i, delta_j) -> np.ndarray:
+    """(V,) how far the pair's sum goes beyond the larger of the two displacements, in rig units:
+    max(0, ‖d_i(v) + d_j(v)‖ − max(‖d_i(v)‖, ‖d_j(v)‖)) -- where superposition overshoots (``shape_overshoot``)."""
+    di, dj = np.asarray(delta_i, dtype=np.float64), np.asarray(delta_j, dtype=np.float64)
+    m = np.maximum(np.linalg.norm(di, axis=-1), np.linalg.norm(dj, axis=-1))
+    return np.maximum(np.linalg.norm(di + dj, axis=-1) - m, 0.0)

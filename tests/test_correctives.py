@@ -14,7 +14,8 @@ from model.correctives import (RULES, Corrective, activation_for, add_corrective
 from model.errors import RigInputError
 from model.pose import PoseEvaluator
 from solvers.correctives import (corrective_delta, corrective_from_scan, driver_region, fit_scan_weights,
-                                 interference_heat, rank_interference, rank_partners, shape_overlap)
+                                 interference_heat, overshoot_heat, rank_interference, rank_partners,
+                                 shape_overlap, shape_overshoot)
 
 BROWS = ["browInnerUp_L", "browInnerUp_R", "browOuterUp_L", "browOuterUp_R"]
 # Smith's brow example: every pair, the four three-way sets and the four-way set, authored low order first.
@@ -312,6 +313,46 @@ def test_interference_finder_on_ict_brows(ict_rig):
     assert O[names.index("jawLeft"), names.index("jawRight")] > 0.9
 
 
+def test_overshoot_measure_on_ict(ict_rig):
+    """Superposition overshoot where both shapes act: Smith's brow set comes out as browInnerUp_L's partners,
+    antagonists score below zero, a small shape inside a large one scores low."""
+    names = ict_rig.shape_names
+    O = shape_overshoot(ict_rig.deltas)
+    assert np.allclose(O, O.T) and np.allclose(np.diag(O), 1.0) and (np.abs(O) <= 1).all()
+    idx = ict_rig.shape_index
+    inner_l = idx("browInnerUp_L")
+    assert [names[j] for j, _ in rank_partners(O, inner_l, 3)] == ["browInnerUp_R", "browOuterUp_L", "browOuterUp_R"]
+    # the definition on one pair, at the vertices where both act
+    i, j = idx("browInnerUp_L"), idx("browInnerUp_R")
+    d_i, d_j = ict_rig.deltas[i], ict_rig.deltas[j]
+    n_i, n_j = np.linalg.norm(d_i, axis=1), np.linalg.norm(d_j, axis=1)
+    w = np.minimum(n_i / n_i.max(), n_j / n_j.max())
+    w[w <= 1e-3] = 0.0
+    m = np.maximum(n_i, n_j)
+    e = (np.linalg.norm(d_i + d_j, axis=1) - m) / np.where(m > 0, m, 1.0)
+    assert O[i, j] == pytest.approx((w * e).sum() / (w.sum() + 10.0), rel=1e-6)  # float32 terms
+    # antagonists cancel: negative; jawOpen + mouthClose (which closes the lips jawOpen parts) too
+    for a, b in [("jawLeft", "jawRight"), ("eyeLookIn_L", "eyeLookOut_L"), ("jawOpen", "mouthClose")]:
+        assert O[idx(a), idx(b)] < -0.5, (a, b)
+    # a lip shape inside jawOpen: plain overlap calls it total (1.0), the overshoot is small
+    assert shape_overlap(ict_rig.deltas)[idx("jawOpen"), idx("mouthLowerDown_L")] > 0.99
+    assert O[idx("jawOpen"), idx("mouthLowerDown_L")] < 0.3
+    # pairs riggers fix first lead the list; the inner-brow pair is in the top 2.5 % of the 1,596 pairs
+    top = rank_interference(None, 40, overlap=O)
+    pairs = [{names[i], names[j]} for i, j, _ in top]
+    print("top 20 pairs by overshoot:", [(names[i], names[j], round(s, 2)) for i, j, s in top[:20]])
+    for a, b in [("eyeLookUp_L", "eyeWide_L"), ("mouthFunnel", "mouthPucker"), ("cheekRaiser_L", "cheekSquint_L"),
+                 ("mouthUpperUp_L", "noseSneer_L")]:
+        assert {a, b} in pairs[:10], (a, b)
+    assert {"browInnerUp_L", "browInnerUp_R"} in pairs
+
+
+def test_overshoot_heat_is_the_excess_of_the_sum():
+    d_i = np.array([[1.0, 0, 0], [1.0, 0, 0], [0, 0, 0], [1.0, 0, 0]])
+    d_j = np.array([[1.0, 0, 0], [-1.0, 0, 0], [0, 2.0, 0], [0, 1.0, 0]])
+    np.testing.assert_allclose(overshoot_heat(d_i, d_j), [1.0, 0.0, 0.0, np.sqrt(2) - 1])
+
+
 def test_heat_map_of_a_pair(ict_rig):
     i, j = ict_rig.shape_index("browInnerUp_L"), ict_rig.shape_index("browInnerUp_R")
     heat = interference_heat(ict_rig.deltas[i], ict_rig.deltas[j])
@@ -344,6 +385,10 @@ def test_brow_example_on_the_sample_rig(sample, rule):
 
 def test_interference_finder_on_the_sample_rig(sample):
     names = sample.shape_names
+    Os = shape_overshoot(sample.deltas)
+    inner_l = names.index("browInnerUp_L")
+    assert [names[j] for j, _ in rank_partners(Os, inner_l, 2)] == ["browInnerUp_R", "browOuterUp_L"]
+    assert {"browInnerUp_L", "browInnerUp_R"} in [{names[i], names[j]} for i, j, _ in rank_interference(None, 20, overlap=Os)]
     O = shape_overlap(sample.deltas)
     top = rank_interference(None, 10, overlap=O)
     print("sample rig top 10:", [(names[i], names[j], round(s, 3)) for i, j, s in top])

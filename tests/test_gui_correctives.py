@@ -258,7 +258,23 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     assert len(pairs) == ctrl.panel.top.value() and ctrl.panel.pairs.topLevelItemCount() == len(pairs)
     scores = [s for _, _, s in pairs]
     assert scores == sorted(scores, reverse=True) and 0 < scores[0] <= 1
-    ctrl.panel.measure.setCurrentIndex(1)
+    # the default measure, overshoot: the heat map is how far the pair's sum goes beyond the larger shape
+    assert ctrl.measure == "overshoot"
+    ctrl.panel.select_pair(0)
+    i, j, _ = pairs[0]
+    d_i, d_j = rig.deltas[i], rig.deltas[j]
+    larger = np.maximum(np.linalg.norm(d_i, axis=1), np.linalg.norm(d_j, axis=1))
+    np.testing.assert_allclose(w.viewport._colormap.scalars,
+                               np.maximum(np.linalg.norm(d_i + d_j, axis=1) - larger, 0.0), atol=1e-12)
+    assert w.viewport._colormap.title.startswith("overshoot") and w.viewport._colormap.scalars.max() > 0
+    # the partners of one shape: the other inner brow first, as Smith's brow example has it
+    ctrl.panel.partner_of.setCurrentIndex(ctrl.panel.partner_of.findData("browInnerUp_L"))
+    partners = ctrl.find_pairs()
+    assert [rig.shape_names[j] for _, j, _ in partners[:2]] == ["browInnerUp_R", "browOuterUp_L"]
+    first = ctrl.panel.pairs.topLevelItem(0)
+    assert (first.text(2), first.text(3)) == ("browInnerUp_L", "browInnerUp_R")
+    ctrl.panel.partner_of.setCurrentIndex(0)
+    ctrl.panel.measure.setCurrentIndex(ctrl.panel.measure.findData("directional"))
     directional = ctrl.find_pairs()
     assert all(s <= 1 for *_, s in directional)
     ctrl.panel.select_pair(0)

@@ -174,9 +174,12 @@ class CorrectivesPanel(QtWidgets.QWidget):
         page = QtWidgets.QWidget()
         lay = QtWidgets.QVBoxLayout(page)
         row = QtWidgets.QHBoxLayout()
-        self.measure = _combo([("plain", "Overlap"), ("directional", "Overlap, same direction")],
-                              "Overlap: Σ min(‖d_i‖, ‖d_j‖) / min(Σ‖d_i‖, Σ‖d_j‖). Same direction also "
-                              "weights each vertex by max(0, cos θ), so opposing shapes drop out")
+        self.measure = _combo([("overshoot", "Overshoot where both act"), ("plain", "Overlap"),
+                               ("directional", "Overlap, same direction")],
+                              "Overshoot: how much the pair's sum exceeds the larger displacement where both "
+                              "shapes act (1 = the motion doubles, below 0 = they cancel), shrunk for small "
+                              "shared areas.\nOverlap: Σ min(‖d_i‖, ‖d_j‖) / min(Σ‖d_i‖, Σ‖d_j‖). Same "
+                              "direction also weights each vertex by max(0, cos θ), so opposing shapes drop out")
         self.top = QtWidgets.QSpinBox()
         self.top.setRange(1, 500)
         self.top.setValue(20)
@@ -188,12 +191,21 @@ class CorrectivesPanel(QtWidgets.QWidget):
         row.addWidget(self.top)
         row.addWidget(self.find_button)
         lay.addLayout(row)
+        prow = QtWidgets.QHBoxLayout()
+        prow.addWidget(QtWidgets.QLabel("Pairs with"))
+        self.partner_of = QtWidgets.QComboBox()
+        self.partner_of.addItem("any shape", None)
+        self.partner_of.setToolTip("List every pair, or only the partners of one shape (the shape you are "
+                                   "correcting), best first")
+        self.partner_of.activated.connect(lambda _=0: self.find_requested.emit())
+        prow.addWidget(self.partner_of, 1)
+        lay.addLayout(prow)
         self.pairs = QtWidgets.QTreeWidget()
-        self.pairs.setHeaderLabels(["#", "Shape", "Shape", "Score"])
+        self.pairs.setHeaderLabels(["#", "Score", "Shape", "Shape"])
         self.pairs.setRootIsDecorated(False)
         self.pairs.setAlternatingRowColors(True)
-        self.pairs.setToolTip("Shape pairs that overlap most, best first; select one to see where they "
-                              "interfere (min(‖d_i‖, ‖d_j‖) per vertex)")
+        self.pairs.setToolTip("Shape pairs that interfere most, best first; select one to see where (the "
+                              "overshoot of their sum, or min(‖d_i‖, ‖d_j‖) for the overlap measures)")
         self.pairs.itemSelectionChanged.connect(self._on_pair)
         lay.addWidget(self.pairs, 1)
         self.pair_info = QtWidgets.QLabel("")
@@ -208,6 +220,12 @@ class CorrectivesPanel(QtWidgets.QWidget):
 
     # --- state shown -------------------------------------------------------------------------------
     def set_shapes(self, names: list[str]) -> None:
+        chosen = self.partner_of.currentData()
+        self.partner_of.clear()
+        self.partner_of.addItem("any shape", None)
+        for n in names:
+            self.partner_of.addItem(n, n)
+        self.partner_of.setCurrentIndex(max(0, self.partner_of.findData(chosen)) if chosen in names else 0)
         self.drivers.clear()
         for n in names:
             item = QtWidgets.QListWidgetItem(n)
@@ -312,10 +330,10 @@ class CorrectivesPanel(QtWidgets.QWidget):
     def set_pairs(self, rows: list[tuple[str, str, float]]) -> None:
         self.pairs.clear()
         for i, (a, b, s) in enumerate(rows):
-            item = QtWidgets.QTreeWidgetItem([str(i + 1), a, b, f"{s:.3f}"])
-            item.setTextAlignment(3, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
+            item = QtWidgets.QTreeWidgetItem([str(i + 1), f"{s:.3f}", a, b])  # the score before the long names
+            item.setTextAlignment(1, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
             self.pairs.addTopLevelItem(item)
-        for c in range(3):
+        for c in range(4):
             self.pairs.resizeColumnToContents(c)
         self.create_pair_button.setEnabled(False)
 

@@ -10,7 +10,7 @@ import pytest
 
 from model.correctives import Corrective, set_correctives
 from model.pose import PoseEvaluator
-from solvers.correctives import driver_region, rank_interference, shape_overlap
+from solvers.correctives import driver_region, rank_interference, shape_overlap, shape_overshoot
 from solvers.sculpt import SculptMesh, grab
 
 # 14 pairs, 4 three-way and 2 four-way correctives on overlapping shapes, all four rules.
@@ -59,6 +59,11 @@ def test_interference_finder_all_pairs(benchmark, ict_rig):
 
 def test_interference_finder_directional(benchmark, ict_rig):
     O = benchmark.pedantic(shape_overlap, args=(ict_rig.deltas, True), rounds=3, iterations=1)
+    assert O.shape == (57, 57)
+
+
+def test_interference_finder_overshoot(benchmark, ict_rig):
+    O = benchmark.pedantic(shape_overshoot, args=(ict_rig.deltas,), rounds=3, iterations=1)
     assert O.shape == (57, 57)
 
 
