@@ -617,7 +617,7 @@ class CorrectiveController(QtCore.QObject):
         heat_of = overshoot_heat if overshoot else interference_heat
         self.heat = heat_of(rig.deltas[i], rig.deltas[j])
         if self._saved_colormap is _UNSET:
-            self._saved_colormap = getattr(self.viewport, "_colormap", None)
+            self._saved_colormap = self.viewport.colormap
         top = float(self.heat.max())
         title = f"overshoot ({rig.units})" if overshoot else f"interference ({rig.units})"
         self._heat_colormap = ColorMap(self.heat, title=title, cmap="YlOrRd", clim=(0.0, top if top > 0 else 1.0))
@@ -628,8 +628,8 @@ class CorrectiveController(QtCore.QObject):
                                      f"{what} up to {top:.3g} {rig.units}, above 10% on {n:,} vertices.")
 
     def _reapply_heat_map(self) -> None:
-        if self._saved_colormap is not _UNSET and getattr(self.viewport, "_colormap", None) is not self._heat_colormap:
-            self._saved_colormap = getattr(self.viewport, "_colormap", None)
+        if self._saved_colormap is not _UNSET and self.viewport.colormap is not self._heat_colormap:
+            self._saved_colormap = self.viewport.colormap
             self.viewport.set_colormap(self._heat_colormap)
 
     def leave_heat_map(self) -> None:

@@ -100,6 +100,21 @@ class _Params:
         return arr.reshape(dims[::-1]) if len(dims) > 1 else (arr if dims else arr[0])
 
 
+def _frame_count(params: _Params, first: int, last: int) -> int:
+    """Frames in the file. POINT:FRAMES is a 16-bit word: past 32,767 frames writers store it unsigned (read
+    back here as such), and past 65,535 the 32-bit TRIAL:ACTUAL_START_FIELD / ACTUAL_END_FIELD (two 16-bit
+    words each, low word first) give the range."""
+    frames = params.get("POINT", "FRAMES")
+    n = int(frames) % 65536 if frames is not None else last - first + 1
+    start, end = params.get("TRIAL", "ACTUAL_START_FIELD"), params.get("TRIAL", "ACTUAL_END_FIELD")
+    if start is not None and end is not None and np.size(start) == 2 and np.size(end) == 2:
+        def value(words) -> int:
+            low, high = (int(w) % 65536 for w in np.asarray(words).ravel())
+            return low + 65536 * high
+        n = max(n, value(end) - value(start) + 1)
+    return n
+
+
 def read_c3d(path: str | Path) -> MarkerTake:
     """Read the 3D points of a C3D file into a MarkerTake (NaN where the residual is negative)."""
     path = Path(path)
@@ -125,8 +140,7 @@ def read_c3d(path: str | Path) -> MarkerTake:
     scale = float(params.get("POINT", "SCALE", hscale))
     rate = float(params.get("POINT", "RATE", hrate))
     data_start = int(params.get("POINT", "DATA_START", h[8]))
-    frames_param = params.get("POINT", "FRAMES")
-    n_frames = int(frames_param) if frames_param is not None else last - first + 1
+    n_frames = _frame_count(params, first, last)
     if n_frames <= 0:
         raise RigInputError(f"{path}: the C3D file holds no frames.")
     labels = params.get("POINT", "LABELS", [])
@@ -192,21 +206,25 @@ def write_c3d(path: str | Path, take: MarkerTake, *, integer: bool = False, scal
     plist = [
         _group(1, "POINT"),
         _param(1, "USED", 2, (), struct.pack("<h", M)),
-        _param(1, "FRAMES", 2, (), struct.pack("<h", F)),
+        _param(1, "FRAMES", 2, (), struct.pack("<H", min(F, 65535))),  # unsigned past 32,767, as readers expect
         _param(1, "SCALE", 4, (), struct.pack("<f", pscale)),
         _param(1, "RATE", 4, (), struct.pack("<f", take.rate)),
         _param(1, "UNITS", -1, (len(units),), units),
         _param(1, "LABELS", -1, (width, M), labels),
     ]
+    if F > 65535:  # the 32-bit frame range (low word first) where 16 bits cannot hold the count
+        plist += [_group(2, "TRIAL"),
+                  _param(2, "ACTUAL_START_FIELD", 2, (2,), struct.pack("<HH", 1, 0)),
+                  _param(2, "ACTUAL_END_FIELD", 2, (2,), struct.pack("<HH", F % 65536, F // 65536))]
     body = b"".join(plist)
     n_pblocks = (4 + len(body) + 2 + 6 + BLOCK - 1) // BLOCK  # room for DATA_START
     data_start = 2 + n_pblocks
     body += _param(1, "DATA_START", 2, (), struct.pack("<h", data_start))
     last = struct.pack("<bb", 0, 0)
     psec = (bytes([1, 80, n_pblocks, 84]) + body + last).ljust(n_pblocks * BLOCK, b"\x00")
-    header = np.zeros(256, dtype="<i2")
+    header = np.zeros(256, dtype="<u2")
     header[0] = 0x5002
-    header[1], header[2], header[3], header[4], header[5] = M, 0, 1, F, 10
+    header[1], header[2], header[3], header[4], header[5] = M, 0, 1, min(F, 65535), 10
     hb = bytearray(header.tobytes())
     hb[12:16] = struct.pack("<f", pscale)
     hb[16:18] = struct.pack("<h", data_start)

@@ -264,9 +264,9 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     i, j, _ = pairs[0]
     d_i, d_j = rig.deltas[i], rig.deltas[j]
     larger = np.maximum(np.linalg.norm(d_i, axis=1), np.linalg.norm(d_j, axis=1))
-    np.testing.assert_allclose(w.viewport._colormap.scalars,
+    np.testing.assert_allclose(w.viewport.colormap.scalars,
                                np.maximum(np.linalg.norm(d_i + d_j, axis=1) - larger, 0.0), atol=1e-12)
-    assert w.viewport._colormap.title.startswith("overshoot") and w.viewport._colormap.scalars.max() > 0
+    assert w.viewport.colormap.title.startswith("overshoot") and w.viewport.colormap.scalars.max() > 0
     # the partners of one shape: the other inner brow first, as Smith's brow example has it
     ctrl.panel.partner_of.setCurrentIndex(ctrl.panel.partner_of.findData("browInnerUp_L"))
     partners = ctrl.find_pairs()
@@ -279,23 +279,23 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     assert all(s <= 1 for *_, s in directional)
     ctrl.panel.select_pair(0)
     i, j, _ = directional[0]
-    cm = w.viewport._colormap
+    cm = w.viewport.colormap
     assert cm is not None and rig.units in cm.title
     np.testing.assert_allclose(cm.scalars, np.minimum(np.linalg.norm(rig.deltas[i], axis=1),
                                                       np.linalg.norm(rig.deltas[j], axis=1)))
     assert w.viewport.plotter.scalar_bars
-    heat = w.viewport._colormap
+    heat = w.viewport.colormap
     with qtbot.waitSignal(w.segmentation.segmentation_ready, timeout=30000):
         w.segmentation.recompute(w.segmentation.settings())   # a finished segmentation repaints the face...
-    assert w.viewport._colormap is heat                       # ...but the heat map stays on top
+    assert w.viewport.colormap is heat                       # ...but the heat map stays on top
     img = tmp_path / "interference.png"
     w.grab().save(str(img))
     ctrl.panel.tabs.setCurrentIndex(0)                     # leaving restores the previous (shaded) view
-    assert w.viewport._colormap is None
+    assert w.viewport.colormap is None
     ctrl.panel.tabs.setCurrentIndex(1)
     ctrl.panel.select_pair(0)
-    assert w.viewport._colormap is not None
+    assert w.viewport.colormap is not None
     ctrl.panel.create_pair_button.click()
-    assert w.viewport._colormap is None and ctrl.sculpting
+    assert w.viewport.colormap is None and ctrl.sculpting
     assert set(ctrl.authoring) == {rig.shape_names[i], rig.shape_names[j]}
     assert w.document.weights[[i, j]].tolist() == [1.0, 1.0] and w.document.weights.sum() == 2.0

@@ -58,6 +58,21 @@ def test_c3d_integer_format_round_trip(c3d, tmp_path):
     assert np.nanmax(np.abs(back.positions - c3d.positions)) <= 0.005 + 1e-5  # half the int16 scale (+ float32 scale rounding)
 
 
+@pytest.mark.parametrize("n_frames", [40000, 70001])
+def test_long_c3d_takes_past_16_bit_frame_counts(c3d, tmp_path, n_frames):
+    """Past 32,767 frames POINT:FRAMES is read unsigned; past 65,535 the TRIAL frame range gives the count
+    (a 10-minute take at 120 frames/s has 72,000)."""
+    reps = -(-n_frames // c3d.n_frames)
+    long = MarkerTake(positions=np.tile(c3d.positions[:, :3], (reps, 1, 1))[:n_frames], labels=c3d.labels[:3],
+                      rate=120.0, units=c3d.units)
+    path = tmp_path / "long.c3d"
+    write_c3d(path, long)
+    back = read_c3d(path)
+    assert back.n_frames == n_frames
+    np.testing.assert_array_equal(np.isnan(back.positions), np.isnan(long.positions))
+    np.testing.assert_allclose(back.positions[-1], long.positions[-1], atol=1e-5, equal_nan=True)
+
+
 def test_truncated_c3d_names_the_file(take_dir, tmp_path):
     data = (take_dir / "take.c3d").read_bytes()
     bad = tmp_path / "cut.c3d"

@@ -149,6 +149,8 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
     else:
         actor = plotter.add_mesh(mesh, scalars="values", cmap=colormap.cmap, clim=colormap.clim,
                                  scalar_bar_args=bar, **kwargs)
+        if bar["title"] in plotter.scalar_bars:
+            plotter.scalar_bars[bar["title"]].SetVerticalTitleSeparation(8)  # pixels between title and top label
     _map_directly(actor, mesh, "values")
     return actor
 

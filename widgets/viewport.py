@@ -62,6 +62,11 @@ class Viewport(QtWidgets.QWidget):
         """A copy of the drawn vertices (the mesh's own array is rewritten in place on each update)."""
         return None if self.mesh is None else np.array(self.mesh.points)
 
+    @property
+    def colormap(self) -> ColorMap | None:
+        """The colour map the surface shows (None: plain shading)."""
+        return self._colormap
+
     def set_colormap(self, colormap: ColorMap | None) -> None:
         self._colormap = colormap
         if self.mesh is not None:
