@@ -76,7 +76,9 @@ class Document(QtCore.QObject):
         self.evaluator = PoseEvaluator(project.rig)
         self._surface = None
         self.edit_offset = None
-        self.region_weights = self.region_blend = self.region_level = None
+        # the saved current pose, regional if it was (its blend is kept with it)
+        self.region_weights, self.region_blend, self.region_level = \
+            project.region_weights, project.region_blend, project.region_level
         self.edit_region = None
         self._collapsed = None
         self.undo_stack.clear()
@@ -86,7 +88,9 @@ class Document(QtCore.QObject):
 
     def save(self, path: str | Path) -> None:
         assert self.project is not None
-        save_project(self.project, path)
+        p = self.project
+        p.region_weights, p.region_blend, p.region_level = self.region_weights, self.region_blend, self.region_level
+        save_project(p, path)
         self.path = Path(path)
         self.undo_stack.setClean()
         self.path_changed.emit()

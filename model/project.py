@@ -1,6 +1,7 @@
 """The ``.bsproj`` project file: one zip holding a JSON manifest plus ``.npy`` arrays (DESIGN.md).
 
-The rig (neutral, faces, deltas, correctives, presets), the current pose and one JSON-able section per
+The rig (neutral, faces, deltas, correctives, presets), the current pose (global, or per region with the
+partition of unity of its segmentation level) and one JSON-able section per
 feature (segmentation settings, markers, keyframes, takes, solve settings). Arrays are stored
 uncompressed, so saving and opening ICT FaceKit (36 MB of deltas) takes a fraction of a second.
 Saved atomically (model.atomic): a crash mid-save leaves the previous file intact.
@@ -15,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import scipy.sparse as sp
 
 from .atomic import atomic_write_with
 from .errors import RigInputError
@@ -37,11 +39,26 @@ class Project:
     weights: np.ndarray | None = None
     sections: dict[str, Any] = field(default_factory=dict)
     arrays: dict[str, np.ndarray] = field(default_factory=dict)
+    # A regional current pose (DESIGN.md "Pose"): (R+1, K) weights per region of segmentation level
+    # ``region_level``, with that level's (V, R+1) blend; None for a global pose (``weights`` alone).
+    region_weights: np.ndarray | None = None
+    region_blend: sp.csr_matrix | None = None
+    region_level: int | None = None
 
     def __post_init__(self) -> None:
         if self.weights is None:
             self.weights = np.zeros(self.rig.n_shapes)
         self.weights = np.asarray(self.weights, dtype=np.float64)
+        if self.region_weights is not None:
+            self.region_weights = np.asarray(self.region_weights, dtype=np.float64)
+            self.region_blend = sp.csr_matrix(self.region_blend)
+            R1 = self.region_blend.shape[1]
+            if self.region_blend.shape[0] != self.rig.n_vertices or self.region_weights.shape != (R1, self.rig.n_shapes):
+                raise RigInputError(f"the regional pose ({self.region_weights.shape[0]} regions x "
+                                    f"{self.region_weights.shape[-1]} weights, blend {list(self.region_blend.shape)}) "
+                                    f"does not fit the rig ({self.rig.n_vertices} vertices, {self.rig.n_shapes} shapes).")
+            if not np.isfinite(self.region_weights).all() or not np.isfinite(self.region_blend.data).all():
+                raise RigInputError("the regional pose holds NaN or infinite values.")
 
 
 def _npy_bytes(a: np.ndarray) -> bytes:
@@ -67,12 +84,19 @@ def save_project(project: Project, path: str | Path) -> None:
         correctives.append({"name": c.name, "drivers": list(c.drivers), "rule": c.rule, "delta": key})
     for name, a in project.arrays.items():
         arrays[f"extra/{name}"] = np.asarray(a)
+    pose = {}
+    if project.region_weights is not None:
+        blend = sp.csr_matrix(project.region_blend)
+        arrays.update({"pose/region_weights": project.region_weights, "pose/blend_data": blend.data,
+                       "pose/blend_indices": blend.indices, "pose/blend_indptr": blend.indptr})
+        pose = {"region_level": project.region_level, "blend_shape": list(blend.shape)}
     manifest = {
         "format": FORMAT,
         "version": VERSION,
         "rig": {"name": rig.name, "units": rig.units, "shape_names": rig.shape_names,
                 "presets": rig.presets, "source": rig.source},
         "correctives": correctives,
+        "pose": pose,
         "sections": project.sections,
         "arrays": {k: [list(v.shape), str(v.dtype)] for k, v in arrays.items()},
     }
@@ -141,9 +165,22 @@ def load_project(path: str | Path) -> Project:
             if weights.shape != (rig.n_shapes,):
                 raise RigInputError(f"{path}: the saved pose has {weights.size} weights for {rig.n_shapes} shapes.")
             extras = {k[len("extra/"):]: array(k) for k in declared if k.startswith("extra/")}
+            regional = {}
+            pose = manifest.get("pose") or {}
+            if pose.get("blend_shape") is not None:
+                try:
+                    blend = sp.csr_matrix((array("pose/blend_data"), array("pose/blend_indices"),
+                                           array("pose/blend_indptr")), shape=tuple(pose["blend_shape"]))
+                except ValueError as exc:
+                    raise RigInputError(f"{path}: the saved regional pose is damaged ({exc}).") from None
+                regional = dict(region_weights=array("pose/region_weights"), region_blend=blend,
+                                region_level=pose.get("region_level"))
         except RigInputError as exc:
             msg = str(exc)
             raise RigInputError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from None
         except (KeyError, TypeError) as exc:
             raise RigInputError(f"{path}: the project manifest is incomplete (missing {exc}).") from None
-    return Project(rig=rig, weights=weights, sections=manifest.get("sections", {}), arrays=extras)
+    try:
+        return Project(rig=rig, weights=weights, sections=manifest.get("sections", {}), arrays=extras, **regional)
+    except RigInputError as exc:
+        raise RigInputError(f"{path}: {exc}") from None

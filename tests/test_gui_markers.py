@@ -100,6 +100,17 @@ def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, 
     np.testing.assert_array_equal(w.viewport.points(), before_pts)
     w.redo_action.trigger()
     np.testing.assert_array_equal(doc.region_weights, W)
+    # the regional pose is the current pose: saved with the project, shown again on reopening
+    qtbot.waitUntil(lambda: not w._redraw_pending)
+    shown = w.viewport.points().copy()
+    np.testing.assert_array_equal(shown, doc.surface())
+    assert w.save_to(tmp_path / "regional.bsproj")
+    w.document.set_weights(np.zeros(doc.rig.n_shapes))  # another pose in between
+    open_and_wait(qtbot, w, tmp_path / "regional.bsproj")
+    qtbot.waitUntil(lambda: not w._redraw_pending)
+    assert w.document.is_regional and w.document.region_level == c.level
+    np.testing.assert_array_equal(w.document.region_weights, W)
+    np.testing.assert_allclose(w.viewport.points(), shown, atol=1e-6)
 
 
 def test_the_same_drag_moves_the_nose_tip_less_than_a_mouth_corner(qtbot, tmp_path, geometry, nose_tip):

@@ -6,6 +6,7 @@ import zipfile
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from model.errors import RigInputError
 from model.project import Project, load_project, save_project
@@ -43,6 +44,51 @@ def test_ict_round_trip_exact(ict_rig, tmp_path):
     assert np.array_equal(back.rig.deltas, ict_rig.deltas) and np.array_equal(back.rig.neutral, ict_rig.neutral)
     assert np.array_equal(back.rig.face_indices, ict_rig.face_indices) and back.rig.shape_names == ict_rig.shape_names
     assert np.array_equal(back.weights, w)
+
+
+def _regional(project, n_regions=3, seed=0):
+    """A regional current pose: a random partition of unity over ``n_regions`` + background, random weights."""
+    rng = np.random.default_rng(seed)
+    V, K = project.rig.n_vertices, project.rig.n_shapes
+    B = rng.random((V, n_regions + 1)) * (rng.random((V, n_regions + 1)) < 0.5)
+    B[:, -1] += 1e-3
+    B /= B.sum(axis=1, keepdims=True)
+    project.region_blend = sp.csr_matrix(B)
+    project.region_weights = rng.random((n_regions + 1, K))
+    project.region_level = 2
+    return project
+
+
+def test_regional_pose_round_trip_exact(small_project, tmp_path):
+    path = tmp_path / "p.bsproj"
+    p = _regional(small_project)
+    save_project(p, path)
+    back = load_project(path)
+    assert back.region_level == 2
+    np.testing.assert_array_equal(back.region_weights, p.region_weights)
+    assert back.region_blend.shape == p.region_blend.shape and (back.region_blend != p.region_blend).nnz == 0
+    # a global pose stays global
+    p.region_weights = p.region_blend = p.region_level = None
+    save_project(p, path)
+    assert load_project(path).region_weights is None
+
+
+def test_damaged_regional_pose_is_named(small_project, tmp_path):
+    path = tmp_path / "p.bsproj"
+    save_project(_regional(small_project), path)
+    good = path.read_bytes()
+    import io
+    buf = io.BytesIO()
+    np.save(buf, np.zeros((2, small_project.rig.n_shapes)))  # 2 rows for a 4-column blend
+    manifest = json.loads(zipfile.ZipFile(path).read("manifest.json"))
+    manifest["arrays"]["pose/region_weights"][0] = [2, small_project.rig.n_shapes]
+    _rewrite(path, replace={"pose/region_weights.npy": buf.getvalue(), "manifest.json": json.dumps(manifest).encode()})
+    with pytest.raises(RigInputError, match=r"p.bsproj: the regional pose .* does not fit the rig"):
+        load_project(path)
+    path.write_bytes(good)
+    _rewrite(path, drop="pose/blend_indptr.npy")
+    with pytest.raises(RigInputError, match="p.bsproj.*missing the array 'pose/blend_indptr'"):
+        load_project(path)
 
 
 def test_crash_mid_save_keeps_previous_file(small_project, tmp_path, monkeypatch):
