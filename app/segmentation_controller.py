@@ -38,7 +38,7 @@ class SegmentationController(QtCore.QObject):
         self.last_seconds = 0.0
         d = self.document
         d.rig_changed.connect(self._on_rig_change)
-        d.shapes_changed.connect(self._on_rig_change)
+        d.shapes_changed.connect(self._on_shapes_change)
         d.section_changed.connect(self._on_section_change)
         p = panel
         p.view_changed.connect(self._on_view_change)
@@ -74,7 +74,19 @@ class SegmentationController(QtCore.QObject):
             self.panel.set_settings(self.settings())
             self.recompute(self.settings())
 
+    def _on_shapes_change(self) -> None:
+        """Shapes or correctives edited: the segmentation depends on the neutral and the shapes only (edits
+        always replace those arrays), so a corrective edit keeps it instead of recomputing it."""
+        rig, seen = self.document.rig, getattr(self, "_segmented", None)
+        if (rig is not None and seen is not None and self.segmentation is not None and rig.neutral is seen[0]
+                and rig.deltas is seen[1] and list(rig.shape_names) == seen[2]):
+            return
+        self._on_rig_change()
+
     def _on_rig_change(self) -> None:
+        rig = self.document.rig
+        # the arrays themselves (not their ids, which a new array may reuse): what this segmentation is of
+        self._segmented = None if rig is None else (rig.neutral, rig.deltas, list(rig.shape_names))
         self.cache = SegmentationCache()  # the old one may still be in use by a running job
         self.segmentation = None
         self.maps = None

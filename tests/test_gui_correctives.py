@@ -163,9 +163,12 @@ def test_corrective_from_scan_reproduces_the_scan(qtbot, win, tmp_path):
     write_obj(path, scan, rig.face_counts, rig.face_indices)
     ctrl.panel.set_ticked(PAIR)
     n0 = doc.undo_stack.count()
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
+    segmentation = w.segmentation.segmentation
     assert ctrl.from_scan(path, mode="drivers")
     _settle(qtbot, w)
     assert doc.undo_stack.count() == n0 + 1
+    assert w.segmentation.segmentation is segmentation  # a corrective leaves the shapes' segmentation alone
     np.testing.assert_allclose(doc.surface(), scan, atol=1e-5)
     np.testing.assert_allclose(w.viewport.points(), scan, atol=1e-5)
     assert ctrl.panel.activation_texts() == ["1.000"]
