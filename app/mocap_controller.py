@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from app.background import BackgroundRunner
 from model.errors import RigInputError
@@ -540,6 +540,16 @@ class MocapController(QtCore.QObject):
         self.timer.stop()
         self.panel.set_playing(False)
 
+    def toggle_play(self) -> None:
+        """Play or pause the take (Ctrl+Space)."""
+        self.pause() if self.playing else self.play()
+
+    def step(self, frames: int) -> None:
+        """Pause and move ``frames`` frames (Alt+, / Alt+.), clamped to the take."""
+        self.pause()
+        if self.n_frames:
+            self.set_frame(max(self.frame, 0) + frames)
+
     @property
     def playing(self) -> bool:
         return self.timer.isActive()
@@ -723,4 +733,24 @@ def install(window) -> MocapController:
     controller = MocapController(window, panel, views, weight_plot, error_plot, window)
     controller.views_dock = window.mocap_views_dock
     window.mocap = controller
+    _add_take_actions(window, controller)
     return controller
+
+
+def _add_take_actions(window, controller: MocapController) -> None:
+    """Animation menu: play / pause and step the take from the keyboard (Space plays the keyed animation)."""
+    menus = {a.text().replace("&", ""): a.menu() for a in window.menuBar().actions()}
+    menu = menus.get("Animation") or window.menuBar().addMenu("&Animation")
+    menu.addSeparator()
+    for text, slot, key, tip in (
+            ("Play / Pause &Take", controller.toggle_play, "Ctrl+Space", "Play or pause the loaded take"),
+            ("Previous Take Frame", lambda: controller.step(-1), "Alt+,", "Step the take one frame back"),
+            ("Next Take Frame", lambda: controller.step(1), "Alt+.", "Step the take one frame on")):
+        act = QtGui.QAction(text, window)
+        act.setShortcut(QtGui.QKeySequence(key))
+        act.setToolTip(tip)
+        act.setStatusTip(tip)
+        act.triggered.connect(lambda _=False, f=slot: f())
+        menu.addAction(act)
+        window.addAction(act)
+    controller.panel.play_button.setToolTip("Play or pause the take (Ctrl+Space); Alt+, and Alt+. step a frame")

@@ -69,6 +69,17 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     for a, b in ((0, 120), (120, 240)):
         for i in range(4):
             assert np.abs(shots[a][i] - shots[b][i]).max() > 1e-3, (a, b, i)
+    # the keyboard: Alt+. / Alt+, step the take, Ctrl+Space plays and pauses it
+    acts = {a.text(): a for a in w.actions()}
+    acts["Next Take Frame"].trigger()
+    assert mc.frame == 241 and w.mocap_panel.slider.value() == 241
+    acts["Previous Take Frame"].trigger()
+    acts["Previous Take Frame"].trigger()
+    assert mc.frame == 239
+    acts["Play / Pause &Take"].trigger()
+    assert mc.playing and acts["Play / Pause &Take"].shortcut().toString() == "Ctrl+Space"
+    acts["Play / Pause &Take"].trigger()
+    assert not mc.playing
     proj, dense, res = shots[240][:3]
     np.testing.assert_allclose(res, np.linalg.norm(dense - proj, axis=1) * 10.0, rtol=1e-3, atol=1e-3)  # cm -> mm
     np.testing.assert_allclose(dense, sol.dense(240)[mc.views.shown_vertices], atol=1e-4)

@@ -80,7 +80,8 @@ class MocapPanel(QtWidgets.QWidget):
         self.export_report_button = QtWidgets.QPushButton("Error Report…")
         for b in (self.export_weights_button, self.export_pc2_button, self.export_report_button):
             exp.addWidget(b)
-        form.addRow("Export", exp)
+        form.addRow(QtWidgets.QLabel("Export"))
+        form.addRow(exp)  # under their label, full width: the panel stays narrow enough for its dock
         lay.addWidget(solve)
 
         play = QtWidgets.QGroupBox("Playback")
@@ -95,14 +96,14 @@ class MocapPanel(QtWidgets.QWidget):
         self.fps_label = QtWidgets.QLabel("")
         pl.addWidget(self.play_button, 0, 0)
         pl.addWidget(self.loop_check, 0, 1)
-        pl.addWidget(self.frame_label, 0, 2)
-        pl.addWidget(self.fps_label, 0, 3)
+        pl.addWidget(self.frame_label, 0, 2, 1, 2)
         pl.addWidget(self.slider, 1, 0, 1, 4)
+        pl.addWidget(self.fps_label, 2, 0, 1, 4)
         self.curve_list = QtWidgets.QListWidget()
         self.curve_list.setMaximumHeight(110)
         self.curve_list.setToolTip("Shapes whose weight curves are plotted")
-        pl.addWidget(QtWidgets.QLabel("Curves"), 2, 0)
-        pl.addWidget(self.curve_list, 3, 0, 1, 4)
+        pl.addWidget(QtWidgets.QLabel("Curves"), 3, 0)
+        pl.addWidget(self.curve_list, 4, 0, 1, 4)
         lay.addWidget(play)
 
         self.status_label = QtWidgets.QLabel("")
