@@ -160,3 +160,14 @@ def test_solve_without_map_or_segmentation_says_why(qtbot, tmp_path, take_dir):
     assert mc.load_take(take_dir / "take.c3d")
     mc.solve()
     assert "marker map" in w.last_error and mc.solution is None
+
+
+def test_side_by_side_culls_the_faces_turned_away_whatever_the_winding():
+    """The views cull back faces of a mesh wound counter-clockwise seen from the front (+Z), front faces of
+    one wound the other way: the face the camera looks at is never the culled side."""
+    from solvers.normals import VertexNormals
+    from widgets.side_by_side import _faces_forward
+    quad = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    ccw, cw = np.array([0, 1, 2, 3]), np.array([0, 3, 2, 1])
+    assert _faces_forward(quad, VertexNormals(np.array([4]), ccw, 4))
+    assert not _faces_forward(quad, VertexNormals(np.array([4]), cw, 4))
