@@ -680,6 +680,7 @@ def install(window) -> CorrectiveController:
     window.panels_menu.addAction(dock.toggleViewAction())
     ctrl = CorrectiveController(window, panel, dock)
     window.correctives = ctrl
+    _remember_measure(panel)
 
     menu = QtWidgets.QMenu("&Correctives", window)
     help_menu = next((a for a in window.menuBar().actions() if a.text().replace("&", "") == "Help"), None)
@@ -716,3 +717,13 @@ def install(window) -> CorrectiveController:
     ]
     ctrl._set_brush_actions(False)
     return ctrl
+
+
+def _remember_measure(panel: CorrectivesPanel) -> None:
+    """The interference measure last chosen comes back in the next session."""
+    from app import settings as app_settings
+    saved = app_settings.settings().value("interference/measure")
+    if saved is not None and panel.measure.findData(saved) >= 0:
+        panel.measure.setCurrentIndex(panel.measure.findData(saved))
+    panel.measure.currentIndexChanged.connect(
+        lambda _=0: app_settings.settings().setValue("interference/measure", panel.measure.currentData()))

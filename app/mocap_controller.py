@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from app import settings as app_settings
 from app.background import BackgroundRunner
 from model.errors import RigInputError
 from model.rig import unit_scale
@@ -418,14 +419,19 @@ class MocapController(QtCore.QObject):
         self.solved.emit()
 
     def _show_views_dock(self) -> None:
-        """Show the Mocap Views dock; the first time, split it half views, half curves."""
+        """Show the Mocap Views dock; the first time, split it as the user last did (else half views, half
+        curves)."""
         first = not self.views_dock.isVisible() and not getattr(self, "_views_split", False)
         self.views_dock.show()
         splitter = self.views.parentWidget()
         if first and isinstance(splitter, QtWidgets.QSplitter):
             self._views_split = True
-            # once the dock has its size (the next turn of the event loop)
-            QtCore.QTimer.singleShot(0, lambda: splitter.setSizes([max(1, sum(splitter.sizes()) // 2)] * 2))
+            saved = app_settings.settings().value("mocap/viewsSplitter")
+
+            def split() -> None:  # once the dock has its size (the next turn of the event loop)
+                if saved is None or not splitter.restoreState(saved):
+                    splitter.setSizes([max(1, sum(splitter.sizes()) // 2)] * 2)
+            QtCore.QTimer.singleShot(0, split)
 
     @staticmethod
     def _face_box(markers: np.ndarray) -> np.ndarray:
@@ -692,6 +698,9 @@ class MocapController(QtCore.QObject):
         if self._shut_down:
             return
         self._shut_down = True
+        splitter = self.views.parentWidget()
+        if getattr(self, "_views_split", False) and isinstance(splitter, QtWidgets.QSplitter):
+            app_settings.settings().setValue("mocap/viewsSplitter", splitter.saveState())  # for the next session
         self.pause()
         self._stop_fill()
         self._cancel.set()

@@ -279,6 +279,9 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     ctrl.panel.partner_of.setCurrentIndex(0)
     ctrl.panel.measure.setCurrentIndex(ctrl.panel.measure.findData("directional"))
     directional = ctrl.find_pairs()
+    w2 = make_window(qtbot, tmp_path)  # the next session (same settings folder) starts on the chosen measure
+    assert w2.correctives.measure == "directional"
+    w2.close()
     assert all(s <= 1 for *_, s in directional)
     ctrl.panel.select_pair(0)
     i, j, _ = directional[0]

@@ -121,6 +121,16 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     _check_weight_playback(qtbot, w, mc)
     assert w.document.undo_stack.count() == undo_before
 
+    # the views / curves split the user chose comes back in the next session
+    splitter = mc.views.parentWidget()
+    splitter.setSizes([400, sum(splitter.sizes()) - 400])
+    chosen = splitter.sizes()
+    w2, mc2 = _install(qtbot, tmp_path)
+    mc.shutdown()   # what closing the first window does
+    mc2._show_views_dock()
+    qtbot.waitUntil(lambda: mc2.views.parentWidget().sizes() == chosen, timeout=5000)
+    w2.close()
+
 
 def _check_weight_playback(qtbot, w, mc):
     mc.set_frame(0)
