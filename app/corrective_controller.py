@@ -62,6 +62,7 @@ class CorrectiveController(QtCore.QObject):
         self._cursor_unit = None
         self._overlap: dict[str, np.ndarray] = {}  # (K, K) scores by measure, until the shapes change
         self.pairs: list[tuple[int, int, float]] = []
+        self._pairs_measure = "overshoot"  # the measure self.pairs were ranked by
         self._saved_colormap = _UNSET
         self.heat: np.ndarray | None = None
         self._heat_colormap: ColorMap | None = None
@@ -613,7 +614,7 @@ class CorrectiveController(QtCore.QObject):
             return
         rig = self.document.rig
         i, j, score = self.pairs[row]
-        overshoot = getattr(self, "_pairs_measure", "overshoot") == "overshoot"
+        overshoot = self._pairs_measure == "overshoot"
         heat_of = overshoot_heat if overshoot else interference_heat
         self.heat = heat_of(rig.deltas[i], rig.deltas[j])
         if self._saved_colormap is _UNSET:

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from PySide6 import QtCore, QtGui, QtWidgets
+from PySide6 import QtCore, QtWidgets
 
 from app import settings as app_settings
 from app.background import BackgroundRunner
@@ -142,6 +142,7 @@ class MocapController(QtCore.QObject):
         self.frame = 0
         self.runner = BackgroundRunner(self)
         self._shut_down = False
+        self._views_split = False  # the Mocap Views splitter got its first layout (saved on shutdown)
         self._relay = _ProgressRelay(self)
         self._relay.progress.connect(self._on_progress)
         self._cancel = threading.Event()
@@ -421,10 +422,9 @@ class MocapController(QtCore.QObject):
     def _show_views_dock(self) -> None:
         """Show the Mocap Views dock; the first time, split it as the user last did (else half views, half
         curves)."""
-        first = not self.views_dock.isVisible() and not getattr(self, "_views_split", False)
         self.views_dock.show()
         splitter = self.views.parentWidget()
-        if first and isinstance(splitter, QtWidgets.QSplitter):
+        if not self._views_split and isinstance(splitter, QtWidgets.QSplitter):
             self._views_split = True
             saved = app_settings.settings().value("mocap/viewsSplitter")
 
@@ -699,7 +699,7 @@ class MocapController(QtCore.QObject):
             return
         self._shut_down = True
         splitter = self.views.parentWidget()
-        if getattr(self, "_views_split", False) and isinstance(splitter, QtWidgets.QSplitter):
+        if self._views_split and isinstance(splitter, QtWidgets.QSplitter):
             app_settings.settings().setValue("mocap/viewsSplitter", splitter.saveState())  # for the next session
         self.pause()
         self._stop_fill()
@@ -755,11 +755,5 @@ def _add_take_actions(window, controller: MocapController) -> None:
             ("Play / Pause &Take", controller.toggle_play, "Ctrl+Space", "Play or pause the loaded take"),
             ("Previous Take Frame", lambda: controller.step(-1), "Alt+,", "Step the take one frame back"),
             ("Next Take Frame", lambda: controller.step(1), "Alt+.", "Step the take one frame on")):
-        act = QtGui.QAction(text, window)
-        act.setShortcut(QtGui.QKeySequence(key))
-        act.setToolTip(tip)
-        act.setStatusTip(tip)
-        act.triggered.connect(lambda _=False, f=slot: f())
-        menu.addAction(act)
-        window.addAction(act)
+        window.addAction(window._action(menu, text, lambda _=False, f=slot: f(), key, tip))
     controller.panel.play_button.setToolTip("Play or pause the take (Ctrl+Space); Alt+, and Alt+. step a frame")

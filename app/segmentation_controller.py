@@ -36,6 +36,7 @@ class SegmentationController(QtCore.QObject):
         self.shape_map = -1
         self.highlight: int | None = None
         self.last_seconds = 0.0
+        self._segmented: tuple | None = None  # (neutral, deltas, shape names) the segmentation is of
         d = self.document
         d.rig_changed.connect(self._on_rig_change)
         d.shapes_changed.connect(self._on_shapes_change)
@@ -77,7 +78,7 @@ class SegmentationController(QtCore.QObject):
     def _on_shapes_change(self) -> None:
         """Shapes or correctives edited: the segmentation depends on the neutral and the shapes only (edits
         always replace those arrays), so a corrective edit keeps it instead of recomputing it."""
-        rig, seen = self.document.rig, getattr(self, "_segmented", None)
+        rig, seen = self.document.rig, self._segmented
         if (rig is not None and seen is not None and self.segmentation is not None and rig.neutral is seen[0]
                 and rig.deltas is seen[1] and list(rig.shape_names) == seen[2]):
             return

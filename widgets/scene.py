@@ -42,11 +42,11 @@ def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarr
     """A pyvista PolyData of the surface (float32 points for display) with smooth-shading normals.
 
     ``mesh.field_data`` is left alone; the normals function (``normals``, to share one built for these
-    faces, else a new one) is kept on the mesh object as ``mesh._display_normals`` so set_points() can
+    faces, else a new one) is kept on the mesh object as ``mesh._display_normals`` so SurfaceArrays can
     refresh them.
     """
     import pyvista as pv
-    # A copy: set_points() writes into the mesh's own arrays, never into the caller's.
+    # A copy: SurfaceArrays writes into the mesh's own arrays, never into the caller's.
     mesh = pv.PolyData(np.array(points, dtype=np.float32), vtk_faces(face_counts, face_indices))
     if normals is None:
         normals = VertexNormals(face_counts, face_indices, mesh.n_points)
@@ -56,31 +56,9 @@ def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarr
     return mesh
 
 
-def set_points(mesh, points: np.ndarray, normals: np.ndarray | None = None) -> None:
-    """Move a rig mesh's vertices in place and refresh its normals: ``normals`` if given (float, or int8 from
-    ``VertexNormals.quantised``), else computed from the points (~2 ms on ICT FaceKit)."""
-    pts = np.asarray(points, dtype=np.float32)
-    if normals is None:
-        normals = mesh._display_normals(pts)
-    old_points, old_normals = mesh.points, mesh.point_data["Normals"]
-    if old_points.shape != pts.shape or old_normals.dtype != np.float32:
-        mesh.points = pts
-        mesh.point_data["Normals"] = dequantise(normals) if normals.dtype == np.int8 else normals
-        mesh.point_data.active_normals_name = "Normals"
-        return
-    # In place (playback moves ~27k points 30+ times a second): no new VTK arrays, two Modified() calls.
-    old_points[:] = pts
-    if normals.dtype == np.int8:
-        dequantise(normals, out=old_normals)
-    else:
-        old_normals[:] = normals
-    mesh.GetPoints().Modified()
-    mesh.GetPointData().GetNormals().Modified()
-
-
 class SurfaceArrays:
-    """Numpy views of a display mesh's own VTK arrays -- points, normals and optionally one scalar array --
-    for in-place updates many times a second (playback) without pyvista's wrapping on every access."""
+    """Numpy views of a rig mesh's own VTK arrays -- points, normals and optionally one scalar array -- for
+    in-place updates (a drag, playback) without new VTK arrays or pyvista's wrapping on every access."""
 
     def __init__(self, mesh, scalars: str | None = None) -> None:
         from vtkmodules.util.numpy_support import vtk_to_numpy
@@ -121,7 +99,7 @@ class ColorMap:
 def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: bool = False, name="surface",
                 specular: float = 0.25):
     """Add the rig surface with smooth shading; colour by ``colormap`` with a legend if given."""
-    # Smooth shading comes from the mesh's own "Normals" (rig_mesh/set_points), not VTK's filter.
+    # Smooth shading comes from the mesh's own "Normals" (rig_mesh/SurfaceArrays), not VTK's filter.
     kwargs = dict(smooth_shading=False, interpolation="gouraud", name=name, show_edges=wireframe, edge_color=(0.15, 0.15, 0.18),
                   line_width=0.5, specular=specular, specular_power=20, diffuse=0.85, ambient=0.12,
                   reset_camera=False)

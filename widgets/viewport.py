@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from .scene import ColorMap, add_surface, rig_mesh, set_camera, set_points, style_plotter
+from .scene import ColorMap, SurfaceArrays, add_surface, rig_mesh, set_camera, style_plotter
 
 
 class Viewport(QtWidgets.QWidget):
@@ -46,6 +46,7 @@ class Viewport(QtWidgets.QWidget):
         self._faces = (face_counts, face_indices)
         self._focus = focus if focus is not None else points
         self.mesh = rig_mesh(points, face_counts, face_indices)
+        self._arrays = SurfaceArrays(self.mesh)
         self._redraw_surface()
         if reset_camera:
             self.set_camera(self._camera)
@@ -55,7 +56,7 @@ class Viewport(QtWidgets.QWidget):
         """Move the surface's vertices (same order and count) and redraw."""
         if self.mesh is None:
             return
-        set_points(self.mesh, points)
+        self._arrays.update(points)
         self.render()
 
     def points(self) -> np.ndarray | None:
