@@ -138,7 +138,8 @@ def cmd_segment(args) -> int:
 
 def cmd_corrective(args) -> int:
     """Smith §4.5 from a scan: e = (x_scan − x_cur) / a(w) at full drivers (or fit weights first with --fit)."""
-    from model.correctives import Corrective, RULES, activation_for, add_corrective, authoring_surface
+    from model.correctives import (Corrective, RULES, activation_for, add_corrective, authoring_surface,
+                                   mirrored_corrective)
     from model.obj_io import read_obj
     from model.project import Project, load_project, save_project
     from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
@@ -168,9 +169,13 @@ def cmd_corrective(args) -> int:
         x_cur, w = authoring_surface(rig, drivers)
         delta = corrective_delta(scan, x_cur, activation_for(drivers, args.rule, rig.shape_names, w))
     corrective = Corrective(drivers=drivers, delta=delta, rule=args.rule, name=args.name or "")
-    add_corrective(rig, corrective)
+    made = [corrective]
+    if args.mirror:
+        made.append(mirrored_corrective(corrective, rig.shape_names, rig.neutral, units=rig.units))
+    for c in made:
+        add_corrective(rig, c)
     save_project(project, args.output)
-    print(f"wrote {args.output} with corrective {corrective.name} ({args.rule}); "
+    print(f"wrote {args.output} with corrective {' and '.join(c.name for c in made)} ({args.rule}); "
           f"largest correction {np.linalg.norm(delta, axis=1).max():.4g} {rig.units}")
     return 0
 
@@ -239,6 +244,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--name", help="corrective name (default: the drivers joined by '+')")
     sp.add_argument("--fit", action="store_true",
                     help="the scan is a free performance: fit the weights first and keep the residual over the drivers' region")
+    sp.add_argument("--mirror", action="store_true",
+                    help="also add the other side's corrective (drivers _L<->_R, reflected across x = 0)")
     sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
     sp.set_defaults(func=cmd_corrective)
 

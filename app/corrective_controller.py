@@ -16,12 +16,14 @@ from PySide6 import QtCore, QtWidgets
 from app.commands import SetEditOffsetCommand, SetWeightsCommand
 from app.corrective_commands import SetCorrectivesCommand
 from model.correctives import (Corrective, activation_for, authoring_surface, corrective_activation,
-                               corrective_activations, driver_pose, find_corrective, validate_correctives)
+                               corrective_activations, driver_pose, find_corrective, mirrored_corrective,
+                               validate_correctives)
 from model.errors import RigInputError
+from model.sides import mirror_indices
 from solvers import sculpt
 from solvers.correctives import (corrective_delta, corrective_from_scan, driver_region, fit_scan_weights,
-                                 interference_heat, overshoot_heat, rank_interference, rank_partners,
-                                 shape_overlap, shape_overshoot)
+                                 interference_heat, merge_mirrored_pairs, overshoot_heat,
+                                 rank_interference, rank_partners, shape_overlap, shape_overshoot)
 from widgets.correctives_panel import CorrectivesPanel
 from widgets.scene import ColorMap
 
@@ -61,7 +63,9 @@ class CorrectiveController(QtCore.QObject):
         self._cursor = None
         self._cursor_unit = None
         self._overlap: dict[str, np.ndarray] = {}  # (K, K) scores by measure, until the shapes change
+        self._mirror: np.ndarray | None = None   # the rig's vertex mirror map across x = 0
         self.pairs: list[tuple[int, int, float]] = []
+        self.pair_mirrors: list[tuple[int, int, float] | None] = []  # each row's mirror pair, when folded in
         self._pairs_measure = "overshoot"  # the measure self.pairs were ranked by
         self._saved_colormap = _UNSET
         self.heat: np.ndarray | None = None
@@ -82,6 +86,7 @@ class CorrectiveController(QtCore.QObject):
         p.rename_requested.connect(self.rename)
         p.drivers_requested.connect(self.edit_drivers)
         p.delete_requested.connect(self.delete)
+        p.mirror_requested.connect(self.mirror)
         p.rule_requested.connect(self.set_rule)
         p.find_requested.connect(self.find_pairs)
         p.pair_selected.connect(self.show_pair)
@@ -102,8 +107,9 @@ class CorrectiveController(QtCore.QObject):
         self.stop_sculpting()
         self.leave_heat_map()
         self.mesh = None
+        self._mirror = None
         self._overlap.clear()
-        self.pairs = []
+        self.pairs, self.pair_mirrors = [], []
         self.panel.set_pairs([])
         rig = self.document.rig
         self.panel.set_shapes(rig.shape_names)
@@ -410,6 +416,29 @@ class CorrectiveController(QtCore.QObject):
                for x in self.document.rig.correctives]
         return self._push_correctives(new, f"Rule of {c.name}: {rule}")
 
+    def mirror(self, name: str | None = None) -> bool:
+        """Add the other side's version of a corrective (``model.correctives.mirrored_corrective``); an
+        existing corrective on the mirrored drivers is replaced. One undoable edit."""
+        c = self._selected(name)
+        if c is None:
+            return False
+        rig = self.document.rig
+        if self._mirror is None:   # the vertex mirror map, once per rig
+            self._mirror = sculpt.mirror_map(rig.neutral)
+        try:
+            made = mirrored_corrective(c, rig.shape_names, rig.neutral, self._mirror, units=rig.units)
+        except RigInputError as exc:
+            self._error(str(exc))
+            return False
+        old = find_corrective(rig.correctives, made.drivers)
+        new = [made if x is old else x for x in rig.correctives] if old is not None else rig.correctives + [made]
+        if not self._push_correctives(new, f"Mirror corrective {c.name} to {made.name}"):
+            return False
+        self.panel.select(made.name)
+        what = f"Replaced {old.name} with" if old is not None else "Made"
+        self.window.statusBar().showMessage(f"{what} {made.name}, the mirror image of {c.name}.", 5000)
+        return True
+
     def delete(self, name: str | None = None) -> bool:
         c = self._selected(name)
         if c is None:
@@ -591,13 +620,21 @@ class CorrectiveController(QtCore.QObject):
         self._pairs_measure = measure
         O, top = self._overlap[measure], self.panel.top.value()
         shape = self.panel.partner_of.currentData()
-        if shape in rig.shape_names:   # the partners of one shape, as (shape, partner, score)
-            k = rig.shape_names.index(shape)
+        names = rig.shape_names
+        self.pair_mirrors = []
+        if shape in names:   # the partners of one shape, as (shape, partner, score)
+            k = names.index(shape)
             self.pairs = [(k, j, s) for j, s in rank_partners(O, k, top)]
+        elif self.panel.merge_mirrored.isChecked():
+            every = rank_interference(None, top=len(names) ** 2, overlap=O)
+            rows = merge_mirrored_pairs(every, mirror_indices(names))[:top]
+            self.pairs = [(i, j, s) for i, j, s, _ in rows]
+            self.pair_mirrors = [m for *_, m in rows]
         else:
             self.pairs = rank_interference(None, top=top, overlap=O)
-        names = rig.shape_names
-        self.panel.set_pairs([(names[i], names[j], s) for i, j, s in self.pairs])
+        mirrors = self.pair_mirrors or [None] * len(self.pairs)
+        self.panel.set_pairs([(names[i], names[j], s, "" if m is None else f"{names[m[0]]} × {names[m[1]]}")
+                              for (i, j, s), m in zip(self.pairs, mirrors)])
         self.leave_heat_map()
         return self.pairs
 
@@ -614,9 +651,12 @@ class CorrectiveController(QtCore.QObject):
             return
         rig = self.document.rig
         i, j, score = self.pairs[row]
+        mirror = self.pair_mirrors[row] if row < len(self.pair_mirrors) else None
         overshoot = self._pairs_measure == "overshoot"
         heat_of = overshoot_heat if overshoot else interference_heat
         self.heat = heat_of(rig.deltas[i], rig.deltas[j])
+        if mirror is not None:   # both sides of a mirrored couple
+            self.heat = np.maximum(self.heat, heat_of(rig.deltas[mirror[0]], rig.deltas[mirror[1]]))
         if self._saved_colormap is _UNSET:
             self._saved_colormap = self.viewport.colormap
         top = float(self.heat.max())
@@ -625,7 +665,9 @@ class CorrectiveController(QtCore.QObject):
         self.viewport.set_colormap(self._heat_colormap)
         n = int((self.heat > 0.1 * top).sum()) if top > 0 else 0
         what = "‖d_i + d_j‖ − max(‖d_i‖, ‖d_j‖)" if overshoot else "min(‖d_i‖, ‖d_j‖)"
-        self.panel.pair_info.setText(f"{rig.shape_names[i]} × {rig.shape_names[j]}: score {score:.3f}; "
+        names = rig.shape_names
+        also = "" if mirror is None else f" (and {names[mirror[0]]} × {names[mirror[1]]}, {mirror[2]:.3f})"
+        self.panel.pair_info.setText(f"{names[i]} × {names[j]}: score {score:.3f}{also}; "
                                      f"{what} up to {top:.3g} {rig.units}, above 10% on {n:,} vertices.")
 
     def _reapply_heat_map(self) -> None:
@@ -681,7 +723,7 @@ def install(window) -> CorrectiveController:
     window.panels_menu.addAction(dock.toggleViewAction())
     ctrl = CorrectiveController(window, panel, dock)
     window.correctives = ctrl
-    _remember_measure(panel)
+    _remember_finder(panel)
 
     menu = QtWidgets.QMenu("&Correctives", window)
     help_menu = next((a for a in window.menuBar().actions() if a.text().replace("&", "") == "Help"), None)
@@ -697,6 +739,8 @@ def install(window) -> CorrectiveController:
     act(menu, "&Save Corrective", lambda _=False: ctrl.save(), "Ctrl+Return", "Store the sculpt as the corrective: e = (x_des − x_cur) / a")
     act(menu, "&Discard Sculpt", lambda _=False: ctrl.discard_sculpt(), None, "Drop the pending sculpt (undoable)")
     act(menu, "S&top Sculpting", lambda _=False: ctrl.stop_sculpting(), None, "Leave sculpt mode")
+    act(menu, "&Mirror Corrective", lambda _=False: ctrl.mirror(), "Ctrl+Shift+M",
+        "Add the other side's version of the selected corrective (drivers _L↔_R, reflected across x = 0)")
     menu.addSeparator()
 
     def _find():
@@ -720,11 +764,19 @@ def install(window) -> CorrectiveController:
     return ctrl
 
 
-def _remember_measure(panel: CorrectivesPanel) -> None:
-    """The interference measure last chosen comes back in the next session."""
+def _remember_finder(panel: CorrectivesPanel) -> None:
+    """The interference measure and the mirror merging last chosen come back in the next session."""
     from app import settings as app_settings
-    saved = app_settings.settings().value("interference/measure")
+    store = app_settings.settings()
+    saved = store.value("interference/measure")
     if saved is not None and panel.measure.findData(saved) >= 0:
         panel.measure.setCurrentIndex(panel.measure.findData(saved))
     panel.measure.currentIndexChanged.connect(
         lambda _=0: app_settings.settings().setValue("interference/measure", panel.measure.currentData()))
+    merge = store.value("interference/mergeMirrored")
+    if merge is not None:
+        panel.merge_mirrored.blockSignals(True)   # no ranking at start-up
+        panel.merge_mirrored.setChecked(str(merge).lower() in ("true", "1"))
+        panel.merge_mirrored.blockSignals(False)
+    panel.merge_mirrored.toggled.connect(
+        lambda on: app_settings.settings().setValue("interference/mergeMirrored", bool(on)))

@@ -349,3 +349,46 @@ def activation_for(drivers, rule: str, shape_names, weights) -> float:
     """a_c(w) of a (not yet created) corrective on ``drivers`` with ``rule``, for a global pose (K,)."""
     probe = Corrective(drivers=list(drivers), rule=rule, delta=np.zeros((0, 3)))
     return corrective_activation(probe, shape_names, weights)
+
+
+# --- mirroring ----------------------------------------------------------------------------------
+MIRROR_TOLERANCE = 0.005   # a vertex has a mirror image when one lies within this fraction of the rig's size
+
+
+def mirrored_corrective(corrective: Corrective, shape_names, neutral, mirror=None, *, units: str = "") -> Corrective:
+    """The other side's version of ``corrective`` (browInnerUp_L+browOuterUp_L → browInnerUp_R+browOuterUp_R):
+    drivers renamed left↔right (``model.sides``), delta reflected across x = 0 through the vertex mirror map
+    (``solvers.correctives.mirror_delta``), same rule. ``mirror`` is the map if already computed.
+
+    Raises RigInputError (one sentence) when the drivers mirror onto themselves, when the rig lacks a mirrored
+    driver, or when the rig is not symmetric where the corrective acts.
+    """
+    from solvers.correctives import mirror_delta
+    from solvers.sculpt import mirror_error, mirror_map
+    from .sides import mirror_name
+
+    c = corrective
+    drivers = [mirror_name(d) for d in c.drivers]
+    if set(drivers) == set(c.drivers):
+        raise RigInputError(f"{c.name} is its own mirror image: its drivers mirror onto themselves.")
+    missing = [d for d in drivers if d not in set(shape_names)]
+    if missing:
+        raise RigInputError(f"Cannot mirror {c.name}: the rig has no shape named "
+                            f"{', '.join(repr(d) for d in missing)}.")
+    neutral = np.asarray(neutral, dtype=np.float64)
+    m = mirror_map(neutral) if mirror is None else np.asarray(mirror)
+    n = np.linalg.norm(c.delta, axis=1)
+    moved = n > 1e-3 * n.max() if n.max() > 0 else n > 0
+    tol = MIRROR_TOLERANCE * float(np.linalg.norm(np.ptp(neutral, axis=0)))
+    bad = int((moved & (mirror_error(neutral, m) > tol)).sum())
+    if bad > 0.01 * moved.sum():
+        raise RigInputError(f"Cannot mirror {c.name}: the rig is not symmetric across x = 0 where it acts "
+                            f"({bad:,} of its {int(moved.sum()):,} vertices have no mirror vertex within "
+                            f"{tol:.2g}{' ' + units if units else ''}).")
+    if c.name == "+".join(c.drivers):
+        name = "+".join(drivers)
+    else:
+        name = "+".join(mirror_name(t) for t in c.name.split("+"))
+        if name == c.name:
+            name = "+".join(drivers)
+    return Corrective(name=name, drivers=drivers, rule=c.rule, delta=mirror_delta(c.delta, m))

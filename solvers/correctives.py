@@ -216,6 +216,40 @@ def rank_interference(deltas, top: int = 10, overlap=None, directional: bool = F
     return [(int(i[o]), int(j[o]), float(s[o])) for o in order]
 
 
+def merge_mirrored_pairs(ranked, mirror) -> list[tuple[int, int, float, tuple[int, int, float] | None]]:
+    """Fold each pair into one row with its mirror image: (i, j, s, (i', j', s') or None), best first.
+
+    ``ranked`` is [(i, j, score), ...] best first (``rank_interference``); ``mirror`` gives each shape's mirror
+    shape (``model.sides.mirror_indices``). The mirror of (i, j) is (mirror[i], mirror[j]); a pair that is its
+    own mirror (browInnerUp_L × browInnerUp_R, mouthFunnel × mouthPucker) keeps a row of its own. The better
+    scoring side of a mirrored couple keeps the row, so a rig with left/right shapes lists each problem once.
+    """
+    m = np.asarray(mirror, dtype=np.int64)
+    score = {(int(i), int(j)): float(s) for i, j, s in ranked}
+    rows, folded = [], set()
+    for i, j, s in ranked:
+        key = (int(i), int(j))
+        if key in folded:
+            continue
+        mi, mj = sorted((int(m[i]), int(m[j])))
+        other = (mi, mj)
+        if other == key or mi == mj or other not in score:
+            rows.append((key[0], key[1], float(s), None))
+            continue
+        folded.add(other)
+        rows.append((key[0], key[1], float(s), (mi, mj, score[other])))
+    return rows
+
+
+def mirror_delta(delta, mirror) -> np.ndarray:
+    """(V, 3) the other side's version of a corrective: e'(v) = M e(m(v)), M = diag(−1, 1, 1), the reflection
+    across x = 0, with m the vertex mirror map (``solvers.sculpt.mirror_map``); the mirror of a shape, as
+    Maya's Mirror Target and Blender's Mirror Shape Key make it."""
+    e = np.asarray(delta, dtype=np.float64)[np.asarray(mirror, dtype=np.int64)]
+    e[:, 0] *= -1.0
+    return e
+
+
 def interference_heat(delta_i, delta_j) -> np.ndarray:
     """(V,) per-vertex interference heat map min(‖d_i(v)‖, ‖d_j(v)‖) of one pair (ALGORITHMS.md §6)."""
     a = np.linalg.norm(np.asarray(delta_i, dtype=np.float64), axis=-1)

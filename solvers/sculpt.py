@@ -96,6 +96,13 @@ def mirror_map(neutral, tolerance: float | None = None) -> np.ndarray:
     return idx
 
 
+def mirror_error(neutral, mirror) -> np.ndarray:
+    """(V,) distance from each vertex to the reflection of its mirror vertex, ‖M p(m(v)) − p(v)‖: 0 on an
+    exactly symmetric mesh, large where the mesh has no mirror image."""
+    p = np.asarray(neutral, dtype=np.float64)
+    return np.linalg.norm(p[np.asarray(mirror, dtype=np.int64)] * _R - p, axis=1)
+
+
 def laplacian_energy(points, average_operator, vertices=None) -> float:
     """Σ_v ‖p(v) − mean of neighbours(v)‖² (uniform Laplacian energy), over ``vertices`` (default all)."""
     p = np.asarray(points, dtype=np.float64)

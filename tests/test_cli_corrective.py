@@ -62,3 +62,26 @@ def test_corrective_bad_input(sample_dir, tmp_path):
                    "-o", tmp_path / "x.bsproj", check=False)
     assert proc.returncode == 2 and "small.obj" in proc.stderr and "3 vertices" in proc.stderr
     assert not (tmp_path / "x.bsproj").exists()
+
+
+def test_corrective_with_mirror_adds_the_other_side(sample_dir, tmp_path):
+    from solvers.sculpt import mirror_map
+    scan = _scan(sample_dir, tmp_path, "browInnerUp_L=1,browOuterUp_L=1")
+    out = tmp_path / "both.bsproj"
+    proc = run_cli("corrective", sample_dir, "--drivers", "browInnerUp_L,browOuterUp_L", "--target",
+                   tmp_path / "scan.obj", "--rule", "min", "--mirror", "-o", out)
+    assert "browInnerUp_L+browOuterUp_L and browInnerUp_R+browOuterUp_R" in proc.stdout
+    info = json.loads(run_cli("info", out, "--json").stdout)
+    assert info["correctives"] == [
+        {"name": "browInnerUp_L+browOuterUp_L", "drivers": ["browInnerUp_L", "browOuterUp_L"], "rule": "min"},
+        {"name": "browInnerUp_R+browOuterUp_R", "drivers": ["browInnerUp_R", "browOuterUp_R"], "rule": "min"}]
+    # the right-side combination is the mirror image of the left-side scan (the sample rig is symmetric)
+    run_cli("export", out, "--weights", "browInnerUp_R=1,browOuterUp_R=1", "-o", tmp_path / "right.obj")
+    right = read_obj(tmp_path / "right.obj").vertices
+    m = mirror_map(read_obj(sample_dir / "neutral.obj").vertices)
+    np.testing.assert_allclose(right, scan[m] * np.array([-1.0, 1.0, 1.0]), atol=1e-4)
+    # a pair that is its own mirror image is refused with one sentence
+    proc = run_cli("corrective", sample_dir, "--drivers", "browInnerUp_L,browInnerUp_R", "--target",
+                   tmp_path / "scan.obj", "--mirror", "-o", tmp_path / "x.bsproj", check=False)
+    assert proc.returncode == 2 and "its own mirror image" in proc.stderr, proc.stderr
+    assert not (tmp_path / "x.bsproj").exists()

@@ -264,11 +264,14 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     # the default measure, overshoot: the heat map is how far the pair's sum goes beyond the larger shape
     assert ctrl.measure == "overshoot"
     ctrl.panel.select_pair(0)
+    def excess(i, j):
+        d_i, d_j = rig.deltas[i], rig.deltas[j]
+        larger = np.maximum(np.linalg.norm(d_i, axis=1), np.linalg.norm(d_j, axis=1))
+        return np.maximum(np.linalg.norm(d_i + d_j, axis=1) - larger, 0.0)
     i, j, _ = pairs[0]
-    d_i, d_j = rig.deltas[i], rig.deltas[j]
-    larger = np.maximum(np.linalg.norm(d_i, axis=1), np.linalg.norm(d_j, axis=1))
-    np.testing.assert_allclose(w.viewport.colormap.scalars,
-                               np.maximum(np.linalg.norm(d_i + d_j, axis=1) - larger, 0.0), atol=1e-12)
+    mirror = ctrl.pair_mirrors[0]            # the row stands for both sides: so does its heat map
+    expected = excess(i, j) if mirror is None else np.maximum(excess(i, j), excess(*mirror[:2]))
+    np.testing.assert_allclose(w.viewport.colormap.scalars, expected, atol=1e-12)
     assert w.viewport.colormap.title.startswith("overshoot") and w.viewport.colormap.scalars.max() > 0
     # the partners of one shape: the other inner brow first, as Smith's brow example has it
     ctrl.panel.partner_of.setCurrentIndex(ctrl.panel.partner_of.findData("browInnerUp_L"))
@@ -287,8 +290,11 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     i, j, _ = directional[0]
     cm = w.viewport.colormap
     assert cm is not None and rig.units in cm.title
-    np.testing.assert_allclose(cm.scalars, np.minimum(np.linalg.norm(rig.deltas[i], axis=1),
-                                                      np.linalg.norm(rig.deltas[j], axis=1)))
+    def overlap(i, j):
+        return np.minimum(np.linalg.norm(rig.deltas[i], axis=1), np.linalg.norm(rig.deltas[j], axis=1))
+    mirror = ctrl.pair_mirrors[0]
+    np.testing.assert_allclose(cm.scalars, overlap(i, j) if mirror is None else
+                               np.maximum(overlap(i, j), overlap(*mirror[:2])))
     assert w.viewport.plotter.scalar_bars
     heat = w.viewport.colormap
     with qtbot.waitSignal(w.segmentation.segmentation_ready, timeout=30000):
@@ -305,3 +311,95 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     assert w.viewport.colormap is None and ctrl.sculpting
     assert set(ctrl.authoring) == {rig.shape_names[i], rig.shape_names[j]}
     assert w.document.weights[[i, j]].tolist() == [1.0, 1.0] and w.document.weights.sum() == 2.0
+
+
+def test_mirror_corrective_makes_the_other_side_and_undoes(qtbot, win):
+    from solvers.correctives import mirror_delta
+    from solvers.sculpt import mirror_map
+    w, ctrl = win
+    doc, rig = w.document, w.document.rig
+    left = ["browInnerUp_L", "browOuterUp_L"]
+    assert ctrl.start_authoring(left, "min")
+    x = rig.neutral
+    fix = np.where((x[:, 0] > 0.5)[:, None], np.array([0.0, 0.05, 0.02]), 0.0)  # a fix on one side only
+    doc.set_edit_offset(fix)
+    assert ctrl.save()
+    src = rig.correctives[0]
+    n = doc.undo_stack.count()
+    ctrl.panel.select(src.name)
+    ctrl.panel.mirror_button.click()
+    assert doc.undo_stack.count() == n + 1
+    made = next(c for c in rig.correctives if c is not src and c.name != src.name)
+    assert made.name == "browInnerUp_R+browOuterUp_R" and made.drivers == ["browInnerUp_R", "browOuterUp_R"]
+    assert made.rule == "min"
+    np.testing.assert_allclose(made.delta, mirror_delta(src.delta, mirror_map(rig.neutral)))
+    assert np.abs(made.delta[x[:, 0] > 0.5]).max() == 0 and np.abs(made.delta).max() > 0   # on the other side
+    assert "the mirror image of browInnerUp_L+browOuterUp_L" in w.statusBar().currentMessage()
+    # posing the right-side drivers fires it; the left one stays off
+    weights = np.zeros(rig.n_shapes)
+    weights[[rig.shape_index(d) for d in made.drivers]] = 1.0
+    w.set_pose(weights, "right brows")
+    assert ctrl.panel.activation_texts()[ctrl.panel.names().index(made.name)] == "1.000"
+    assert ctrl.panel.activation_texts()[ctrl.panel.names().index(src.name)] == "0.000"
+    np.testing.assert_allclose(doc.surface(), PoseEvaluator(rig, dtype=np.float64).evaluate(weights), atol=1e-5)
+    # mirroring again replaces the right-side corrective instead of adding a second one
+    assert ctrl.mirror(src.name)
+    assert len(rig.correctives) == 2
+    doc.undo_stack.undo()
+    doc.undo_stack.undo()
+    doc.undo_stack.undo()
+    assert [c.name for c in rig.correctives] == [src.name]
+    doc.undo_stack.redo()
+    assert sorted(c.name for c in rig.correctives) == sorted([src.name, made.name])
+    # a corrective whose drivers mirror onto themselves cannot be mirrored
+    assert ctrl.start_authoring(PAIR)
+    doc.set_edit_offset(np.full((rig.n_vertices, 3), 0.01))
+    assert ctrl.save()
+    count = doc.undo_stack.count()
+    assert not ctrl.mirror("browInnerUp_L+browInnerUp_R")
+    assert w.last_error == "browInnerUp_L+browInnerUp_R is its own mirror image: its drivers mirror onto themselves."
+    assert doc.undo_stack.count() == count
+
+
+def test_finder_lists_a_pair_and_its_mirror_as_one_row(qtbot, win):
+    from model.sides import mirror_name
+    w, ctrl = win
+    names = w.document.rig.shape_names
+    ctrl.panel.tabs.setCurrentIndex(1)
+    assert ctrl.panel.merge_mirrored.isChecked()
+    rows = ctrl.find_pairs()
+    listed = {frozenset((names[i], names[j])) for i, j, _ in rows}
+    mirrored = [m for m in ctrl.pair_mirrors if m is not None]
+    assert mirrored, "the sample rig has left/right shapes: some rows stand for both sides"
+    for (i, j, _), m in zip(rows, ctrl.pair_mirrors):
+        twin = frozenset((mirror_name(names[i]), mirror_name(names[j])))
+        assert twin == frozenset((names[i], names[j])) or twin not in listed    # never both sides as rows
+        if m is not None:
+            assert frozenset((names[m[0]], names[m[1]])) == twin
+    row = next(r for r, m in enumerate(ctrl.pair_mirrors) if m is not None)
+    assert ctrl.panel.pairs.topLevelItem(row).text(4) == f"{names[ctrl.pair_mirrors[row][0]]} × " \
+                                                           f"{names[ctrl.pair_mirrors[row][1]]}"
+    ctrl.panel.select_pair(row)          # the heat map shows both sides
+    heat = w.viewport.colormap.scalars
+    x = w.document.rig.neutral
+    assert heat[x[:, 0] > 0.5].max() > 0 and heat[x[:, 0] < -0.5].max() > 0
+    ctrl.panel.merge_mirrored.setChecked(False)   # re-ranks: both sides as rows again
+    flat = ctrl.pairs
+    assert ctrl.pair_mirrors == [] and len(flat) == len(rows)
+    assert any(frozenset((mirror_name(names[i]), mirror_name(names[j]))) in
+               {frozenset((names[a], names[b])) for a, b, _ in flat} - {frozenset((names[i], names[j]))}
+               for i, j, _ in flat)
+
+
+def test_mirror_refuses_an_asymmetric_rig(qtbot, win):
+    w, ctrl = win
+    doc, rig = w.document, w.document.rig
+    assert ctrl.start_authoring(["browInnerUp_L", "browOuterUp_L"])
+    doc.set_edit_offset(np.full((rig.n_vertices, 3), 0.01))
+    assert ctrl.save()
+    rig.neutral[rig.neutral[:, 0] > 0, 0] *= 1.2            # the left half widened: no mirror image there
+    count = doc.undo_stack.count()
+    assert not ctrl.mirror("browInnerUp_L+browOuterUp_L")
+    assert w.last_error.startswith("Cannot mirror browInnerUp_L+browOuterUp_L: the rig is not symmetric across "
+                                   "x = 0 where it acts (")
+    assert doc.undo_stack.count() == count and len(rig.correctives) == 1

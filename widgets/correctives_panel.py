@@ -40,6 +40,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
     rename_requested = QtCore.Signal()
     drivers_requested = QtCore.Signal()
     delete_requested = QtCore.Signal()
+    mirror_requested = QtCore.Signal()         # add the other side's version of the selected corrective
     rule_requested = QtCore.Signal(str)        # the selected corrective's new rule
     brush_changed = QtCore.Signal()
     find_requested = QtCore.Signal()
@@ -79,8 +80,10 @@ class CorrectivesPanel(QtWidgets.QWidget):
                                       self.drivers_requested)
         self.edit_button = _button("Sculpt", "Set the selected corrective's drivers to 1 and sculpt it again",
                                    self.edit_shape_requested)
+        self.mirror_button = _button("Mirror", "Add the other side's version of the selected corrective: "
+                                     "drivers _L↔_R, shape reflected across x = 0 (undoable)", self.mirror_requested)
         self.delete_button = _button("Delete", "Delete the selected corrective (undoable)", self.delete_requested)
-        for b in (self.rename_button, self.drivers_button, self.edit_button, self.delete_button):
+        for b in (self.rename_button, self.drivers_button, self.edit_button, self.mirror_button, self.delete_button):
             row.addWidget(b)
         lay.addLayout(row)
         rule_row = QtWidgets.QHBoxLayout()
@@ -200,8 +203,15 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.partner_of.activated.connect(lambda _=0: self.find_requested.emit())
         prow.addWidget(self.partner_of, 1)
         lay.addLayout(prow)
+        self.merge_mirrored = QtWidgets.QCheckBox("One row for a pair and its mirror")
+        self.merge_mirrored.setChecked(True)
+        self.merge_mirrored.setToolTip("List eyeWide_L × eyeLookUp_L and eyeWide_R × eyeLookUp_R as one problem "
+                                       "(the heat map shows both sides; author one and Mirror it)")
+        self.merge_mirrored.toggled.connect(   # re-rank a list already shown
+            lambda _=False: self.find_requested.emit() if self.pairs.topLevelItemCount() else None)
+        lay.addWidget(self.merge_mirrored)
         self.pairs = QtWidgets.QTreeWidget()
-        self.pairs.setHeaderLabels(["#", "Score", "Shape", "Shape"])
+        self.pairs.setHeaderLabels(["#", "Score", "Shape", "Shape", "Mirror pair"])
         self.pairs.setRootIsDecorated(False)
         self.pairs.setAlternatingRowColors(True)
         self.pairs.setToolTip("Shape pairs that interfere most, best first; select one to see where (the "
@@ -291,7 +301,8 @@ class CorrectivesPanel(QtWidgets.QWidget):
 
     def _on_selection(self) -> None:
         has = self.selected_name() is not None
-        for b in (self.rename_button, self.drivers_button, self.edit_button, self.delete_button):
+        for b in (self.rename_button, self.drivers_button, self.edit_button, self.mirror_button,
+                  self.delete_button):
             b.setEnabled(has)
         if has and not self._updating:
             rule = self.table.selectedItems()[0].text(2)
@@ -327,13 +338,17 @@ class CorrectivesPanel(QtWidgets.QWidget):
                 "symmetric": self.symmetric.isChecked()}
 
     # --- interference ------------------------------------------------------------------------------
-    def set_pairs(self, rows: list[tuple[str, str, float]]) -> None:
+    def set_pairs(self, rows) -> None:
+        """Rows (shape, shape, score) or (shape, shape, score, mirror pair text or "")."""
         self.pairs.clear()
-        for i, (a, b, s) in enumerate(rows):
-            item = QtWidgets.QTreeWidgetItem([str(i + 1), f"{s:.3f}", a, b])  # the score before the long names
+        for i, (a, b, s, *mirror) in enumerate(rows):
+            item = QtWidgets.QTreeWidgetItem([str(i + 1), f"{s:.3f}", a, b,
+                                              mirror[0] if mirror else ""])  # the score before the long names
             item.setTextAlignment(1, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
+            if mirror and mirror[0]:
+                item.setToolTip(4, f"Also {mirror[0]}: the same interference on the other side")
             self.pairs.addTopLevelItem(item)
-        for c in range(4):
+        for c in range(5):
             self.pairs.resizeColumnToContents(c)
         self.create_pair_button.setEnabled(False)
 

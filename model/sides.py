@@ -1,0 +1,26 @@
+"""Left/right naming of shapes: the mirror name of ``browInnerUp_L`` is ``browInnerUp_R``.
+
+Recognised side suffixes, in both cases where rigs use them: ``_L``/``_R`` (ICT FaceKit), ``_l``/``_r``,
+``.L``/``.R`` (Blender), ``Left``/``Right`` (ARKit), ``_left``/``_right``. A name without a side suffix
+(``jawOpen``, ``mouthFunnel``) is its own mirror image.
+"""
+from __future__ import annotations
+
+_SUFFIXES = (("_L", "_R"), ("_l", "_r"), (".L", ".R"), ("Left", "Right"), ("_left", "_right"))
+
+
+def mirror_name(name: str) -> str:
+    """The name of the other side's shape (the name itself when it has no side suffix)."""
+    for left, right in _SUFFIXES:
+        if name.endswith(left) and len(name) > len(left):
+            return name[: -len(left)] + right
+        if name.endswith(right) and len(name) > len(right):
+            return name[: -len(right)] + left
+    return name
+
+
+def mirror_indices(names: list[str]) -> list[int]:
+    """For each shape, the index of its mirror shape; a shape without one (no suffix, or the other side
+    missing from the rig) maps to itself."""
+    pos = {n: k for k, n in enumerate(names)}
+    return [pos.get(mirror_name(n), k) for k, n in enumerate(names)]
