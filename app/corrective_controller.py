@@ -19,7 +19,7 @@ from model.correctives import (Corrective, activation_for, authoring_surface, co
                                corrective_activations, driver_pose, find_corrective, mirrored_corrective,
                                validate_correctives)
 from model.errors import RigInputError
-from model.sides import mirror_indices
+from model.sides import mirror_indices, mirror_name
 from solvers import sculpt
 from solvers.correctives import (corrective_delta, corrective_from_scan, driver_region, fit_scan_weights,
                                  interference_heat, merge_mirrored_pairs, overshoot_heat,
@@ -281,7 +281,10 @@ class CorrectiveController(QtCore.QObject):
             return False
         self.stop_sculpting()
         self.panel.select(name)
-        self.window.statusBar().showMessage(f"Saved corrective {name}.", 5000)
+        twin = [mirror_name(d) for d in drivers]
+        hint = (" Mirror (Ctrl+Shift+M) makes the other side's." if set(twin) != set(drivers)
+                and all(d in rig.shape_names for d in twin) else "")
+        self.window.statusBar().showMessage(f"Saved corrective {name}.{hint}", 8000)
         return True
 
     def discard_sculpt(self) -> None:

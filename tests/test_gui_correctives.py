@@ -324,6 +324,8 @@ def test_mirror_corrective_makes_the_other_side_and_undoes(qtbot, win):
     fix = np.where((x[:, 0] > 0.5)[:, None], np.array([0.0, 0.05, 0.02]), 0.0)  # a fix on one side only
     doc.set_edit_offset(fix)
     assert ctrl.save()
+    assert w.statusBar().currentMessage() == ("Saved corrective browInnerUp_L+browOuterUp_L. Mirror (Ctrl+Shift+M) "
+                                              "makes the other side's.")
     src = rig.correctives[0]
     n = doc.undo_stack.count()
     ctrl.panel.select(src.name)

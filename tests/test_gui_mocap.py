@@ -91,6 +91,16 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     half = img.shape[1] // 2
     assert _not_background(img[:, :half]) > 0.1 and _not_background(img[:, half:]) > 0.1
     assert_matches_reference(img, "mocap_side_by_side")
+    # orbiting round to the back: culling goes off, so the mask's back is drawn instead of nothing
+    assert mc.views.culling()
+    mc.views.plotter.renderers[0].GetActiveCamera().Azimuth(180)
+    back = mc.views.grab_image()
+    assert not mc.views.culling()
+    half = back.shape[1] // 2
+    # (culled, only labels, markers and a few inward faces cover about 6 %; drawn, about 20 %)
+    assert _not_background(back[:, :half]) > 0.12 and _not_background(back[:, half:]) > 0.12
+    mc.views.set_camera("front")
+    assert mc.views.culling()
 
     # exports
     assert mc.export_weights_csv(tmp_path / "w.csv")

@@ -13,6 +13,9 @@ BRUSHES = [("grab", "Grab"), ("smooth", "Smooth"), ("inflate", "Inflate"), ("def
 FALLOFF_LABELS = [("smooth", "Smooth"), ("linear", "Linear"), ("constant", "Constant")]
 
 
+_ACTIVATION, _RULE = 1, 2   # columns of the corrective table
+
+
 def _combo(items, tip: str) -> QtWidgets.QComboBox:
     box = QtWidgets.QComboBox()
     for key, label in items:
@@ -65,7 +68,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
         page = QtWidgets.QWidget()
         lay = QtWidgets.QVBoxLayout(page)
         self.table = QtWidgets.QTreeWidget()
-        self.table.setHeaderLabels(["Corrective", "Drivers", "Rule", "Activation"])
+        self.table.setHeaderLabels(["Corrective", "Activation", "Rule", "Drivers"])  # the live value stays in view
         self.table.setRootIsDecorated(False)
         self.table.setAlternatingRowColors(True)
         self.table.setToolTip("Correctives of the rig, in evaluation order (lower orders first), with their "
@@ -267,9 +270,10 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.table.clear()
         labels = dict(RULE_LABELS)
         for (name, drivers, rule), a in zip(rows, activations):
-            item = QtWidgets.QTreeWidgetItem([name, ", ".join(drivers), labels.get(rule, rule), f"{a:.3f}"])
+            item = QtWidgets.QTreeWidgetItem([name, f"{a:.3f}", labels.get(rule, rule), ", ".join(drivers)])
             item.setData(0, QtCore.Qt.UserRole, name)
-            item.setTextAlignment(3, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
+            item.setToolTip(0, f"{name}: driven by {', '.join(drivers)}; {labels.get(rule, rule)}")
+            item.setTextAlignment(_ACTIVATION, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
             self.table.addTopLevelItem(item)
             if name == selected:
                 item.setSelected(True)
@@ -282,10 +286,10 @@ class CorrectivesPanel(QtWidgets.QWidget):
         for i, a in enumerate(activations):
             item = self.table.topLevelItem(i)
             if item is not None:
-                item.setText(3, f"{a:.3f}")
+                item.setText(_ACTIVATION, f"{a:.3f}")
 
     def activation_texts(self) -> list[str]:
-        return [self.table.topLevelItem(i).text(3) for i in range(self.table.topLevelItemCount())]
+        return [self.table.topLevelItem(i).text(_ACTIVATION) for i in range(self.table.topLevelItemCount())]
 
     def names(self) -> list[str]:
         return [self.table.topLevelItem(i).text(0) for i in range(self.table.topLevelItemCount())]
@@ -305,7 +309,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
                   self.delete_button):
             b.setEnabled(has)
         if has and not self._updating:
-            rule = self.table.selectedItems()[0].text(2)
+            rule = self.table.selectedItems()[0].text(_RULE)
             key = {label: k for k, label in RULE_LABELS}.get(rule, rule)
             self._updating = True
             self.rule.setCurrentIndex(max(0, self.rule.findData(key)))

@@ -32,6 +32,9 @@ class SideBySideView(QtWidgets.QWidget):
             style_plotter(self.plotter, playback=True)  # playback speed: see style_plotter
         self.plotter.enable_trackball_style()
         self.plotter.link_views()  # one camera for both: orbiting either view moves both
+        self._culled: list = []    # the two surfaces' properties, whose culling follows the camera
+        self._forward, self._culling = True, None
+        self.plotter.renderers[0].AddObserver("StartEvent", self._update_culling)
         self.setMinimumHeight(200)
         lay = QtWidgets.QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
@@ -94,11 +97,11 @@ class SideBySideView(QtWidgets.QWidget):
         # Cull the faces turned away from the camera: the views show a face mask from the front, where those
         # are hidden anyway, and software OpenGL then rasterises ~20% less a frame (measured under Xvfb).
         # Which side is "away" follows the winding: the faces' summed normal points forward (+Z) or back.
-        forward = _faces_forward(shown, normals)
-        for actor in (p.renderers[0].actors["surface_left"], self._right_actor):
-            prop = actor.GetProperty()
-            prop.SetBackfaceCulling(forward)
-            prop.SetFrontfaceCulling(not forward)
+        # Seen from behind (the user orbited round), culling would hide the whole mask: it is off there.
+        self._forward = _faces_forward(shown, normals)
+        self._culled = [p.renderers[0].actors["surface_left"].GetProperty(), self._right_actor.GetProperty()]
+        self._culling = None
+        self._update_culling()
         self._focus = np.asarray(points if focus is None else focus)
         self.set_camera(self._camera)
 
@@ -129,6 +132,22 @@ class SideBySideView(QtWidgets.QWidget):
             for cloud in (self.marker_cloud, self.error_lines):
                 cloud.GetPoints().Modified()
         self.render()
+
+    def _update_culling(self, *_args) -> None:
+        """Cull the faces turned away while the camera is in front of the face (+Z side), none from behind."""
+        if not self._culled:
+            return
+        cam = self.plotter.renderers[0].GetActiveCamera()
+        front = cam.GetPosition()[2] >= cam.GetFocalPoint()[2]
+        if front != self._culling:
+            self._culling = front
+            for prop in self._culled:
+                prop.SetBackfaceCulling(front and self._forward)
+                prop.SetFrontfaceCulling(front and not self._forward)
+
+    def culling(self) -> bool:
+        """Whether faces turned away are being culled (the camera is in front of the face)."""
+        return bool(self._culling)
 
     def render(self) -> None:
         self.plotter.render()
