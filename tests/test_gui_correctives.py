@@ -379,8 +379,10 @@ def test_finder_lists_a_pair_and_its_mirror_as_one_row(qtbot, win):
         if m is not None:
             assert frozenset((names[m[0]], names[m[1]])) == twin
     row = next(r for r, m in enumerate(ctrl.pair_mirrors) if m is not None)
-    assert ctrl.panel.pairs.topLevelItem(row).text(4) == f"{names[ctrl.pair_mirrors[row][0]]} × " \
-                                                           f"{names[ctrl.pair_mirrors[row][1]]}"
+    item = ctrl.panel.pairs.topLevelItem(row)
+    assert item.text(4) == "both"
+    assert item.toolTip(2).endswith(f"its mirror image {names[ctrl.pair_mirrors[row][0]]} × "
+                                    f"{names[ctrl.pair_mirrors[row][1]]}")
     ctrl.panel.select_pair(row)          # the heat map shows both sides
     heat = w.viewport.colormap.scalars
     x = w.document.rig.neutral

@@ -214,7 +214,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
             lambda _=False: self.find_requested.emit() if self.pairs.topLevelItemCount() else None)
         lay.addWidget(self.merge_mirrored)
         self.pairs = QtWidgets.QTreeWidget()
-        self.pairs.setHeaderLabels(["#", "Score", "Shape", "Shape", "Mirror pair"])
+        self.pairs.setHeaderLabels(["#", "Score", "Shape", "Shape", "Sides"])
         self.pairs.setRootIsDecorated(False)
         self.pairs.setAlternatingRowColors(True)
         self.pairs.setToolTip("Shape pairs that interfere most, best first; select one to see where (the "
@@ -343,14 +343,15 @@ class CorrectivesPanel(QtWidgets.QWidget):
 
     # --- interference ------------------------------------------------------------------------------
     def set_pairs(self, rows) -> None:
-        """Rows (shape, shape, score) or (shape, shape, score, mirror pair text or "")."""
+        """Rows (shape, shape, score) or (shape, shape, score, the mirror pair as text, or "" if none)."""
         self.pairs.clear()
         for i, (a, b, s, *mirror) in enumerate(rows):
-            item = QtWidgets.QTreeWidgetItem([str(i + 1), f"{s:.3f}", a, b,
-                                              mirror[0] if mirror else ""])  # the score before the long names
-            item.setTextAlignment(1, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
-            if mirror and mirror[0]:
-                item.setToolTip(4, f"Also {mirror[0]}: the same interference on the other side")
+            twin = mirror[0] if mirror else ""
+            item = QtWidgets.QTreeWidgetItem([str(i + 1), f"{s:.3f}", a, b, "both" if twin else ""])
+            item.setTextAlignment(1, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)   # the score before the names
+            if twin:
+                for c in range(5):
+                    item.setToolTip(c, f"{a} × {b}, and its mirror image {twin}")
             self.pairs.addTopLevelItem(item)
         for c in range(5):
             self.pairs.resizeColumnToContents(c)
