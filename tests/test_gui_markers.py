@@ -160,6 +160,7 @@ def test_bad_marker_input(qtbot, tmp_path, geometry, nose_tip):
 def test_click_adds_right_click_removes_and_markers_are_saved(qtbot, tmp_path, geometry, nose_tip):
     w = _window(qtbot, tmp_path)
     c = w.markers
+    assert not w.markers_panel.hint.isHidden()     # an empty list says how to place markers
     w.marker_mode_action.trigger()
     widget = w.viewport.plotter.interactor
     corner = int(geometry.mouth.upper[0])
@@ -174,10 +175,12 @@ def test_click_adds_right_click_removes_and_markers_are_saved(qtbot, tmp_path, g
     q1 = _screen(w, P[None])[0]
     assert abs(q1.x() - pos.x()) < 3 and abs(q1.y() - pos.y()) < 3  # it sits under the click
     assert w.markers_panel.list.count() == 1 and w.markers.overlay.n_markers == 1
+    assert w.markers_panel.hint.isHidden()
     pos2 = QtCore.QPoint(round(q1.x()), round(q1.y()))
     mouse(widget, "press", pos2, buttons=QtCore.Qt.RightButton, button=QtCore.Qt.RightButton)
     mouse(widget, "release", pos2, buttons=QtCore.Qt.RightButton, button=QtCore.Qt.RightButton)
     assert len(c.markers) == 0
+    assert not w.markers_panel.hint.isHidden()
     w.document.undo_stack.undo()
     assert len(c.markers) == 1
     _pins(w, geometry, nose_tip)

@@ -35,6 +35,12 @@ class MarkersPanel(QtWidgets.QWidget):
         self.lam.valueChanged.connect(self.lam_reg_changed)
         form.addRow("Stay near pose (λ_r)", self.lam)
         lay.addLayout(form)
+        self.hint = QtWidgets.QLabel("No markers yet. Turn on Marker mode (M) and click the face to place "
+                                     "markers, then drag one: the weights are solved region by region at the "
+                                     "solve level, coarse levels first.")
+        self.hint.setWordWrap(True)
+        self.hint.setStyleSheet("color: gray;")
+        lay.addWidget(self.hint)
         self.list = QtWidgets.QListWidget()
         self.list.setToolTip("Markers on the surface; background markers (no shape moves them) are greyed")
         self.list.currentRowChanged.connect(self.marker_selected)
@@ -94,6 +100,7 @@ class MarkersPanel(QtWidgets.QWidget):
             self.list.setCurrentRow(cur)
         self.list.blockSignals(False)
         self.remove.setEnabled(bool(names))
+        self.hint.setVisible(not names)
 
     def select_marker(self, index: int) -> None:
         self.list.blockSignals(True)
