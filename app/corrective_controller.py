@@ -442,6 +442,38 @@ class CorrectiveController(QtCore.QObject):
         self.window.statusBar().showMessage(f"{what} {made.name}, the mirror image of {c.name}.", 5000)
         return True
 
+    def mirror_all(self) -> int:
+        """Add the mirror image of every corrective whose other side is missing (one undoable edit); returns how
+        many were made. Correctives that are their own mirror image are left alone."""
+        rig = self.document.rig
+        if rig is None:
+            return 0
+        if self._mirror is None:
+            self._mirror = sculpt.mirror_map(rig.neutral)
+        have = {frozenset(c.drivers) for c in rig.correctives}
+        made, problems = [], []
+        for c in rig.correctives:
+            twin = frozenset(mirror_name(d) for d in c.drivers)
+            if twin == frozenset(c.drivers) or twin in have:
+                continue
+            try:
+                made.append(mirrored_corrective(c, rig.shape_names, rig.neutral, self._mirror, units=rig.units))
+            except RigInputError as exc:
+                problems.append(str(exc))
+                continue
+            have.add(twin)
+        if problems:
+            self._error(" ".join(problems))
+        if not made:
+            if not problems:
+                self.window.statusBar().showMessage("Every corrective already has its other side.", 5000)
+            return 0
+        names = ", ".join(c.name for c in made)
+        if not self._push_correctives(rig.correctives + made, f"Mirror {len(made)} corrective(s)"):
+            return 0
+        self.window.statusBar().showMessage(f"Made {len(made)} mirrored corrective(s): {names}.", 8000)
+        return len(made)
+
     def delete(self, name: str | None = None) -> bool:
         c = self._selected(name)
         if c is None:
@@ -744,6 +776,8 @@ def install(window) -> CorrectiveController:
     act(menu, "S&top Sculpting", lambda _=False: ctrl.stop_sculpting(), None, "Leave sculpt mode")
     act(menu, "&Mirror Corrective", lambda _=False: ctrl.mirror(), "Ctrl+Shift+M",
         "Add the other side's version of the selected corrective (drivers _L↔_R, reflected across x = 0)")
+    act(menu, "Mirror &All Correctives", lambda _=False: ctrl.mirror_all(), None,
+        "Add the other side's version of every corrective that lacks one (one undoable edit)")
     menu.addSeparator()
 
     def _find():

@@ -407,3 +407,23 @@ def test_mirror_refuses_an_asymmetric_rig(qtbot, win):
     assert w.last_error.startswith("Cannot mirror browInnerUp_L+browOuterUp_L: the rig is not symmetric across "
                                    "x = 0 where it acts (")
     assert doc.undo_stack.count() == count and len(rig.correctives) == 1
+
+
+def test_mirror_all_adds_each_missing_side_once(qtbot, win):
+    w, ctrl = win
+    doc, rig = w.document, w.document.rig
+    for drivers in (["browInnerUp_L", "browOuterUp_L"], ["cheekPuff_R", "mouthSmile_R"], PAIR):
+        assert ctrl.start_authoring(drivers)
+        doc.set_edit_offset(np.full((rig.n_vertices, 3), 0.01))
+        assert ctrl.save()
+    assert ctrl.mirror("browInnerUp_L+browOuterUp_L")           # this one already has its other side
+    n = doc.undo_stack.count()
+    assert ctrl.mirror_all() == 1
+    assert doc.undo_stack.count() == n + 1
+    assert sorted(c.name for c in rig.correctives) == sorted([
+        "browInnerUp_L+browOuterUp_L", "browInnerUp_R+browOuterUp_R", "cheekPuff_R+mouthSmile_R",
+        "cheekPuff_L+mouthSmile_L", "browInnerUp_L+browInnerUp_R"])
+    assert ctrl.mirror_all() == 0 and doc.undo_stack.count() == n + 1
+    assert w.statusBar().currentMessage() == "Every corrective already has its other side."
+    doc.undo_stack.undo()
+    assert "cheekPuff_L+mouthSmile_L" not in [c.name for c in rig.correctives] and len(rig.correctives) == 4
