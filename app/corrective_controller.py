@@ -419,6 +419,12 @@ class CorrectiveController(QtCore.QObject):
                for x in self.document.rig.correctives]
         return self._push_correctives(new, f"Rule of {c.name}: {rule}")
 
+    def _mirror_map(self) -> np.ndarray:
+        """The rig's vertex mirror map across x = 0, computed once per rig."""
+        if self._mirror is None:
+            self._mirror = sculpt.mirror_map(self.document.rig.neutral)
+        return self._mirror
+
     def mirror(self, name: str | None = None) -> bool:
         """Add the other side's version of a corrective (``model.correctives.mirrored_corrective``); an
         existing corrective on the mirrored drivers is replaced. One undoable edit."""
@@ -426,10 +432,8 @@ class CorrectiveController(QtCore.QObject):
         if c is None:
             return False
         rig = self.document.rig
-        if self._mirror is None:   # the vertex mirror map, once per rig
-            self._mirror = sculpt.mirror_map(rig.neutral)
         try:
-            made = mirrored_corrective(c, rig.shape_names, rig.neutral, self._mirror, units=rig.units)
+            made = mirrored_corrective(c, rig.shape_names, rig.neutral, self._mirror_map(), units=rig.units)
         except RigInputError as exc:
             self._error(str(exc))
             return False
@@ -448,8 +452,6 @@ class CorrectiveController(QtCore.QObject):
         rig = self.document.rig
         if rig is None:
             return 0
-        if self._mirror is None:
-            self._mirror = sculpt.mirror_map(rig.neutral)
         have = {frozenset(c.drivers) for c in rig.correctives}
         made, problems = [], []
         for c in rig.correctives:
@@ -457,7 +459,7 @@ class CorrectiveController(QtCore.QObject):
             if twin == frozenset(c.drivers) or twin in have:
                 continue
             try:
-                made.append(mirrored_corrective(c, rig.shape_names, rig.neutral, self._mirror, units=rig.units))
+                made.append(mirrored_corrective(c, rig.shape_names, rig.neutral, self._mirror_map(), units=rig.units))
             except RigInputError as exc:
                 problems.append(str(exc))
                 continue
