@@ -32,6 +32,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.resize(1400, 900)
         self.confirm_discard = True   # tests turn the unsaved-changes question off
         self.last_error: str | None = None
+        self.shortcuts_dialog: QtWidgets.QDialog | None = None   # Help ▸ Keyboard Shortcuts, once opened
         self.document = Document(self)
         self.viewport = Viewport(self)
         self.setCentralWidget(self.viewport)
@@ -405,14 +406,52 @@ class MainWindow(QtWidgets.QMainWindow):
         QtWidgets.QMessageBox.about(self, "About Blendshape Studio",
                                     "Blendshape Studio — pose, segment, solve and correct blendshape face rigs.")
 
-    def show_shortcuts(self) -> None:
+    def shortcut_rows(self) -> list[tuple[str, str, str]]:
+        """(menu, action, keys) for every action with a shortcut: the menus' in menu order (submenus as
+        "Correctives ▸ Brush"), then those that live outside the menus (take stepping, ...)."""
+        ordered: list[tuple[str, QtGui.QAction]] = []
+        seen: set = set()
+
+        def walk(actions, where: str) -> None:
+            for act in actions:
+                sub = act.menu()
+                if sub is not None:
+                    name = act.text().replace("&", "")
+                    walk(sub.actions(), f"{where} ▸ {name}" if where else name)
+                elif act not in seen:
+                    seen.add(act)
+                    ordered.append((where, act))
+        walk(self.menuBar().actions(), "")
+        ordered += [("", a) for a in self.findChildren(QtGui.QAction) if a not in seen]
         rows = []
-        for menu in self.menuBar().findChildren(QtWidgets.QMenu):
-            for act in menu.actions():
-                if act.shortcut().toString():
-                    rows.append(f"<tr><td>{act.text().replace('&', '')}</td>"
-                                f"<td><b>{act.shortcut().toString()}</b></td></tr>")
-        QtWidgets.QMessageBox.information(self, "Keyboard Shortcuts", "<table>" + "".join(rows) + "</table>")
+        for where, act in ordered:
+            keys = ", ".join(k.toString(QtGui.QKeySequence.NativeText) for k in act.shortcuts() if not k.isEmpty())
+            if keys:
+                rows.append((where or "Window", act.text().replace("&", ""), keys))
+        return rows
+
+    def show_shortcuts(self) -> None:
+        """Help ▸ Keyboard Shortcuts: every shortcut of the window in a sortable, resizable list."""
+        dialog = QtWidgets.QDialog(self)
+        dialog.setWindowTitle("Keyboard Shortcuts")
+        lay = QtWidgets.QVBoxLayout(dialog)
+        table = QtWidgets.QTreeWidget()
+        table.setHeaderLabels(["Shortcut", "Action", "Menu"])
+        table.setRootIsDecorated(False)
+        table.setAlternatingRowColors(True)
+        for where, name, keys in self.shortcut_rows():
+            table.addTopLevelItem(QtWidgets.QTreeWidgetItem([keys, name, where]))
+        for c in range(3):
+            table.resizeColumnToContents(c)
+        table.header().setSortIndicator(-1, QtCore.Qt.AscendingOrder)   # menu order until a header is clicked
+        table.setSortingEnabled(True)
+        lay.addWidget(table)
+        buttons = QtWidgets.QDialogButtonBox(QtWidgets.QDialogButtonBox.Close)
+        buttons.rejected.connect(dialog.reject)
+        lay.addWidget(buttons)
+        dialog.resize(560, 520)
+        self.shortcuts_dialog = dialog
+        dialog.show()
 
     # --- window state ------------------------------------------------------------------------------
     def _restore_layout(self) -> None:

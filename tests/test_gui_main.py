@@ -106,3 +106,27 @@ def test_open_obj_folder_in_background(qtbot, tmp_path):
     assert w.last_error is None
     assert w.document.rig.n_vertices == 36 and w.document.rig.shape_names == ["push", "raise"]
     assert w.viewport.points().shape == (36, 3)
+
+
+def test_every_shortcut_is_unambiguous_and_listed(qtbot, tmp_path):
+    """Qt ignores a key bound to two actions ("ambiguous shortcut"): each key does one thing, and F1 lists it."""
+    from PySide6 import QtGui
+    w = make_window(qtbot, tmp_path)
+    keys: dict[str, list[str]] = {}
+    for act in w.findChildren(QtGui.QAction):
+        for sc in act.shortcuts():
+            if sc.toString():
+                keys.setdefault(sc.toString(), []).append(act.text())
+    assert {k: v for k, v in keys.items() if len(v) > 1} == {}
+    for key in ("Ctrl+Z", "Ctrl+S", "M", "Ctrl+Shift+M", "Ctrl+Space", "Ctrl+Shift+F", "F1"):
+        assert key in keys, key
+    listed = {k for *_, ks in w.shortcut_rows() for k in ks.split(", ")}
+    assert sorted(set(keys) - listed) == []
+    w.show_shortcuts()                                     # F1: every shortcut, with its menu
+    table = w.shortcuts_dialog.findChild(QtWidgets.QTreeWidget)
+    rows = [tuple(table.topLevelItem(i).text(c) for c in range(3)) for i in range(table.topLevelItemCount())]
+    assert ("Ctrl+Shift+M", "Mirror Corrective", "Correctives") in rows
+    assert ("[", "Smaller Brush", "Correctives ▸ Brush") in rows
+    assert ("Alt+,", "Previous Take Frame") in [r[:2] for r in rows]
+    assert rows[0][2] == "File"                            # in menu order until a column header is clicked
+    assert ("Ctrl+Z", "Undo", "Edit") in rows
