@@ -130,3 +130,14 @@ def test_every_shortcut_is_unambiguous_and_listed(qtbot, tmp_path):
     assert ("Alt+,", "Previous Take Frame") in [r[:2] for r in rows]
     assert rows[0][2] == "File"                            # in menu order until a column header is clicked
     assert ("Ctrl+Z", "Undo", "Edit") in rows
+
+
+def test_every_control_explains_itself_in_a_tooltip(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    silent = []
+    for cls in (QtWidgets.QPushButton, QtWidgets.QComboBox, QtWidgets.QAbstractSpinBox, QtWidgets.QCheckBox,
+                QtWidgets.QSlider):
+        for c in w.findChildren(cls):
+            if not c.toolTip() and not (c.parent() is not None and c.parent().toolTip()):
+                silent.append((cls.__name__, c.text() if hasattr(c, "text") else "", type(c.parent()).__name__))
+    assert silent == []

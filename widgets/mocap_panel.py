@@ -50,12 +50,16 @@ class MocapPanel(QtWidgets.QWidget):
         form = QtWidgets.QFormLayout(solve)
         self.mode_combo = QtWidgets.QComboBox()
         self.mode_combo.addItems(["global", "per region"])
+        self.mode_combo.setToolTip("Global: one solve over all markers (measured best on the ICT take); per "
+                                   "region: one solve per segmentation region of the level below, blended")
         self.level_spin = QtWidgets.QSpinBox()
         self.level_spin.setRange(0, 20)
         self.level_spin.setToolTip("Segmentation level for a per-region solve (0 = finest)")
         self.residual_combo = QtWidgets.QComboBox()
         self.residual_combo.addItems(RESIDUALS)
         self.residual_combo.setCurrentText(DEFAULTS["residual"])
+        self.residual_combo.setToolTip("Radial-basis residual that carries the marker errors the shapes cannot "
+                                       "reach to the dense surface (Joshi Eq. 3; Fidaleo), or none")
         self.lam_sparsity = self._spin(DEFAULTS["lam_sparsity"], 0.0, 10.0, 4, "Sparsity λ_s (Ma et al. 2016, Eq. 3)")
         self.lam_temporal = self._spin(DEFAULTS["lam_temporal"], 0.0, 10.0, 4, "Temporal λ_t (Ma et al. 2016, Eq. 4)")
         self.rbf_scale = self._spin(DEFAULTS["rbf_scale"], 0.01, 100.0, 3, "RBF kernel length (rig units)")
@@ -73,12 +77,19 @@ class MocapPanel(QtWidgets.QWidget):
         form.addRow("RBF λ", self.rbf_lambda)
         form.addRow("Calibration frames", self.calibration_spin)
         self.solve_button = QtWidgets.QPushButton("Solve")
+        self.solve_button.setToolTip("Solve head motion, weights and residual for every frame of the take "
+                                     "(in the background, with progress; Esc cancels)")
         form.addRow(self.solve_button)
         exp = QtWidgets.QHBoxLayout()
         self.export_weights_button = QtWidgets.QPushButton("Weights CSV…")
         self.export_pc2_button = QtWidgets.QPushButton("PC2…")
         self.export_report_button = QtWidgets.QPushButton("Error Report…")
-        for b in (self.export_weights_button, self.export_pc2_button, self.export_report_button):
+        for b, tip in ((self.export_weights_button, "Write the solved weights per frame as a CSV (frame, time, "
+                                                    "one column per shape)"),
+                       (self.export_pc2_button, "Write the dense solved surface per frame as a PC2 point cache "
+                                                "(Blender, Maya, Max), head-stabilised, rig units"),
+                       (self.export_report_button, "Write the per-frame and per-marker errors (mm) as JSON")):
+            b.setToolTip(tip)
             exp.addWidget(b)
         form.addRow(QtWidgets.QLabel("Export"))
         form.addRow(exp)  # under their label, full width: the panel stays narrow enough for its dock
@@ -90,8 +101,10 @@ class MocapPanel(QtWidgets.QWidget):
         self.play_button.setCheckable(True)
         self.loop_check = QtWidgets.QCheckBox("Loop")
         self.loop_check.setChecked(True)
+        self.loop_check.setToolTip("Start again at the first frame after the last")
         self.slider = QtWidgets.QSlider(QtCore.Qt.Horizontal)
         self.slider.setRange(0, 0)
+        self.slider.setToolTip("Scrub the take (Alt+, and Alt+. step a frame)")
         self.frame_label = QtWidgets.QLabel("frame –")
         self.fps_label = QtWidgets.QLabel("")
         pl.addWidget(self.play_button, 0, 0)

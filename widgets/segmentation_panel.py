@@ -57,6 +57,7 @@ class SegmentationPanel(QtWidgets.QWidget):
         self.t_box.setDecimals(3)
         self.t_box.setSingleStep(0.01)
         self.t_box.setKeyboardTracking(False)
+        self.t_box.setToolTip(self.t_slider.toolTip())
         t_row.addWidget(self.t_slider, 1)
         t_row.addWidget(self.t_box)
         form.addRow("Threshold t", t_row)
