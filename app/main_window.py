@@ -103,6 +103,8 @@ class MainWindow(QtWidgets.QMainWindow):
         f.addSeparator()
         self._action(f, "&Export Pose as OBJ…", self.export_pose, "Ctrl+E",
                      "Write the posed surface as an OBJ, vertex order kept")
+        self._action(f, "Save Viewport &Image…", self.save_image_dialog, "Ctrl+Shift+E",
+                     "Write what the viewport shows (with its colour bar) as a PNG")
         f.addSeparator()
         self._action(f, "&Quit", self.close, QtGui.QKeySequence.Quit)
 
@@ -116,6 +118,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.undo_action, self.redo_action = undo, redo
         e.addSeparator()
         self._action(e, "Reset &Pose", self.reset_pose, "Ctrl+0", "Set every weight to 0")
+        self._action(e, "&Mirror Pose", self.mirror_pose, "Ctrl+M",
+                     "Swap the weights of left and right shapes (_L↔_R): the pose of the other side")
 
         v = mb.addMenu("&View")
         self.wire_action = self._action(v, "&Wireframe", self.viewport.set_wireframe, "W",
@@ -249,6 +253,24 @@ class MainWindow(QtWidgets.QMainWindow):
         if self.document.rig is not None:
             self.set_pose(np.zeros(self.document.rig.n_shapes), "Reset pose")
 
+    def mirror_pose(self) -> bool:
+        """Swap each left shape's weight with its right twin's (model.sides), one undoable pose change."""
+        from model.sides import mirror_indices
+        rig = self.document.rig
+        if rig is None:
+            return False
+        if self.document.is_regional:
+            self.show_error("Mirror Pose", "Mirror Pose flips a global pose, and this one is set per region (by "
+                                           "marker drags); reset it or pose the shapes globally first.")
+            return False
+        idx = mirror_indices(rig.shape_names)
+        if idx == list(range(rig.n_shapes)):
+            self.show_error("Mirror Pose", f"{rig.name} has no left and right shapes (names ending _L/_R, .L/.R "
+                                           "or Left/Right) to swap.")
+            return False
+        self.set_pose(self.document.weights[idx], "Mirror pose")
+        return True
+
     def apply_preset(self, name: str) -> None:
         rig = self.document.rig
         self.set_pose(rig.weights_from_dict(rig.presets[name]), f"Preset {name}")
@@ -370,6 +392,34 @@ class MainWindow(QtWidgets.QMainWindow):
             self.show_error("Could not export", f"{path}: could not be written ({exc.strerror or exc}).")
             return
         self.statusBar().showMessage(f"Exported {path}", 5000)
+
+    def save_image_dialog(self) -> None:
+        if self.document.project is None:
+            return
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Save Viewport Image",
+                                                        f"{self.document.rig.name}.png", "PNG image (*.png)")
+        if path:
+            self.save_image(path)
+
+    def save_image(self, path: str | Path) -> bool:
+        """Write the viewport as it is shown (camera, colour map and bar, wireframe) as a PNG."""
+        from model.atomic import atomic_write
+        path = Path(path)
+        if path.suffix.lower() != ".png":
+            path = path.with_suffix(path.suffix + ".png") if path.suffix else path.with_suffix(".png")
+        rgb = np.ascontiguousarray(self.viewport.grab_image())
+        h, w = rgb.shape[:2]
+        image = QtGui.QImage(rgb.data, w, h, 3 * w, QtGui.QImage.Format_RGB888)
+        buf = QtCore.QBuffer()
+        buf.open(QtCore.QIODevice.WriteOnly)
+        image.save(buf, "PNG")
+        try:
+            atomic_write(path, bytes(buf.data()))
+        except OSError as exc:
+            self.show_error("Could not save the image", f"{path}: could not be written ({exc.strerror or exc}).")
+            return False
+        self.statusBar().showMessage(f"Saved {path} ({w}x{h} pixels)", 5000)
+        return True
 
     def _rebuild_recent_menu(self) -> None:
         self.recent_menu.clear()

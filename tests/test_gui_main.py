@@ -141,3 +141,37 @@ def test_every_control_explains_itself_in_a_tooltip(qtbot, tmp_path):
             if not c.toolTip() and not (c.parent() is not None and c.parent().toolTip()):
                 silent.append((cls.__name__, c.text() if hasattr(c, "text") else "", type(c.parent()).__name__))
     assert silent == []
+
+
+def test_mirror_pose_flips_the_face_and_undoes(qtbot, tmp_path):
+    from solvers.sculpt import mirror_map
+    w = make_window(qtbot, tmp_path)
+    doc, rig = w.document, w.document.rig
+    weights = np.zeros(rig.n_shapes)
+    for name, value in (("browInnerUp_L", 0.7), ("mouthSmile_R", 0.4), ("jawOpen", 0.3)):
+        weights[rig.shape_index(name)] = value
+    w.set_pose(weights, "asymmetric pose")
+    before = doc.surface().copy()
+    assert w.mirror_pose()
+    got = {n: doc.weights[rig.shape_index(n)] for n in ("browInnerUp_R", "mouthSmile_L", "jawOpen",
+                                                        "browInnerUp_L", "mouthSmile_R")}
+    assert got == {"browInnerUp_R": 0.7, "mouthSmile_L": 0.4, "jawOpen": 0.3, "browInnerUp_L": 0.0,
+                   "mouthSmile_R": 0.0}
+    m = mirror_map(rig.neutral)                 # the sample face is symmetric: the surface is the mirror image
+    np.testing.assert_allclose(doc.surface(), before[m] * np.array([-1.0, 1.0, 1.0]), atol=1e-4)
+    assert w.undo_action.text().endswith("Mirror pose")
+    doc.undo_stack.undo()
+    np.testing.assert_array_equal(doc.weights, weights)
+
+
+def test_save_viewport_image(qtbot, tmp_path):
+    from PIL import Image
+    w = make_window(qtbot, tmp_path)
+    assert w.save_image(tmp_path / "shot")               # the .png suffix is added
+    img = np.asarray(Image.open(tmp_path / "shot.png").convert("RGB"))
+    ratio = w.viewport.plotter.interactor.devicePixelRatioF()
+    assert img.shape[:2] == (round(w.viewport.plotter.interactor.height() * ratio),
+                             round(w.viewport.plotter.interactor.width() * ratio))
+    assert len(np.unique(img.reshape(-1, 3), axis=0)) > 100   # a shaded face, not a blank frame
+    assert not w.save_image("/proc/no/such/dir/x.png")
+    assert w.last_error.startswith("/proc/no/such/dir/x.png: could not be written")

@@ -111,6 +111,10 @@ def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, 
     assert w.document.is_regional and w.document.region_level == c.level
     np.testing.assert_array_equal(w.document.region_weights, W)
     np.testing.assert_allclose(w.viewport.points(), shown, atol=1e-6)
+    n = w.document.undo_stack.count()
+    assert not w.mirror_pose()                            # a regional pose is not flipped: one clear sentence
+    assert w.last_error.startswith("Mirror Pose flips a global pose, and this one is set per region")
+    assert w.document.undo_stack.count() == n and w.document.is_regional
 
 
 def test_the_same_drag_moves_the_nose_tip_less_than_a_mouth_corner(qtbot, tmp_path, geometry, nose_tip):
