@@ -1,10 +1,10 @@
 """Corrective shapes in the GUI (ALGORITHMS.md §6; Smith 2006 §4.5, §5.6–5.8): the Correctives panel,
-sculpt strokes on the viewport, saving a sculpt as a corrective, correctives from scans, and the
-interference finder with its heat map.
+sculpt strokes on the viewport, saving a sculpt as a corrective, correctives from scans, mirroring; the
+interference finder with its heat map is ``app.interference_finder``, owned by the controller.
 
 ``install(window)`` adds the dock, the menu and this controller to a MainWindow. Every edit is an undo
 command on ``window.document.undo_stack``: a sculpt stroke is one ``SetEditOffsetCommand``; saving,
-importing, renaming, editing drivers or rule and deleting are ``SetCorrectivesCommand``s.
+importing, mirroring, renaming, editing drivers or rule and deleting are ``SetCorrectivesCommand``s.
 """
 from __future__ import annotations
 
@@ -15,19 +15,16 @@ from PySide6 import QtCore, QtWidgets
 
 from app.commands import SetEditOffsetCommand, SetWeightsCommand
 from app.corrective_commands import SetCorrectivesCommand
+from app.interference_finder import InterferenceFinder
 from model.correctives import (Corrective, activation_for, authoring_surface, corrective_activation,
                                corrective_activations, driver_pose, find_corrective, mirrored_corrective,
                                validate_correctives)
 from model.errors import RigInputError
-from model.sides import mirror_indices, mirror_name
+from model.sides import mirror_name
 from solvers import sculpt
-from solvers.correctives import (corrective_delta, corrective_from_scan, driver_region, fit_scan_weights,
-                                 interference_heat, merge_mirrored_pairs, overshoot_heat,
-                                 rank_interference, rank_partners, shape_overlap, shape_overshoot)
+from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
 from widgets.correctives_panel import CorrectivesPanel
-from widgets.scene import ColorMap
 
-_UNSET = object()
 _OBSERVER_PRIORITY = 10.0   # above the interactor style (0): a stroke on the face does not turn the camera
 _DAB = 0.1                  # inflate/deflate per dab: this fraction of the radius times the strength
 
@@ -62,14 +59,8 @@ class CorrectiveController(QtCore.QObject):
         self._stroke: dict | None = None
         self._cursor = None
         self._cursor_unit = None
-        self._overlap: dict[str, np.ndarray] = {}  # (K, K) scores by measure, until the shapes change
         self._mirror: np.ndarray | None = None   # the rig's vertex mirror map across x = 0
-        self.pairs: list[tuple[int, int, float]] = []
-        self.pair_mirrors: list[tuple[int, int, float] | None] = []  # each row's mirror pair, when folded in
-        self._pairs_measure = "overshoot"  # the measure self.pairs were ranked by
-        self._saved_colormap = _UNSET
-        self.heat: np.ndarray | None = None
-        self._heat_colormap: ColorMap | None = None
+        self.finder = InterferenceFinder(window, panel, self.start_authoring)
         d = self.document
         d.rig_changed.connect(self._on_rig_change)
         d.shapes_changed.connect(self._on_shapes_change)
@@ -88,29 +79,23 @@ class CorrectiveController(QtCore.QObject):
         p.delete_requested.connect(self.delete)
         p.mirror_requested.connect(self.mirror)
         p.rule_requested.connect(self.set_rule)
-        p.find_requested.connect(self.find_pairs)
-        p.pair_selected.connect(self.show_pair)
-        p.create_pair_requested.connect(self.create_for_pair)
-        p.tab_changed.connect(self._on_tab_change)
+        p.tab_changed.connect(self.finder.on_tab_change)
         p.brush_changed.connect(self._update_cursor_radius)
         seg = getattr(window, "segmentation", None)
         if seg is not None and hasattr(seg, "segmentation_ready"):
             # the segmentation view repaints the surface when it finishes: keep the heat map on top
-            seg.segmentation_ready.connect(self._reapply_heat_map)
+            seg.segmentation_ready.connect(self.finder.reapply_heat_map)
         if dock is not None:
-            dock.visibilityChanged.connect(lambda vis: None if vis else self.leave_heat_map())
+            dock.visibilityChanged.connect(lambda vis: None if vis else self.finder.leave_heat_map())
         if d.project is not None:
             self._on_rig_change()
 
     # --- document signals --------------------------------------------------------------------------
     def _on_rig_change(self) -> None:
         self.stop_sculpting()
-        self.leave_heat_map()
+        self.finder.reset()
         self.mesh = None
         self._mirror = None
-        self._overlap.clear()
-        self.pairs, self.pair_mirrors = [], []
-        self.panel.set_pairs([])
         rig = self.document.rig
         self.panel.set_shapes(rig.shape_names)
         lo, hi = rig.neutral.min(axis=0), rig.neutral.max(axis=0)
@@ -124,7 +109,7 @@ class CorrectiveController(QtCore.QObject):
             ticked = self.panel.ticked_drivers()
             self.panel.set_shapes(rig.shape_names)
             self.panel.set_ticked(ticked)
-            self._overlap.clear()
+            self.finder.shapes_changed()
         self._refresh_table()
 
     def _on_pose_change(self) -> None:
@@ -641,100 +626,6 @@ class CorrectiveController(QtCore.QObject):
             self._cursor[1].SetVisibility(False)
             self.viewport.render()
 
-    # --- interference finder -----------------------------------------------------------------------
-    def find_pairs(self) -> list[tuple[int, int, float]]:
-        rig = self.document.rig
-        if rig is None:
-            return []
-        measure = self.measure
-        if measure not in self._overlap:
-            QtWidgets.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
-            try:
-                self._overlap[measure] = shape_overshoot(rig.deltas) if measure == "overshoot" else \
-                    shape_overlap(rig.deltas, directional=measure == "directional")
-            finally:
-                QtWidgets.QApplication.restoreOverrideCursor()
-        self._pairs_measure = measure
-        O, top = self._overlap[measure], self.panel.top.value()
-        shape = self.panel.partner_of.currentData()
-        names = rig.shape_names
-        self.pair_mirrors = []
-        if shape in names:   # the partners of one shape, as (shape, partner, score)
-            k = names.index(shape)
-            self.pairs = [(k, j, s) for j, s in rank_partners(O, k, top)]
-        elif self.panel.merge_mirrored.isChecked():
-            every = rank_interference(None, top=len(names) ** 2, overlap=O)
-            rows = merge_mirrored_pairs(every, mirror_indices(names))[:top]
-            self.pairs = [(i, j, s) for i, j, s, _ in rows]
-            self.pair_mirrors = [m for *_, m in rows]
-        else:
-            self.pairs = rank_interference(None, top=top, overlap=O)
-        mirrors = self.pair_mirrors or [None] * len(self.pairs)
-        self.panel.set_pairs([(names[i], names[j], s, "" if m is None else f"{names[m[0]]} × {names[m[1]]}")
-                              for (i, j, s), m in zip(self.pairs, mirrors)])
-        self.leave_heat_map()
-        return self.pairs
-
-    @property
-    def measure(self) -> str:
-        """The finder's measure: "overshoot" (default), "plain" or "directional" overlap."""
-        return self.panel.measure.currentData()
-
-    def show_pair(self, row: int) -> None:
-        """Colour the face by where the selected pair interferes (a colour bar in rig units): the overshoot of
-        their sum for the overshoot measure, else min(‖d_i‖, ‖d_j‖)."""
-        if row < 0 or row >= len(self.pairs):
-            self.leave_heat_map()
-            return
-        rig = self.document.rig
-        i, j, score = self.pairs[row]
-        mirror = self.pair_mirrors[row] if row < len(self.pair_mirrors) else None
-        overshoot = self._pairs_measure == "overshoot"
-        heat_of = overshoot_heat if overshoot else interference_heat
-        self.heat = heat_of(rig.deltas[i], rig.deltas[j])
-        if mirror is not None:   # both sides of a mirrored couple
-            self.heat = np.maximum(self.heat, heat_of(rig.deltas[mirror[0]], rig.deltas[mirror[1]]))
-        if self._saved_colormap is _UNSET:
-            self._saved_colormap = self.viewport.colormap
-        top = float(self.heat.max())
-        title = f"overshoot ({rig.units})" if overshoot else f"interference ({rig.units})"
-        self._heat_colormap = ColorMap(self.heat, title=title, cmap="YlOrRd", clim=(0.0, top if top > 0 else 1.0))
-        self.viewport.set_colormap(self._heat_colormap)
-        n = int((self.heat > 0.1 * top).sum()) if top > 0 else 0
-        what = "‖d_i + d_j‖ − max(‖d_i‖, ‖d_j‖)" if overshoot else "min(‖d_i‖, ‖d_j‖)"
-        names = rig.shape_names
-        also = "" if mirror is None else f" (and {names[mirror[0]]} × {names[mirror[1]]}, {mirror[2]:.3f})"
-        self.panel.pair_info.setText(f"{names[i]} × {names[j]}: score {score:.3f}{also}; "
-                                     f"{what} up to {top:.3g} {rig.units}, above 10% on {n:,} vertices.")
-
-    def _reapply_heat_map(self) -> None:
-        if self._saved_colormap is not _UNSET and self.viewport.colormap is not self._heat_colormap:
-            self._saved_colormap = self.viewport.colormap
-            self.viewport.set_colormap(self._heat_colormap)
-
-    def leave_heat_map(self) -> None:
-        """Restore the view that was shown before the heat map."""
-        if self._saved_colormap is not _UNSET:
-            saved, self._saved_colormap = self._saved_colormap, _UNSET
-            self.heat = None
-            self.viewport.set_colormap(saved)
-            self.panel.pair_info.setText("")
-
-    def _on_tab_change(self, index: int) -> None:
-        if index != 1:
-            self.leave_heat_map()
-        elif self.panel.selected_pair_row() >= 0:
-            self.show_pair(self.panel.selected_pair_row())
-
-    def create_for_pair(self) -> None:
-        row = self.panel.selected_pair_row()
-        if row < 0 or row >= len(self.pairs):
-            return
-        i, j, _ = self.pairs[row]
-        names = self.document.rig.shape_names
-        self.leave_heat_map()
-        self.start_authoring([names[i], names[j]], self.panel.current_rule())
-
     # --- brush shortcuts ---------------------------------------------------------------------------
     def set_brush(self, brush: str) -> None:
         self.panel.brush.setCurrentIndex(max(0, self.panel.brush.findData(brush)))
@@ -786,7 +677,7 @@ def install(window) -> CorrectiveController:
         dock.show()
         dock.raise_()
         panel.tabs.setCurrentIndex(1)
-        ctrl.find_pairs()
+        ctrl.finder.find_pairs()
     act(menu, "&Find Interfering Pairs", lambda _=False: _find(), "Ctrl+Shift+F", "Rank shape pairs by the overlap of their displacements")
     menu.addSeparator()
     brushes = menu.addMenu("&Brush")

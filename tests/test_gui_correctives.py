@@ -257,33 +257,33 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     w, ctrl = win
     rig = w.document.rig
     ctrl.panel.tabs.setCurrentIndex(1)
-    pairs = ctrl.find_pairs()
+    pairs = ctrl.finder.find_pairs()
     assert len(pairs) == ctrl.panel.top.value() and ctrl.panel.pairs.topLevelItemCount() == len(pairs)
     scores = [s for _, _, s in pairs]
     assert scores == sorted(scores, reverse=True) and 0 < scores[0] <= 1
     # the default measure, overshoot: the heat map is how far the pair's sum goes beyond the larger shape
-    assert ctrl.measure == "overshoot"
+    assert ctrl.finder.measure == "overshoot"
     ctrl.panel.select_pair(0)
     def excess(i, j):
         d_i, d_j = rig.deltas[i], rig.deltas[j]
         larger = np.maximum(np.linalg.norm(d_i, axis=1), np.linalg.norm(d_j, axis=1))
         return np.maximum(np.linalg.norm(d_i + d_j, axis=1) - larger, 0.0)
     i, j, _ = pairs[0]
-    mirror = ctrl.pair_mirrors[0]            # the row stands for both sides: so does its heat map
+    mirror = ctrl.finder.pair_mirrors[0]            # the row stands for both sides: so does its heat map
     expected = excess(i, j) if mirror is None else np.maximum(excess(i, j), excess(*mirror[:2]))
     np.testing.assert_allclose(w.viewport.colormap.scalars, expected, atol=1e-12)
     assert w.viewport.colormap.title.startswith("overshoot") and w.viewport.colormap.scalars.max() > 0
     # the partners of one shape: the other inner brow first, as Smith's brow example has it
     ctrl.panel.partner_of.setCurrentIndex(ctrl.panel.partner_of.findData("browInnerUp_L"))
-    partners = ctrl.find_pairs()
+    partners = ctrl.finder.find_pairs()
     assert [rig.shape_names[j] for _, j, _ in partners[:2]] == ["browInnerUp_R", "browOuterUp_L"]
     first = ctrl.panel.pairs.topLevelItem(0)
     assert (first.text(2), first.text(3)) == ("browInnerUp_L", "browInnerUp_R")
     ctrl.panel.partner_of.setCurrentIndex(0)
     ctrl.panel.measure.setCurrentIndex(ctrl.panel.measure.findData("directional"))
-    directional = ctrl.find_pairs()
+    directional = ctrl.finder.find_pairs()
     w2 = make_window(qtbot, tmp_path)  # the next session (same settings folder) starts on the chosen measure
-    assert w2.correctives.measure == "directional"
+    assert w2.correctives.finder.measure == "directional"
     w2.close()
     assert all(s <= 1 for *_, s in directional)
     ctrl.panel.select_pair(0)
@@ -292,7 +292,7 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     assert cm is not None and rig.units in cm.title
     def overlap(i, j):
         return np.minimum(np.linalg.norm(rig.deltas[i], axis=1), np.linalg.norm(rig.deltas[j], axis=1))
-    mirror = ctrl.pair_mirrors[0]
+    mirror = ctrl.finder.pair_mirrors[0]
     np.testing.assert_allclose(cm.scalars, overlap(i, j) if mirror is None else
                                np.maximum(overlap(i, j), overlap(*mirror[:2])))
     assert w.viewport.plotter.scalar_bars
@@ -369,27 +369,27 @@ def test_finder_lists_a_pair_and_its_mirror_as_one_row(qtbot, win):
     names = w.document.rig.shape_names
     ctrl.panel.tabs.setCurrentIndex(1)
     assert ctrl.panel.merge_mirrored.isChecked()
-    rows = ctrl.find_pairs()
+    rows = ctrl.finder.find_pairs()
     listed = {frozenset((names[i], names[j])) for i, j, _ in rows}
-    mirrored = [m for m in ctrl.pair_mirrors if m is not None]
+    mirrored = [m for m in ctrl.finder.pair_mirrors if m is not None]
     assert mirrored, "the sample rig has left/right shapes: some rows stand for both sides"
-    for (i, j, _), m in zip(rows, ctrl.pair_mirrors):
+    for (i, j, _), m in zip(rows, ctrl.finder.pair_mirrors):
         twin = frozenset((mirror_name(names[i]), mirror_name(names[j])))
         assert twin == frozenset((names[i], names[j])) or twin not in listed    # never both sides as rows
         if m is not None:
             assert frozenset((names[m[0]], names[m[1]])) == twin
-    row = next(r for r, m in enumerate(ctrl.pair_mirrors) if m is not None)
+    row = next(r for r, m in enumerate(ctrl.finder.pair_mirrors) if m is not None)
     item = ctrl.panel.pairs.topLevelItem(row)
     assert item.text(4) == "both"
-    assert item.toolTip(2).endswith(f"its mirror image {names[ctrl.pair_mirrors[row][0]]} × "
-                                    f"{names[ctrl.pair_mirrors[row][1]]}")
+    assert item.toolTip(2).endswith(f"its mirror image {names[ctrl.finder.pair_mirrors[row][0]]} × "
+                                    f"{names[ctrl.finder.pair_mirrors[row][1]]}")
     ctrl.panel.select_pair(row)          # the heat map shows both sides
     heat = w.viewport.colormap.scalars
     x = w.document.rig.neutral
     assert heat[x[:, 0] > 0.5].max() > 0 and heat[x[:, 0] < -0.5].max() > 0
     ctrl.panel.merge_mirrored.setChecked(False)   # re-ranks: both sides as rows again
-    flat = ctrl.pairs
-    assert ctrl.pair_mirrors == [] and len(flat) == len(rows)
+    flat = ctrl.finder.pairs
+    assert ctrl.finder.pair_mirrors == [] and len(flat) == len(rows)
     assert any(frozenset((mirror_name(names[i]), mirror_name(names[j]))) in
                {frozenset((names[a], names[b])) for a, b, _ in flat} - {frozenset((names[i], names[j]))}
                for i, j, _ in flat)
