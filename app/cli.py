@@ -77,7 +77,8 @@ def cmd_info(args) -> int:
         "units": rig.units,
         "shapes": rig.shape_names,
         "moving_vertices": moving,
-        "correctives": [{"name": c.name, "drivers": list(c.drivers), "rule": c.rule} for c in rig.correctives],
+        "correctives": [{"name": c.name, "drivers": list(c.drivers), "rule": c.rule, "muted": c.muted}
+                        for c in rig.correctives],
         "presets": sorted(rig.presets),
         "bounds": [rig.neutral.min(axis=0).round(6).tolist(), rig.neutral.max(axis=0).round(6).tolist()],
     }
@@ -88,7 +89,7 @@ def cmd_info(args) -> int:
               f"{len(info['shapes'])} shapes, units {info['units']}")
         print(f"  shapes: {', '.join(info['shapes'])}")
         if info["correctives"]:
-            print(f"  correctives: {', '.join(c['name'] for c in info['correctives'])}")
+            print(f"  correctives: {', '.join(c['name'] + (' (muted)' if c['muted'] else '') for c in info['correctives'])}")
         if info["presets"]:
             print(f"  presets: {', '.join(info['presets'])}")
     return 0

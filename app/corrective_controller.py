@@ -8,6 +8,7 @@ importing, mirroring, renaming, editing drivers or rule and deleting are ``SetCo
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -78,6 +79,7 @@ class CorrectiveController(QtCore.QObject):
         p.drivers_requested.connect(self.edit_drivers)
         p.delete_requested.connect(self.delete)
         p.mirror_requested.connect(self.mirror)
+        p.mute_requested.connect(self.set_muted)
         p.rule_requested.connect(self.set_rule)
         p.tab_changed.connect(self.finder.on_tab_change)
         p.brush_changed.connect(self._update_cursor_radius)
@@ -126,7 +128,7 @@ class CorrectiveController(QtCore.QObject):
 
     def _refresh_table(self) -> None:
         rig = self.document.rig
-        rows = [(c.name, list(c.drivers), c.rule) for c in rig.correctives]
+        rows = [(c.name, list(c.drivers), c.rule, c.muted) for c in rig.correctives]
         self.panel.set_correctives(rows, self.activations())
 
     # --- helpers -----------------------------------------------------------------------------------
@@ -257,7 +259,8 @@ class CorrectiveController(QtCore.QObject):
         name = own.name if own is not None else "+".join(drivers)
         try:
             delta = corrective_delta(x_des, x_cur, activation_for(drivers, rule, rig.shape_names, w))
-            made = Corrective(name=name, drivers=drivers, rule=rule, delta=delta)
+            made = Corrective(name=name, drivers=drivers, rule=rule, delta=delta,
+                              muted=own.muted if own is not None else False)
         except RigInputError as exc:
             self._error(str(exc))
             return False
@@ -365,8 +368,7 @@ class CorrectiveController(QtCore.QObject):
             return False
         if new_name == c.name:
             return False
-        new = [Corrective(name=new_name, drivers=x.drivers, rule=x.rule, delta=x.delta) if x is c else x
-               for x in self.document.rig.correctives]
+        new = [replace(x, name=new_name) if x is c else x for x in self.document.rig.correctives]
         ok = self._push_correctives(new, f"Rename corrective {c.name} to {new_name}")
         if ok:
             self.panel.select(new_name)
@@ -386,7 +388,7 @@ class CorrectiveController(QtCore.QObject):
             drivers = [str(d).strip() for d in drivers if str(d).strip()]
             self._check_cycle(drivers)
             new_name = "+".join(drivers) if c.name == "+".join(c.drivers) else c.name
-            made = Corrective(name=new_name, drivers=drivers, rule=c.rule, delta=c.delta)
+            made = replace(c, name=new_name, drivers=drivers)
         except RigInputError as exc:
             self._error(str(exc))
             return False
@@ -400,8 +402,7 @@ class CorrectiveController(QtCore.QObject):
         c = self._selected(name)
         if c is None or c.rule == rule:
             return False
-        new = [Corrective(name=x.name, drivers=x.drivers, rule=rule, delta=x.delta) if x is c else x
-               for x in self.document.rig.correctives]
+        new = [replace(x, rule=rule) if x is c else x for x in self.document.rig.correctives]
         return self._push_correctives(new, f"Rule of {c.name}: {rule}")
 
     def _mirror_map(self) -> np.ndarray:
@@ -460,6 +461,15 @@ class CorrectiveController(QtCore.QObject):
             return 0
         self.window.statusBar().showMessage(f"Made {len(made)} mirrored corrective(s): {names}.", 8000)
         return len(made)
+
+    def set_muted(self, name: str, muted: bool) -> bool:
+        """Mute a corrective (it adds nothing to the face and exports until unmuted) or unmute it; undoable."""
+        c = self.corrective(name)
+        if c is None or c.muted == bool(muted):
+            self._refresh_table()
+            return False
+        new = [replace(x, muted=bool(muted)) if x is c else x for x in self.document.rig.correctives]
+        return self._push_correctives(new, f"{'Mute' if muted else 'Unmute'} corrective {c.name}")
 
     def delete(self, name: str | None = None) -> bool:
         c = self._selected(name)

@@ -49,13 +49,16 @@ SMOOTH_MIN_POWER = 4.0
 class Corrective:
     """A corrective shape: name, driver shape names (2 or more), activation rule, delta (V, 3) float64.
 
-    The name defaults to the drivers joined by '+', e.g. ``browInnerUp_L+browInnerUp_R``.
+    The name defaults to the drivers joined by '+', e.g. ``browInnerUp_L+browInnerUp_R``. A ``muted``
+    corrective (Blender's mute, Maya's target visibility) adds nothing to the evaluated surface and exports;
+    its activation is still computed, and authoring still counts it as a lower order.
     """
 
     drivers: list[str]
     delta: np.ndarray
     rule: str = "product"
     name: str = ""
+    muted: bool = False
 
     def __post_init__(self) -> None:
         self.drivers = [str(d) for d in self.drivers]
@@ -82,21 +85,23 @@ class Corrective:
         return len(self.drivers)
 
     def copy(self) -> "Corrective":
-        return Corrective(drivers=list(self.drivers), delta=self.delta.copy(), rule=self.rule, name=self.name)
+        return Corrective(drivers=list(self.drivers), delta=self.delta.copy(), rule=self.rule, name=self.name,
+                          muted=self.muted)
 
     # --- project file ----------------------------------------------------------------------------
     def to_dict(self, delta_key: str) -> dict:
         """Manifest entry (JSON); the delta itself is stored as the .npy array ``delta_key``."""
-        return {"name": self.name, "drivers": list(self.drivers), "rule": self.rule, "delta": delta_key}
+        return {"name": self.name, "drivers": list(self.drivers), "rule": self.rule, "muted": self.muted,
+                "delta": delta_key}
 
     @classmethod
-    def from_arrays(cls, entry: dict, arrays: dict[str, np.ndarray]) -> "Corrective":
-        """Rebuild from a manifest entry and the project's arrays ({key: array})."""
+    def from_entry(cls, entry: dict, delta_of) -> "Corrective":
+        """Rebuild from a manifest entry; ``delta_of(key)`` returns the stored delta array (a missing key raises
+        KeyError). Entries written before correctives could be muted are not muted."""
         try:
-            key = entry["delta"]
-            delta = arrays[key]
+            delta = delta_of(entry["delta"])
             return cls(name=str(entry.get("name", "")), drivers=list(entry["drivers"]),
-                       rule=str(entry.get("rule", "product")), delta=delta)
+                       rule=str(entry.get("rule", "product")), delta=delta, muted=bool(entry.get("muted", False)))
         except KeyError as e:
             raise RigInputError(f"Corrective entry {entry.get('name', '?')!r} in the project is missing {e}.") from None
 
@@ -163,24 +168,6 @@ def find_corrective(correctives, drivers) -> Corrective | None:
         if frozenset(c.drivers) == key:
             return c
     return None
-
-
-def correctives_to_arrays(correctives) -> tuple[list[dict], dict[str, np.ndarray]]:
-    """Manifest entries and {key: delta} arrays for a project file (keys ``correctives/NNN.npy``)."""
-    entries, arrays = [], {}
-    for i, c in enumerate(correctives):
-        key = f"correctives/{i:03d}.npy"
-        entries.append(c.to_dict(key))
-        arrays[key] = c.delta
-    return entries, arrays
-
-
-def correctives_from_arrays(entries, arrays, shape_names=None, n_vertices: int | None = None) -> list:
-    """Inverse of ``correctives_to_arrays``; validated when ``shape_names`` is given; in evaluation order."""
-    cs = [Corrective.from_arrays(e, arrays) for e in entries]
-    if shape_names is not None:
-        validate_correctives(cs, shape_names, n_vertices)
-    return evaluation_order(cs)
 
 
 # --- activations --------------------------------------------------------------------------------

@@ -1,6 +1,6 @@
 """Pose evaluation: one blended product, vectorised (ALGORITHMS.md §1 and §4).
 
-Global pose:   x = b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c
+Global pose:   x = b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c   (muted correctives left out)
 Regional pose: x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v) (+ correctives activated per vertex)
 
 ``PoseEvaluator`` is built once per rig (and rebuilt when shapes or correctives change): it keeps the
@@ -25,6 +25,7 @@ class PoseEvaluator:
         self._neutral = rig.neutral.astype(dtype).reshape(-1)
         corr = list(rig.correctives)
         self._n_corr = len(corr)
+        self._live = np.array([0.0 if c.muted else 1.0 for c in corr])  # muted correctives add nothing
         blocks = [rig.deltas.reshape(rig.n_shapes, -1)]
         if corr:
             blocks.append(np.stack([c.delta for c in corr]).reshape(len(corr), -1))
@@ -46,7 +47,7 @@ class PoseEvaluator:
         """(V, 3) surface for a global weight vector (K,)."""
         w = np.asarray(weights, dtype=np.float64)
         if self._n_corr:
-            w = np.concatenate([w, self.activations(w)])
+            w = np.concatenate([w, self.activations(w) * self._live])
         if out is None:
             out = self._neutral.copy()
         else:
@@ -66,6 +67,7 @@ class PoseEvaluator:
         if self._n_corr:
             from .correctives import corrective_activations_per_vertex
             a = corrective_activations_per_vertex(self.rig.correctives, self.rig.shape_names, per_vertex)
+            a *= self._live
             per_vertex = np.concatenate([per_vertex, a], axis=1)
         D = self._D.reshape(self._D.shape[0], -1, 3)  # (K+C, U, 3)
         out = self._neutral.copy().reshape(-1, 3)

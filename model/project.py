@@ -81,7 +81,7 @@ def save_project(project: Project, path: str | Path) -> None:
     for i, c in enumerate(rig.correctives):
         key = f"correctives/{i}"
         arrays[key] = np.asarray(c.delta, dtype=np.float64)
-        correctives.append({"name": c.name, "drivers": list(c.drivers), "rule": c.rule, "delta": key})
+        correctives.append(c.to_dict(key))
     for name, a in project.arrays.items():
         arrays[f"extra/{name}"] = np.asarray(a)
     pose = {}
@@ -155,8 +155,7 @@ def load_project(path: str | Path) -> Project:
                       source=str(path), presets=meta.get("presets", {}))
             if manifest.get("correctives"):
                 from .correctives import Corrective, set_correctives
-                set_correctives(rig, [Corrective(name=c["name"], drivers=list(c["drivers"]), rule=c["rule"],
-                                                 delta=array(c["delta"])) for c in manifest["correctives"]])
+                set_correctives(rig, [Corrective.from_entry(c, array) for c in manifest["correctives"]])
             for c in rig.correctives:
                 if c.delta.shape != rig.neutral.shape:
                     raise RigInputError(f"{path}: corrective '{c.name}' has {c.delta.shape[0]} vertices, "

@@ -36,7 +36,8 @@ def test_corrective_from_scan_round_trip(sample_dir, tmp_path, rule):
             "--rule", rule, "-o", out)
     info = json.loads(run_cli("info", out, "--json").stdout)
     assert info["correctives"] == [{"name": "browInnerUp_L+browInnerUp_R",
-                                    "drivers": ["browInnerUp_L", "browInnerUp_R"], "rule": rule}]
+                                    "drivers": ["browInnerUp_L", "browInnerUp_R"], "rule": rule,
+                                    "muted": False}]
     run_cli("export", out, "--weights", "browInnerUp_L=1,browInnerUp_R=1", "-o", tmp_path / "full.obj")
     np.testing.assert_allclose(read_obj(tmp_path / "full.obj").vertices, scan, atol=2e-6)
     # One driver off: the corrective adds nothing, the surface is the plain shape.
@@ -73,8 +74,10 @@ def test_corrective_with_mirror_adds_the_other_side(sample_dir, tmp_path):
     assert "browInnerUp_L+browOuterUp_L and browInnerUp_R+browOuterUp_R" in proc.stdout
     info = json.loads(run_cli("info", out, "--json").stdout)
     assert info["correctives"] == [
-        {"name": "browInnerUp_L+browOuterUp_L", "drivers": ["browInnerUp_L", "browOuterUp_L"], "rule": "min"},
-        {"name": "browInnerUp_R+browOuterUp_R", "drivers": ["browInnerUp_R", "browOuterUp_R"], "rule": "min"}]
+        {"name": "browInnerUp_L+browOuterUp_L", "drivers": ["browInnerUp_L", "browOuterUp_L"], "rule": "min",
+         "muted": False},
+        {"name": "browInnerUp_R+browOuterUp_R", "drivers": ["browInnerUp_R", "browOuterUp_R"], "rule": "min",
+         "muted": False}]
     # the right-side combination is the mirror image of the left-side scan (the sample rig is symmetric)
     run_cli("export", out, "--weights", "browInnerUp_R=1,browOuterUp_R=1", "-o", tmp_path / "right.obj")
     right = read_obj(tmp_path / "right.obj").vertices

@@ -8,7 +8,7 @@ import pytest
 
 from model.correctives import (RULES, Corrective, activation_for, add_corrective, authoring_surface,
                                corrective_activations, corrective_activations_per_vertex,
-                               correctives_from_arrays, correctives_to_arrays, driver_pose, rule_activation,
+                               driver_pose, rule_activation,
                                set_correctives,
                                validate_correctives)
 from model.errors import RigInputError
@@ -190,14 +190,40 @@ def test_per_vertex_activations_match_the_global_ones_row_by_row(brow_rigs):
     assert np.array_equal(per_vertex, rows)
 
 
-def test_project_arrays_round_trip(brow_rigs):
-    rig, _ = brow_rigs["smooth-min"]
-    entries, arrays = correctives_to_arrays(rig.correctives)
+def test_project_round_trip_keeps_correctives_and_mute(brow_rigs, tmp_path):
+    """Saved in a .bsproj and opened again: names, drivers, rules, deltas bit for bit, muted flags; a muted
+    corrective adds nothing to the pose; a manifest written before muting existed opens unmuted."""
     import json
-    entries = json.loads(json.dumps(entries))  # the manifest is plain JSON
-    back = correctives_from_arrays(entries, arrays, rig.shape_names, rig.n_vertices)
-    assert [(c.name, c.drivers, c.rule) for c in back] == [(c.name, c.drivers, c.rule) for c in rig.correctives]
-    assert all(np.array_equal(a.delta, b.delta) for a, b in zip(back, rig.correctives))
+    import zipfile
+    from dataclasses import replace
+    from model.project import Project, load_project, save_project
+    rig, _ = brow_rigs["smooth-min"]
+    rig = rig.copy()
+    muted = rig.correctives[0].name
+    set_correctives(rig, [replace(c, muted=c.name == muted) for c in rig.correctives])
+    save_project(Project(rig=rig), tmp_path / "brows.bsproj")
+    back = load_project(tmp_path / "brows.bsproj").rig
+    assert [(c.name, c.drivers, c.rule, c.muted) for c in back.correctives] == \
+        [(c.name, c.drivers, c.rule, c.muted) for c in rig.correctives]
+    assert all(np.array_equal(a.delta, b.delta) for a, b in zip(back.correctives, rig.correctives))
+    on = driver_pose(back, BROWS)
+    first = back.correctives[0]
+    unmuted = PoseEvaluator(replace(back, correctives=[replace(c, muted=False) for c in back.correctives]),
+                            dtype=np.float64).evaluate(on)
+    a = corrective_activations(back.correctives, back.shape_names, on)[0]
+    assert a == 1.0
+    np.testing.assert_allclose(PoseEvaluator(back, dtype=np.float64).evaluate(on), unmuted - first.delta, atol=1e-12)
+    # an older project: no "muted" in the manifest
+    with zipfile.ZipFile(tmp_path / "brows.bsproj") as z:
+        files = {n: z.read(n) for n in z.namelist()}
+    manifest = json.loads(files["manifest.json"])
+    for entry in manifest["correctives"]:
+        del entry["muted"]
+    files["manifest.json"] = json.dumps(manifest).encode()
+    with zipfile.ZipFile(tmp_path / "old.bsproj", "w") as z:
+        for n, data in files.items():
+            z.writestr(n, data)
+    assert not any(c.muted for c in load_project(tmp_path / "old.bsproj").rig.correctives)
 
 
 # --- from a scan (Smith, future work 1) ---------------------------------------------------------

@@ -427,3 +427,33 @@ def test_mirror_all_adds_each_missing_side_once(qtbot, win):
     assert w.statusBar().currentMessage() == "Every corrective already has its other side."
     doc.undo_stack.undo()
     assert "cheekPuff_L+mouthSmile_L" not in [c.name for c in rig.correctives] and len(rig.correctives) == 4
+
+
+def test_unticking_a_corrective_mutes_it_and_undo_brings_it_back(qtbot, win, tmp_path):
+    w, ctrl = win
+    doc, rig = w.document, w.document.rig
+    assert ctrl.start_authoring(PAIR)
+    fix = np.where((np.abs(rig.neutral[:, 0]) < 2.0)[:, None], np.array([0.0, 0.0, 0.05]), 0.0)
+    doc.set_edit_offset(fix)
+    assert ctrl.save()
+    _settle(qtbot, w)
+    with_fix = doc.surface().copy()
+    item = ctrl.panel.table.topLevelItem(0)
+    assert item.checkState(0) == QtCore.Qt.Checked
+    n = doc.undo_stack.count()
+    item.setCheckState(0, QtCore.Qt.Unchecked)               # the user unticks it
+    qtbot.waitUntil(lambda: rig.correctives[0].muted)         # (the edit runs once the tick's signal returns)
+    _settle(qtbot, w)
+    assert rig.correctives[0].muted and doc.undo_stack.count() == n + 1
+    assert w.undo_action.text().endswith("Mute corrective browInnerUp_L+browInnerUp_R")
+    np.testing.assert_allclose(doc.surface(), with_fix - fix, atol=1e-5)     # the face without it
+    np.testing.assert_allclose(w.viewport.points(), with_fix - fix, atol=1e-5)
+    assert ctrl.panel.muted_names() == ["browInnerUp_L+browInnerUp_R"]
+    assert ctrl.panel.activation_texts() == ["1.000"]         # its activation is still shown
+    assert w.save_to(tmp_path / "muted.bsproj")
+    from model.project import load_project
+    assert load_project(tmp_path / "muted.bsproj").rig.correctives[0].muted
+    doc.undo_stack.undo()
+    _settle(qtbot, w)
+    assert not rig.correctives[0].muted and ctrl.panel.muted_names() == []
+    np.testing.assert_allclose(doc.surface(), with_fix, atol=1e-5)

@@ -44,6 +44,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
     drivers_requested = QtCore.Signal()
     delete_requested = QtCore.Signal()
     mirror_requested = QtCore.Signal()         # add the other side's version of the selected corrective
+    mute_requested = QtCore.Signal(str, bool)  # (corrective, muted): its tick box was toggled
     rule_requested = QtCore.Signal(str)        # the selected corrective's new rule
     brush_changed = QtCore.Signal()
     find_requested = QtCore.Signal()
@@ -72,10 +73,12 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.table.setRootIsDecorated(False)
         self.table.setAlternatingRowColors(True)
         self.table.setToolTip("Correctives of the rig, in evaluation order (lower orders first), with their "
-                              "activation a_c(w) at the current pose; double-click to sculpt one again")
+                              "activation a_c(w) at the current pose; untick one to mute it (compare the face "
+                              "without it); double-click to sculpt one again")
         self.table.setMinimumHeight(110)
         self.table.itemSelectionChanged.connect(self._on_selection)
         self.table.itemDoubleClicked.connect(lambda *_: self.edit_shape_requested.emit())
+        self.table.itemChanged.connect(self._on_item_changed)
         lay.addWidget(self.table, 2)
         row = QtWidgets.QHBoxLayout()
         self.rename_button = _button("Rename…", "Rename the selected corrective (undoable)", self.rename_requested)
@@ -263,16 +266,24 @@ class CorrectivesPanel(QtWidgets.QWidget):
             it = self.drivers.item(i)
             it.setHidden(bool(t) and t not in it.text().lower())
 
-    def set_correctives(self, rows: list[tuple[str, list[str], str]], activations) -> None:
-        """rows: (name, drivers, rule) in evaluation order; activations: (C,) at the current pose."""
+    def set_correctives(self, rows, activations) -> None:
+        """rows: (name, drivers, rule) or (name, drivers, rule, muted) in evaluation order; activations: (C,)
+        at the current pose."""
         selected = self.selected_name()
         self._updating = True
         self.table.clear()
         labels = dict(RULE_LABELS)
-        for (name, drivers, rule), a in zip(rows, activations):
+        for (name, drivers, rule, *muted), a in zip(rows, activations):
+            muted = bool(muted and muted[0])
             item = QtWidgets.QTreeWidgetItem([name, f"{a:.3f}", labels.get(rule, rule), ", ".join(drivers)])
             item.setData(0, QtCore.Qt.UserRole, name)
-            item.setToolTip(0, f"{name}: driven by {', '.join(drivers)}; {labels.get(rule, rule)}")
+            item.setFlags(item.flags() | QtCore.Qt.ItemIsUserCheckable)
+            item.setCheckState(0, QtCore.Qt.Unchecked if muted else QtCore.Qt.Checked)
+            item.setToolTip(0, f"{name}: driven by {', '.join(drivers)}; {labels.get(rule, rule)}"
+                               + ("; muted: it adds nothing to the face until ticked again" if muted else ""))
+            if muted:
+                for c in range(4):
+                    item.setForeground(c, QtCore.Qt.gray)
             item.setTextAlignment(_ACTIVATION, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
             self.table.addTopLevelItem(item)
             if name == selected:
@@ -281,6 +292,16 @@ class CorrectivesPanel(QtWidgets.QWidget):
             self.table.resizeColumnToContents(c)
         self._updating = False
         self._on_selection()
+
+    def muted_names(self) -> list[str]:
+        return [self.table.topLevelItem(i).text(0) for i in range(self.table.topLevelItemCount())
+                if self.table.topLevelItem(i).checkState(0) == QtCore.Qt.Unchecked]
+
+    def _on_item_changed(self, item: QtWidgets.QTreeWidgetItem, column: int) -> None:
+        if column == 0 and not self._updating:
+            name, muted = item.data(0, QtCore.Qt.UserRole), item.checkState(0) == QtCore.Qt.Unchecked
+            # after this signal returns: the edit rebuilds the table, which must not delete the item mid-signal
+            QtCore.QTimer.singleShot(0, lambda: self.mute_requested.emit(name, muted))
 
     def set_activations(self, activations) -> None:
         for i, a in enumerate(activations):
