@@ -458,7 +458,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def shortcut_rows(self) -> list[tuple[str, str, str]]:
         """(menu, action, keys) for every action with a shortcut: the menus' in menu order (submenus as
-        "Correctives ▸ Brush"), then those that live outside the menus (take stepping, ...)."""
+        "Correctives ▸ Brush"), then those that live outside the menus, then the panels' own QShortcuts."""
         ordered: list[tuple[str, QtGui.QAction]] = []
         seen: set = set()
 
@@ -478,6 +478,10 @@ class MainWindow(QtWidgets.QMainWindow):
             keys = ", ".join(k.toString(QtGui.QKeySequence.NativeText) for k in act.shortcuts() if not k.isEmpty())
             if keys:
                 rows.append((where or "Window", act.text().replace("&", ""), keys))
+        for sc in self.findChildren(QtGui.QShortcut):   # panel keys that are not menu actions (region nudges)
+            if not sc.key().isEmpty():
+                rows.append(("Panels", sc.whatsThis() or "(panel shortcut)",
+                             sc.key().toString(QtGui.QKeySequence.NativeText)))
         return rows
 
     def show_shortcuts(self) -> None:

@@ -117,6 +117,8 @@ def test_every_shortcut_is_unambiguous_and_listed(qtbot, tmp_path):
         for sc in act.shortcuts():
             if sc.toString():
                 keys.setdefault(sc.toString(), []).append(act.text())
+    for sc in w.findChildren(QtGui.QShortcut):
+        keys.setdefault(sc.key().toString(), []).append(sc.whatsThis())
     assert {k: v for k, v in keys.items() if len(v) > 1} == {}
     for key in ("Ctrl+Z", "Ctrl+S", "M", "Ctrl+Shift+M", "Ctrl+Space", "Ctrl+Shift+F", "F1"):
         assert key in keys, key
@@ -130,6 +132,7 @@ def test_every_shortcut_is_unambiguous_and_listed(qtbot, tmp_path):
     assert ("Alt+,", "Previous Take Frame") in [r[:2] for r in rows]
     assert rows[0][2] == "File"                            # in menu order until a column header is clicked
     assert ("Ctrl+Z", "Undo", "Edit") in rows
+    assert ("Ctrl+Shift+Up", "Nudge Region Up", "Panels") in rows
 
 
 def test_every_control_explains_itself_in_a_tooltip(qtbot, tmp_path):

@@ -121,6 +121,7 @@ class SegmentationPanel(QtWidgets.QWidget):
             b.clicked.connect(lambda _=False, k=key: self.nudge_requested.emit(k, self.nudge_amount.value()))
             sc = QtGui.QShortcut(QtGui.QKeySequence(shortcut), self)
             sc.setContext(QtCore.Qt.WindowShortcut)
+            sc.setWhatsThis(f"Nudge Region {label}")   # its name in Help ▸ Keyboard Shortcuts
             sc.activated.connect(lambda k=key: self.nudge_requested.emit(k, self.nudge_amount.value()))
             ng.addWidget(b, 1 + i // 3, i % 3)
             self.nudge_buttons[key] = b
