@@ -19,7 +19,7 @@ from app.corrective_commands import SetCorrectivesCommand
 from app.interference_finder import InterferenceFinder
 from model.correctives import (Corrective, activation_for, authoring_surface, corrective_activation,
                                corrective_activations, driver_pose, find_corrective, mirrored_corrective,
-                               validate_correctives)
+                               symmetrized_corrective, validate_correctives)
 from model.errors import RigInputError
 from model.sides import mirror_name
 from solvers import sculpt
@@ -432,6 +432,26 @@ class CorrectiveController(QtCore.QObject):
         self.window.statusBar().showMessage(f"{what} {made.name}, the mirror image of {c.name}.", 5000)
         return True
 
+    def symmetrize(self, name: str | None = None) -> bool:
+        """Make a corrective whose drivers mirror onto themselves exactly symmetric (one undoable edit)."""
+        c = self._selected(name)
+        if c is None:
+            return False
+        rig = self.document.rig
+        try:
+            made = symmetrized_corrective(c, rig.neutral, self._mirror_map(), units=rig.units)
+        except RigInputError as exc:
+            self._error(str(exc))
+            return False
+        new = [made if x is c else x for x in rig.correctives]
+        if not self._push_correctives(new, f"Symmetrize corrective {c.name}"):
+            return False
+        self.panel.select(made.name)
+        change = float(np.linalg.norm(made.delta - c.delta, axis=1).max())
+        self.window.statusBar().showMessage(f"Made {c.name} symmetric (it moved by up to {change:.3g} "
+                                            f"{rig.units}).", 5000)
+        return True
+
     def mirror_all(self) -> int:
         """Add the mirror image of every corrective whose other side is missing (one undoable edit); returns how
         many were made. Correctives that are their own mirror image are left alone."""
@@ -681,6 +701,8 @@ def install(window) -> CorrectiveController:
         "Add the other side's version of the selected corrective (drivers _L↔_R, reflected across x = 0)")
     act(menu, "Mirror &All Correctives", lambda _=False: ctrl.mirror_all(), None,
         "Add the other side's version of every corrective that lacks one (one undoable edit)")
+    act(menu, "Symmetri&ze Corrective", lambda _=False: ctrl.symmetrize(), None,
+        "Make the selected two-sided corrective (drivers that mirror onto themselves) exactly symmetric")
     menu.addSeparator()
 
     def _find():

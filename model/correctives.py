@@ -351,7 +351,7 @@ def mirrored_corrective(corrective: Corrective, shape_names, neutral, mirror=Non
     driver, or when the rig is not symmetric where the corrective acts.
     """
     from solvers.correctives import mirror_delta
-    from solvers.sculpt import mirror_error, mirror_map
+    from solvers.sculpt import mirror_map
     from .sides import mirror_name
 
     c = corrective
@@ -364,14 +364,7 @@ def mirrored_corrective(corrective: Corrective, shape_names, neutral, mirror=Non
                             f"{', '.join(repr(d) for d in missing)}.")
     neutral = np.asarray(neutral, dtype=np.float64)
     m = mirror_map(neutral) if mirror is None else np.asarray(mirror)
-    n = np.linalg.norm(c.delta, axis=1)
-    moved = n > 1e-3 * n.max() if n.max() > 0 else n > 0
-    tol = MIRROR_TOLERANCE * float(np.linalg.norm(np.ptp(neutral, axis=0)))
-    bad = int((moved & (mirror_error(neutral, m) > tol)).sum())
-    if bad > 0.01 * moved.sum():
-        raise RigInputError(f"Cannot mirror {c.name}: the rig is not symmetric across x = 0 where it acts "
-                            f"({bad:,} of its {int(moved.sum()):,} vertices have no mirror vertex within "
-                            f"{tol:.2g}{' ' + units if units else ''}).")
+    _check_symmetric(c, neutral, m, units)
     if c.name == "+".join(c.drivers):
         name = "+".join(drivers)
     else:
@@ -379,3 +372,36 @@ def mirrored_corrective(corrective: Corrective, shape_names, neutral, mirror=Non
         if name == c.name:
             name = "+".join(drivers)
     return Corrective(name=name, drivers=drivers, rule=c.rule, delta=mirror_delta(c.delta, m))
+
+
+def symmetrized_corrective(corrective: Corrective, neutral, mirror=None, *, units: str = "") -> Corrective:
+    """A corrective whose drivers mirror onto themselves (browInnerUp_L+browInnerUp_R, mouthFunnel+jawOpen) made
+    exactly symmetric across x = 0: e' = (e + M e∘m) / 2, the mean of the shape and its mirror image (Maya's
+    Symmetrize Target). Raises RigInputError for a one-sided corrective (use ``mirrored_corrective``) or a rig
+    that is not symmetric where the corrective acts."""
+    from solvers.correctives import mirror_delta
+    from solvers.sculpt import mirror_map
+    from .sides import mirror_name
+
+    c = corrective
+    if {mirror_name(d) for d in c.drivers} != set(c.drivers):
+        raise RigInputError(f"{c.name} acts on one side: Mirror makes its other side; only a corrective whose "
+                            "drivers mirror onto themselves can be made symmetric.")
+    neutral = np.asarray(neutral, dtype=np.float64)
+    m = mirror_map(neutral) if mirror is None else np.asarray(mirror)
+    _check_symmetric(c, neutral, m, units)
+    return Corrective(name=c.name, drivers=list(c.drivers), rule=c.rule, muted=c.muted,
+                      delta=0.5 * (c.delta + mirror_delta(c.delta, m)))
+
+
+def _check_symmetric(c: Corrective, neutral: np.ndarray, mirror: np.ndarray, units: str) -> None:
+    """Raise unless the rig has a mirror vertex for (nearly) every vertex the corrective moves."""
+    from solvers.sculpt import mirror_error
+    n = np.linalg.norm(c.delta, axis=1)
+    moved = n > 1e-3 * n.max() if n.max() > 0 else n > 0
+    tol = MIRROR_TOLERANCE * float(np.linalg.norm(np.ptp(neutral, axis=0)))
+    bad = int((moved & (mirror_error(neutral, mirror) > tol)).sum())
+    if bad > 0.01 * moved.sum():
+        raise RigInputError(f"Cannot mirror {c.name}: the rig is not symmetric across x = 0 where it acts "
+                            f"({bad:,} of its {int(moved.sum()):,} vertices have no mirror vertex within "
+                            f"{tol:.2g}{' ' + units if units else ''}).")

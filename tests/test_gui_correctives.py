@@ -457,3 +457,30 @@ def test_unticking_a_corrective_mutes_it_and_undo_brings_it_back(qtbot, win, tmp
     _settle(qtbot, w)
     assert not rig.correctives[0].muted and ctrl.panel.muted_names() == []
     np.testing.assert_allclose(doc.surface(), with_fix, atol=1e-5)
+
+
+def test_symmetrize_a_two_sided_corrective(qtbot, win):
+    from solvers.correctives import mirror_delta
+    from solvers.sculpt import mirror_map
+    w, ctrl = win
+    doc, rig = w.document, w.document.rig
+    assert ctrl.start_authoring(PAIR)
+    lopsided = np.where((rig.neutral[:, 0] > 0.5)[:, None], np.array([0.0, 0.04, 0.02]), 0.0)
+    doc.set_edit_offset(lopsided)
+    assert ctrl.save()
+    before = rig.correctives[0].delta.copy()
+    n = doc.undo_stack.count()
+    assert ctrl.symmetrize(PAIR[0] + "+" + PAIR[1])
+    made = rig.correctives[0]
+    m = mirror_map(rig.neutral)
+    np.testing.assert_allclose(made.delta, 0.5 * (before + mirror_delta(before, m)))
+    np.testing.assert_allclose(mirror_delta(made.delta, m), made.delta, atol=1e-12)   # now its own mirror image
+    assert doc.undo_stack.count() == n + 1
+    doc.undo_stack.undo()
+    np.testing.assert_array_equal(rig.correctives[0].delta, before)
+    # a one-sided corrective is mirrored, not symmetrized
+    assert ctrl.start_authoring(["browInnerUp_L", "browOuterUp_L"])
+    doc.set_edit_offset(lopsided)
+    assert ctrl.save()
+    assert not ctrl.symmetrize("browInnerUp_L+browOuterUp_L")
+    assert w.last_error.startswith("browInnerUp_L+browOuterUp_L acts on one side: Mirror makes its other side")
