@@ -13,7 +13,7 @@ from PySide6 import QtCore, QtWidgets
 from model.sides import mirror_indices
 from solvers.correctives import (interference_heat, merge_mirrored_pairs, overshoot_heat, rank_interference,
                                  rank_partners, shape_overlap, shape_overshoot)
-from widgets.correctives_panel import CorrectivesPanel
+from widgets.correctives_panel import PAIR_HINT, CorrectivesPanel
 from widgets.scene import ColorMap
 
 _UNSET = object()
@@ -125,7 +125,7 @@ class InterferenceFinder:
             saved, self._saved_colormap = self._saved_colormap, _UNSET
             self.heat = None
             self.viewport.set_colormap(saved)
-            self.panel.pair_info.setText("")
+            self.panel.pair_info.setText(PAIR_HINT)
 
     def on_tab_change(self, index: int) -> None:
         if index != INTERFERENCE_TAB:

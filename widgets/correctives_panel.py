@@ -14,6 +14,7 @@ FALLOFF_LABELS = [("smooth", "Smooth"), ("linear", "Linear"), ("constant", "Cons
 
 
 _ACTIVATION, _RULE = 1, 2   # columns of the corrective table
+PAIR_HINT = "Find pairs, then select one to see where it interferes on the face."
 
 
 def _combo(items, tip: str) -> QtWidgets.QComboBox:
@@ -223,15 +224,17 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.pairs.setToolTip("Shape pairs that interfere most, best first; select one to see where (the "
                               "overshoot of their sum, or min(‖d_i‖, ‖d_j‖) for the overlap measures)")
         self.pairs.itemSelectionChanged.connect(self._on_pair)
-        lay.addWidget(self.pairs, 1)
-        self.pair_info = QtWidgets.QLabel("")
-        self.pair_info.setWordWrap(True)
-        lay.addWidget(self.pair_info)
+        # the selected pair's summary and action above the list, which takes the rest of the (tall) page:
+        # below it they ended up under the fold of the dock's scroll area
         self.create_pair_button = _button("Create corrective for this pair",
                                           "Set the pair to 1 and start sculpting its corrective",
                                           self.create_pair_requested)
         self.create_pair_button.setEnabled(False)
         lay.addWidget(self.create_pair_button)
+        self.pair_info = QtWidgets.QLabel(PAIR_HINT)
+        self.pair_info.setWordWrap(True)
+        lay.addWidget(self.pair_info)
+        lay.addWidget(self.pairs, 1)
         return page
 
     # --- state shown -------------------------------------------------------------------------------
