@@ -208,6 +208,7 @@ class CorrectiveController(QtCore.QObject):
             self.dock.raise_()
         self.panel.tabs.setCurrentIndex(0)
         self.panel.set_sculpting(drivers, self.document.edit_offset is not None)
+        self.panel.reveal_sculpt()
         self.window.statusBar().showMessage(
             f"Sculpt the corrective for {' + '.join(drivers)}: drag on the face, then Save corrective.", 8000)
         self.sculpting_changed.emit(True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from PySide6 import QtCore
+from PySide6 import QtCore, QtWidgets
 
 from app.corrective_controller import install
 from model.obj_io import write_obj
@@ -60,6 +60,12 @@ def test_real_sculpt_stroke_saved_as_corrective_and_undone(qtbot, win):
     ctrl.panel.new_button.click()
     _settle(qtbot, w)
     assert ctrl.sculpting and ctrl.authoring == PAIR
+    scroll = ctrl.panel.parentWidget()
+    while not isinstance(scroll, QtWidgets.QScrollArea):
+        scroll = scroll.parentWidget()
+    view = scroll.viewport()                             # the Save button has been scrolled into view
+    save = ctrl.panel.save_button
+    qtbot.waitUntil(lambda: view.rect().contains(QtCore.QRect(save.mapTo(view, QtCore.QPoint(0, 0)), save.size())))
     full = np.zeros(rig.n_shapes)
     full[[rig.shape_index(n) for n in PAIR]] = 1
     np.testing.assert_array_equal(doc.weights, full)   # the drivers at 1: one undoable pose change

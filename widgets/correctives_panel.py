@@ -360,6 +360,14 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.sculpt_box.setStyleSheet("QGroupBox { border: 1px solid #d08a3a; margin-top: 6px; }"
                                       "QGroupBox::title { color: #e0a050; }" if on else "")
 
+    def reveal_sculpt(self) -> None:
+        """Scroll the dock so the Sculpt group (brush settings, Save corrective) is in view."""
+        w = self.parentWidget()
+        while w is not None and not isinstance(w, QtWidgets.QScrollArea):
+            w = w.parentWidget()
+        if w is not None:
+            QtCore.QTimer.singleShot(0, lambda: w.ensureWidgetVisible(self.sculpt_box, 0, 0))
+
     def brush_settings(self) -> dict:
         return {"brush": self.brush.currentData(), "radius": float(self.radius.value()),
                 "falloff": self.falloff.currentData(), "strength": float(self.strength.value()),
