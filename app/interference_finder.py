@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from model.sides import mirror_indices
+from model.sides import is_left, mirror_indices
 from solvers.correctives import (interference_heat, merge_mirrored_pairs, overshoot_heat, rank_interference,
                                  rank_partners, shape_overlap, shape_overshoot)
 from widgets.correctives_panel import PAIR_HINT, CorrectivesPanel
@@ -70,8 +70,8 @@ class InterferenceFinder:
             self.pairs = [(k, j, s) for j, s in rank_partners(O, k, top)]
         elif self.panel.merge_mirrored.isChecked():
             every = rank_interference(None, top=len(names) ** 2, overlap=O)
-            rows = merge_mirrored_pairs(every, mirror_indices(names))[:top]
-            self.pairs = [(i, j, s) for i, j, s, _ in rows]
+            rows = merge_mirrored_pairs(every, mirror_indices(names), [is_left(n) for n in names])[:top]
+            self.pairs = [(i, j, s if m is None else max(s, m[2])) for i, j, s, m in rows]   # a row's score
             self.pair_mirrors = [m for *_, m in rows]
         else:
             self.pairs = rank_interference(None, top=top, overlap=O)
@@ -109,8 +109,13 @@ class InterferenceFinder:
         n = int((self.heat > 0.1 * top).sum()) if top > 0 else 0
         what = "‖d_i + d_j‖ − max(‖d_i‖, ‖d_j‖)" if overshoot else "min(‖d_i‖, ‖d_j‖)"
         names = rig.shape_names
-        also = "" if mirror is None else f" (and {names[mirror[0]]} × {names[mirror[1]]}, {mirror[2]:.3f})"
-        self.panel.pair_info.setText(f"{names[i]} × {names[j]}: score {score:.3f}{also}; "
+        if mirror is not None:
+            own = float(self._overlap[self._pairs_measure][i, j])
+            score_text = (f"{names[i]} × {names[j]} and {names[mirror[0]]} × {names[mirror[1]]}: scores "
+                          f"{own:.3f} and {mirror[2]:.3f}")
+        else:
+            score_text = f"{names[i]} × {names[j]}: score {score:.3f}"
+        self.panel.pair_info.setText(f"{score_text}; "
                                      f"{what} up to {top:.3g} {rig.units}, above 10% on {n:,} vertices.")
 
     def reapply_heat_map(self) -> None:

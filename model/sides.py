@@ -19,6 +19,11 @@ def mirror_name(name: str) -> str:
     return name
 
 
+def is_left(name: str) -> bool:
+    """Whether the name carries a left-side suffix (``_L``, ``.L``, ``Left``, ...)."""
+    return any(name.endswith(left) and len(name) > len(left) for left, _ in _SUFFIXES)
+
+
 def mirror_indices(names: list[str]) -> list[int]:
     """For each shape, the index of its mirror shape; a shape without one (no suffix, or the other side
     missing from the rig) maps to itself."""

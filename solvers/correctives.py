@@ -216,15 +216,18 @@ def rank_interference(deltas, top: int = 10, overlap=None, directional: bool = F
     return [(int(i[o]), int(j[o]), float(s[o])) for o in order]
 
 
-def merge_mirrored_pairs(ranked, mirror) -> list[tuple[int, int, float, tuple[int, int, float] | None]]:
+def merge_mirrored_pairs(ranked, mirror, left=None) -> list[tuple[int, int, float, tuple[int, int, float] | None]]:
     """Fold each pair into one row with its mirror image: (i, j, s, (i', j', s') or None), best first.
 
     ``ranked`` is [(i, j, score), ...] best first (``rank_interference``); ``mirror`` gives each shape's mirror
     shape (``model.sides.mirror_indices``). The mirror of (i, j) is (mirror[i], mirror[j]); a pair that is its
-    own mirror (browInnerUp_L × browInnerUp_R, mouthFunnel × mouthPucker) keeps a row of its own. The better
-    scoring side of a mirrored couple keeps the row, so a rig with left/right shapes lists each problem once.
+    own mirror (browInnerUp_L × browInnerUp_R, mouthFunnel × mouthPucker) keeps a row of its own. A row ranks
+    by the better of its two scores. With ``left`` ((K,) bool, ``model.sides.is_left``) the side with more
+    left-side shapes is the row's pair, as riggers author the left side and mirror it; otherwise, and on a
+    tie, the better scoring side is.
     """
     m = np.asarray(mirror, dtype=np.int64)
+    lefts = None if left is None else np.asarray(left, dtype=bool)
     score = {(int(i), int(j)): float(s) for i, j, s in ranked}
     rows, folded = [], set()
     for i, j, s in ranked:
@@ -237,7 +240,10 @@ def merge_mirrored_pairs(ranked, mirror) -> list[tuple[int, int, float, tuple[in
             rows.append((key[0], key[1], float(s), None))
             continue
         folded.add(other)
-        rows.append((key[0], key[1], float(s), (mi, mj, score[other])))
+        first, second = key, other
+        if lefts is not None and int(lefts[list(other)].sum()) > int(lefts[list(key)].sum()):
+            first, second = other, key
+        rows.append((first[0], first[1], score[first], (second[0], second[1], score[second])))
     return rows
 
 
