@@ -23,6 +23,7 @@ from model.correctives import (Corrective, activation_for, authoring_surface, co
 from model.errors import RigInputError
 from model.sides import mirror_name
 from solvers import sculpt
+from solvers.symmetry import mirror_map
 from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
 from widgets.correctives_panel import CorrectivesPanel
 
@@ -409,7 +410,7 @@ class CorrectiveController(QtCore.QObject):
     def _mirror_map(self) -> np.ndarray:
         """The rig's vertex mirror map across x = 0, computed once per rig."""
         if self._mirror is None:
-            self._mirror = sculpt.mirror_map(self.document.rig.neutral)
+            self._mirror = mirror_map(self.document.rig.neutral)
         return self._mirror
 
     def mirror(self, name: str | None = None) -> bool:

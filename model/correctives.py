@@ -350,8 +350,7 @@ def mirrored_corrective(corrective: Corrective, shape_names, neutral, mirror=Non
     Raises RigInputError (one sentence) when the drivers mirror onto themselves, when the rig lacks a mirrored
     driver, or when the rig is not symmetric where the corrective acts.
     """
-    from solvers.correctives import mirror_delta
-    from solvers.sculpt import mirror_map
+    from solvers.symmetry import mirror_delta, mirror_map
     from .sides import mirror_name
 
     c = corrective
@@ -379,8 +378,7 @@ def symmetrized_corrective(corrective: Corrective, neutral, mirror=None, *, unit
     exactly symmetric across x = 0: e' = (e + M e∘m) / 2, the mean of the shape and its mirror image (Maya's
     Symmetrize Target). Raises RigInputError for a one-sided corrective (use ``mirrored_corrective``) or a rig
     that is not symmetric where the corrective acts."""
-    from solvers.correctives import mirror_delta
-    from solvers.sculpt import mirror_map
+    from solvers.symmetry import mirror_delta, mirror_map
     from .sides import mirror_name
 
     c = corrective
@@ -396,7 +394,7 @@ def symmetrized_corrective(corrective: Corrective, neutral, mirror=None, *, unit
 
 def _check_symmetric(c: Corrective, neutral: np.ndarray, mirror: np.ndarray, units: str) -> None:
     """Raise unless the rig has a mirror vertex for (nearly) every vertex the corrective moves."""
-    from solvers.sculpt import mirror_error
+    from solvers.symmetry import mirror_error
     n = np.linalg.norm(c.delta, axis=1)
     moved = n > 1e-3 * n.max() if n.max() > 0 else n > 0
     tol = MIRROR_TOLERANCE * float(np.linalg.norm(np.ptp(neutral, axis=0)))

@@ -247,15 +247,6 @@ def merge_mirrored_pairs(ranked, mirror, left=None) -> list[tuple[int, int, floa
     return rows
 
 
-def mirror_delta(delta, mirror) -> np.ndarray:
-    """(V, 3) the other side's version of a corrective: e'(v) = M e(m(v)), M = diag(−1, 1, 1), the reflection
-    across x = 0, with m the vertex mirror map (``solvers.sculpt.mirror_map``); the mirror of a shape, as
-    Maya's Mirror Target and Blender's Mirror Shape Key make it."""
-    e = np.asarray(delta, dtype=np.float64)[np.asarray(mirror, dtype=np.int64)]
-    e[:, 0] *= -1.0
-    return e
-
-
 def interference_heat(delta_i, delta_j) -> np.ndarray:
     """(V,) per-vertex interference heat map min(‖d_i(v)‖, ‖d_j(v)‖) of one pair (ALGORITHMS.md §6)."""
     a = np.linalg.norm(np.asarray(delta_i, dtype=np.float64), axis=-1)

@@ -19,12 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.spatial import cKDTree
 
 from model.errors import RigInputError
 
+from .symmetry import REFLECT_X as _R
+from .symmetry import mirror_map
+
 FALLOFFS = ("smooth", "linear", "constant")
-_R = np.array([-1.0, 1.0, 1.0])  # reflection across x = 0
 
 
 def falloff(t, kind: str = "smooth") -> np.ndarray:
@@ -81,26 +82,6 @@ def vertex_normals(points, triangles) -> np.ndarray:
         np.add.at(vn, t[:, k], fn)
     ln = np.linalg.norm(vn, axis=1, keepdims=True)
     return np.divide(vn, ln, out=np.zeros_like(vn), where=ln > 0)
-
-
-def mirror_map(neutral, tolerance: float | None = None) -> np.ndarray:
-    """(V,) index of each vertex's mirror image across x = 0: the nearest neutral vertex to (−x, y, z).
-
-    With ``tolerance``, vertices whose reflection is farther than that from any vertex map to themselves.
-    """
-    p = np.asarray(neutral, dtype=np.float64)
-    dist, idx = cKDTree(p).query(p * _R)
-    idx = idx.astype(np.int64)
-    if tolerance is not None:
-        idx[dist > tolerance] = np.flatnonzero(dist > tolerance)
-    return idx
-
-
-def mirror_error(neutral, mirror) -> np.ndarray:
-    """(V,) distance from each vertex to the reflection of its mirror vertex, ‖M p(m(v)) − p(v)‖: 0 on an
-    exactly symmetric mesh, large where the mesh has no mirror image."""
-    p = np.asarray(neutral, dtype=np.float64)
-    return np.linalg.norm(p[np.asarray(mirror, dtype=np.int64)] * _R - p, axis=1)
 
 
 def laplacian_energy(points, average_operator, vertices=None) -> float:

@@ -66,7 +66,7 @@ def test_corrective_bad_input(sample_dir, tmp_path):
 
 
 def test_corrective_with_mirror_adds_the_other_side(sample_dir, tmp_path):
-    from solvers.sculpt import mirror_map
+    from solvers.symmetry import mirror_map
     scan = _scan(sample_dir, tmp_path, "browInnerUp_L=1,browOuterUp_L=1")
     out = tmp_path / "both.bsproj"
     proc = run_cli("corrective", sample_dir, "--drivers", "browInnerUp_L,browOuterUp_L", "--target",

@@ -15,9 +15,9 @@ from model.errors import RigInputError
 from model.pose import PoseEvaluator
 from model.sides import is_left, mirror_indices, mirror_name
 from solvers.correctives import (corrective_delta, corrective_from_scan, driver_region, fit_scan_weights,
-                                 interference_heat, merge_mirrored_pairs, mirror_delta, overshoot_heat,
-                                 rank_interference, rank_partners, shape_overlap, shape_overshoot)
-from solvers.sculpt import mirror_error, mirror_map
+                                 interference_heat, merge_mirrored_pairs, overshoot_heat, rank_interference,
+                                 rank_partners, shape_overlap, shape_overshoot)
+from solvers.symmetry import mirror_delta, mirror_error, mirror_map
 
 BROWS = ["browInnerUp_L", "browInnerUp_R", "browOuterUp_L", "browOuterUp_R"]
 # Smith's brow example: every pair, the four three-way sets and the four-way set, authored low order first.

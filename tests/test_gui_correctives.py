@@ -320,8 +320,7 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
 
 
 def test_mirror_corrective_makes_the_other_side_and_undoes(qtbot, win):
-    from solvers.correctives import mirror_delta
-    from solvers.sculpt import mirror_map
+    from solvers.symmetry import mirror_delta, mirror_map
     w, ctrl = win
     doc, rig = w.document, w.document.rig
     left = ["browInnerUp_L", "browOuterUp_L"]
@@ -466,8 +465,7 @@ def test_unticking_a_corrective_mutes_it_and_undo_brings_it_back(qtbot, win, tmp
 
 
 def test_symmetrize_a_two_sided_corrective(qtbot, win):
-    from solvers.correctives import mirror_delta
-    from solvers.sculpt import mirror_map
+    from solvers.symmetry import mirror_delta, mirror_map
     w, ctrl = win
     doc, rig = w.document, w.document.rig
     assert ctrl.start_authoring(PAIR)

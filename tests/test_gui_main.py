@@ -147,7 +147,7 @@ def test_every_control_explains_itself_in_a_tooltip(qtbot, tmp_path):
 
 
 def test_mirror_pose_flips_the_face_and_undoes(qtbot, tmp_path):
-    from solvers.sculpt import mirror_map
+    from solvers.symmetry import mirror_map
     w = make_window(qtbot, tmp_path)
     doc, rig = w.document, w.document.rig
     weights = np.zeros(rig.n_shapes)
