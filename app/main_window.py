@@ -254,21 +254,28 @@ class MainWindow(QtWidgets.QMainWindow):
             self.set_pose(np.zeros(self.document.rig.n_shapes), "Reset pose")
 
     def mirror_pose(self) -> bool:
-        """Swap each left shape's weight with its right twin's (model.sides), one undoable pose change."""
+        """Swap each left shape's weight with its right twin's (model.sides), one undoable pose change. A
+        regional pose gets the per-region weights closest to its mirror image (solvers.symmetry)."""
+        from app.document import PoseState
+        from app.marker_commands import SetPoseCommand
         from model.sides import mirror_indices
-        rig = self.document.rig
+        from solvers.symmetry import mirror_map, mirrored_region_weights
+        doc = self.document
+        rig = doc.rig
         if rig is None:
-            return False
-        if self.document.is_regional:
-            self.show_error("Mirror Pose", "Mirror Pose flips a global pose, and this one is set per region (by "
-                                           "marker drags); reset it or pose the shapes globally first.")
             return False
         idx = mirror_indices(rig.shape_names)
         if idx == list(range(rig.n_shapes)):
             self.show_error("Mirror Pose", f"{rig.name} has no left and right shapes (names ending _L/_R, .L/.R "
                                            "or Left/Right) to swap.")
             return False
-        self.set_pose(self.document.weights[idx], "Mirror pose")
+        if not doc.is_regional:
+            self.set_pose(doc.weights[idx], "Mirror pose")
+            return True
+        old = doc.pose_state()
+        W = mirrored_region_weights(old.region_weights, old.blend, mirror_map(rig.neutral), idx)
+        doc.undo_stack.push(SetPoseCommand(doc, old, PoseState(old.weights[idx], W, old.blend, old.level),
+                                           "Mirror pose"))
         return True
 
     def apply_preset(self, name: str) -> None:

@@ -1,5 +1,5 @@
 """Left/right symmetry of a face mesh across x = 0: the vertex mirror map, how far the mesh is from
-symmetric, and mirror images of per-vertex fields and of segmentation regions. Pure numpy / scipy.
+symmetric, and mirror images of per-vertex fields and of regional poses. Pure numpy / scipy.
 
 The mirror map is the nearest neutral vertex to each reflected vertex (scipy cKDTree), the usual way of
 Maya's and Blender's position-based symmetry when the topology is not known to be symmetric.
@@ -42,18 +42,17 @@ def mirror_delta(delta, mirror) -> np.ndarray:
     return e
 
 
-def mirror_regions(blend, mirror) -> tuple[np.ndarray, np.ndarray]:
-    """Which region of a segmentation level is the mirror image of which: (R,) partner index and (R,) match.
+def mirrored_region_weights(region_weights, blend, mirror, shape_mirror) -> np.ndarray:
+    """(R, K) per-region weights of the mirror image of a regional pose, on the same regions.
 
-    ``blend`` (V, R) is the level's partition of unity φ_r (sparse or dense), ``mirror`` the vertex mirror map.
-    Region r's mirror image is the r' whose φ_r' best matches φ_r∘m, by the cosine of the two columns; its
-    match is that cosine (1 for an exactly mirrored region). A region on the midline is its own partner.
+    The pose's per-vertex weights are w(v) = Σ_r φ_r(v) W_r (Joshi §4, ``blend`` φ (V, R)); its mirror image has
+    w'(v) = P w(m(v)), P swapping each shape with its mirror shape (``shape_mirror``, (K,) indices) and m the
+    vertex mirror map. When the regions are mirror images of each other this is again a regional pose (the
+    regions trade places); otherwise the least-squares one closest to it, (ΦᵀΦ) W' = Φᵀ w', clipped to [0, 1].
     """
-    B = sp.csc_matrix(blend, dtype=np.float64)
-    flipped = B[np.asarray(mirror, dtype=np.int64)]            # φ_r(m(v)) column by column
-    dots = np.asarray((B.T @ flipped).todense())               # (R', R): ⟨φ_r', φ_r∘m⟩
-    norms = np.sqrt(np.asarray(B.multiply(B).sum(axis=0))).ravel()
-    fnorms = np.sqrt(np.asarray(flipped.multiply(flipped).sum(axis=0))).ravel()
-    cos = dots / np.maximum(np.outer(norms, fnorms), 1e-300)
-    partner = np.argmax(cos, axis=0)
-    return partner, cos[partner, np.arange(cos.shape[1])]
+    B = sp.csr_matrix(blend, dtype=np.float64)
+    W = np.asarray(region_weights, dtype=np.float64)
+    target = (B @ W)[np.asarray(mirror, dtype=np.int64)][:, np.asarray(shape_mirror, dtype=np.int64)]  # w'(v)
+    gram = (B.T @ B).toarray()
+    W_new = np.linalg.lstsq(gram, B.T @ target, rcond=None)[0]
+    return np.clip(W_new, 0.0, 1.0)

@@ -111,10 +111,29 @@ def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, 
     assert w.document.is_regional and w.document.region_level == c.level
     np.testing.assert_array_equal(w.document.region_weights, W)
     np.testing.assert_allclose(w.viewport.points(), shown, atol=1e-6)
-    n = w.document.undo_stack.count()
-    assert not w.mirror_pose()                            # a regional pose is not flipped: one clear sentence
-    assert w.last_error.startswith("Mirror Pose flips a global pose, and this one is set per region")
-    assert w.document.undo_stack.count() == n and w.document.is_regional
+    # Mirror Pose flips a regional pose too: the per-region weights closest to its mirror image; for this
+    # drag's pose that is the exact mirror image (measured to 6e-6)
+    from app.document import PoseState
+    from solvers.symmetry import mirror_map
+    doc = w.document
+    m, flip = mirror_map(doc.rig.neutral), np.array([-1.0, 1.0, 1.0])
+    before = doc.surface().copy()
+    n = doc.undo_stack.count()
+    assert w.mirror_pose()
+    assert doc.is_regional and doc.undo_stack.count() == n + 1
+    assert np.abs(doc.surface() - before[m] * flip).max() < 1e-4
+    # arbitrary weights in every region: the sample's regions are not all mirror images of each other, and the
+    # flip is the nearest regional pose (measured: 3.5 % RMS of the motion)
+    rng = np.random.default_rng(1)
+    state = PoseState(doc.weights, rng.uniform(0, 0.6, doc.region_weights.shape), doc.region_blend, doc.region_level)
+    doc.set_pose_state(state)
+    before = doc.surface().copy()
+    assert w.mirror_pose()
+    err = np.linalg.norm(doc.surface() - before[m] * flip, axis=1)
+    motion = np.linalg.norm(before - doc.rig.neutral, axis=1)
+    assert np.sqrt((err ** 2).mean()) < 0.05 * np.sqrt((motion ** 2).mean())
+    doc.undo_stack.undo()
+    np.testing.assert_array_equal(doc.region_weights, state.region_weights)
 
 
 def test_the_same_drag_moves_the_nose_tip_less_than_a_mouth_corner(qtbot, tmp_path, geometry, nose_tip):
