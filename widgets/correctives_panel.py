@@ -304,7 +304,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
         if column == 0 and not self._updating:
             name, muted = item.data(0, QtCore.Qt.UserRole), item.checkState(0) == QtCore.Qt.Unchecked
             # after this signal returns: the edit rebuilds the table, which must not delete the item mid-signal
-            QtCore.QTimer.singleShot(0, lambda: self.mute_requested.emit(name, muted))
+            QtCore.QTimer.singleShot(0, self, lambda: self.mute_requested.emit(name, muted))
 
     def set_activations(self, activations) -> None:
         for i, a in enumerate(activations):
@@ -366,7 +366,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
         while w is not None and not isinstance(w, QtWidgets.QScrollArea):
             w = w.parentWidget()
         if w is not None:
-            QtCore.QTimer.singleShot(0, lambda: w.ensureWidgetVisible(self.sculpt_box, 0, 0))
+            QtCore.QTimer.singleShot(0, w, lambda: w.ensureWidgetVisible(self.sculpt_box, 0, 0))
 
     def brush_settings(self) -> dict:
         return {"brush": self.brush.currentData(), "radius": float(self.radius.value()),
