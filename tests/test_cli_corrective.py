@@ -88,3 +88,22 @@ def test_corrective_with_mirror_adds_the_other_side(sample_dir, tmp_path):
                    tmp_path / "scan.obj", "--mirror", "-o", tmp_path / "x.bsproj", check=False)
     assert proc.returncode == 2 and "its own mirror image" in proc.stderr, proc.stderr
     assert not (tmp_path / "x.bsproj").exists()
+
+
+def test_info_and_export_of_a_muted_corrective(sample_dir, tmp_path):
+    from dataclasses import replace
+    from model.project import load_project, save_project
+    _scan(sample_dir, tmp_path, "browInnerUp_L=1,browInnerUp_R=1")
+    out = tmp_path / "fixed.bsproj"
+    run_cli("corrective", sample_dir, "--drivers", "browInnerUp_L,browInnerUp_R", "--target", tmp_path / "scan.obj",
+            "-o", out)
+    project = load_project(out)
+    project.rig.correctives = [replace(c, muted=True) for c in project.rig.correctives]
+    save_project(project, tmp_path / "muted.bsproj")
+    assert "correctives: browInnerUp_L+browInnerUp_R (muted)" in run_cli("info", tmp_path / "muted.bsproj").stdout
+    assert json.loads(run_cli("info", tmp_path / "muted.bsproj", "--json").stdout)["correctives"][0]["muted"]
+    # a muted corrective is left out of the exported surface: the plain combination comes out
+    run_cli("export", tmp_path / "muted.bsproj", "--weights", "browInnerUp_L=1,browInnerUp_R=1", "-o",
+            tmp_path / "muted.obj")
+    np.testing.assert_allclose(read_obj(tmp_path / "muted.obj").vertices, read_obj(tmp_path / "combo.obj").vertices,
+                               atol=2e-6)
