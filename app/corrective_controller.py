@@ -25,7 +25,7 @@ from model.sides import mirror_name
 from solvers import sculpt
 from solvers.symmetry import mirror_map
 from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
-from widgets.correctives_panel import CorrectivesPanel
+from widgets.correctives_panel import CORRECTIVES_TAB, INTERFERENCE_TAB, CorrectivesPanel
 
 _OBSERVER_PRIORITY = 10.0   # above the interactor style (0): a stroke on the face does not turn the camera
 _DAB = 0.1                  # inflate/deflate per dab: this fraction of the radius times the strength
@@ -207,7 +207,7 @@ class CorrectiveController(QtCore.QObject):
         if self.dock is not None:
             self.dock.show()
             self.dock.raise_()
-        self.panel.tabs.setCurrentIndex(0)
+        self.panel.tabs.setCurrentIndex(CORRECTIVES_TAB)
         self.panel.set_sculpting(drivers, self.document.edit_offset is not None)
         self.panel.reveal_sculpt()
         self.window.statusBar().showMessage(
@@ -710,7 +710,7 @@ def install(window) -> CorrectiveController:
     def _find():
         dock.show()
         dock.raise_()
-        panel.tabs.setCurrentIndex(1)
+        panel.tabs.setCurrentIndex(INTERFERENCE_TAB)
         ctrl.finder.find_pairs()
     act(menu, "&Find Interfering Pairs", lambda _=False: _find(), "Ctrl+Shift+F", "Rank shape pairs by the overlap of their displacements")
     menu.addSeparator()

@@ -13,11 +13,10 @@ from PySide6 import QtCore, QtWidgets
 from model.sides import is_left, mirror_indices
 from solvers.correctives import (interference_heat, merge_mirrored_pairs, overshoot_heat, rank_interference,
                                  rank_partners, shape_overlap, shape_overshoot)
-from widgets.correctives_panel import PAIR_HINT, CorrectivesPanel
+from widgets.correctives_panel import INTERFERENCE_TAB, PAIR_HINT, CorrectivesPanel
 from widgets.scene import ColorMap
 
 _UNSET = object()
-INTERFERENCE_TAB = 1   # the panel's Interference tab
 
 
 class InterferenceFinder:
@@ -49,6 +48,9 @@ class InterferenceFinder:
         self._overlap.clear()
 
     def find_pairs(self) -> list[tuple[int, int, float]]:
+        """Rank the pairs by the panel's measure (computed once per measure until the shapes change) and list
+        the top ones: every pair, mirrored couples as one row, or one shape's partners. Returns the rows as
+        (i, j, score)."""
         rig = self.document.rig
         if rig is None:
             return []

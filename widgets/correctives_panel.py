@@ -14,6 +14,7 @@ FALLOFF_LABELS = [("smooth", "Smooth"), ("linear", "Linear"), ("constant", "Cons
 
 
 _ACTIVATION, _RULE = 1, 2   # columns of the corrective table
+CORRECTIVES_TAB, INTERFERENCE_TAB = 0, 1
 PAIR_HINT = "Find pairs, then select one to see where it interferes on the face."
 
 
@@ -60,8 +61,8 @@ class CorrectivesPanel(QtWidgets.QWidget):
         lay = QtWidgets.QVBoxLayout(self)
         lay.setContentsMargins(4, 4, 4, 4)
         self.tabs = QtWidgets.QTabWidget()
-        self.tabs.addTab(self._build_correctives_tab(), "Correctives")
-        self.tabs.addTab(self._build_interference_tab(), "Interference")
+        self.tabs.insertTab(CORRECTIVES_TAB, self._build_correctives_tab(), "Correctives")
+        self.tabs.insertTab(INTERFERENCE_TAB, self._build_interference_tab(), "Interference")
         self.tabs.currentChanged.connect(self.tab_changed)
         lay.addWidget(self.tabs)
 
