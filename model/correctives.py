@@ -339,9 +339,6 @@ def activation_for(drivers, rule: str, shape_names, weights) -> float:
 
 
 # --- mirroring ----------------------------------------------------------------------------------
-MIRROR_TOLERANCE = 0.005   # a vertex has a mirror image when one lies within this fraction of the rig's size
-
-
 def mirrored_corrective(corrective: Corrective, shape_names, neutral, mirror=None, *, units: str = "") -> Corrective:
     """The other side's version of ``corrective`` (browInnerUp_L+browOuterUp_L → browInnerUp_R+browOuterUp_R):
     drivers renamed left↔right (``model.sides``), delta reflected across x = 0 through the vertex mirror map
@@ -351,7 +348,7 @@ def mirrored_corrective(corrective: Corrective, shape_names, neutral, mirror=Non
     driver, or when the rig is not symmetric where the corrective acts.
     """
     from solvers.symmetry import mirror_delta, mirror_map
-    from .sides import mirror_name
+    from .sides import check_mirrorable, mirror_name
 
     c = corrective
     drivers = [mirror_name(d) for d in c.drivers]
@@ -363,7 +360,7 @@ def mirrored_corrective(corrective: Corrective, shape_names, neutral, mirror=Non
                             f"{', '.join(repr(d) for d in missing)}.")
     neutral = np.asarray(neutral, dtype=np.float64)
     m = mirror_map(neutral) if mirror is None else np.asarray(mirror)
-    _check_symmetric(c, neutral, m, units)
+    check_mirrorable(c.name, c.delta, neutral, m, units)
     if c.name == "+".join(c.drivers):
         name = "+".join(drivers)
     else:
@@ -379,7 +376,7 @@ def symmetrized_corrective(corrective: Corrective, neutral, mirror=None, *, unit
     Symmetrize Target). Raises RigInputError for a one-sided corrective (use ``mirrored_corrective``) or a rig
     that is not symmetric where the corrective acts."""
     from solvers.symmetry import mirror_delta, mirror_map
-    from .sides import mirror_name
+    from .sides import check_mirrorable, mirror_name
 
     c = corrective
     if {mirror_name(d) for d in c.drivers} != set(c.drivers):
@@ -387,19 +384,6 @@ def symmetrized_corrective(corrective: Corrective, neutral, mirror=None, *, unit
                             "drivers mirror onto themselves can be made symmetric.")
     neutral = np.asarray(neutral, dtype=np.float64)
     m = mirror_map(neutral) if mirror is None else np.asarray(mirror)
-    _check_symmetric(c, neutral, m, units)
+    check_mirrorable(c.name, c.delta, neutral, m, units)
     return Corrective(name=c.name, drivers=list(c.drivers), rule=c.rule, muted=c.muted,
                       delta=0.5 * (c.delta + mirror_delta(c.delta, m)))
-
-
-def _check_symmetric(c: Corrective, neutral: np.ndarray, mirror: np.ndarray, units: str) -> None:
-    """Raise unless the rig has a mirror vertex for (nearly) every vertex the corrective moves."""
-    from solvers.symmetry import mirror_error
-    n = np.linalg.norm(c.delta, axis=1)
-    moved = n > 1e-3 * n.max() if n.max() > 0 else n > 0
-    tol = MIRROR_TOLERANCE * float(np.linalg.norm(np.ptp(neutral, axis=0)))
-    bad = int((moved & (mirror_error(neutral, mirror) > tol)).sum())
-    if bad > 0.01 * moved.sum():
-        raise RigInputError(f"Cannot mirror {c.name}: the rig is not symmetric across x = 0 where it acts "
-                            f"({bad:,} of its {int(moved.sum()):,} vertices have no mirror vertex within "
-                            f"{tol:.2g}{' ' + units if units else ''}).")

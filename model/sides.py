@@ -29,3 +29,15 @@ def mirror_indices(names: list[str]) -> list[int]:
     missing from the rig) maps to itself."""
     pos = {n: k for k, n in enumerate(names)}
     return [pos.get(mirror_name(n), k) for k, n in enumerate(names)]
+
+
+def check_mirrorable(what: str, delta, neutral, mirror, units: str = "") -> None:
+    """Raise RigInputError (one sentence) unless nearly every vertex the field ``delta`` moves has a mirror
+    vertex across x = 0 (at most 1% without one within 0.5% of the rig's size)."""
+    from solvers.symmetry import unmatched_vertices
+    from .errors import RigInputError
+    bad, moved, tol = unmatched_vertices(neutral, mirror, delta)
+    if bad > 0.01 * moved:
+        raise RigInputError(f"Cannot mirror {what}: the rig is not symmetric across x = 0 where it acts "
+                            f"({bad:,} of its {moved:,} vertices have no mirror vertex within "
+                            f"{tol:.2g}{' ' + units if units else ''}).")

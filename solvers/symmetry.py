@@ -33,6 +33,16 @@ def mirror_error(neutral, mirror) -> np.ndarray:
     return np.linalg.norm(p[np.asarray(mirror, dtype=np.int64)] * REFLECT_X - p, axis=1)
 
 
+def unmatched_vertices(neutral, mirror, field, tolerance_fraction: float = 0.005) -> tuple[int, int, float]:
+    """How many of the vertices a displacement field (V, 3) moves (above 1/1000 of its peak) have no mirror
+    vertex within ``tolerance_fraction`` of the mesh's size: (unmatched, moved, tolerance)."""
+    p = np.asarray(neutral, dtype=np.float64)
+    n = np.linalg.norm(np.asarray(field, dtype=np.float64), axis=1)
+    moved = n > 1e-3 * n.max() if n.max() > 0 else n > 0
+    tol = tolerance_fraction * float(np.linalg.norm(np.ptp(p, axis=0)))
+    return int((moved & (mirror_error(p, mirror) > tol)).sum()), int(moved.sum()), tol
+
+
 def mirror_delta(delta, mirror) -> np.ndarray:
     """(V, 3) the other side's version of a corrective: e'(v) = M e(m(v)), M = diag(−1, 1, 1), the reflection
     across x = 0, with m the vertex mirror map (``mirror_map``); the mirror of a shape, as
