@@ -59,10 +59,12 @@ class SetEditOffsetCommand(QUndoCommand):
 class AddShapeCommand(QUndoCommand):
     """Add a new shape (e.g. from a nudged region) with weight 0, taking the pending offset with it."""
 
-    def __init__(self, document, name: str, delta: np.ndarray, text: str | None = None) -> None:
+    def __init__(self, document, name: str, delta: np.ndarray, text: str | None = None,
+                 takes_offset: bool = True) -> None:
         super().__init__(text or f"Add shape {name}")
         self.document, self.name = document, name
         self.delta = np.array(delta, dtype=np.float64)
+        self.takes_offset = takes_offset   # the pending nudge became the shape; a mirrored shape leaves it
         self.offset = None if document.edit_offset is None else document.edit_offset.copy()
 
     def redo(self) -> None:
@@ -70,7 +72,8 @@ class AddShapeCommand(QUndoCommand):
         rig.shape_names = rig.shape_names + [self.name]
         rig.deltas = np.concatenate([rig.deltas, self.delta[None]], axis=0)
         project.weights = np.append(project.weights, 0.0)
-        self.document.edit_offset = None
+        if self.takes_offset:
+            self.document.edit_offset = None
         self.document.rig_edited()
 
     def undo(self) -> None:
@@ -79,5 +82,30 @@ class AddShapeCommand(QUndoCommand):
         rig.shape_names = rig.shape_names[:k] + rig.shape_names[k + 1:]
         rig.deltas = np.delete(rig.deltas, k, axis=0)
         project.weights = np.delete(project.weights, k)
-        self.document.edit_offset = self.offset
+        if self.takes_offset:
+            self.document.edit_offset = self.offset
         self.document.rig_edited()
+
+
+class SetShapeDeltaCommand(QUndoCommand):
+    """Replace one shape's displacements (e.g. with the mirror image of its other side)."""
+
+    def __init__(self, document, name: str, delta: np.ndarray, text: str) -> None:
+        super().__init__(text)
+        self.document, self.name = document, name
+        k = document.rig.shape_names.index(name)
+        self.old = document.rig.deltas[k].copy()
+        self.new = np.array(delta, dtype=document.rig.deltas.dtype)
+
+    def _set(self, delta: np.ndarray) -> None:
+        rig = self.document.rig
+        deltas = rig.deltas.copy()   # a new array: whatever kept the old one (an evaluator, a cache) keeps it whole
+        deltas[rig.shape_names.index(self.name)] = delta
+        rig.deltas = deltas
+        self.document.rig_edited()
+
+    def redo(self) -> None:
+        self._set(self.new)
+
+    def undo(self) -> None:
+        self._set(self.old)

@@ -173,6 +173,7 @@ class MainWindow(QtWidgets.QMainWindow):
         p.drag_finished.connect(self._on_slider_drag_finished)
         p.weight_committed.connect(self._on_weight_committed)
         p.reset_requested.connect(self.reset_pose)
+        p.mirror_shape_requested.connect(lambda k: self.mirror_shape(self.document.rig.shape_names[k]))
         p.preset_requested.connect(self.apply_preset)
 
     # --- document signals --------------------------------------------------------------------------
@@ -276,6 +277,37 @@ class MainWindow(QtWidgets.QMainWindow):
         W = mirrored_region_weights(old.region_weights, old.blend, mirror_map(rig.neutral), idx)
         doc.undo_stack.push(SetPoseCommand(doc, old, PoseState(old.weights[idx], W, old.blend, old.level),
                                            "Mirror pose"))
+        return True
+
+    def mirror_shape(self, name: str) -> bool:
+        """Make the other side's shape the mirror image of ``name`` across x = 0 (browInnerUp_L → browInnerUp_R):
+        added if the rig lacks it, replaced if it has it; one undoable edit (Maya's Mirror Target)."""
+        from app.commands import AddShapeCommand, SetShapeDeltaCommand
+        from model.errors import RigInputError
+        from model.sides import check_mirrorable, mirror_name
+        from solvers.symmetry import mirror_delta, mirror_map
+        rig = self.document.rig
+        twin = mirror_name(name)
+        if twin == name:
+            self.show_error("Mirror Shape", f"{name} has no side in its name (_L/_R, .L/.R or Left/Right), so it "
+                                            "has no other side to mirror to.")
+            return False
+        k = rig.shape_index(name)
+        m = mirror_map(rig.neutral)
+        try:
+            check_mirrorable(name, rig.deltas[k], rig.neutral, m, rig.units)
+        except RigInputError as exc:
+            self.show_error("Mirror Shape", str(exc))
+            return False
+        delta = mirror_delta(rig.deltas[k], m)
+        if twin in rig.shape_names:
+            self.document.undo_stack.push(SetShapeDeltaCommand(self.document, twin, delta,
+                                                               f"Mirror {name} onto {twin}"))
+            self.statusBar().showMessage(f"Replaced {twin} with the mirror image of {name}.", 5000)
+        else:
+            self.document.undo_stack.push(AddShapeCommand(self.document, twin, delta, f"Mirror {name} to new {twin}",
+                                                          takes_offset=False))
+            self.statusBar().showMessage(f"Added {twin}, the mirror image of {name}.", 5000)
         return True
 
     def apply_preset(self, name: str) -> None:

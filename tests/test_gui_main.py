@@ -178,3 +178,42 @@ def test_save_viewport_image(qtbot, tmp_path):
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 100   # a shaded face, not a blank frame
     assert not w.save_image("/proc/no/such/dir/x.png")
     assert w.last_error.startswith("/proc/no/such/dir/x.png: could not be written")
+
+
+def test_mirror_shape_replaces_or_adds_the_other_side(qtbot, tmp_path):
+    from solvers.symmetry import mirror_delta, mirror_map
+    from tests.rig_files import grid, obj_text
+    w = make_window(qtbot, tmp_path)
+    rig = w.document.rig
+    r = rig.shape_index("browInnerUp_R")
+    right = rig.deltas[r].copy()
+    n = w.document.undo_stack.count()
+    w.shapes_panel.row("browInnerUp_L").label.customContextMenuRequested.emit(QtCore.QPoint(2, 2))
+    menu = w.shapes_panel.row("browInnerUp_L").findChild(QtWidgets.QMenu)
+    assert [a.text() for a in menu.actions()] == ["Mirror to the Other Side"]
+    menu.actions()[0].trigger()                        # the right-click menu of the left shape's row
+    menu.close()
+    mirrored = mirror_delta(rig.deltas[rig.shape_index("browInnerUp_L")], mirror_map(rig.neutral))
+    np.testing.assert_allclose(rig.deltas[r], mirrored)
+    assert np.abs(rig.deltas[r] - right).max() < 1e-3 * np.abs(right).max() + 1e-6   # the sample is symmetric
+    assert w.document.undo_stack.count() == n + 1
+    w.document.undo_stack.undo()
+    np.testing.assert_array_equal(rig.deltas[r], right)
+    assert not w.mirror_shape("jawOpen")
+    assert w.last_error.startswith("jawOpen has no side in its name")
+    # a rig with only the left shape: mirroring adds the right one
+    verts, faces = grid(7)
+    verts[:, 0] -= 3.0                                 # centred on x = 0
+    folder = tmp_path / "one_sided"
+    folder.mkdir()
+    (folder / "neutral.obj").write_text(obj_text(verts, faces))
+    lift = verts + np.where(verts[:, :1] > 0, [0.0, 0.0, 0.4], 0.0) * verts[:, :1] / 3.0
+    (folder / "lift_L.obj").write_text(obj_text(lift, faces))
+    open_and_wait(qtbot, w, folder)
+    rig = w.document.rig
+    assert w.mirror_shape("lift_L")
+    assert rig.shape_names == ["lift_L", "lift_R"] and w.shapes_panel.row("lift_R") is not None
+    d = rig.deltas[1]
+    assert np.abs(d[verts[:, 0] < 0, 2]).max() > 0.3 and np.abs(d[verts[:, 0] > 0]).max() == 0
+    w.document.undo_stack.undo()
+    assert rig.shape_names == ["lift_L"]

@@ -18,7 +18,7 @@ class _ShapeRow(QtWidgets.QWidget):
         self.label = QtWidgets.QLabel(name)
         self.label.setMinimumWidth(120)
         self.label.setMaximumWidth(170)
-        self.label.setToolTip(name)
+        self.label.setToolTip(f"{name} (right-click: mirror it to the other side)")
         self.slider = QtWidgets.QSlider(QtCore.Qt.Horizontal)
         self.slider.setRange(0, SLIDER_STEPS)
         self.slider.setToolTip(f"Weight of {name}: drag to pose (one drag is one undo step)")
@@ -35,6 +35,8 @@ class _ShapeRow(QtWidgets.QWidget):
         lay.addWidget(self.box)
         self._dragging = False
         self._bold = False
+        self.label.setContextMenuPolicy(QtCore.Qt.CustomContextMenu)
+        self.label.customContextMenuRequested.connect(self._menu)
         self.slider.sliderPressed.connect(self._pressed)
         self.slider.sliderReleased.connect(self._released)
         self.slider.valueChanged.connect(self._slider_moved)
@@ -51,6 +53,13 @@ class _ShapeRow(QtWidgets.QWidget):
         if active != self._bold:  # style sheets are slow: only touch the label when it changes
             self._bold = active
             self.label.setStyleSheet("font-weight: bold;" if active else "")
+
+    def _menu(self, pos) -> None:
+        menu = QtWidgets.QMenu(self)
+        act = menu.addAction("Mirror to the Other Side")
+        act.setToolTip("Make (or replace) the other side's shape as this one's mirror image across x = 0")
+        act.triggered.connect(lambda: self.panel.mirror_shape_requested.emit(self.index))
+        menu.popup(self.label.mapToGlobal(pos))
 
     def _pressed(self) -> None:
         self._dragging = True
@@ -83,6 +92,7 @@ class ShapesPanel(QtWidgets.QWidget):
     weight_committed = QtCore.Signal(int, float)  # a complete edit: one undo step
     reset_requested = QtCore.Signal()
     preset_requested = QtCore.Signal(str)
+    mirror_shape_requested = QtCore.Signal(int)   # make the other side's shape from this one (right-click)
     # The same gestures while the pose is regional (set_target(..., routed=True)): the marker controller
     # turns them into edits of the selected region's weights (or of every region).
     routed_drag_started = QtCore.Signal(int)
