@@ -250,7 +250,11 @@ def test_panel_lists_correctives_with_live_activation_and_undoable_edits(qtbot, 
     assert ctrl.panel.activation_texts()[ctrl.panel.names().index("browInnerUp_L+browInnerUp_R")] == "0.500"
     assert ctrl.rename("browInnerUp_L+browInnerUp_R", "innerBrows")
     assert "innerBrows" in ctrl.panel.names()
-    assert ctrl.delete("innerBrows")
+    ctrl.panel.select("innerBrows")
+    w.activateWindow()
+    ctrl.panel.table.setFocus()
+    qtbot.waitUntil(ctrl.panel.table.hasFocus)
+    qtbot.keyClick(ctrl.panel.table, QtCore.Qt.Key_Delete)      # the Delete key in the list
     assert ctrl.panel.names() == ["browOuterUp_L+browOuterUp_R"]
     for _ in range(3):
         doc.undo_stack.undo()

@@ -5,7 +5,7 @@ It shows state and emits requests; the corrective controller does the work.
 """
 from __future__ import annotations
 
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 RULE_LABELS = [("product", "Product (Maya multiplication)"), ("hierarchical", "Hierarchical (Smith)"),
                ("min", "Lowest weight"), ("smooth-min", "Lowest weight, smooth")]
@@ -83,16 +83,24 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.table.itemChanged.connect(self._on_item_changed)
         lay.addWidget(self.table, 2)
         row = QtWidgets.QHBoxLayout()
-        self.rename_button = _button("Rename…", "Rename the selected corrective (undoable)", self.rename_requested)
+        self.rename_button = _button("Rename…", "Rename the selected corrective (undoable; F2 in the list)",
+                                     self.rename_requested)
         self.drivers_button = _button("Drivers…", "Edit the selected corrective's driver shapes (undoable)",
                                       self.drivers_requested)
         self.edit_button = _button("Sculpt", "Set the selected corrective's drivers to 1 and sculpt it again",
                                    self.edit_shape_requested)
         self.mirror_button = _button("Mirror", "Add the other side's version of the selected corrective: "
                                      "drivers _L↔_R, shape reflected across x = 0 (undoable)", self.mirror_requested)
-        self.delete_button = _button("Delete", "Delete the selected corrective (undoable)", self.delete_requested)
+        self.delete_button = _button("Delete", "Delete the selected corrective (undoable; Delete key in the list)",
+                                     self.delete_requested)
         for b in (self.rename_button, self.drivers_button, self.edit_button, self.mirror_button, self.delete_button):
             row.addWidget(b)
+        for key, signal, what in (("Delete", self.delete_requested, "Delete Corrective"),
+                                  ("F2", self.rename_requested, "Rename Corrective")):
+            sc = QtGui.QShortcut(QtGui.QKeySequence(key), self.table)   # while the list has the focus
+            sc.setContext(QtCore.Qt.WidgetShortcut)
+            sc.setWhatsThis(what)
+            sc.activated.connect(lambda s=signal: s.emit() if self.selected_name() is not None else None)
         lay.addLayout(row)
         rule_row = QtWidgets.QHBoxLayout()
         rule_row.addWidget(QtWidgets.QLabel("Rule"))
