@@ -117,13 +117,18 @@ def test_every_shortcut_is_unambiguous_and_listed(qtbot, tmp_path):
         for sc in act.shortcuts():
             if sc.toString():
                 keys.setdefault(sc.toString(), []).append(act.text())
+    scoped = []                                   # keys of one list (Delete in a list with the focus)
     for sc in w.findChildren(QtGui.QShortcut):
-        keys.setdefault(sc.key().toString(), []).append(sc.whatsThis())
+        if sc.context() == QtCore.Qt.WidgetShortcut:
+            scoped.append((sc.key().toString(), sc.whatsThis()))
+        else:
+            keys.setdefault(sc.key().toString(), []).append(sc.whatsThis())
     assert {k: v for k, v in keys.items() if len(v) > 1} == {}
+    assert len(set(scoped)) == len(scoped) and all(k not in keys for k, _ in scoped)
     for key in ("Ctrl+Z", "Ctrl+S", "M", "Ctrl+Shift+M", "Ctrl+Space", "Ctrl+Shift+F", "F1"):
         assert key in keys, key
     listed = {k for *_, ks in w.shortcut_rows() for k in ks.split(", ")}
-    assert sorted(set(keys) - listed) == []
+    assert sorted(set(keys) - listed) == [] and {k for k, _ in scoped} <= listed
     w.show_shortcuts()                                     # F1: every shortcut, with its menu
     table = w.shortcuts_dialog.findChild(QtWidgets.QTreeWidget)
     rows = [tuple(table.topLevelItem(i).text(c) for c in range(3)) for i in range(table.topLevelItemCount())]

@@ -199,6 +199,14 @@ def test_click_adds_right_click_removes_and_markers_are_saved(qtbot, tmp_path, g
     assert abs(q1.x() - pos.x()) < 3 and abs(q1.y() - pos.y()) < 3  # it sits under the click
     assert w.markers_panel.list.count() == 1 and w.markers.overlay.n_markers == 1
     assert w.markers_panel.hint.isHidden()
+    w.markers_panel.list.setCurrentRow(0)                 # the Delete key in the list removes it (undoable)
+    w.activateWindow()
+    w.markers_panel.list.setFocus()
+    qtbot.waitUntil(w.markers_panel.list.hasFocus)
+    qtbot.keyClick(w.markers_panel.list, QtCore.Qt.Key_Delete)
+    assert len(c.markers) == 0
+    w.document.undo_stack.undo()
+    assert len(c.markers) == 1
     pos2 = QtCore.QPoint(round(q1.x()), round(q1.y()))
     mouse(widget, "press", pos2, buttons=QtCore.Qt.RightButton, button=QtCore.Qt.RightButton)
     mouse(widget, "release", pos2, buttons=QtCore.Qt.RightButton, button=QtCore.Qt.RightButton)

@@ -2,7 +2,7 @@
 list (background markers flagged). It shows state and emits requests; app.marker_controller does the work."""
 from __future__ import annotations
 
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 
 class MarkersPanel(QtWidgets.QWidget):
@@ -45,9 +45,14 @@ class MarkersPanel(QtWidgets.QWidget):
         self.list.setToolTip("Markers on the surface; background markers (no shape moves them) are greyed")
         self.list.currentRowChanged.connect(self.marker_selected)
         lay.addWidget(self.list, 1)
+        remove_key = QtGui.QShortcut(QtGui.QKeySequence("Delete"), self.list)   # while the list has the focus
+        remove_key.setContext(QtCore.Qt.WidgetShortcut)
+        remove_key.setWhatsThis("Remove Marker")
+        remove_key.activated.connect(self._remove_clicked)
         row = QtWidgets.QHBoxLayout()
         self.remove = QtWidgets.QPushButton("Remove")
-        self.remove.setToolTip("Remove the selected marker (undoable; or right-click it in marker mode)")
+        self.remove.setToolTip("Remove the selected marker (undoable; Delete in the list, or right-click it in "
+                               "marker mode)")
         self.remove.clicked.connect(self._remove_clicked)
         row.addWidget(self.remove)
         row.addStretch(1)
