@@ -301,12 +301,15 @@ def region_shape_activity(per_shape: np.ndarray, cores: list[np.ndarray]) -> np.
     return np.stack([P[c].sum(axis=0) for c in cores])
 
 
-def most_active_shapes(activity: np.ndarray, shape_names: list[str], n: int = 5) -> list[list[tuple[str, float]]]:
-    """Per region, the ``n`` shapes with the largest activity ``Σ_core m_k`` (Joshi et al. 2003, §2), as
-    (name, share of the region's total)."""
+def most_active_shapes(activity: np.ndarray, shape_names: list[str], n: int = 5,
+                       min_share: float = 0.005) -> list[list[tuple[str, float]]]:
+    """Per region, up to ``n`` shapes with the largest activity ``Σ_core m_k`` (Joshi et al. 2003, §2), as
+    (name, share of the region's total); shapes below ``min_share`` of it are left out (a region one shape
+    drives lists that shape alone, not four more at 0%), the first is always kept."""
     out = []
     for row in np.asarray(activity):
         total = float(row.sum())
         top = np.argsort(-row, kind="stable")[:n]
-        out.append([(shape_names[k], float(row[k] / total) if total > 0 else 0.0) for k in top])
+        shares = [(shape_names[k], float(row[k] / total) if total > 0 else 0.0) for k in top]
+        out.append(shares[:1] + [x for x in shares[1:] if x[1] >= min_share])
     return out

@@ -384,6 +384,7 @@ def test_sample_rig_segmentation(sample_rig):
     stats = region_statistics(seg, cache.maps(), sample_rig.shape_names)
     assert len(stats) == counts[0]
     assert all(name in sample_rig.shape_names for st in stats for name, _ in st["shapes"])
+    assert all(share >= 0.005 for st in stats for _, share in st["shapes"][1:])   # no "0%" entries
 
 
 def test_sample_rig_regions_are_sensible(sample_rig):
