@@ -89,7 +89,8 @@ def cmd_info(args) -> int:
               f"{len(info['shapes'])} shapes, units {info['units']}")
         print(f"  shapes: {', '.join(info['shapes'])}")
         if info["correctives"]:
-            print(f"  correctives: {', '.join(c['name'] + (' (muted)' if c['muted'] else '') for c in info['correctives'])}")
+            names = [c["name"] + (" (muted)" if c["muted"] else "") for c in info["correctives"]]
+            print(f"  correctives: {', '.join(names)}")
         if info["presets"]:
             print(f"  presets: {', '.join(info['presets'])}")
     return 0

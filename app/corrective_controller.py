@@ -21,9 +21,8 @@ from model.correctives import (Corrective, activation_for, authoring_surface, co
                                corrective_activations, driver_pose, find_corrective, mirrored_corrective,
                                symmetrized_corrective, validate_correctives)
 from model.errors import RigInputError
-from model.sides import mirror_name
+from model.sides import mirror_drivers
 from solvers import sculpt
-from solvers.symmetry import mirror_map
 from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
 from widgets.correctives_panel import CORRECTIVES_TAB, INTERFERENCE_TAB, CorrectivesPanel
 
@@ -61,7 +60,6 @@ class CorrectiveController(QtCore.QObject):
         self._stroke: dict | None = None
         self._cursor = None
         self._cursor_unit = None
-        self._mirror: np.ndarray | None = None   # the rig's vertex mirror map across x = 0
         self.finder = InterferenceFinder(window, panel, self.start_authoring)
         d = self.document
         d.rig_changed.connect(self._on_rig_change)
@@ -98,7 +96,6 @@ class CorrectiveController(QtCore.QObject):
         self.stop_sculpting()
         self.finder.reset()
         self.mesh = None
-        self._mirror = None
         rig = self.document.rig
         self.panel.set_shapes(rig.shape_names)
         lo, hi = rig.neutral.min(axis=0), rig.neutral.max(axis=0)
@@ -271,7 +268,7 @@ class CorrectiveController(QtCore.QObject):
             return False
         self.stop_sculpting()
         self.panel.select(name)
-        twin = [mirror_name(d) for d in drivers]
+        twin = mirror_drivers(drivers)
         hint = (" Mirror (Ctrl+Shift+M) makes the other side's." if set(twin) != set(drivers)
                 and all(d in rig.shape_names for d in twin) else "")
         self.window.statusBar().showMessage(f"Saved corrective {name}.{hint}", 8000)
@@ -407,12 +404,6 @@ class CorrectiveController(QtCore.QObject):
         new = [replace(x, rule=rule) if x is c else x for x in self.document.rig.correctives]
         return self._push_correctives(new, f"Rule of {c.name}: {rule}")
 
-    def _mirror_map(self) -> np.ndarray:
-        """The rig's vertex mirror map across x = 0, computed once per rig."""
-        if self._mirror is None:
-            self._mirror = mirror_map(self.document.rig.neutral)
-        return self._mirror
-
     def mirror(self, name: str | None = None) -> bool:
         """Add the other side's version of a corrective (``model.correctives.mirrored_corrective``); an
         existing corrective on the mirrored drivers is replaced. One undoable edit."""
@@ -421,7 +412,7 @@ class CorrectiveController(QtCore.QObject):
             return False
         rig = self.document.rig
         try:
-            made = mirrored_corrective(c, rig.shape_names, rig.neutral, self._mirror_map(), units=rig.units)
+            made = mirrored_corrective(c, rig.shape_names, rig.neutral, self.document.mirror_map(), units=rig.units)
         except RigInputError as exc:
             self._error(str(exc))
             return False
@@ -441,7 +432,7 @@ class CorrectiveController(QtCore.QObject):
             return False
         rig = self.document.rig
         try:
-            made = symmetrized_corrective(c, rig.neutral, self._mirror_map(), units=rig.units)
+            made = symmetrized_corrective(c, rig.neutral, self.document.mirror_map(), units=rig.units)
         except RigInputError as exc:
             self._error(str(exc))
             return False
@@ -463,11 +454,12 @@ class CorrectiveController(QtCore.QObject):
         have = {frozenset(c.drivers) for c in rig.correctives}
         made, problems = [], []
         for c in rig.correctives:
-            twin = frozenset(mirror_name(d) for d in c.drivers)
+            twin = frozenset(mirror_drivers(c.drivers))
             if twin == frozenset(c.drivers) or twin in have:
                 continue
             try:
-                made.append(mirrored_corrective(c, rig.shape_names, rig.neutral, self._mirror_map(), units=rig.units))
+                made.append(mirrored_corrective(c, rig.shape_names, rig.neutral, self.document.mirror_map(),
+                                                units=rig.units))
             except RigInputError as exc:
                 problems.append(str(exc))
                 continue

@@ -67,6 +67,7 @@ class Document(QtCore.QObject):
         self.region_level: int | None = None
         self.edit_region: int | None = None   # the region the Shapes panel edits (None: all of them)
         self._collapsed: tuple | None = None  # (global weights set, regional state before): exact undo
+        self._mirror: np.ndarray | None = None   # the rig's vertex mirror map, computed on first use
 
     # --- whole document ----------------------------------------------------------------------------
     def set_project(self, project: Project, path: str | Path | None) -> None:
@@ -75,6 +76,7 @@ class Document(QtCore.QObject):
         self.path = Path(path) if path else None
         self.evaluator = PoseEvaluator(project.rig)
         self._surface = None
+        self._mirror = None
         self.edit_offset = None
         # the saved current pose, regional if it was (its blend is kept with it)
         self.region_weights, self.region_blend, self.region_level = \
@@ -94,6 +96,14 @@ class Document(QtCore.QObject):
         self.path = Path(path)
         self.undo_stack.setClean()
         self.path_changed.emit()
+
+    def mirror_map(self) -> np.ndarray:
+        """The rig's vertex mirror map across x = 0 (``solvers.symmetry.mirror_map``), once per rig: mirroring
+        poses, shapes and correctives all use it."""
+        if self._mirror is None:
+            from solvers.symmetry import mirror_map
+            self._mirror = mirror_map(self.project.rig.neutral)
+        return self._mirror
 
     @property
     def rig(self):

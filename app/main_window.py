@@ -260,7 +260,7 @@ class MainWindow(QtWidgets.QMainWindow):
         from app.document import PoseState
         from app.marker_commands import SetPoseCommand
         from model.sides import mirror_indices
-        from solvers.symmetry import mirror_map, mirrored_region_weights
+        from solvers.symmetry import mirrored_region_weights
         doc = self.document
         rig = doc.rig
         if rig is None:
@@ -274,7 +274,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.set_pose(doc.weights[idx], "Mirror pose")
             return True
         old = doc.pose_state()
-        W = mirrored_region_weights(old.region_weights, old.blend, mirror_map(rig.neutral), idx)
+        W = mirrored_region_weights(old.region_weights, old.blend, doc.mirror_map(), idx)
         doc.undo_stack.push(SetPoseCommand(doc, old, PoseState(old.weights[idx], W, old.blend, old.level),
                                            "Mirror pose"))
         return True
@@ -285,7 +285,7 @@ class MainWindow(QtWidgets.QMainWindow):
         from app.commands import AddShapeCommand, SetShapeDeltaCommand
         from model.errors import RigInputError
         from model.sides import check_mirrorable, mirror_name
-        from solvers.symmetry import mirror_delta, mirror_map
+        from solvers.symmetry import mirror_delta
         rig = self.document.rig
         twin = mirror_name(name)
         if twin == name:
@@ -293,7 +293,7 @@ class MainWindow(QtWidgets.QMainWindow):
                                             "has no other side to mirror to.")
             return False
         k = rig.shape_index(name)
-        m = mirror_map(rig.neutral)
+        m = self.document.mirror_map()
         try:
             check_mirrorable(name, rig.deltas[k], rig.neutral, m, rig.units)
         except RigInputError as exc:

@@ -348,10 +348,10 @@ def mirrored_corrective(corrective: Corrective, shape_names, neutral, mirror=Non
     driver, or when the rig is not symmetric where the corrective acts.
     """
     from solvers.symmetry import mirror_delta, mirror_map
-    from .sides import check_mirrorable, mirror_name
+    from .sides import check_mirrorable, mirror_drivers, mirror_name
 
     c = corrective
-    drivers = [mirror_name(d) for d in c.drivers]
+    drivers = mirror_drivers(c.drivers)
     if set(drivers) == set(c.drivers):
         raise RigInputError(f"{c.name} is its own mirror image: its drivers mirror onto themselves.")
     missing = [d for d in drivers if d not in set(shape_names)]
@@ -376,10 +376,10 @@ def symmetrized_corrective(corrective: Corrective, neutral, mirror=None, *, unit
     Symmetrize Target). Raises RigInputError for a one-sided corrective (use ``mirrored_corrective``) or a rig
     that is not symmetric where the corrective acts."""
     from solvers.symmetry import mirror_delta, mirror_map
-    from .sides import check_mirrorable, mirror_name
+    from .sides import check_mirrorable, mirror_drivers
 
     c = corrective
-    if {mirror_name(d) for d in c.drivers} != set(c.drivers):
+    if set(mirror_drivers(c.drivers)) != set(c.drivers):
         raise RigInputError(f"{c.name} acts on one side: Mirror makes its other side; only a corrective whose "
                             "drivers mirror onto themselves can be made symmetric.")
     neutral = np.asarray(neutral, dtype=np.float64)

@@ -24,6 +24,11 @@ def is_left(name: str) -> bool:
     return any(name.endswith(left) and len(name) > len(left) for left, _ in _SUFFIXES)
 
 
+def mirror_drivers(names) -> list[str]:
+    """Each name's mirror name; equal as a set to ``names`` when the set is its own mirror image."""
+    return [mirror_name(n) for n in names]
+
+
 def mirror_indices(names: list[str]) -> list[int]:
     """For each shape, the index of its mirror shape; a shape without one (no suffix, or the other side
     missing from the rig) maps to itself."""
