@@ -225,17 +225,15 @@ class KeyframeController(QtCore.QObject):
         return write_pc2(path, frames, n_points=doc.rig.n_vertices, start_frame=0.0, sample_rate=1.0)
 
     def _export_dialog(self, title: str, suffix: str, filt: str, fn) -> None:
-        if self.document.project is None:
-            return
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(self.window, title, f"{self.document.rig.name}_keys{suffix}", filt)
-        if not path:
-            return
-        try:
-            n = fn(path)
-        except (RigInputError, OSError) as exc:
-            self.window.show_error("Could not export", str(exc))
-            return
-        self.window.statusBar().showMessage(f"Exported {n} frames to {path}", 5000)
+        def write(path: str) -> None:
+            try:
+                n = fn(path)
+            except (RigInputError, OSError) as exc:
+                self.window.show_error("Could not export", str(exc))
+                return
+            self.window.statusBar().showMessage(f"Exported {n} frames to {path}", 5000)
+        if self.document.project is not None:
+            self.window.save_dialog(title, f"{self.document.rig.name}_keys{suffix}", filt, write)
 
     def export_csv_dialog(self) -> None:
         self._export_dialog("Export Keyed Weights as CSV", ".csv", "CSV (*.csv)", self.export_csv)

@@ -413,13 +413,19 @@ class MainWindow(QtWidgets.QMainWindow):
         self.statusBar().showMessage(f"Saved {path}", 5000)
         return True
 
-    def export_pose(self) -> None:
+    def save_dialog(self, title: str, default_name: str, file_filter: str, write) -> None:
+        """Ask where to write (a file dialog starting at ``default_name``) and call ``write(path)``; nothing
+        without an open rig or when the user cancels. Every export of the window and its panels uses it."""
         if self.document.project is None:
             return
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Export Pose as OBJ",
-                                                        f"{self.document.rig.name}_pose.obj", "OBJ (*.obj)")
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, title, default_name, file_filter)
         if path:
-            self.export_pose_to(path)
+            write(path)
+
+    def export_pose(self) -> None:
+        if self.document.project is not None:
+            self.save_dialog("Export Pose as OBJ", f"{self.document.rig.name}_pose.obj", "OBJ (*.obj)",
+                             self.export_pose_to)
 
     def export_pose_to(self, path: str | Path) -> None:
         from model.obj_io import write_obj
@@ -433,12 +439,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.statusBar().showMessage(f"Exported {path}", 5000)
 
     def save_image_dialog(self) -> None:
-        if self.document.project is None:
-            return
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Save Viewport Image",
-                                                        f"{self.document.rig.name}.png", "PNG image (*.png)")
-        if path:
-            self.save_image(path)
+        if self.document.project is not None:
+            self.save_dialog("Save Viewport Image", f"{self.document.rig.name}.png", "PNG image (*.png)",
+                             self.save_image)
 
     def save_image(self, path: str | Path) -> bool:
         """Write the viewport as it is shown (camera, colour map and bar, wireframe) as a PNG."""

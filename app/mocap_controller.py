@@ -612,9 +612,7 @@ class MocapController(QtCore.QObject):
     # --- exports ----------------------------------------------------------------------------------
     def _export_dialog(self, title: str, filt: str, suffix: str, fn) -> None:
         stem = self.take_path.stem if self.take_path else "take"
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(self.window, title, stem + suffix, filt)
-        if path:
-            fn(path)
+        self.window.save_dialog(title, stem + suffix, filt, fn)
 
     def _write(self, what: str, path, writer) -> bool:
         try:

@@ -172,7 +172,7 @@ def test_mirror_pose_flips_the_face_and_undoes(qtbot, tmp_path):
     np.testing.assert_array_equal(doc.weights, weights)
 
 
-def test_save_viewport_image(qtbot, tmp_path):
+def test_save_viewport_image(qtbot, tmp_path, monkeypatch):
     from PIL import Image
     w = make_window(qtbot, tmp_path)
     assert w.save_image(tmp_path / "shot")               # the .png suffix is added
@@ -181,6 +181,12 @@ def test_save_viewport_image(qtbot, tmp_path):
     assert img.shape[:2] == (round(w.viewport.plotter.interactor.height() * ratio),
                              round(w.viewport.plotter.interactor.width() * ratio))
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 100   # a shaded face, not a blank frame
+    # through File > Save Viewport Image and File > Export Pose: the dialog's answer is written
+    answers = iter([(str(tmp_path / "menu.png"), ""), (str(tmp_path / "menu.obj"), "")])
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", lambda *a, **k: next(answers))
+    w.save_image_dialog()
+    w.export_pose()
+    assert (tmp_path / "menu.png").stat().st_size > 0 and (tmp_path / "menu.obj").stat().st_size > 0
     assert not w.save_image("/proc/no/such/dir/x.png")
     assert w.last_error.startswith("/proc/no/such/dir/x.png: could not be written")
 
