@@ -44,7 +44,8 @@ class VertexNormals:
         self.incidence = sp.csr_matrix((np.ones(3 * T, np.float32), (self.tris.ravel(), np.repeat(np.arange(T), 3))),
                                        shape=(n_points, T))
 
-    def __call__(self, points: np.ndarray) -> np.ndarray:
+    def face_normals(self, points: np.ndarray) -> np.ndarray:
+        """(T, 3) float32 e1 x e2 of each triangle: its normal times twice its area (winding-signed)."""
         p = np.asarray(points, dtype=np.float32)
         corners = np.take(p, self._flat, axis=0).reshape(-1, 3, 3)  # (T, 3, 3): np.take is 5x fancy indexing
         e1 = corners[:, 1] - corners[:, 0]
@@ -53,7 +54,10 @@ class VertexNormals:
         fn[:, 0] = e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1]
         fn[:, 1] = e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2]
         fn[:, 2] = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-        out = np.asarray(self.incidence @ fn, dtype=np.float32)
+        return fn
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        out = np.asarray(self.incidence @ self.face_normals(points), dtype=np.float32)
         length = np.linalg.norm(out, axis=1, keepdims=True)
         out /= np.where(length > 0, length, 1.0)
         return out

@@ -197,5 +197,4 @@ class SideBySideView(QtWidgets.QWidget):
 
 def _faces_forward(points: np.ndarray, normals: VertexNormals) -> bool:
     """Whether the faces' winding makes their area-weighted normals point toward +Z (the face's front)."""
-    corners = np.asarray(points, dtype=np.float64)[normals.tris]        # (T, 3, 3)
-    return bool(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])[:, 2].sum() >= 0)
+    return bool(normals.face_normals(points)[:, 2].sum(dtype=np.float64) >= 0)
