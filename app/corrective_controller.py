@@ -109,7 +109,7 @@ class CorrectiveController(QtCore.QObject):
             ticked = self.panel.ticked_drivers()
             self.panel.set_shapes(rig.shape_names)
             self.panel.set_ticked(ticked)
-            self.finder.shapes_changed()
+        self.finder.shapes_changed()   # it keeps its scores unless the deltas changed (Mirror to the Other Side)
         self._refresh_table()
 
     def _on_pose_change(self) -> None:

@@ -13,6 +13,7 @@ from PySide6 import QtCore, QtWidgets
 from model.sides import is_left, mirror_indices
 from solvers.correctives import (interference_heat, merge_mirrored_pairs, overshoot_heat, rank_interference,
                                  rank_partners, shape_overlap, shape_overshoot)
+from solvers.laplacian import vertex_areas
 from widgets.correctives_panel import INTERFERENCE_TAB, PAIR_HINT, CorrectivesPanel
 from widgets.scene import ColorMap
 
@@ -26,6 +27,8 @@ class InterferenceFinder:
         self.window, self.panel, self._start_authoring = window, panel, start_authoring
         self.document, self.viewport = window.document, window.viewport
         self._overlap: dict[str, np.ndarray] = {}  # (K, K) scores by measure, until the shapes change
+        self._scored_deltas: np.ndarray | None = None   # the rig.deltas array the scores were computed from
+        self._areas: np.ndarray | None = None      # the neutral's vertex areas, until the rig changes
         self.pairs: list[tuple[int, int, float]] = []
         self.pair_mirrors: list[tuple[int, int, float] | None] = []  # each row's mirror pair, when folded in
         self._pairs_measure = "overshoot"  # the measure self.pairs were ranked by
@@ -40,12 +43,22 @@ class InterferenceFinder:
         """A new rig: nothing ranked, no heat map."""
         self.leave_heat_map()
         self._overlap.clear()
+        self._areas = None
         self.pairs, self.pair_mirrors = [], []
         self.panel.set_pairs([])
 
+    def vertex_areas(self) -> np.ndarray:
+        """(V,) the neutral's vertex areas in rig units² (``solvers.laplacian.vertex_areas``), once per rig."""
+        if self._areas is None:
+            rig = self.document.rig
+            self._areas = vertex_areas(rig.neutral, rig.triangles())
+        return self._areas
+
     def shapes_changed(self) -> None:
-        """The shapes were edited: the scores are recomputed on the next search."""
-        self._overlap.clear()
+        """Shapes or correctives were edited: if the shapes' deltas changed (the commands replace the array,
+        never write into it), the scores are recomputed on the next search."""
+        if self.document.rig is None or self.document.rig.deltas is not self._scored_deltas:
+            self._overlap.clear()
 
     def find_pairs(self) -> list[tuple[int, int, float]]:
         """Rank the pairs by the panel's measure (computed once per measure until the shapes change) and list
@@ -55,11 +68,14 @@ class InterferenceFinder:
         if rig is None:
             return []
         measure = self.measure
+        self.shapes_changed()
         if measure not in self._overlap:
             QtWidgets.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
-            try:
-                self._overlap[measure] = shape_overshoot(rig.deltas) if measure == "overshoot" else \
-                    shape_overlap(rig.deltas, directional=measure == "directional")
+            try:   # surface-weighted: a densely modelled eyelid does not outweigh the forehead
+                areas = self.vertex_areas()
+                self._overlap[measure] = shape_overshoot(rig.deltas, areas=areas) if measure == "overshoot" else \
+                    shape_overlap(rig.deltas, directional=measure == "directional", areas=areas)
+                self._scored_deltas = rig.deltas
             finally:
                 QtWidgets.QApplication.restoreOverrideCursor()
         self._pairs_measure = measure
@@ -108,7 +124,8 @@ class InterferenceFinder:
         title = f"overshoot ({rig.units})" if overshoot else f"interference ({rig.units})"
         self._heat_colormap = ColorMap(self.heat, title=title, cmap="YlOrRd", clim=(0.0, top if top > 0 else 1.0))
         self.viewport.set_colormap(self._heat_colormap)
-        n = int((self.heat > 0.1 * top).sum()) if top > 0 else 0
+        hot = self.heat > 0.1 * top if top > 0 else np.zeros(self.heat.shape, dtype=bool)
+        n, area = int(hot.sum()), float(self.vertex_areas()[hot].sum())
         what = "‖d_i + d_j‖ − max(‖d_i‖, ‖d_j‖)" if overshoot else "min(‖d_i‖, ‖d_j‖)"
         names = rig.shape_names
         if mirror is not None:
@@ -118,7 +135,8 @@ class InterferenceFinder:
         else:
             score_text = f"{names[i]} × {names[j]}: score {score:.3f}"
         self.panel.pair_info.setText(f"{score_text}; "
-                                     f"{what} up to {top:.3g} {rig.units}, above 10% on {n:,} vertices.")
+                                     f"{what} up to {top:.3g} {rig.units}, above 10% on {n:,} vertices "
+                                     f"({area:.3g} {rig.units}²).")
 
     def reapply_heat_map(self) -> None:
         """Put the heat map back on top after another view repainted the face (a finished segmentation)."""

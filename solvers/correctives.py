@@ -113,7 +113,17 @@ def corrective_from_scan(scan, x_fit, region, activation: float) -> np.ndarray:
 
 
 # --- interference finder ------------------------------------------------------------------------
-def shape_overlap(deltas, directional: bool = False) -> np.ndarray:
+def _area_weights(areas, n_vertices: int) -> np.ndarray | None:
+    """Per-vertex surface weights for the finder's measures, or None (every vertex counts alike)."""
+    if areas is None:
+        return None
+    a = np.asarray(areas, dtype=np.float64).ravel()
+    if a.shape[0] != n_vertices or not np.isfinite(a).all() or (a < 0).any():
+        raise RigInputError(f"The vertex areas must be {n_vertices} finite values of zero or more.")
+    return a
+
+
+def shape_overlap(deltas, directional: bool = False, areas=None) -> np.ndarray:
     """(K, K) overlap of displacement fields (ALGORITHMS.md §6; Smith §4.5 on shapes in superposition).
 
     O_ij = Σ_v min(‖d_i(v)‖, ‖d_j(v)‖) / min(Σ_v ‖d_i(v)‖, Σ_v ‖d_j(v)‖), in [0, 1]; the diagonal is 1
@@ -121,19 +131,28 @@ def shape_overlap(deltas, directional: bool = False) -> np.ndarray:
     Σ_v min = (S_i + S_j − ‖n_i − n_j‖₁) / 2 with the L1 distances from one ``pdist`` call, over the
     vertices that two or more shapes move.
 
+    ``areas`` ((V,), ``solvers.laplacian.vertex_areas``) weights every vertex term by its surface area A(v),
+    so the sums become surface integrals, ∫ min(‖d_i‖, ‖d_j‖) dA / min(∫ ‖d_i‖ dA, ∫ ‖d_j‖ dA), and a region
+    modelled with denser vertices (eyelids, lips) does not count for more than its area.
+
     ``directional=True`` (our extension) counts only displacements that point the same way, the case in
     which superposition overshoots: each vertex term is weighted by max(0, cos θ_ij(v)), i.e.
     min(‖d_i‖, ‖d_j‖)·max(0, cos θ) = max(0, d_i·d_j) / max(‖d_i‖, ‖d_j‖). Antagonists (jawLeft/jawRight,
     eyeLookIn/eyeLookOut) then drop out of the ranking.
     """
     D = np.asarray(deltas, dtype=np.float64)
+    A = _area_weights(areas, D.shape[1])
     n = np.sqrt(np.einsum("kvc,kvc->kv", D, D))  # (K, V)
-    S = n.sum(axis=1)
     keep = (n > 0).sum(axis=0) >= 2  # vertices moved by fewer than two shapes add nothing to any min
+    if A is not None:
+        n = n * A[None, :]          # A·min(a, b) = min(A·a, A·b): the weights go into the magnitudes
+    S = n.sum(axis=1)
     n = n[:, keep]
     if directional:
         # Per vertex the K×K dot products, in float32 chunks of vertices (batched matmul).
         Dv = np.ascontiguousarray(D[:, keep].transpose(1, 0, 2), dtype=np.float32)  # (U, K, 3)
+        if A is not None:   # (A d_i)·(A d_j) / (A max(‖d_i‖, ‖d_j‖)) = A·(d_i·d_j / max(‖d_i‖, ‖d_j‖))
+            Dv *= A[keep].astype(np.float32)[:, None, None]
         nv = np.ascontiguousarray(n.T, dtype=np.float32)  # (U, K)
         inter = np.zeros((D.shape[0], D.shape[0]))
         for s in range(0, Dv.shape[0], 1024):
@@ -157,7 +176,7 @@ def shape_overlap(deltas, directional: bool = False) -> np.ndarray:
 OVERSHOOT_PRIOR = 10.0   # shrinkage of shape_overshoot, in vertices: a shared area of a few vertices scores ~0
 
 
-def shape_overshoot(deltas, prior: float = OVERSHOOT_PRIOR) -> np.ndarray:
+def shape_overshoot(deltas, prior: float = OVERSHOOT_PRIOR, areas=None) -> np.ndarray:
     """(K, K) overshoot of superposition where two shapes both act, in (-1, 1) (Smith §4.5: where shapes
     overlap, their sum bunches or overshoots; the formulation is ours).
 
@@ -168,7 +187,11 @@ def shape_overshoot(deltas, prior: float = OVERSHOOT_PRIOR) -> np.ndarray:
     strongly both do, w(v) = min(‖d_i(v)‖ / max‖d_i‖, ‖d_j(v)‖ / max‖d_j‖), and shrunk toward 0 for small
     shared areas: O_ij = Σ_v w e / (Σ_v w + prior). A small shape inside a large one (a lip shape inside
     jawOpen) scores low, since superposing them adds little to the large motion. The diagonal is 1.
-    One pass per shape over the vertices it moves, all partners at once.
+
+    ``areas`` ((V,), ``solvers.laplacian.vertex_areas``) multiplies w(v) by the vertex's surface area relative
+    to the median area of the vertices the rig moves, so the average is over the surface rather than over
+    vertices (a densely modelled eyelid does not outweigh the forehead) and ``prior`` stays "about that many
+    typical vertices". One pass per shape over the vertices it moves, all partners at once.
     """
     D = np.asarray(deltas, dtype=np.float32)  # float32 terms, float64 sums: ~1e-6 relative, twice as fast
     K = D.shape[0]
@@ -176,6 +199,11 @@ def shape_overshoot(deltas, prior: float = OVERSHOOT_PRIOR) -> np.ndarray:
     peak = n.max(axis=1)
     rel = n / np.where(peak > 0, peak, 1.0)[:, None]  # (K, V) in [0, 1]
     floor = 1e-3                                       # below a thousandth of its peak a shape does not act
+    A = _area_weights(areas, D.shape[1])
+    if A is not None:
+        moved = A[(rel > floor).any(axis=0)]
+        typical = float(np.median(moved[moved > 0])) if (moved > 0).any() else 1.0
+        A = (A / typical).astype(np.float32)
     O = np.zeros((K, K))
     for a in range(K - 1):
         cols = np.flatnonzero(rel[a] > floor)
@@ -185,6 +213,8 @@ def shape_overshoot(deltas, prior: float = OVERSHOOT_PRIOR) -> np.ndarray:
         Db, nb = D[a + 1:, cols], n[a + 1:, cols]                     # its partners there: (P, C, 3), (P, C)
         w = np.minimum(rel[a, cols][None, :], rel[a + 1:, cols])      # (P, C)
         w[w <= floor] = 0.0
+        if A is not None:
+            w *= A[cols][None, :]
         m = np.maximum(na[None, :], nb)
         Db += Da[None]                                                # d_i + d_j, in place (Db is a copy)
         e = np.sqrt(np.einsum("pcx,pcx->pc", Db, Db))
@@ -204,12 +234,13 @@ def rank_partners(overlap, shape: int, top: int = 5) -> list[tuple[int, float]]:
     return [(int(j), float(row[j])) for j in order if np.isfinite(row[j])]
 
 
-def rank_interference(deltas, top: int = 10, overlap=None, directional: bool = False) -> list[tuple[int, int, float]]:
+def rank_interference(deltas, top: int = 10, overlap=None, directional: bool = False,
+                      areas=None) -> list[tuple[int, int, float]]:
     """The ``top`` shape pairs (i < j) with the largest ``shape_overlap``: [(i, j, overlap), ...], best first.
 
     Pass a precomputed ``overlap`` (K, K) to skip the computation (``deltas`` may then be None).
     """
-    O = shape_overlap(deltas, directional) if overlap is None else np.asarray(overlap)
+    O = shape_overlap(deltas, directional, areas) if overlap is None else np.asarray(overlap)
     i, j = np.triu_indices(O.shape[0], k=1)
     s = O[i, j]
     order = np.lexsort((j, i, -s))[:top]

@@ -122,6 +122,18 @@ def cotangent_laplacian(vertices: np.ndarray, triangles: np.ndarray) -> sp.csr_m
     return L
 
 
+def vertex_areas(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(V,) barycentric vertex areas: a third of the area of every triangle at the vertex, the lumped mass
+    matrix of the cotangent Laplacian (Meyer et al. 2003, §3.3). Σ_v A(v) is the surface area, so a sum over
+    vertices weighted by A approximates a surface integral whatever the tessellation. Vertices in no triangle
+    get 0."""
+    X = np.asarray(vertices, dtype=np.float64)
+    T = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    cross = np.cross(X[T[:, 1]] - X[T[:, 0]], X[T[:, 2]] - X[T[:, 0]])
+    third = np.linalg.norm(cross, axis=1) / 6.0
+    return np.bincount(T.ravel(), weights=np.repeat(third, 3), minlength=X.shape[0])
+
+
 def mesh_laplacian(vertices: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
                    kind: str = "uniform", adjacency: sp.spmatrix | None = None) -> sp.csr_matrix:
     """The mesh Laplacian of ALGORITHMS.md §2 (Joshi et al. 2003, §2): ``kind`` 'uniform' or 'cotangent'."""

@@ -289,6 +289,15 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     assert [rig.shape_names[j] for _, j, _ in partners[:2]] == ["browInnerUp_R", "browOuterUp_L"]
     first = ctrl.panel.pairs.topLevelItem(0)
     assert (first.text(2), first.text(3)) == ("browInnerUp_L", "browInnerUp_R")
+    ctrl.panel.select_pair(0)     # the summary gives the hot area in rig units²
+    assert f"{rig.units}²)" in ctrl.panel.pair_info.text() and "vertices (" in ctrl.panel.pair_info.text()
+    # a replaced shape is scored afresh: browInnerUp_R flattened (undoably) is no partner any more
+    from app.commands import SetShapeDeltaCommand
+    k = rig.shape_index("browInnerUp_R")
+    w.document.undo_stack.push(SetShapeDeltaCommand(w.document, "browInnerUp_R", 0.0 * rig.deltas[k], "Flatten"))
+    assert "browInnerUp_R" not in [rig.shape_names[j] for _, j, _ in ctrl.finder.find_pairs()[:2]]
+    w.document.undo_stack.undo()
+    assert [rig.shape_names[j] for _, j, _ in ctrl.finder.find_pairs()[:2]] == ["browInnerUp_R", "browOuterUp_L"]
     ctrl.panel.partner_of.setCurrentIndex(0)
     ctrl.panel.measure.setCurrentIndex(ctrl.panel.measure.findData("directional"))
     directional = ctrl.finder.find_pairs()

@@ -11,6 +11,7 @@ import pytest
 from model.correctives import Corrective, set_correctives
 from model.pose import PoseEvaluator
 from solvers.correctives import driver_region, rank_interference, shape_overlap, shape_overshoot
+from solvers.laplacian import vertex_areas
 from solvers.sculpt import SculptMesh, grab
 
 # 14 pairs, 4 three-way and 2 four-way correctives on overlapping shapes, all four rules.
@@ -52,18 +53,24 @@ def test_evaluate_pose_with_20_correctives(benchmark, rig20):
     assert x.shape == (26719, 3)
 
 
-def test_interference_finder_all_pairs(benchmark, ict_rig):
-    top = benchmark.pedantic(lambda: rank_interference(ict_rig.deltas, 10), rounds=5, iterations=1)
+@pytest.fixture(scope="module")
+def areas(ict_rig):
+    """The neutral's vertex areas: the finder weights every measure by them, as the Correctives panel does."""
+    return vertex_areas(ict_rig.neutral, ict_rig.triangles())
+
+
+def test_interference_finder_all_pairs(benchmark, ict_rig, areas):
+    top = benchmark.pedantic(lambda: rank_interference(ict_rig.deltas, 10, areas=areas), rounds=5, iterations=1)
     assert len(top) == 10
 
 
-def test_interference_finder_directional(benchmark, ict_rig):
-    O = benchmark.pedantic(shape_overlap, args=(ict_rig.deltas, True), rounds=3, iterations=1)
+def test_interference_finder_directional(benchmark, ict_rig, areas):
+    O = benchmark.pedantic(shape_overlap, args=(ict_rig.deltas, True, areas), rounds=3, iterations=1)
     assert O.shape == (57, 57)
 
 
-def test_interference_finder_overshoot(benchmark, ict_rig):
-    O = benchmark.pedantic(shape_overshoot, args=(ict_rig.deltas,), rounds=3, iterations=1)
+def test_interference_finder_overshoot(benchmark, ict_rig, areas):
+    O = benchmark.pedantic(shape_overshoot, args=(ict_rig.deltas,), kwargs={"areas": areas}, rounds=3, iterations=1)
     assert O.shape == (57, 57)
 
 
