@@ -10,18 +10,23 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from model.rig import fan_triangulate
+
 NORMAL_SCALE = 127.0  # int8 quantisation of unit normals: 3 bytes a vertex, about half a degree of error
 
 
-def fan_triangles(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
-    """(T, 3) triangles of the polygons (a fan from each polygon's first corner)."""
-    counts = np.asarray(face_counts, dtype=np.int64)
-    idx = np.asarray(face_indices, dtype=np.int64)
-    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
-    ntri = np.maximum(counts - 2, 0)
-    first = np.repeat(starts, ntri)
-    k = np.arange(ntri.sum()) - np.repeat(np.cumsum(ntri) - ntri, ntri)
-    return np.stack([idx[first], idx[first + k + 1], idx[first + k + 2]], axis=1)
+def vertex_normals(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
+    """(V, 3) float64 unit area-weighted vertex normals of a triangle mesh, for one-off use (sculpting,
+    nudging along the normal); zero for vertices in no triangle. ``VertexNormals`` is the same in float32 with
+    the faces' incidence built once, for surfaces redrawn every frame."""
+    p = np.asarray(points, dtype=np.float64)
+    t = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    fn = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
+    corners = t.ravel()
+    vn = np.stack([np.bincount(corners, weights=np.repeat(fn[:, c], 3), minlength=p.shape[0]) for c in range(3)],
+                  axis=1)
+    length = np.linalg.norm(vn, axis=1, keepdims=True)
+    return np.divide(vn, length, out=np.zeros_like(vn), where=length > 0)
 
 
 def compact_faces(face_indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -37,7 +42,7 @@ class VertexNormals:
     (zero for vertices no face uses); ``normals.quantised(points)`` -> the same as int8 (x 127)."""
 
     def __init__(self, face_counts: np.ndarray, face_indices: np.ndarray, n_points: int) -> None:
-        self.tris = fan_triangles(face_counts, face_indices)
+        self.tris = fan_triangulate(face_counts, face_indices)
         self._flat = self.tris.ravel().astype(np.intp)
         T = len(self.tris)
         self.n_points = n_points

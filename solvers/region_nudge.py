@@ -4,28 +4,15 @@ from __future__ import annotations
 import numpy as np
 
 from model.errors import RigInputError
+from model.rig import fan_triangulate
+
+from .normals import vertex_normals
 
 
-def vertex_normals(positions: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
-    """(V, 3) unit vertex normals: the sum of the area vectors of the polygons around each vertex.
-
-    Each polygon's area vector is the sum of its fan triangles' cross products (Newell's method for planar
-    polygons); vertices in no polygon get a zero normal.
-    """
-    from model.rig import fan_triangulate
-    X = np.asarray(positions, dtype=np.float64)
-    T = fan_triangulate(face_counts, face_indices).astype(np.int64)
-    n = np.zeros_like(X)
-    if T.size:
-        c = np.cross(X[T[:, 1]] - X[T[:, 0]], X[T[:, 2]] - X[T[:, 0]])
-        # scatter-add each triangle's area vector to its three corners (bincount per coordinate)
-        idx = T.ravel()
-        cc = np.repeat(c, 3, axis=0)
-        n = np.stack([np.bincount(idx, weights=cc[:, j], minlength=X.shape[0]) for j in range(3)], axis=1)
-    norm = np.linalg.norm(n, axis=1)
-    ok = norm > 0
-    n[ok] /= norm[ok, None]
-    return n
+def polygon_normals(positions: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
+    """(V, 3) unit vertex normals of a polygon mesh: the sum of the area vectors of the (fanned) polygons
+    around each vertex (``solvers.normals.vertex_normals``); vertices in no polygon get a zero normal."""
+    return vertex_normals(positions, fan_triangulate(face_counts, face_indices))
 
 
 def nudge_region(positions: np.ndarray, vertices: np.ndarray, amount: float, *,
@@ -52,7 +39,7 @@ def nudge_region(positions: np.ndarray, vertices: np.ndarray, amount: float, *,
         if normals is None:
             if face_counts is None or face_indices is None:
                 raise RigInputError("Nudging along the normal needs the rig's faces to compute normals.")
-            normals = vertex_normals(X, face_counts, face_indices)
+            normals = polygon_normals(X, face_counts, face_indices)
         u = np.asarray(normals, dtype=np.float64)[idx] * (1.0 if direction == "out" else -1.0)
     else:
         d = np.asarray(direction, dtype=np.float64).ravel()

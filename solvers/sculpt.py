@@ -22,6 +22,7 @@ import scipy.sparse as sp
 
 from model.errors import RigInputError
 
+from .normals import vertex_normals
 from .symmetry import REFLECT_X as _R
 from .symmetry import mirror_map
 
@@ -70,18 +71,6 @@ def edges_of_triangles(triangles) -> np.ndarray:
     t = np.asarray(triangles, dtype=np.int64)
     e = np.concatenate([t[:, [0, 1]], t[:, [1, 2]], t[:, [2, 0]]])
     return np.unique(np.sort(e, axis=1), axis=0)
-
-
-def vertex_normals(points, triangles) -> np.ndarray:
-    """(V, 3) unit area-weighted vertex normals (sum of adjacent triangle cross products, normalised)."""
-    p = np.asarray(points, dtype=np.float64)
-    t = np.asarray(triangles, dtype=np.int64)
-    fn = np.cross(p[t[:, 1]] - p[t[:, 0]], p[t[:, 2]] - p[t[:, 0]])
-    vn = np.zeros_like(p)
-    for k in range(3):
-        np.add.at(vn, t[:, k], fn)
-    ln = np.linalg.norm(vn, axis=1, keepdims=True)
-    return np.divide(vn, ln, out=np.zeros_like(vn), where=ln > 0)
 
 
 def laplacian_energy(points, average_operator, vertices=None) -> float:

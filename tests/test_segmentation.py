@@ -15,7 +15,7 @@ from model.segmentation import (Segmentation, SegmentationCache, SegmentationSet
 from solvers import segmentation as S
 from solvers.hierarchy import level_targets
 from solvers.region_growing import grow_regions
-from solvers.region_nudge import nudge_region, vertex_normals
+from solvers.region_nudge import nudge_region, polygon_normals
 
 ICT_FACE = 9409  # vertices 0–9408 are the face skin (data README)
 MOUTH_CORNERS = (48, 54)  # iBUG-68 landmark numbers in vertex_indices.json
@@ -336,7 +336,7 @@ def test_region_growing_follows_acosta(ict_rig, ict_cache):
 
 
 def test_vertex_normals_point_out_of_the_face(ict_rig, landmarks):
-    n = vertex_normals(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices)
+    n = polygon_normals(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices)
     assert np.allclose(np.linalg.norm(n[:ICT_FACE], axis=1), 1.0)
     nose_tip = landmarks[30]
     assert n[nose_tip, 2] > 0.8
@@ -355,7 +355,7 @@ def test_nudge_moves_only_the_region_with_a_soft_edge(ict_rig, ict_seg):
     others = np.setdiff1d(np.arange(x.shape[0]), reg.vertices)
     assert moved[others].max() == 0
     assert np.allclose(moved[reg.vertices], 0.2 * phi)
-    n = vertex_normals(x, ict_rig.face_counts, ict_rig.face_indices)
+    n = polygon_normals(x, ict_rig.face_counts, ict_rig.face_indices)
     inward = nudge_region(x, reg.vertices, 0.2, direction="in", normals=n)
     assert np.allclose(inward[reg.core] - x[reg.core], -0.2 * n[reg.core])
     up = nudge_region(x, reg.vertices, 0.5, direction=[0, 2, 0])
