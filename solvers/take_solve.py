@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 from typing import Callable, Iterator, Optional
 
 import numpy as np
+import scipy.linalg as la
 import scipy.sparse as sp
 
 from .rbf import KERNELS, RBFResidual, phantom_points
@@ -71,15 +72,28 @@ class SolveCancelled(Exception):
     """Raised when the cancel flag is set during a take solve."""
 
 
+def _det3(m: np.ndarray) -> float:
+    """The determinant of a 3x3 matrix in plain floats (np.linalg.det costs 8 µs a call; this 1 µs)."""
+    (a, b, c), (d, e, f), (g, h, i) = m.tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
+
+
+_GESDD = la.get_lapack_funcs("gesdd", (np.zeros((3, 3)),))   # LAPACK's SVD, as np.linalg.svd, at 1/4 the overhead
+
+
 def _kabsch(P: np.ndarray, Y: np.ndarray, p: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Weighted Kabsch / Umeyama 1991 (Eq. 40–41) for one frame: Y ≈ R P + t, point weights p (sum 1)."""
+    """Weighted Kabsch / Umeyama 1991 (Eq. 40–41) for one frame: Y ≈ R P + t, point weights p (sum 1).
+    Called a few thousand times a take, so the 3x3 SVD and determinants go straight to LAPACK and floats."""
     if p is None:
         mp, my = P.mean(axis=0), Y.mean(axis=0)
-        U, _, Vt = np.linalg.svd((Y - my).T @ (P - mp))
+        C = (Y - my).T @ (P - mp)
     else:
         mp, my = p @ P, p @ Y
-        U, _, Vt = np.linalg.svd((Y - my).T @ ((P - mp) * p[:, None]))
-    if np.linalg.det(U) * np.linalg.det(Vt) < 0:
+        C = (Y - my).T @ ((P - mp) * p[:, None])
+    U, _, Vt, info = _GESDD(C)
+    if info != 0:
+        U, _, Vt = np.linalg.svd(C)
+    if _det3(U) * _det3(Vt) < 0:
         U[:, 2] = -U[:, 2]
     R = U @ Vt
     return R, my - R @ mp
@@ -93,8 +107,6 @@ class _CachedBoxQP:
     Eq. 2; Ma et al. 2016, Eq. 3–4)."""
 
     def __init__(self, H: np.ndarray, lo: float = 0.0, hi: float = 1.0, max_iter: int = 200) -> None:
-        import scipy.linalg as la
-        self._la = la
         self.H = np.ascontiguousarray(H)
         self.K = H.shape[0]
         self.lo, self.hi = lo, hi
@@ -116,7 +128,7 @@ class _CachedBoxQP:
             if seen < 2:
                 self._seen[key] = seen
                 return idx, None, Hff
-            hit = (idx, self._la.cho_solve(self._la.cho_factor(Hff), np.eye(idx.size)), None)
+            hit = (idx, la.cho_solve(la.cho_factor(Hff), np.eye(idx.size)), None)
             if len(self._factors) > 4096:
                 self._factors.clear()
                 self._seen.clear()
@@ -124,45 +136,40 @@ class _CachedBoxQP:
         return hit
 
     def solve(self, g: np.ndarray, w0: np.ndarray) -> np.ndarray:
+        """The box QP from ``w0`` (clipped into the box). Each step solves the free block with the bound
+        variables held (r = g_f − H_fb w_b); a blocked step stops at the first bound, else the most violated
+        multiplier (−∂ at the lower bound, +∂ at the upper) frees its variable, until none is violated.
+        The working set is one float array, s = −1 at the lower bound, +1 at the upper, 0 free, so that a
+        step is a dozen numpy calls (each costs microseconds at this size, and a take makes thousands)."""
         H, lo, hi = self.H, self.lo, self.hi
-        w = np.clip(w0, lo, hi)
-        at_lo = w <= lo
-        at_hi = w >= hi
+        w = np.minimum(np.maximum(w0, lo), hi)
+        s = (w >= hi) - (w <= lo).astype(np.float64)
         for _ in range(self.max_iter):
-            free = ~(at_lo | at_hi)
+            free = s == 0.0
             idx, inv, Hff = self._factor(free)
             if idx.size:
-                wb = w.copy()
-                wb[idx] = 0.0
-                r = g[idx] - H[idx] @ wb
+                r = g[idx] - (H @ np.where(free, 0.0, w))[idx]    # the bound variables' pull on the free ones
                 x = inv @ r if inv is not None else self._posv(Hff, r)[1]
-                cur = w[idx]
-                out_lo = x < lo
-                out_hi = x > hi
-                if out_lo.any() or out_hi.any():
+                if np.minimum.reduce(x) < lo or np.maximum.reduce(x) > hi:
                     # blocked: step to the first bound on the way and hold that variable there
+                    cur = w[idx]
+                    out_lo, out_hi = x < lo, x > hi
                     p = x - cur
                     ratio = np.full(idx.size, np.inf)
                     ratio[out_lo] = (lo - cur[out_lo]) / p[out_lo]
                     ratio[out_hi] = (hi - cur[out_hi]) / p[out_hi]
-                    j = int(np.argmin(ratio))
+                    j = int(ratio.argmin())
                     w[idx] = cur + max(ratio[j], 0.0) * p
                     v = idx[j]
-                    if out_lo[j]:
-                        w[v], at_lo[v] = lo, True
-                    else:
-                        w[v], at_hi[v] = hi, True
+                    w[v], s[v] = (lo, -1.0) if out_lo[j] else (hi, 1.0)
                     continue
                 w[idx] = x
-            grad = H @ w - g
-            viol = np.zeros(self.K)
-            viol[at_lo] = -grad[at_lo]
-            viol[at_hi] = grad[at_hi]
-            j = int(np.argmax(viol))
+            viol = (H @ w - g) * s          # the multipliers' violation; 0 for free variables
+            j = int(viol.argmax())
             if viol[j] <= self.tol:
                 break
-            at_lo[j] = at_hi[j] = False
-        np.clip(w, lo, hi, out=w)
+            s[j] = 0.0
+        np.minimum(np.maximum(w, lo, out=w), hi, out=w)
         return w
 
 
@@ -265,6 +272,7 @@ class TakeSolver:
         Dm = np.stack([self.binding @ self.deltas[k] for k in range(K)])  # (K, M, 3)
         self.Dm = Dm.reshape(K, 3 * M)  # w @ Dm -> (3M,)
         self.A = np.ascontiguousarray(self.Dm.T)  # (3M, K)
+        self.At = np.ascontiguousarray(self.Dm)   # (K, 3M) = Aᵀ, row-major for the per-frame Aᵀb
         self.mode, self.lam_sparsity, self.lam_temporal = mode, float(lam_sparsity), float(lam_temporal)
         self.lower, self.upper = 0.0, 1.0
         self._qps: dict[bytes, tuple] = {}
@@ -442,7 +450,7 @@ class TakeSolver:
             y = Y[f]
             valid = np.isfinite(y).all(axis=1)
             if valid.sum() >= 3:
-                yv = y[valid]
+                yv, rest_v = y[valid], rest[valid]
                 if not self.head_motion:  # the head is fixed: one weight QP is the whole solve
                     w = self._qp(valid, (y - rest).reshape(-1), w if w_prev is None else w_prev, w)
                     w_prev = w
@@ -456,9 +464,9 @@ class TakeSolver:
                     if rw:  # trust markers the expression moves little: the rig's misfit grows with motion
                         dv = disp[valid]
                         pw = 1.0 / (rw0 + rw * np.einsum("mc,mc->m", dv, dv))
-                        R, t = _kabsch(rest[valid] + dv, yv, pw / pw.sum())
+                        R, t = _kabsch(rest_v + dv, yv, pw / pw.sum())
                     else:
-                        R, t = _kabsch(rest[valid] + disp[valid], yv)
+                        R, t = _kabsch(rest_v + disp[valid], yv)
                     z = (y - t) @ R  # Rᵀ (y − t): head-stabilised markers
                     w = self._qp(valid, (z - rest).reshape(-1), w if w_prev is None else w_prev, w)
                 w_prev = w
@@ -493,12 +501,14 @@ class TakeSolver:
             rows = np.repeat(valid, 3)
             A = self.A[rows]
             H = A.T @ A + self.lam_sparsity + (self.lam_temporal + 1e-10) * np.eye(self.K)
-            qp = self._qps[key] = (rows, _CachedBoxQP(H, self.lower, self.upper))
-        rows, solver = qp
+            # Aᵀ of the present rows, contiguous (one gemv a call), and None for all rows (no row selection)
+            qp = self._qps[key] = (rows, None if rows.all() else np.ascontiguousarray(A.T),
+                                   _CachedBoxQP(H, self.lower, self.upper))
+        rows, At, solver = qp
         if self.mode != "box":
             return self.weight_solver.solve(np.where(rows, b, np.nan), w_prev=w_prev, w_start=w_start)
-        g = self.A[rows].T @ b[rows] + self.lam_temporal * w_prev if not rows.all() else \
-            self.A.T @ b + self.lam_temporal * w_prev
+        g = self.At @ b if At is None else At @ b[rows]
+        g += self.lam_temporal * w_prev
         return solver.solve(g, w_start)
 
     def _solve_regions(self, z: np.ndarray, w: np.ndarray, prev: np.ndarray | None) -> np.ndarray:
