@@ -251,8 +251,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
     sp.set_defaults(func=cmd_corrective)
 
-    from app import cli_solve
+    from app import cli_pairs, cli_solve
     cli_solve.add_parser(sub, rig_arg)
+    cli_pairs.add_parser(sub, rig_arg)
 
     sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder")
     sp.add_argument("-o", "--output", required=True, help="folder to write")
@@ -283,7 +284,7 @@ def main(argv: list[str] | None = None) -> int:
         return 130
 
 
-_COMMANDS = {"info", "render", "export", "sample", "segment", "solve", "corrective"}
+_COMMANDS = {"info", "render", "export", "sample", "segment", "solve", "corrective", "pairs"}
 
 if __name__ == "__main__":
     sys.exit(main())

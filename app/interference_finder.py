@@ -2,18 +2,15 @@
 how their displacements interfere, list the best (a pair and its mirror image as one row, or the partners of
 one shape), colour the face by where the selected pair interferes, and start a corrective for it.
 
-The scores come from ``solvers.correctives`` (one (K, K) matrix per measure, kept until the shapes change);
-this module only wires them to the panel and the viewport.
+The ranking is ``model.interference`` (one (K, K) score matrix per measure, kept here until the shapes
+change); this module only wires it to the panel and the viewport.
 """
 from __future__ import annotations
 
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from model.sides import is_left, mirror_indices
-from solvers.correctives import (interference_heat, merge_mirrored_pairs, overshoot_heat, rank_interference,
-                                 rank_partners, shape_overlap, shape_overshoot)
-from solvers.laplacian import vertex_areas
+from model.interference import PairRow, hot_area, pair_heat, pair_scores, ranked_pairs, rig_vertex_areas
 from widgets.correctives_panel import INTERFERENCE_TAB, PAIR_HINT, CorrectivesPanel
 from widgets.scene import ColorMap
 
@@ -29,8 +26,7 @@ class InterferenceFinder:
         self._overlap: dict[str, np.ndarray] = {}  # (K, K) scores by measure, until the shapes change
         self._scored_deltas: np.ndarray | None = None   # the rig.deltas array the scores were computed from
         self._areas: np.ndarray | None = None      # the neutral's vertex areas, until the rig changes
-        self.pairs: list[tuple[int, int, float]] = []
-        self.pair_mirrors: list[tuple[int, int, float] | None] = []  # each row's mirror pair, when folded in
+        self.rows: list[PairRow] = []     # the listed rows, best first
         self._pairs_measure = "overshoot"  # the measure self.pairs were ranked by
         self._saved_colormap = _UNSET
         self.heat: np.ndarray | None = None
@@ -44,14 +40,13 @@ class InterferenceFinder:
         self.leave_heat_map()
         self._overlap.clear()
         self._areas = None
-        self.pairs, self.pair_mirrors = [], []
+        self.rows = []
         self.panel.set_pairs([])
 
     def vertex_areas(self) -> np.ndarray:
         """(V,) the neutral's vertex areas in rig units² (``solvers.laplacian.vertex_areas``), once per rig."""
         if self._areas is None:
-            rig = self.document.rig
-            self._areas = vertex_areas(rig.neutral, rig.triangles())
+            self._areas = rig_vertex_areas(self.document.rig)
         return self._areas
 
     def shapes_changed(self) -> None:
@@ -59,6 +54,16 @@ class InterferenceFinder:
         never write into it), the scores are recomputed on the next search."""
         if self.document.rig is None or self.document.rig.deltas is not self._scored_deltas:
             self._overlap.clear()
+
+    @property
+    def pairs(self) -> list[tuple[int, int, float]]:
+        """The listed rows as (i, j, score)."""
+        return [(r.i, r.j, r.score) for r in self.rows]
+
+    @property
+    def pair_mirrors(self) -> list[tuple[int, int, float] | None]:
+        """Each listed row's mirror pair, when it stands for both sides."""
+        return [r.mirror for r in self.rows]
 
     def find_pairs(self) -> list[tuple[int, int, float]]:
         """Rank the pairs by the panel's measure (computed once per measure until the shapes change) and list
@@ -71,69 +76,53 @@ class InterferenceFinder:
         self.shapes_changed()
         if measure not in self._overlap:
             QtWidgets.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
-            try:   # surface-weighted: a densely modelled eyelid does not outweigh the forehead
-                areas = self.vertex_areas()
-                self._overlap[measure] = shape_overshoot(rig.deltas, areas=areas) if measure == "overshoot" else \
-                    shape_overlap(rig.deltas, directional=measure == "directional", areas=areas)
+            try:
+                self._overlap[measure] = pair_scores(rig, measure, self.vertex_areas())
                 self._scored_deltas = rig.deltas
             finally:
                 QtWidgets.QApplication.restoreOverrideCursor()
         self._pairs_measure = measure
-        O, top = self._overlap[measure], self.panel.top.value()
-        shape = self.panel.partner_of.currentData()
         names = rig.shape_names
-        self.pair_mirrors = []
-        if shape in names:   # the partners of one shape, as (shape, partner, score)
-            k = names.index(shape)
-            self.pairs = [(k, j, s) for j, s in rank_partners(O, k, top)]
-        elif self.panel.merge_mirrored.isChecked():
-            every = rank_interference(None, top=len(names) ** 2, overlap=O)
-            rows = merge_mirrored_pairs(every, mirror_indices(names), [is_left(n) for n in names])[:top]
-            self.pairs = [(i, j, s if m is None else max(s, m[2])) for i, j, s, m in rows]   # a row's score
-            self.pair_mirrors = [m for *_, m in rows]
-        else:
-            self.pairs = rank_interference(None, top=top, overlap=O)
-        mirrors = self.pair_mirrors or [None] * len(self.pairs)
-        self.panel.set_pairs([(names[i], names[j], s, "" if m is None else f"{names[m[0]]} × {names[m[1]]}")
-                              for (i, j, s), m in zip(self.pairs, mirrors)])
+        self.rows = ranked_pairs(self._overlap[measure], names, self.panel.top.value(),
+                                 merge_mirrored=self.panel.merge_mirrored.isChecked(),
+                                 partner_of=self.panel.partner_of.currentData())
+        self.panel.set_pairs([(names[r.i], names[r.j], r.score,
+                               "" if r.mirror is None else f"{names[r.mirror[0]]} × {names[r.mirror[1]]}")
+                              for r in self.rows])
         self.leave_heat_map()
         return self.pairs
 
     @property
     def measure(self) -> str:
-        """The finder's measure: "overshoot" (default), "plain" or "directional" overlap."""
+        """The finder's measure, one of ``model.interference.MEASURES``: "overshoot" (default), "overlap", "directional"."""
         return self.panel.measure.currentData()
 
     def show_pair(self, row: int) -> None:
         """Colour the face by where the selected pair interferes (a colour bar in rig units): the overshoot of
         their sum for the overshoot measure, else min(‖d_i‖, ‖d_j‖)."""
-        if row < 0 or row >= len(self.pairs):
+        if row < 0 or row >= len(self.rows):
             self.leave_heat_map()
             return
         rig = self.document.rig
-        i, j, score = self.pairs[row]
-        mirror = self.pair_mirrors[row] if row < len(self.pair_mirrors) else None
+        pair = self.rows[row]
         overshoot = self._pairs_measure == "overshoot"
-        heat_of = overshoot_heat if overshoot else interference_heat
-        self.heat = heat_of(rig.deltas[i], rig.deltas[j])
-        if mirror is not None:   # both sides of a mirrored couple
-            self.heat = np.maximum(self.heat, heat_of(rig.deltas[mirror[0]], rig.deltas[mirror[1]]))
+        self.heat = pair_heat(rig, pair, self._pairs_measure)
         if self._saved_colormap is _UNSET:
             self._saved_colormap = self.viewport.colormap
         top = float(self.heat.max())
         title = f"overshoot ({rig.units})" if overshoot else f"interference ({rig.units})"
         self._heat_colormap = ColorMap(self.heat, title=title, cmap="YlOrRd", clim=(0.0, top if top > 0 else 1.0))
         self.viewport.set_colormap(self._heat_colormap)
-        hot = self.heat > 0.1 * top if top > 0 else np.zeros(self.heat.shape, dtype=bool)
-        n, area = int(hot.sum()), float(self.vertex_areas()[hot].sum())
+        n, area = hot_area(self.heat, self.vertex_areas())
         what = "‖d_i + d_j‖ − max(‖d_i‖, ‖d_j‖)" if overshoot else "min(‖d_i‖, ‖d_j‖)"
         names = rig.shape_names
+        i, j, mirror = pair.i, pair.j, pair.mirror
         if mirror is not None:
             own = float(self._overlap[self._pairs_measure][i, j])
             score_text = (f"{names[i]} × {names[j]} and {names[mirror[0]]} × {names[mirror[1]]}: scores "
                           f"{own:.3f} and {mirror[2]:.3f}")
         else:
-            score_text = f"{names[i]} × {names[j]}: score {score:.3f}"
+            score_text = f"{names[i]} × {names[j]}: score {pair.score:.3f}"
         self.panel.pair_info.setText(f"{score_text}; "
                                      f"{what} up to {top:.3g} {rig.units}, above 10% on {n:,} vertices "
                                      f"({area:.3g} {rig.units}²).")
@@ -160,9 +149,9 @@ class InterferenceFinder:
 
     def create_for_pair(self) -> None:
         row = self.panel.selected_pair_row()
-        if row < 0 or row >= len(self.pairs):
+        if row < 0 or row >= len(self.rows):
             return
-        i, j, _ = self.pairs[row]
+        i, j = self.rows[row].i, self.rows[row].j
         names = self.document.rig.shape_names
         self.leave_heat_map()
         self._start_authoring([names[i], names[j]], self.panel.current_rule())

@@ -193,7 +193,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
         page = QtWidgets.QWidget()
         lay = QtWidgets.QVBoxLayout(page)
         row = QtWidgets.QHBoxLayout()
-        self.measure = _combo([("overshoot", "Overshoot where both act"), ("plain", "Overlap"),
+        self.measure = _combo([("overshoot", "Overshoot where both act"), ("overlap", "Overlap"),
                                ("directional", "Overlap, same direction")],
                               "Overshoot: how much the pair's sum exceeds the larger displacement where both "
                               "shapes act (1 = the motion doubles, below 0 = they cancel), shrunk for small "
