@@ -1,6 +1,7 @@
 """Corrective shapes in the GUI (ALGORITHMS.md §6; Smith 2006 §4.5, §5.6–5.8): the Correctives panel,
-sculpt strokes on the viewport, saving a sculpt as a corrective, correctives from scans, mirroring; the
-interference finder with its heat map is ``app.interference_finder``, owned by the controller.
+sculpt mode, saving a sculpt as a corrective, correctives from scans, mirroring. The controller owns the
+brush strokes on the viewport (``app.sculpt_tool``) and the interference finder with its heat map
+(``app.interference_finder``).
 
 ``install(window)`` adds the dock, the menu and this controller to a MainWindow. Every edit is an undo
 command on ``window.document.undo_stack``: a sculpt stroke is one ``SetEditOffsetCommand``; saving,
@@ -17,17 +18,14 @@ from PySide6 import QtCore, QtWidgets
 from app.commands import SetEditOffsetCommand, SetWeightsCommand
 from app.corrective_commands import SetCorrectivesCommand
 from app.interference_finder import InterferenceFinder
+from app.sculpt_tool import SculptTool
 from model.correctives import (Corrective, activation_for, authoring_surface, corrective_activation,
                                corrective_activations, driver_pose, find_corrective, mirrored_corrective,
                                symmetrized_corrective, validate_correctives)
 from model.errors import RigInputError
 from model.sides import mirror_drivers
-from solvers import sculpt
 from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
 from widgets.correctives_panel import CORRECTIVES_TAB, INTERFERENCE_TAB, CorrectivesPanel
-
-_OBSERVER_PRIORITY = 10.0   # above the interactor style (0): a stroke on the face does not turn the camera
-_DAB = 0.1                  # inflate/deflate per dab: this fraction of the radius times the strength
 
 
 def pose_surface64(rig, weights, skip_drivers=None) -> np.ndarray:
@@ -55,11 +53,7 @@ class CorrectiveController(QtCore.QObject):
         self.document, self.viewport = window.document, window.viewport
         self.authoring: list[str] | None = None   # drivers being sculpted (sculpt mode on when not None)
         self.new_rule = "product"
-        self.mesh: sculpt.SculptMesh | None = None
-        self._tags: dict[str, int] = {}
-        self._stroke: dict | None = None
-        self._cursor = None
-        self._cursor_unit = None
+        self.sculpt = SculptTool(window.viewport, window.document, panel, lambda: self.authoring is not None)
         self.finder = InterferenceFinder(window, panel, self.start_authoring)
         d = self.document
         d.rig_changed.connect(self._on_rig_change)
@@ -81,7 +75,7 @@ class CorrectiveController(QtCore.QObject):
         p.mute_requested.connect(self.set_muted)
         p.rule_requested.connect(self.set_rule)
         p.tab_changed.connect(self.finder.on_tab_change)
-        p.brush_changed.connect(self._update_cursor_radius)
+        p.brush_changed.connect(self.sculpt.update_cursor_radius)
         seg = getattr(window, "segmentation", None)
         if seg is not None and hasattr(seg, "segmentation_ready"):
             # the segmentation view repaints the surface when it finishes: keep the heat map on top
@@ -95,7 +89,7 @@ class CorrectiveController(QtCore.QObject):
     def _on_rig_change(self) -> None:
         self.stop_sculpting()
         self.finder.reset()
-        self.mesh = None
+        self.sculpt.reset()
         rig = self.document.rig
         self.panel.set_shapes(rig.shape_names)
         lo, hi = rig.neutral.min(axis=0), rig.neutral.max(axis=0)
@@ -200,7 +194,7 @@ class CorrectiveController(QtCore.QObject):
         self.window.set_pose(driver_pose(rig, drivers), f"Pose {'+'.join(drivers)} for a corrective")
         self.authoring = drivers
         self.panel.set_ticked(drivers)
-        self._enable_sculpt()
+        self.sculpt.enable()
         if self.dock is not None:
             self.dock.show()
             self.dock.raise_()
@@ -220,7 +214,7 @@ class CorrectiveController(QtCore.QObject):
     def stop_sculpting(self) -> None:
         was = self.authoring is not None
         self.authoring = None
-        self._disable_sculpt()
+        self.sculpt.disable()
         self.panel.set_sculpting(None, self.document.edit_offset is not None)
         if was:
             self.sculpting_changed.emit(False)
@@ -492,164 +486,6 @@ class CorrectiveController(QtCore.QObject):
         new = [x for x in self.document.rig.correctives if x is not c]
         return self._push_correctives(new, f"Delete corrective {c.name}")
 
-    # --- sculpt mode: VTK observers on the viewport ------------------------------------------------
-    def _vtk_interactor(self):
-        return self.viewport.plotter.iren.interactor
-
-    def _enable_sculpt(self) -> None:
-        rig = self.document.rig
-        if self.mesh is None:
-            self.mesh = sculpt.SculptMesh.build(rig.neutral, rig.triangles(), symmetric=True)
-        if self._tags:
-            return
-        iren = self._vtk_interactor()
-        for event, fn in (("LeftButtonPressEvent", self._on_press), ("MouseMoveEvent", self._on_move),
-                          ("LeftButtonReleaseEvent", self._on_release)):
-            self._tags[event] = iren.AddObserver(event, fn, _OBSERVER_PRIORITY)
-        self._set_brush_actions(True)
-
-    def _disable_sculpt(self) -> None:
-        if self._stroke is not None:
-            self.end_stroke()
-        iren = self._vtk_interactor() if hasattr(self.viewport, "plotter") else None
-        for tag in self._tags.values():
-            if iren is not None:
-                iren.RemoveObserver(tag)
-        self._tags.clear()
-        self._hide_cursor()
-        self._set_brush_actions(False)
-
-    def _set_brush_actions(self, on: bool) -> None:
-        for act in getattr(self, "brush_actions", []):
-            act.setEnabled(on)
-
-    def _abort(self, obj, event: str) -> None:
-        cmd = obj.GetCommand(self._tags[event]) if event in self._tags else None
-        if cmd is not None:
-            cmd.SetAbortFlag(1)
-
-    def _on_press(self, obj, event) -> None:
-        x, y = obj.GetEventPosition()
-        if self.begin_stroke(x, y):
-            self._abort(obj, event)
-
-    def _on_move(self, obj, event) -> None:
-        x, y = obj.GetEventPosition()
-        if self._stroke is not None:
-            self.move_stroke(x, y)
-            self._abort(obj, event)
-        else:
-            hit = self.viewport.pick(x, y)
-            self._show_cursor(None if hit is None else hit[1])
-
-    def _on_release(self, obj, event) -> None:
-        if self._stroke is not None:
-            self.end_stroke()
-            self._abort(obj, event)
-
-    # --- strokes (display pixels from the bottom-left, like VTK) -----------------------------------
-    def _to_display(self, p) -> np.ndarray:
-        r = self.viewport.plotter.renderer
-        r.SetWorldPoint(float(p[0]), float(p[1]), float(p[2]), 1.0)
-        r.WorldToDisplay()
-        return np.array(r.GetDisplayPoint())
-
-    def _to_world(self, x: float, y: float, z: float) -> np.ndarray:
-        r = self.viewport.plotter.renderer
-        r.SetDisplayPoint(float(x), float(y), float(z))
-        r.DisplayToWorld()
-        wp = np.array(r.GetWorldPoint())
-        return wp[:3] / wp[3]
-
-    def begin_stroke(self, x: float, y: float) -> bool:
-        """Start a stroke at display pixel (x, y) if it is on the face; False otherwise (the view turns)."""
-        if self.authoring is None or self.document.project is None:
-            return False
-        hit = self.viewport.pick(int(x), int(y))
-        if hit is None:
-            return False
-        doc = self.document
-        s = self.panel.brush_settings()
-        base = doc.surface().astype(np.float64)
-        old = None if doc.edit_offset is None else doc.edit_offset.copy()
-        self._stroke = {"settings": s, "old": old, "base": base, "center": np.asarray(hit[1], dtype=np.float64),
-                        "depth": self._to_display(hit[1])[2], "changed": False}
-        if s["brush"] != "grab":
-            self._dab(hit[1])
-        self._show_cursor(hit[1])
-        return True
-
-    def move_stroke(self, x: float, y: float) -> None:
-        st = self._stroke
-        if st is None:
-            return
-        s = st["settings"]
-        if s["brush"] == "grab":
-            drag = self._to_world(x, y, st["depth"]) - self._to_world(*self._to_display(st["center"])[:2], st["depth"])
-            new = sculpt.grab(st["base"], st["center"], drag, s["radius"], s["falloff"], s["strength"],
-                              mesh=self.mesh, symmetric=s["symmetric"], reference=st["base"])
-            base_offset = np.zeros_like(st["base"]) if st["old"] is None else st["old"]
-            self.document.set_edit_offset(base_offset + (new - st["base"]))
-            st["changed"] = True
-            self._show_cursor(st["center"] + drag)
-        else:
-            hit = self.viewport.pick(int(x), int(y))
-            if hit is not None:
-                self._dab(hit[1])
-                self._show_cursor(hit[1])
-
-    def _dab(self, center) -> None:
-        st, doc = self._stroke, self.document
-        s = st["settings"]
-        cur = doc.surface().astype(np.float64)
-        if s["brush"] == "smooth":
-            new = sculpt.smooth(cur, center, s["radius"], self.mesh, s["falloff"], 0.5 * s["strength"],
-                                symmetric=s["symmetric"])
-        else:
-            amount = _DAB * s["radius"] * s["strength"] * (1.0 if s["brush"] == "inflate" else -1.0)
-            new = sculpt.inflate(cur, center, s["radius"], self.mesh, amount, s["falloff"], symmetric=s["symmetric"])
-        offset = np.zeros_like(cur) if doc.edit_offset is None else doc.edit_offset.copy()
-        doc.set_edit_offset(offset + (new - cur))
-        st["changed"] = True
-
-    def end_stroke(self) -> None:
-        """One stroke is one undo step (SetEditOffsetCommand from the offset before to the one after)."""
-        st, self._stroke = self._stroke, None
-        if st is None or not st["changed"]:
-            return
-        doc = self.document
-        new = doc.edit_offset
-        doc.undo_stack.push(SetEditOffsetCommand(doc, st["old"], new, f"Sculpt ({st['settings']['brush']})"))
-
-    # --- brush cursor ------------------------------------------------------------------------------
-    def _show_cursor(self, center) -> None:
-        plotter = self.viewport.plotter
-        if center is None or self.authoring is None:
-            self._hide_cursor()
-            return
-        import pyvista as pv
-        r = self.panel.radius.value()
-        if self._cursor is None:
-            sphere = pv.Sphere(radius=1.0, theta_resolution=16, phi_resolution=9)
-            self._cursor_unit = np.asarray(sphere.points, dtype=np.float64)
-            self._cursor = (sphere, plotter.add_mesh(sphere, name="brush_cursor", style="wireframe",
-                                                     color=(1.0, 0.75, 0.3), opacity=0.3, line_width=1,
-                                                     pickable=False, reset_camera=False, lighting=False))
-        sphere, actor = self._cursor
-        sphere.points = (self._cursor_unit * r + np.asarray(center, dtype=np.float64)).astype(np.float32)
-        actor.SetVisibility(True)
-        self.viewport.render()
-
-    def _update_cursor_radius(self) -> None:
-        if self._cursor is not None and self._cursor[1].GetVisibility():
-            pts = np.asarray(self._cursor[0].points, dtype=np.float64)
-            self._show_cursor(pts.mean(axis=0))
-
-    def _hide_cursor(self) -> None:
-        if self._cursor is not None and self._cursor[1].GetVisibility():
-            self._cursor[1].SetVisibility(False)
-            self.viewport.render()
-
     # --- brush shortcuts ---------------------------------------------------------------------------
     def set_brush(self, brush: str) -> None:
         self.panel.brush.setCurrentIndex(max(0, self.panel.brush.findData(brush)))
@@ -707,7 +543,7 @@ def install(window) -> CorrectiveController:
     act(menu, "&Find Interfering Pairs", lambda _=False: _find(), "Ctrl+Shift+F", "Rank shape pairs by the overlap of their displacements")
     menu.addSeparator()
     brushes = menu.addMenu("&Brush")
-    ctrl.brush_actions = [
+    ctrl.sculpt.brush_actions = [
         act(brushes, "&Grab", lambda _=False: ctrl.set_brush("grab"), "G", "Grab brush: drag the surface"),
         act(brushes, "&Smooth", lambda _=False: ctrl.set_brush("smooth"), "Shift+S", "Smooth brush: relax the surface"),
         act(brushes, "&Inflate", lambda _=False: ctrl.set_brush("inflate"), "I", "Inflate brush: push along the normals"),
@@ -716,7 +552,7 @@ def install(window) -> CorrectiveController:
         act(brushes, "S&maller Brush", lambda _=False: ctrl.scale_radius(1 / 1.25), "[", "Shrink the brush radius"),
         act(brushes, "&Larger Brush", lambda _=False: ctrl.scale_radius(1.25), "]", "Grow the brush radius"),
     ]
-    ctrl._set_brush_actions(False)
+    ctrl.sculpt.set_brush_actions(False)
     return ctrl
 
 

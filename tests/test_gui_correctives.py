@@ -153,7 +153,7 @@ def test_smooth_and_inflate_strokes_are_one_step_each(qtbot, win):
     mouse(widget, "release", corner + QtCore.QPointF(30, 30))
     assert doc.undo_stack.count() == n0 + 2 and doc.undo_stack.index() == n0 + 1   # no new step
     ctrl.stop_sculpting()
-    assert not ctrl._tags  # the observers are gone outside sculpt mode
+    assert not ctrl.sculpt._tags  # the observers are gone outside sculpt mode
 
 
 def test_corrective_from_scan_reproduces_the_scan(qtbot, win, tmp_path):
