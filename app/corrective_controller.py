@@ -92,6 +92,7 @@ class CorrectiveController(QtCore.QObject):
         self.sculpt.reset()
         rig = self.document.rig
         self.panel.set_shapes(rig.shape_names)
+        self.panel.set_units(rig.units)
         lo, hi = rig.neutral.min(axis=0), rig.neutral.max(axis=0)
         self.panel.radius.setValue(float(f"{0.08 * np.linalg.norm(hi - lo):.2g}"))
         self._refresh_table()

@@ -588,6 +588,7 @@ class MocapController(QtCore.QObject):
 
     # --- rig changes ------------------------------------------------------------------------------
     def _on_rig_change(self) -> None:
+        self.panel.set_units(self.document.rig.units)
         self.pause()
         self._drop_solution()
         if isinstance(self.take, WeightTake) and self.take_path is not None:

@@ -93,6 +93,7 @@ class SegmentationController(QtCore.QObject):
         self.maps = None
         self.highlight = None
         self.panel.set_shapes(self.document.rig.shape_names)
+        self.panel.set_units(self.document.rig.units)
         self.panel.set_settings(self.settings())
         self.recompute(self.settings())
 

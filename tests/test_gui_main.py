@@ -83,6 +83,20 @@ def test_save_and_reopen_project(qtbot, tmp_path):
     assert str(path) in [a.text() for a in w.recent_menu.actions()][0]
 
 
+def test_lengths_show_the_rigs_units(qtbot, tmp_path):
+    """Brush radius, nudge step and RBF kernel length are in rig units: each box says which."""
+    w = make_window(qtbot, tmp_path)
+    boxes = [w.correctives_panel.radius, w.segmentation_panel.nudge_amount, w.mocap_panel.rbf_scale]
+    assert w.document.rig.units == "cm" and [b.suffix() for b in boxes] == [" cm"] * 3
+    rig = w.document.rig.copy()
+    rig.units = "mm"
+    from model.project import Project, save_project
+    save_project(Project(rig=rig), tmp_path / "mm.bsproj")
+    open_and_wait(qtbot, w, tmp_path / "mm.bsproj")
+    assert w.document.rig.units == "mm" and [b.suffix() for b in boxes] == [" mm"] * 3
+    assert "mm" in w.correctives_panel.radius.text()
+
+
 def test_bad_folder_keeps_the_open_rig(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path)
     w.apply_preset("happy")

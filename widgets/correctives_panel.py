@@ -247,6 +247,10 @@ class CorrectivesPanel(QtWidgets.QWidget):
         return page
 
     # --- state shown -------------------------------------------------------------------------------
+    def set_units(self, units: str) -> None:
+        """Lengths (the brush radius) are in the rig's units: show them."""
+        self.radius.setSuffix(f" {units}")
+
     def set_shapes(self, names: list[str]) -> None:
         chosen = self.partner_of.currentData()
         self.partner_of.clear()

@@ -159,6 +159,10 @@ class MocapPanel(QtWidgets.QWidget):
                 "rbf_scale": self.rbf_scale.value(), "rbf_lambda": self.rbf_lambda.value(),
                 "calibration_frames": self.calibration_spin.value()}
 
+    def set_units(self, units: str) -> None:
+        """Lengths (the RBF kernel length) are in the rig's units: show them."""
+        self.rbf_scale.setSuffix(f" {units}")
+
     def set_marker_mode(self, markers: bool, solved: bool = False) -> None:
         """Enable what makes sense: map and solve for a marker take, exports once something is playable."""
         for w in (self.load_map_button, self.auto_map_button, self.solve_button):

@@ -136,6 +136,10 @@ class SegmentationPanel(QtWidgets.QWidget):
         lay.addWidget(nudge)
 
     # --- state in ----------------------------------------------------------------------------------
+    def set_units(self, units: str) -> None:
+        """Lengths (the nudge step) are in the rig's units: show them."""
+        self.nudge_amount.setSuffix(f" {units}")
+
     def set_shapes(self, names: list[str]) -> None:
         self.shape.blockSignals(True)
         self.shape.clear()
