@@ -198,7 +198,9 @@ class CorrectivesPanel(QtWidgets.QWidget):
                               "Overshoot: how much the pair's sum exceeds the larger displacement where both "
                               "shapes act (1 = the motion doubles, below 0 = they cancel), shrunk for small "
                               "shared areas.\nOverlap: Σ min(‖d_i‖, ‖d_j‖) / min(Σ‖d_i‖, Σ‖d_j‖). Same "
-                              "direction also weights each vertex by max(0, cos θ), so opposing shapes drop out")
+                              "direction also weights each vertex by max(0, cos θ), so opposing shapes drop out."
+                              "\nEvery sum is over the surface (each vertex weighted by its area), so densely "
+                              "modelled parts do not count for more")
         self.top = QtWidgets.QSpinBox()
         self.top.setRange(1, 500)
         self.top.setValue(20)
