@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import json
 
-from model.interference import MEASURES, hot_area, pair_heat, pair_scores, ranked_pairs, rig_vertex_areas
+from model.interference import (MEASURES, hot_area, pair_heat, pair_scores, ranked_pairs, rig_vertex_areas,
+                                row_correctives)
 
 
 def add_parser(sub, rig_arg) -> None:
@@ -46,7 +47,8 @@ def cmd_pairs(args) -> int:
         n, area = hot_area(heat, areas)
         out.append({"rank": rank, "shapes": [names[row.i], names[row.j]], "score": round(row.score, 6),
                     "mirror": None if row.mirror is None else [names[row.mirror[0]], names[row.mirror[1]]],
-                    "peak": round(float(heat.max()), 6), "vertices": n, "area": round(area, 6)})
+                    "peak": round(float(heat.max()), 6), "vertices": n, "area": round(area, 6),
+                    "correctives": row_correctives(rig, row)})
     if args.json:
         print(json.dumps({"measure": args.measure, "units": rig.units, "pairs": out}, indent=2))
         return 0
@@ -55,6 +57,7 @@ def cmd_pairs(args) -> int:
     width = max((len(" × ".join(r["shapes"])) for r in out), default=0)
     for r in out:
         side = "" if r["mirror"] is None else f"  and {' × '.join(r['mirror'])}"
+        done = f"  (corrective: {', '.join(r['correctives'])})" if r["correctives"] else ""
         print(f"{r['rank']:4d}  {r['score']:6.3f}  {' × '.join(r['shapes']):<{width}}  peak {r['peak']:.3g}  "
-              f"area {r['area']:.3g} {rig.units}²{side}")
+              f"area {r['area']:.3g} {rig.units}²{side}{done}")
     return 0

@@ -10,7 +10,8 @@ from __future__ import annotations
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from model.interference import PairRow, hot_area, pair_heat, pair_scores, ranked_pairs, rig_vertex_areas
+from model.interference import (PairRow, corrective_status, hot_area, pair_heat, pair_scores, ranked_pairs,
+                                rig_vertex_areas)
 from widgets.correctives_panel import INTERFERENCE_TAB, PAIR_HINT, CorrectivesPanel
 from widgets.scene import ColorMap
 
@@ -54,6 +55,8 @@ class InterferenceFinder:
         never write into it), the scores are recomputed on the next search."""
         if self.document.rig is None or self.document.rig.deltas is not self._scored_deltas:
             self._overlap.clear()
+        elif self.rows:       # a corrective saved, mirrored or deleted: the listed rows say so
+            self.panel.set_pair_correctives([corrective_status(self.document.rig, r) for r in self.rows])
 
     @property
     def pairs(self) -> list[tuple[int, int, float]]:
@@ -87,8 +90,8 @@ class InterferenceFinder:
                                  merge_mirrored=self.panel.merge_mirrored.isChecked(),
                                  partner_of=self.panel.partner_of.currentData())
         self.panel.set_pairs([(names[r.i], names[r.j], r.score,
-                               "" if r.mirror is None else f"{names[r.mirror[0]]} × {names[r.mirror[1]]}")
-                              for r in self.rows])
+                               "" if r.mirror is None else f"{names[r.mirror[0]]} × {names[r.mirror[1]]}",
+                               corrective_status(rig, r)) for r in self.rows])
         self.leave_heat_map()
         return self.pairs
 

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from model.correctives import find_corrective
 from model.errors import RigInputError
 from model.sides import is_left, mirror_indices
 from solvers.correctives import (interference_heat, merge_mirrored_pairs, overshoot_heat, rank_interference,
@@ -64,6 +65,19 @@ def ranked_pairs(scores: np.ndarray, shape_names: list[str], top: int = 20, *, m
     every = rank_interference(None, top=len(names) ** 2, overlap=scores)
     rows = merge_mirrored_pairs(every, mirror_indices(names), [is_left(n) for n in names])[:top]
     return [PairRow(i, j, s if m is None else max(s, m[2]), m) for i, j, s, m in rows]
+
+
+def row_correctives(rig, row: PairRow) -> list[str]:
+    """The names of the rig's correctives on the row's pair and on its mirror pair (those that exist)."""
+    names = rig.shape_names
+    found = (find_corrective(rig.correctives, [names[i], names[j]]) for i, j in row.shapes())
+    return [c.name for c in found if c is not None]
+
+
+def corrective_status(rig, row: PairRow) -> str:
+    """What the finder shows of a row's correctives: "" none, "✓" every side has one, "1/2" one side of two."""
+    have, sides = len(row_correctives(rig, row)), len(row.shapes())
+    return "" if have == 0 else "✓" if have == sides else f"{have}/{sides}"
 
 
 def pair_heat(rig, row: PairRow, measure: str = "overshoot") -> np.ndarray:

@@ -61,3 +61,17 @@ def test_ranked_rows_of_the_model():
     assert ranked_pairs(scores, names, 10) == [PairRow(0, 1, 0.9), PairRow(2, 3, 0.8),
                                                PairRow(0, 3, 0.2, (1, 2, 0.2)), PairRow(0, 2, 0.1, (1, 3, 0.1))]
     assert ranked_pairs(scores, names, 2, partner_of="b_R") == [PairRow(3, 2, 0.8), PairRow(3, 0, 0.2)]
+
+
+def test_pairs_name_the_correctives_a_project_has(tmp_path):
+    sample = tmp_path / "rig"
+    run_cli("sample", "-o", sample)
+    run_cli("export", sample, "--weights", "browInnerUp_L=1,browInnerUp_R=1", "-o", tmp_path / "scan.obj")
+    project = tmp_path / "fixed.bsproj"
+    run_cli("corrective", sample, "--drivers", "browInnerUp_L,browInnerUp_R", "--target", tmp_path / "scan.obj",
+            "-o", project)
+    rows = json.loads(run_cli("pairs", project, "--partners-of", "browInnerUp_L", "--json").stdout)["pairs"]
+    by_partner = {r["shapes"][1]: r["correctives"] for r in rows}
+    assert by_partner["browInnerUp_R"] == ["browInnerUp_L+browInnerUp_R"] and by_partner["browOuterUp_L"] == []
+    text = run_cli("pairs", project, "--partners-of", "browInnerUp_L").stdout
+    assert "(corrective: browInnerUp_L+browInnerUp_R)" in text

@@ -501,3 +501,32 @@ def test_symmetrize_a_two_sided_corrective(qtbot, win):
     assert ctrl.save()
     assert not ctrl.symmetrize("browInnerUp_L+browOuterUp_L")
     assert w.last_error.startswith("browInnerUp_L+browOuterUp_L acts on one side: Mirror makes its other side")
+
+
+def test_finder_marks_the_pairs_that_have_a_corrective(qtbot, win):
+    """A rigger works down the list: the Corrective column says which rows are done, one side or both."""
+    w, ctrl = win
+    doc, names = w.document, w.document.rig.shape_names
+    ctrl.panel.tabs.setCurrentIndex(1)
+    ctrl.panel.top.setValue(200)
+    rows = ctrl.finder.find_pairs()
+    column = lambda r: ctrl.panel.pairs.topLevelItem(r).text(5)   # noqa: E731
+    assert ctrl.panel.pairs.headerItem().text(5) == "Fixed"
+    assert all(column(r) == "" for r in range(len(rows)))
+    row = next(r for r, m in enumerate(ctrl.finder.pair_mirrors) if m is not None)
+    i, j, _ = rows[row]
+    drivers = [names[i], names[j]]
+    assert ctrl.start_authoring(drivers)
+    doc.set_edit_offset(np.full((doc.rig.n_vertices, 3), 0.01))
+    rows = list(w.shapes_panel.rows)
+    assert ctrl.save()
+    assert w.shapes_panel.rows == rows                   # a corrective edit does not rebuild the sliders
+    assert column(row) == "1/2"                       # one side of a mirrored row
+    assert ctrl.mirror("+".join(drivers))
+    assert column(row) == "✓"
+    doc.undo_stack.undo()
+    assert column(row) == "1/2"
+    ctrl.panel.select_pair(row)                          # the column does not disturb the selection
+    assert ctrl.panel.selected_pair_row() == row and w.viewport.colormap is not None
+    doc.undo_stack.undo()
+    assert column(row) == ""

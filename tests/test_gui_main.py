@@ -77,8 +77,11 @@ def test_save_and_reopen_project(qtbot, tmp_path):
     assert w.save_to(path)
     assert not w.isWindowModified() and path.exists()
     w.reset_pose()
+    rows = list(w.shapes_panel.rows)
     open_and_wait(qtbot, w, path)
     np.testing.assert_array_equal(w.document.weights, pose)
+    assert w.shapes_panel.rows == rows      # the same shapes keep their rows, which show the project's pose
+    np.testing.assert_allclose([r.box.value() for r in w.shapes_panel.rows], pose, atol=5e-4)
     assert w.document.path == path and w.document.rig.n_shapes >= 24
     assert str(path) in [a.text() for a in w.recent_menu.actions()][0]
 

@@ -229,7 +229,8 @@ class CorrectivesPanel(QtWidgets.QWidget):
             lambda _=False: self.find_requested.emit() if self.pairs.topLevelItemCount() else None)
         lay.addWidget(self.merge_mirrored)
         self.pairs = QtWidgets.QTreeWidget()
-        self.pairs.setHeaderLabels(["#", "Score", "Shape", "Shape", "Sides"])
+        self.pairs.setHeaderLabels(["#", "Score", "Shape", "Shape", "Sides", "Fixed"])
+        self.pairs.headerItem().setToolTip(5, "Whether the pair already has a corrective (✓), or one side of two")
         self.pairs.setRootIsDecorated(False)
         self.pairs.setAlternatingRowColors(True)
         self.pairs.setToolTip("Shape pairs that interfere most, best first; select one to see where (the "
@@ -390,19 +391,30 @@ class CorrectivesPanel(QtWidgets.QWidget):
 
     # --- interference ------------------------------------------------------------------------------
     def set_pairs(self, rows) -> None:
-        """Rows (shape, shape, score) or (shape, shape, score, the mirror pair as text, or "" if none)."""
+        """Rows (shape, shape, score[, the mirror pair as text or "", the corrective status as text or ""])."""
         self.pairs.clear()
-        for i, (a, b, s, *mirror) in enumerate(rows):
-            twin = mirror[0] if mirror else ""
+        for i, (a, b, s, *rest) in enumerate(rows):
+            twin = rest[0] if rest else ""
             item = QtWidgets.QTreeWidgetItem([str(i + 1), f"{s:.3f}", a, b, "both" if twin else ""])
             item.setTextAlignment(1, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)   # the score before the names
             if twin:
                 for c in range(5):
                     item.setToolTip(c, f"{a} × {b}, and its mirror image {twin}")
             self.pairs.addTopLevelItem(item)
-        for c in range(5):
+        self.set_pair_correctives([r[4] if len(r) > 4 else "" for r in rows])
+        for c in range(self.pairs.columnCount()):
             self.pairs.resizeColumnToContents(c)
         self.create_pair_button.setEnabled(False)
+
+    def set_pair_correctives(self, status: list[str]) -> None:
+        """The Fixed column: "✓" when the row's pair (and its mirror) has a corrective, "1/2" for one side."""
+        for i, text in enumerate(status):
+            item = self.pairs.topLevelItem(i)
+            if item is not None:
+                item.setText(5, text)
+                item.setToolTip(5, "" if not text else "This pair has a corrective" if text == "✓" else
+                                f"{text.replace('/', ' of ')} sides of this row have a corrective: Mirror makes "
+                                "the other")
 
     def selected_pair_row(self) -> int:
         items = self.pairs.selectedItems()

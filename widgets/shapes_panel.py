@@ -151,6 +151,11 @@ class ShapesPanel(QtWidgets.QWidget):
         self._weights = np.zeros(0)
 
     def set_shapes(self, names: list[str], presets: list[str] | None = None) -> None:
+        """One row per shape. The same names and presets keep the rows (a corrective edit also says the
+        shapes changed: rebuilding 57 rows then was wasted work and made the panel flicker)."""
+        current = [self.presets.itemText(i) for i in range(self.presets.count())]
+        if [r.name for r in self.rows] == list(names) and current == list(presets or []):
+            return
         for r in self.rows:
             r.setParent(None)
             r.deleteLater()
