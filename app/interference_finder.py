@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
+from model.correctives import find_corrective
 from model.interference import (PairRow, corrective_status, hot_area, pair_heat, pair_scores, ranked_pairs,
                                 rig_vertex_areas)
 from widgets.correctives_panel import INTERFERENCE_TAB, PAIR_HINT, CorrectivesPanel
@@ -56,7 +57,12 @@ class InterferenceFinder:
         if self.document.rig is None or self.document.rig.deltas is not self._scored_deltas:
             self._overlap.clear()
         elif self.rows:       # a corrective saved, mirrored or deleted: the listed rows say so
-            self.panel.set_pair_correctives([corrective_status(self.document.rig, r) for r in self.rows])
+            rig = self.document.rig
+            self.panel.set_pair_correctives([corrective_status(rig, r) for r in self.rows])
+            row = self.panel.selected_pair_row()
+            if 0 <= row < len(self.rows):
+                pair = [rig.shape_names[self.rows[row].i], rig.shape_names[self.rows[row].j]]
+                self.panel.set_pair_action(find_corrective(rig.correctives, pair) is not None)
 
     @property
     def pairs(self) -> list[tuple[int, int, float]]:
@@ -126,6 +132,7 @@ class InterferenceFinder:
                           f"{own:.3f} and {mirror[2]:.3f}")
         else:
             score_text = f"{names[i]} × {names[j]}: score {pair.score:.3f}"
+        self.panel.set_pair_action(find_corrective(rig.correctives, [names[i], names[j]]) is not None)
         self.panel.pair_info.setText(f"{score_text}; "
                                      f"{what} up to {top:.3g} {rig.units}, above 10% on {n:,} vertices "
                                      f"({area:.3g} {rig.units}²).")

@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 import json
+import subprocess
 
 import numpy as np
 
 from model.interference import PairRow, pair_scores, ranked_pairs, rig_vertex_areas
 from solvers.correctives import overshoot_heat
-from tests.cli_runner import run_cli
+from tests.cli_runner import command, run_cli
 
 
 def test_pairs_on_ict_rank_smiths_brow_pair_and_say_where(ict_dir, ict_rig):
@@ -75,3 +76,13 @@ def test_pairs_name_the_correctives_a_project_has(tmp_path):
     assert by_partner["browInnerUp_R"] == ["browInnerUp_L+browInnerUp_R"] and by_partner["browOuterUp_L"] == []
     text = run_cli("pairs", project, "--partners-of", "browInnerUp_L").stdout
     assert "(corrective: browInnerUp_L+browInnerUp_R)" in text
+
+
+def test_pairs_piped_into_a_reader_that_stops_early(ict_dir):
+    """`blendshape-studio pairs RIG | head -3`: no traceback when the reader closes the pipe."""
+    proc = subprocess.Popen(command() + ["pairs", str(ict_dir), "--top", "500", "--json"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "{"
+    proc.stdout.close()
+    _, err = proc.communicate(timeout=300)
+    assert proc.returncode == 0 and "Traceback" not in err and "BrokenPipe" not in err

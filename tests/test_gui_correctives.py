@@ -528,5 +528,6 @@ def test_finder_marks_the_pairs_that_have_a_corrective(qtbot, win):
     assert column(row) == "1/2"
     ctrl.panel.select_pair(row)                          # the column does not disturb the selection
     assert ctrl.panel.selected_pair_row() == row and w.viewport.colormap is not None
+    assert ctrl.panel.create_pair_button.text() == "Edit the corrective of this pair"
     doc.undo_stack.undo()
-    assert column(row) == ""
+    assert column(row) == "" and ctrl.panel.create_pair_button.text() == "Create corrective for this pair"

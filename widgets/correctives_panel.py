@@ -402,9 +402,15 @@ class CorrectivesPanel(QtWidgets.QWidget):
                     item.setToolTip(c, f"{a} × {b}, and its mirror image {twin}")
             self.pairs.addTopLevelItem(item)
         self.set_pair_correctives([r[4] if len(r) > 4 else "" for r in rows])
+        self.set_pair_action(False)
         for c in range(self.pairs.columnCount()):
             self.pairs.resizeColumnToContents(c)
         self.create_pair_button.setEnabled(False)
+
+    def set_pair_action(self, has_corrective: bool) -> None:
+        """The pair button creates the selected pair's corrective, or edits the one it has."""
+        self.create_pair_button.setText("Edit the corrective of this pair" if has_corrective
+                                        else "Create corrective for this pair")
 
     def set_pair_correctives(self, status: list[str]) -> None:
         """The Fixed column: "✓" when the row's pair (and its mirror) has a corrective, "1/2" for one side."""
