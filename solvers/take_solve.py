@@ -17,7 +17,8 @@ Pipeline (all in rig units):
 5. The remaining marker misfit, low-passed in time (``residual_smoothing``), is interpolated by RBFs and
    added to the dense result (Joshi Eq. 3; Fidaleo Eq. 1–5; ``solvers.rbf``).
 The box QP of a take solve runs in ``_CachedBoxQP`` (same problem as ``solvers.weight_solve``, whose
-general solver is about 2.5× slower per call here; that one is still used for convex mode).
+general solver is slower along a take, where warm starts make the same working sets recur; that one is still
+used for convex mode).
 Missing markers (NaN) are dropped per frame. Everything that depends only on the rig and the marker set
 (normal matrices, kernel factorisations per missing-marker mask) is built once.
 """
