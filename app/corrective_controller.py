@@ -195,6 +195,10 @@ class CorrectiveController(QtCore.QObject):
         self.window.set_pose(driver_pose(rig, drivers), f"Pose {'+'.join(drivers)} for a corrective")
         self.authoring = drivers
         self.panel.set_ticked(drivers)
+        # Symmetric strokes for a two-sided corrective (browInnerUp_L+browInnerUp_R), one-sided strokes for a
+        # one-sided one: a symmetric stroke there would change the other side, where this corrective also fires
+        two_sided = set(mirror_drivers(drivers)) == set(drivers)
+        self.panel.symmetric.setChecked(two_sided)
         self.sculpt.enable()
         if self.dock is not None:
             self.dock.show()
@@ -203,7 +207,8 @@ class CorrectiveController(QtCore.QObject):
         self.panel.set_sculpting(drivers, self.document.edit_offset is not None)
         self.panel.reveal_sculpt()
         self.window.statusBar().showMessage(
-            f"Sculpt the corrective for {' + '.join(drivers)}: drag on the face, then Save corrective.", 8000)
+            f"Sculpt the corrective for {' + '.join(drivers)}: drag on the face, then Save corrective "
+            f"(symmetric strokes {'on: the drivers are two-sided' if two_sided else 'off: one side'}).", 8000)
         self.sculpting_changed.emit(True)
         return True
 

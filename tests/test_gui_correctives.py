@@ -531,3 +531,15 @@ def test_finder_marks_the_pairs_that_have_a_corrective(qtbot, win):
     assert ctrl.panel.create_pair_button.text() == "Edit the corrective of this pair"
     doc.undo_stack.undo()
     assert column(row) == "" and ctrl.panel.create_pair_button.text() == "Create corrective for this pair"
+
+
+def test_sculpt_symmetry_follows_the_drivers_sides(qtbot, win):
+    """A two-sided (or midline) corrective is sculpted symmetrically, a one-sided one is not: a symmetric
+    stroke would also change the other side, where a one-sided corrective must add nothing of its own."""
+    w, ctrl = win
+    for drivers, symmetric in ((PAIR, True), (["browInnerUp_L", "browOuterUp_L"], False),
+                               (["jawOpen", "mouthClose"], True)):
+        assert ctrl.start_authoring(drivers)
+        assert ctrl.panel.symmetric.isChecked() is symmetric, drivers
+        assert ("symmetric strokes on" in w.statusBar().currentMessage()) is symmetric
+        ctrl.stop_sculpting()
