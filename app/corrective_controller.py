@@ -517,7 +517,7 @@ def install(window) -> CorrectiveController:
     window.panels_menu.addAction(dock.toggleViewAction())
     ctrl = CorrectiveController(window, panel, dock)
     window.correctives = ctrl
-    _remember_finder(panel)
+    _remember_options(panel)
 
     menu = QtWidgets.QMenu("&Correctives", window)
     help_menu = next((a for a in window.menuBar().actions() if a.text().replace("&", "") == "Help"), None)
@@ -562,19 +562,11 @@ def install(window) -> CorrectiveController:
     return ctrl
 
 
-def _remember_finder(panel: CorrectivesPanel) -> None:
-    """The interference measure and the mirror merging last chosen come back in the next session."""
-    from app import settings as app_settings
-    store = app_settings.settings()
-    saved = store.value("interference/measure")
-    if saved is not None and panel.measure.findData(saved) >= 0:
-        panel.measure.setCurrentIndex(panel.measure.findData(saved))
-    panel.measure.currentIndexChanged.connect(
-        lambda _=0: app_settings.settings().setValue("interference/measure", panel.measure.currentData()))
-    merge = store.value("interference/mergeMirrored")
-    if merge is not None:
-        panel.merge_mirrored.blockSignals(True)   # no ranking at start-up
-        panel.merge_mirrored.setChecked(str(merge).lower() in ("true", "1"))
-        panel.merge_mirrored.blockSignals(False)
-    panel.merge_mirrored.toggled.connect(
-        lambda on: app_settings.settings().setValue("interference/mergeMirrored", bool(on)))
+def _remember_options(panel: CorrectivesPanel) -> None:
+    """The finder's measure, list length and mirror merging, and the brush, its falloff and strength come back
+    in the next session (the radius is in rig units and follows each rig's size instead)."""
+    from app.settings import remember
+    for widget, key in ((panel.measure, "interference/measure"), (panel.top, "interference/top"),
+                        (panel.merge_mirrored, "interference/mergeMirrored"), (panel.brush, "sculpt/brush"),
+                        (panel.falloff, "sculpt/falloff"), (panel.strength, "sculpt/strength")):
+        remember(widget, key)

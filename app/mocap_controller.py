@@ -624,6 +624,11 @@ def install(window) -> MocapController:
         return existing
     panel = MocapPanel(window)
     window.mocap_panel = panel
+    # the solve's mode, residual kernel and calibration length come back in the next session (the λs and the
+    # kernel length stay at their measured defaults: they depend on the rig's units and the take)
+    for widget, key in ((panel.mode_combo, "mocap/mode"), (panel.residual_combo, "mocap/residual"),
+                        (panel.calibration_spin, "mocap/calibrationFrames")):
+        app_settings.remember(widget, key)
     window.mocap_dock = window._add_dock("Mocap", panel, QtCore.Qt.RightDockWidgetArea, scroll=True)
     views = SideBySideView()
     weight_plot, error_plot = CurvePlot("weights"), CurvePlot("marker error RMS (mm)")

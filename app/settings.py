@@ -1,7 +1,7 @@
-"""Remembered settings: recent files, window layout, last folders (QSettings, INI format)."""
+"""Remembered settings: recent files, window layout, last folders, tool options (QSettings, INI format)."""
 from __future__ import annotations
 
-from PySide6 import QtCore
+from PySide6 import QtCore, QtWidgets
 
 MAX_RECENT = 10
 
@@ -27,3 +27,44 @@ def add_recent_file(path: str) -> list[str]:
 
 def clear_recent_files() -> None:
     settings().setValue("recentFiles", [])
+
+
+def _combo_value(combo: QtWidgets.QComboBox):
+    data = combo.currentData()
+    return combo.currentText() if data is None else data
+
+
+def remember(widget: QtWidgets.QWidget, key: str) -> None:
+    """Bring back the value ``widget`` had in the last session (saved under ``key``) and save every change.
+
+    For a QComboBox (its item data, else its text), a QSpinBox or QDoubleSpinBox (its value, clamped to its
+    range) and a QCheckBox. A saved value that no longer fits (an item gone) is ignored. The widget's signals
+    are blocked while it is restored, so start-up triggers no work; a widget that is not one of those raises.
+    """
+    saved = settings().value(key)
+    widget.blockSignals(True)
+    try:
+        if isinstance(widget, QtWidgets.QComboBox):
+            if saved is not None:
+                i = widget.findData(saved)
+                i = widget.findText(str(saved)) if i < 0 else i
+                if i >= 0:
+                    widget.setCurrentIndex(i)
+            widget.currentIndexChanged.connect(lambda _=0: settings().setValue(key, _combo_value(widget)))
+        elif isinstance(widget, (QtWidgets.QSpinBox, QtWidgets.QDoubleSpinBox)):
+            if saved is not None:
+                try:
+                    value = float(saved)
+                except (TypeError, ValueError):
+                    value = None
+                if value is not None:
+                    widget.setValue(int(round(value)) if isinstance(widget, QtWidgets.QSpinBox) else value)
+            widget.valueChanged.connect(lambda v: settings().setValue(key, v))
+        elif isinstance(widget, QtWidgets.QCheckBox):
+            if saved is not None:
+                widget.setChecked(str(saved).lower() in ("true", "1"))
+            widget.toggled.connect(lambda on: settings().setValue(key, bool(on)))
+        else:
+            raise TypeError(f"Cannot remember a {type(widget).__name__}.")
+    finally:
+        widget.blockSignals(False)

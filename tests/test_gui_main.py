@@ -245,3 +245,29 @@ def test_mirror_shape_replaces_or_adds_the_other_side(qtbot, tmp_path):
     assert np.abs(d[verts[:, 0] < 0, 2]).max() > 0.3 and np.abs(d[verts[:, 0] > 0]).max() == 0
     w.document.undo_stack.undo()
     assert rig.shape_names == ["lift_L"]
+
+
+def test_tool_options_come_back_in_the_next_session(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    cp, mp = w.correctives_panel, w.mocap_panel
+    cp.brush.setCurrentIndex(cp.brush.findData("smooth"))
+    cp.falloff.setCurrentIndex(cp.falloff.count() - 1)
+    cp.strength.setValue(0.4)
+    cp.top.setValue(35)
+    mp.mode_combo.setCurrentText("per region")
+    mp.residual_combo.setCurrentText("none")
+    mp.calibration_spin.setValue(12)
+    falloff = cp.falloff.currentData()
+    w.close()
+    w2 = make_window(qtbot, tmp_path)       # the same settings folder: the next session
+    cp, mp = w2.correctives_panel, w2.mocap_panel
+    assert (cp.brush.currentData(), cp.falloff.currentData(), cp.strength.value(), cp.top.value()) == \
+        ("smooth", falloff, 0.4, 35)
+    assert (mp.mode_combo.currentText(), mp.residual_combo.currentText(), mp.calibration_spin.value()) == \
+        ("per region", "none", 12)
+    w2.close()
+    from app.settings import settings
+    settings().setValue("sculpt/brush", "chisel")          # an item that no longer exists, a broken number
+    settings().setValue("sculpt/strength", "strong")
+    w3 = make_window(qtbot, tmp_path)
+    assert w3.correctives_panel.brush.currentData() == "grab" and w3.correctives_panel.strength.value() == 1.0
