@@ -287,6 +287,21 @@ def corrective_activation(corrective: Corrective, shape_names, weights) -> float
     return float(corrective_activations([corrective], shape_names, weights)[0])
 
 
+def solver_correctives(rig):
+    """The rig's live (unmuted) correctives for a solver on plain arrays (``solvers.take_solve.TakeSolver``):
+    (activate, E, drivers) with activate (U, K) weights -> (U, C) activations, E (C, V, 3) their deltas and
+    drivers the shape indices they depend on; None when the rig has no live corrective."""
+    live = [c for c in rig.correctives if not c.muted]
+    if not live:
+        return None
+    names = list(rig.shape_names)
+
+    def activate(weights: np.ndarray) -> np.ndarray:
+        return corrective_activations_per_vertex(live, names, weights)
+    drivers = sorted({names.index(d) for c in live for d in c.drivers})
+    return activate, np.stack([np.asarray(c.delta, dtype=np.float64) for c in live]), drivers
+
+
 # --- authoring (Smith §5.6–5.8) ------------------------------------------------------------------
 def driver_pose(rig, drivers, weights=None) -> np.ndarray:
     """(K,) weight vector with the drivers at ``weights`` (a number, a list, or None for 1) and others 0."""

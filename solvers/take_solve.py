@@ -38,6 +38,9 @@ from .weight_solve import WeightSolver
 
 Progress = Optional[Callable[[int, int, str], None]]
 
+CORRECTIVE_STEPS = 6      # Gauss–Newton steps per weight solve on a rig with correctives (quadratic: 2–3 suffice)
+_JACOBIAN_STEP = 1e-6     # forward-difference step of the activation rules' gradient
+
 # Defaults chosen by measurement on the ICT Live Link take (see tests/benchmarks/test_bench_take_solve.py).
 DEFAULTS = dict(lam_sparsity=0.0, lam_temporal=1.0, iterations=3, two_pass=True, marker_smoothing=0.7,
                 residual="gaussian", rbf_scale=2.0, rbf_lambda=1.0, residual_smoothing=6.0, n_phantoms=48,
@@ -80,6 +83,7 @@ def _det3(m: np.ndarray) -> float:
 
 
 _GESDD = la.get_lapack_funcs("gesdd", (np.zeros((3, 3)),))   # LAPACK's SVD, as np.linalg.svd, at 1/4 the overhead
+_POSV = la.get_lapack_funcs("posv", (np.zeros((2, 2)),))     # LAPACK's Cholesky solve, float64
 
 
 def _kabsch(P: np.ndarray, Y: np.ndarray, p: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -107,17 +111,22 @@ class _CachedBoxQP:
     most frames cost a back-substitution or two. H here is ``AᵀA + λ_s 11ᵀ + λ_t I`` (Joshi et al. 2003,
     Eq. 2; Ma et al. 2016, Eq. 3–4)."""
 
-    def __init__(self, H: np.ndarray, lo: float = 0.0, hi: float = 1.0, max_iter: int = 200) -> None:
-        self.H = np.ascontiguousarray(H)
+    def __init__(self, H: np.ndarray, lo: float = 0.0, hi: float = 1.0, max_iter: int = 200,
+                 cache: bool = True) -> None:
+        self.H = np.ascontiguousarray(H, dtype=np.float64)
         self.K = H.shape[0]
         self.lo, self.hi = lo, hi
         self.max_iter = max_iter
+        self.cache = cache        # False for a one-off H (a Gauss–Newton step): no factor is kept
         self._factors: dict[bytes, tuple] = {}
         self._seen: dict[bytes, int] = {}
-        self._posv = la.get_lapack_funcs("posv", (self.H,))
+        self._posv = _POSV
         self.tol = 1e-12 * max(1.0, float(np.abs(H).max()))
 
     def _factor(self, free: np.ndarray):
+        if not self.cache:
+            idx = np.flatnonzero(free)
+            return idx, None, self.H[np.ix_(idx, idx)]
         key = free.tobytes()
         hit = self._factors.get(key)
         if hit is None:
@@ -234,6 +243,12 @@ class TakeSolver:
     residual_vertices (vertices that receive the residual; default: those nearer to a marker than the
     phantom ring), regions (list of vertex index arrays) and blend ((V, R+1) partition of unity, last
     column the background) for a per-region solve.
+
+    correctives: the rig's corrective shapes (Smith 2006 §4.5; ALGORITHMS.md §6), as (activate, E, drivers):
+    activate maps weights (U, K) to activations (U, C) by the rig's rules, E (C, V, 3) holds their deltas and
+    drivers the indices of the shapes that drive them (``model.correctives.solver_correctives``). The model is
+    then x(w) = b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c, solved by Gauss–Newton steps on the weights (``_weights``;
+    one per Kabsch alternation), and every pose, fit and dense frame includes the correctives.
     """
 
     def __init__(self, neutral: np.ndarray, deltas: np.ndarray, binding, *, mode: str = "box",
@@ -249,7 +264,7 @@ class TakeSolver:
                  head_motion: bool = True,
                  rigid_weighting: float = DEFAULTS["rigid_weighting"],
                  rigid_noise: float = DEFAULTS["rigid_noise"],
-                 lam_region: float = DEFAULTS["lam_region"]) -> None:
+                 lam_region: float = DEFAULTS["lam_region"], correctives=None) -> None:
         if residual not in KERNELS:
             raise ValueError(f"Unknown residual '{residual}': use one of {', '.join(KERNELS)}.")
         self.neutral = np.asarray(neutral, dtype=np.float64)
@@ -278,9 +293,20 @@ class TakeSolver:
         self.lower, self.upper = 0.0, 1.0
         self._qps: dict[bytes, tuple] = {}
         self.weight_solver = WeightSolver(self.A, mode=mode, lam_sparsity=lam_sparsity, lam_temporal=lam_temporal)
-        # Dense pose: deltas as (K, 3V) over the vertices any shape moves.
-        self._moving = np.flatnonzero(np.abs(self.deltas).max(axis=(0, 2)) > 0)
+        # Correctives: their activation rule and deltas, at the markers (C, 3M) and on the surface.
+        self._activate, E, drivers = correctives if correctives is not None else (None, np.zeros((0, V, 3)), [])
+        E = np.asarray(E, dtype=np.float64).reshape(-1, V, 3)
+        if self._activate is None or E.shape[0] == 0:
+            self._activate, E, drivers = None, np.zeros((0, V, 3)), []
+        self._drivers = np.unique(np.asarray(drivers, dtype=np.intp))   # the shapes the activations depend on
+        self.C = E.shape[0]
+        self.Em = np.stack([self.binding @ E[c] for c in range(self.C)]).reshape(self.C, 3 * M) if self.C else \
+            np.zeros((0, 3 * M))
+        # Dense pose: deltas as (K, 3V) over the vertices any shape (or corrective) moves.
+        self._moving = np.flatnonzero(np.maximum(np.abs(self.deltas).max(axis=(0, 2)),
+                                                 np.abs(E).max(axis=(0, 2), initial=0.0)) > 0)
         self._Dv = np.ascontiguousarray(self.deltas[:, self._moving].reshape(K, -1))
+        self._Ev = np.ascontiguousarray(E[:, self._moving].reshape(self.C, 3 * self._moving.size))
         # Regions.
         self.lam_region = float(lam_region)
         self.regions = None
@@ -328,27 +354,47 @@ class TakeSolver:
                                               lam_reg=self.lam_region)))
 
     # --- poses -----------------------------------------------------------------------------------
+    def corrective_markers(self, W: np.ndarray) -> np.ndarray:
+        """(F, 3M) the correctives' displacement of the markers for global weights W (F, K); 0 without any."""
+        W = np.atleast_2d(np.asarray(W, dtype=np.float64))
+        if self._activate is None:
+            return np.zeros((W.shape[0], 3 * self.M))
+        return self._activate(W) @ self.Em
+
+    def _corrective_per_marker(self, per_marker: np.ndarray) -> np.ndarray:
+        """(M, 3) the correctives' displacement of each marker for its own blended weights (M, K)."""
+        if self._activate is None:
+            return np.zeros((self.M, 3))
+        return np.einsum("mc,cmx->mx", self._activate(per_marker), self.Em.reshape(self.C, self.M, 3))
+
     def markers_at(self, w: np.ndarray) -> np.ndarray:
-        """(M, 3) rig markers for global weights w."""
-        return self.rest + (w @ self.Dm).reshape(-1, 3)
+        """(M, 3) rig markers for global weights w (correctives included)."""
+        return self.rest + (w @ self.Dm + self.corrective_markers(w)[0]).reshape(-1, 3)
 
     def markers_regional(self, W: np.ndarray) -> np.ndarray:
         """(M, 3) rig markers for region weights W (R+1, K): Joshi §4 blend at the markers."""
         per_marker = self.marker_blend @ W  # (M, K)
-        return self.rest + np.einsum("mk,kmc->mc", per_marker, self.Dm.reshape(self.K, self.M, 3))
+        return (self.rest + np.einsum("mk,kmc->mc", per_marker, self.Dm.reshape(self.K, self.M, 3))
+                + self._corrective_per_marker(per_marker))
 
     def pose(self, w: np.ndarray) -> np.ndarray:
-        """(V, 3) surface for global weights (ALGORITHMS.md §1)."""
+        """(V, 3) surface for global weights (ALGORITHMS.md §1), correctives included."""
         x = self.neutral.copy()
-        x[self._moving] += (np.asarray(w) @ self._Dv).reshape(-1, 3)
+        d = np.asarray(w) @ self._Dv
+        if self._activate is not None:
+            d += self._activate(np.asarray(w, dtype=np.float64)[None])[0] @ self._Ev
+        x[self._moving] += d.reshape(-1, 3)
         return x
 
     def pose_regional(self, W: np.ndarray) -> np.ndarray:
-        """(V, 3) surface for region weights: x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v) (Joshi §4)."""
+        """(V, 3) surface for region weights: x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v) (Joshi §4), with each
+        vertex's correctives activated by its blended weights (as ``model.pose`` evaluates a regional pose)."""
         per_vertex = np.asarray(self.blend[self._moving] @ W)  # (U, K)
         x = self.neutral.copy()
         D = self._Dv.reshape(self.K, -1, 3)
         x[self._moving] += np.einsum("uk,kuc->uc", per_vertex, D)
+        if self._activate is not None:
+            x[self._moving] += np.einsum("uc,cux->ux", self._activate(per_vertex), self._Ev.reshape(self.C, -1, 3))
         return x
 
     # --- calibration (Ma §3.1; Umeyama 1991) -----------------------------------------------------
@@ -413,8 +459,10 @@ class TakeSolver:
                     (RW[f - 1] if f else W[f])
             fit = self.rest + np.einsum("mr,frk,kmc->fmc", self.marker_blend, RW,
                                         self.Dm.reshape(self.K, self.M, 3))
+            if self._activate is not None:
+                fit += np.stack([self._corrective_per_marker(self.marker_blend @ RW[f]) for f in range(F)])
         else:
-            fit = self.rest + (W @ self.Dm).reshape(F, M, 3)
+            fit = self.rest + (W @ self.Dm + self.corrective_markers(W)).reshape(F, M, 3)
         misfit = np.where(solved[:, None, None], Z - fit, np.nan)
         heads = np.einsum("ij,fjk->fik", np.linalg.inv(cal), to_matrix(np.ones(F), Rs, ts))
         heads[:, :3, :] /= float(unit_factor)  # to take units
@@ -452,8 +500,9 @@ class TakeSolver:
             valid = np.isfinite(y).all(axis=1)
             if valid.sum() >= 3:
                 yv, rest_v = y[valid], rest[valid]
-                if not self.head_motion:  # the head is fixed: one weight QP is the whole solve
-                    w = self._qp(valid, (y - rest).reshape(-1), w if w_prev is None else w_prev, w)
+                if not self.head_motion:  # the head is fixed: the weight QP is the whole solve
+                    b = (y - rest).reshape(-1)
+                    w = self._weights(valid, b, w if w_prev is None else w_prev, w, steps=CORRECTIVE_STEPS)
                     w_prev = w
                     solved[f] = True
                     W[f], Rs[f], ts[f] = w, np.eye(3), np.zeros(3)
@@ -461,7 +510,8 @@ class TakeSolver:
                         report(i)
                     continue
                 for _ in range(self.iterations):
-                    disp = (w @ Dm).reshape(-1, 3)
+                    disp = (w @ Dm if self._activate is None else w @ Dm + self.corrective_markers(w)[0])
+                    disp = disp.reshape(-1, 3)
                     if rw:  # trust markers the expression moves little: the rig's misfit grows with motion
                         dv = disp[valid]
                         pw = 1.0 / (rw0 + rw * np.einsum("mc,mc->m", dv, dv))
@@ -469,7 +519,7 @@ class TakeSolver:
                     else:
                         R, t = _kabsch(rest_v + disp[valid], yv)
                     z = (y - t) @ R  # Rᵀ (y − t): head-stabilised markers
-                    w = self._qp(valid, (z - rest).reshape(-1), w if w_prev is None else w_prev, w)
+                    w = self._weights(valid, (z - rest).reshape(-1), w if w_prev is None else w_prev, w)
                 w_prev = w
                 solved[f] = True
             W[f], Rs[f], ts[f] = w, R, t
@@ -493,9 +543,50 @@ class TakeSolver:
             out[fr] = self.rbf.coefficients_batch(misfit[fr])
         return out
 
-    def _qp(self, valid: np.ndarray, b: np.ndarray, w_prev: np.ndarray, w_start: np.ndarray) -> np.ndarray:
-        """The frame's weight QP (Joshi Eq. 2 + Ma Eq. 3–4): ``‖Aw − b‖² + λ_s(Σw)² + λ_t‖w − w_prev‖²``
-        over the present markers, in the box; one cached solver per missing-marker subset."""
+    def _weights(self, valid: np.ndarray, b: np.ndarray, w_prev: np.ndarray, w_start: np.ndarray,
+                 steps: int = 1) -> np.ndarray:
+        """The frame's weights for head-stabilised marker displacements ``b`` (3M,): the linear QP (``_qp``), or
+        with correctives ``steps`` Gauss–Newton steps on Aw + C(w) ≈ b: linearise C(w) = Σ_c a_c(w) e_c at the
+        current w (J = Σ_c e_c ∇a_cᵀ over the drivers, by forward differences of the activation rules) and
+        solve the box QP of (A + J) w ≈ b − C(w₀) + J w₀, stopping early once a step moves less than 1e-7.
+        Where no corrective acts or varies (its drivers at 0) a step is the linear QP with its cached factors."""
+        if self._activate is None:
+            return self._qp(valid, b, w_prev, w_start)
+        if self.mode != "box":    # the general solver's other constraints: the correctives frozen at w instead
+            w = w_start
+            for _ in range(steps):
+                w = self._qp(valid, b - self.corrective_markers(w)[0], w_prev, w)
+            return w
+        rows, _, linear = self._qp_entry(valid)
+        d = self._drivers
+        A = self.A[rows]
+        w = np.minimum(np.maximum(w_start, self.lower), self.upper)
+        for _ in range(steps):
+            probe = np.repeat(w[None], 1 + d.size, axis=0)
+            probe[np.arange(1, d.size + 1), d] += _JACOBIAN_STEP
+            a = self._activate(probe)                                        # (1 + n, C)
+            grad = (a[1:] - a[0]) / _JACOBIAN_STEP                           # (n, C): ∂a_c/∂w_d
+            if not a[0].any() and not grad.any():    # no corrective acts or varies here: the linear QP
+                step = self._qp(valid, b, w_prev, w)
+            else:
+                Jd = (grad @ self.Em).T[rows]                                # (3M', n): ∂C/∂w_d
+                r = b[rows] - (a[0] @ self.Em)[rows] + Jd @ w[d]
+                AtJ = A.T @ Jd                                               # (K, n)
+                H = linear.H.copy()                                          # (A + J)ᵀ(A + J) + λ terms
+                H[:, d] += AtJ
+                H[d, :] += AtJ.T
+                H[np.ix_(d, d)] += Jd.T @ Jd
+                g = A.T @ r + self.lam_temporal * w_prev
+                g[d] += Jd.T @ r
+                step = _CachedBoxQP(H, self.lower, self.upper, cache=False).solve(g, w.copy())
+            done = np.abs(step - w).max() < 1e-7
+            w = step
+            if done:
+                break
+        return w
+
+    def _qp_entry(self, valid: np.ndarray) -> tuple:
+        """(rows, Aᵀ of those rows or None for all, the cached QP) of one missing-marker subset, made once."""
         key = valid.tobytes()
         qp = self._qps.get(key)
         if qp is None:
@@ -505,7 +596,12 @@ class TakeSolver:
             # Aᵀ of the present rows, contiguous (one gemv a call), and None for all rows (no row selection)
             qp = self._qps[key] = (rows, None if rows.all() else np.ascontiguousarray(A.T),
                                    _CachedBoxQP(H, self.lower, self.upper))
-        rows, At, solver = qp
+        return qp
+
+    def _qp(self, valid: np.ndarray, b: np.ndarray, w_prev: np.ndarray, w_start: np.ndarray) -> np.ndarray:
+        """The frame's weight QP (Joshi Eq. 2 + Ma Eq. 3–4): ``‖Aw − b‖² + λ_s(Σw)² + λ_t‖w − w_prev‖²``
+        over the present markers, in the box; one cached solver per missing-marker subset."""
+        rows, At, solver = self._qp_entry(valid)
         if self.mode != "box":
             return self.weight_solver.solve(np.where(rows, b, np.nan), w_prev=w_prev, w_start=w_start)
         g = self.At @ b if At is None else At @ b[rows]
@@ -515,7 +611,7 @@ class TakeSolver:
     def _solve_regions(self, z: np.ndarray, w: np.ndarray, prev: np.ndarray | None) -> np.ndarray:
         """Per-region QPs (Joshi et al. 2003, Eq. 2 per region; Ma Eq. 3–4 terms) with the head fixed."""
         out = np.repeat(w[None], len(self.regions) + 1, axis=0)
-        b_all = (z - self.rest).reshape(-1)
+        b_all = (z - self.rest).reshape(-1) - self.corrective_markers(w)[0]   # correctives frozen at w
         for r, reg in enumerate(self.regions):
             if reg is None:
                 continue
@@ -540,7 +636,8 @@ def solve_take(rig, take, marker_map, *, progress: Progress = None, cancel=None,
     from model.rig import unit_scale
     labels, cols = marker_map.match(take)
     binding = marker_map.binding(rig, labels)
-    solver = TakeSolver(rig.neutral, rig.deltas, binding, **options)
+    from model.correctives import solver_correctives
+    solver = TakeSolver(rig.neutral, rig.deltas, binding, correctives=solver_correctives(rig), **options)
     factor = unit_scale(take.units, rig.units)
     sol = solver.solve(take.positions[:, cols], unit_factor=factor, calibration_frames=calibration_frames,
                        calibrate=calibration_frames > 0,

@@ -43,6 +43,30 @@ def test_bench_take_solve(benchmark, ict_rig, setup):
     assert err < 0.22
 
 
+def test_bench_take_solve_with_correctives(benchmark, ict_rig, setup):
+    """The same take on ICT with four correctives (Smith's brow pair and three other top pairs of the finder,
+    each taking back 20% of the pair's summed motion where both act): Gauss–Newton weight steps."""
+    from model.correctives import Corrective, set_correctives, solver_correctives
+    from solvers.correctives import driver_region
+    B, X, truth = setup
+    rig = ict_rig.copy()
+    pairs = [["browInnerUp_L", "browInnerUp_R"], ["mouthFunnel", "mouthPucker"], ["eyeLookUp_L", "eyeWide_L"],
+             ["cheekRaiser_L", "cheekSquint_L"]]
+    cs = []
+    for drivers in pairs:
+        d = rig.deltas[[rig.shape_index(n) for n in drivers]]
+        cs.append(Corrective(drivers=drivers, delta=-0.2 * driver_region(d)[:, None] * d.sum(axis=0)))
+    set_correctives(rig, cs)
+    solver = TakeSolver(rig.neutral, rig.deltas, B, correctives=solver_correctives(rig))
+    sol = benchmark.pedantic(solver.solve, args=(X,), kwargs={"unit_factor": 0.1}, rounds=3, iterations=1)
+    fps = X.shape[0] / benchmark.stats.stats.min
+    err = dense_rms_mm(sol, truth)
+    benchmark.extra_info.update(frames_per_second_best=fps, dense_rms_mm=err)
+    print(f"\ntake solve with 4 correctives: best {benchmark.stats.stats.min:.3f} s = {fps:.0f} fps, "
+          f"dense RMS {err:.4f} mm")
+    assert err < 0.22
+
+
 def test_bench_take_dense_all_frames(benchmark, ict_rig, setup):
     B, X, _ = setup
     sol = TakeSolver(ict_rig.neutral, ict_rig.deltas, B).solve(X, unit_factor=0.1)
