@@ -19,6 +19,7 @@ from PySide6 import QtCore, QtGui
 
 from app.document import PoseState
 from app.marker_commands import SetMarkersCommand, SetPoseCommand
+from model.correctives import solver_correctives
 from model.errors import RigInputError
 from model.markers import Marker, MarkerSet
 from solvers.damping import damping_gains, point_mobility
@@ -48,6 +49,11 @@ class DragState:
     press_world: np.ndarray | None = None
     moved: bool = False
     W: np.ndarray | None = None    # (R+1, K) pose after the last move
+    correctives: tuple | None = None   # the rig's live correctives: (activate, marker rows (3M, C), drivers)
+
+
+DRAG_CORRECTIVE_STEPS = 4   # Gauss–Newton solves a move at most, on a rig with correctives (~1 ms each on ICT)
+_JACOBIAN_STEP = 1e-6
 
 
 def same_blend(a: sp.spmatrix | None, b: sp.spmatrix | None) -> bool:
@@ -343,9 +349,11 @@ class MarkerController(QtCore.QObject):
             doc.set_pose_state(PoseState(old.weights, W0, blend, level))  # same pose, now per region
         start = self.marker_positions()
         gain = float(np.asarray(ms.S[index] @ self._gains).reshape(-1)[0])
+        live = solver_correctives(rig)
+        correctives = None if live is None else (live[0], ms.delta_rows(live[1]), np.asarray(live[2], np.intp))
         self.drag = DragState(index=index, old=old, level=level, blend=blend, W0=W0, solver=solver,
                               neutral_at=ms.positions(rig.neutral), start=start, targets=start.copy(), gain=gain,
-                              W=W0.copy())
+                              W=W0.copy(), correctives=correctives)
         if display_xy is not None:
             self.drag.press_world = self.viewport.view_plane_point(display_xy[0], display_xy[1], start[index])
         self._selected = index
@@ -367,7 +375,7 @@ class MarkerController(QtCore.QObject):
         dr.targets[dr.index] = dr.start[dr.index] + dr.gain * np.asarray(mouse_delta, dtype=np.float64)
         b = (dr.targets - dr.neutral_at).reshape(-1)
         # From the current pose, λ_r toward it (Joshi §4): warm-started, so a move costs a few solver steps.
-        W = dr.solver.solve(b, dr.W)
+        W = dr.solver.solve(b, dr.W) if dr.correctives is None else self._solve_with_correctives(dr, b)
         dr.W = W
         dr.moved = True
         if dr.blend is None:
@@ -375,6 +383,29 @@ class MarkerController(QtCore.QObject):
         else:
             self.document.set_region_weights_live(W)
         self.drag_updated.emit()
+        return W
+
+    @staticmethod
+    def _solve_with_correctives(dr: DragState, b: np.ndarray) -> np.ndarray:
+        """The drag's weights when the surface also carries the correctives they fire (Smith §4.5): Gauss–Newton
+        on each region's model A w + C(w) ≈ b, C the correctives' displacement of the markers with the
+        region's weights, linearised at the latest weights (``RegionalSolver.solve(linearised=...)``)."""
+        activate, rows, drivers = dr.correctives          # rows (3M, C): each corrective's marker displacement
+        W = dr.W
+        n, R1 = drivers.size, dr.W.shape[0]
+        for _ in range(DRAG_CORRECTIVE_STEPS):
+            probe = np.repeat(W[:, None, :], 1 + n, axis=1)                        # (R+1, 1+n, K)
+            probe[:, np.arange(1, n + 1), drivers] += _JACOBIAN_STEP
+            a = activate(probe.reshape(-1, W.shape[1])).reshape(R1, 1 + n, -1)     # (R+1, 1+n, C)
+            C = a[:, 0] @ rows.T                                                   # (R+1, 3M)
+            J = np.zeros((R1, rows.shape[0], W.shape[1]))
+            J[:, :, drivers] = np.einsum("rnc,mc->rmn", (a[:, 1:] - a[:, :1]) / _JACOBIAN_STEP, rows)
+            offset = C - np.einsum("rmk,rk->rm", J, W)
+            new = dr.solver.solve(b, dr.W, linearised=(offset, J))
+            done = np.abs(new - W).max() < 1e-6
+            W = new
+            if done:
+                break
         return W
 
     def end_drag(self) -> bool:

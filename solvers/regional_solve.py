@@ -122,10 +122,18 @@ class RegionalSolver:
         """Regions that hold markers and shapes (the ones a solve changes)."""
         return [p[0] for p in self._problems if p is not None]
 
-    def solve(self, b: np.ndarray, weights: np.ndarray, *, w_prev: np.ndarray | None = None) -> np.ndarray:
+    def solve(self, b: np.ndarray, weights: np.ndarray, *, w_prev: np.ndarray | None = None,
+              linearised: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """New (R+1, K) regional weights for targets ``b`` (3M,) = marker targets − neutral at the markers
         (NaN for markers to ignore), starting from and regularised toward the current ``weights`` (R+1, K).
-        ``w_prev`` (R+1, K) feeds the temporal term when ``lam_temporal`` > 0."""
+        ``w_prev`` (R+1, K) feeds the temporal term when ``lam_temporal`` > 0.
+
+        ``linearised`` = (offset (R+1, 3M), J (R+1, 3M, K)): a weight-dependent extra displacement of the
+        markers, linearised per region at its weights W₀ (a rig's correctives, Smith §4.5: C(W) ≈ C(W₀) +
+        J (W − W₀), offset = C(W₀) − J W₀); region r then fits (A + J_r) w ≈ b − offset_r (a Gauss–Newton
+        step, Joshi Eq. 2 on the linearised model). Needs finite ``b``."""
+        if linearised is not None:
+            return self._solve_linearised(b, weights, w_prev, *linearised)
         W = np.asarray(weights, dtype=np.float64)
         if W.shape != (self.R + 1, self.K):
             raise RigInputError(f"The regional weights must be ({self.R + 1}, {self.K}), not {W.shape}.")
@@ -149,6 +157,36 @@ class RegionalSolver:
             wr = W[self.R]
             prev = None if w_prev is None else np.asarray(w_prev)[self.R]
             out[self.R] = self._background.solve(b, w_ref=wr, w_start=wr, w_prev=prev)
+        return out
+
+
+    def _solve_linearised(self, b, weights, w_prev, offset, J) -> np.ndarray:
+        W = np.asarray(weights, dtype=np.float64)
+        b = np.asarray(b, dtype=np.float64).reshape(-1)
+        if W.shape != (self.R + 1, self.K) or b.shape[0] != 3 * self.n_markers or not np.isfinite(b).all():
+            raise RigInputError("The linearised regional solve needs finite targets for every marker and "
+                                f"({self.R + 1}, {self.K}) weights.")
+        out = W.copy()
+
+        def step(solver, A_sh, J_sh, target, sh, r):
+            # (A + J)ᵀ(A + J) = AᵀA + AᵀJ + JᵀA + JᵀJ: the solver's gram plus an update for this call
+            upd = A_sh.T @ J_sh + J_sh.T @ A_sh + J_sh.T @ J_sh
+            prev = None if w_prev is None else np.asarray(w_prev)[r, sh]
+            return solver.solve_gram((A_sh + J_sh).T @ target, w_ref=W[r, sh], w_start=W[r, sh], w_prev=prev,
+                                     gram_update=upd)
+
+        for prob in self._problems:
+            if prob is None:
+                continue
+            r, rows, sh, others, solver, A_others = prob
+            Jr = J[r][rows]
+            target = b[rows] - offset[r][rows]
+            if others.size:
+                target = target - (A_others + Jr[:, others]) @ W[r, others]
+            out[r, sh] = step(solver, self.A[rows][:, sh], Jr[:, sh], target, sh, r)
+        if self._background is not None:
+            allk = np.arange(self.K)
+            out[self.R] = step(self._background, self.A, J[self.R], b - offset[self.R], allk, self.R)
         return out
 
 

@@ -325,3 +325,32 @@ def test_keys_interpolate_play_save_and_export(qtbot, tmp_path, geometry, nose_t
     np.testing.assert_array_equal(w.keyframes.timeline.keys[1].weights, W1)
     w.keyframes.scrub(1.0)
     np.testing.assert_allclose(doc.surface(), expect, atol=1e-5)
+
+
+def test_a_drag_on_a_rig_with_correctives_puts_the_marker_where_it_is_dragged(qtbot, tmp_path, geometry,
+                                                                             nose_tip):
+    """With jawOpen posed, a corrective on jawOpen + mouthSmile_R doubles the smile at the mouth corner. A drag
+    along the smile lands on the cursor when the solve knows the corrective; solving the shapes alone puts
+    twice the smile on the face and overshoots."""
+    from model.correctives import Corrective, set_correctives
+    w = _window(qtbot, tmp_path)
+    rig = w.document.rig
+    smile = rig.shape_index("mouthSmile_R")
+    set_correctives(rig, [Corrective(drivers=["jawOpen", "mouthSmile_R"], delta=rig.deltas[smile].copy())])
+    w.document.rig_edited()                    # the surface shown now carries the corrective
+    pose = np.zeros(rig.n_shapes)
+    pose[rig.shape_index("jawOpen")] = 1.0
+    w.document.set_weights(pose)
+    c = _pins(w, geometry, nose_tip)
+    corner = c.markers.index("M00")
+    along = c.markers.positions(rig.deltas[smile])[corner]          # the smile's motion of this corner
+    errors = {}
+    for aware in (True, False):
+        dr = c.begin_drag(corner)
+        if not aware:
+            dr.correctives = None              # what a shapes-only drag solve would do
+        c.drag_by(0.4 * along / dr.gain)       # a target the rig reaches: 0.4 of the smile's motion
+        errors[aware] = np.linalg.norm(c.marker_positions()[corner] - dr.targets[corner])
+        c.end_drag()
+        w.document.undo_stack.undo()
+    assert errors[True] < 0.02 * np.linalg.norm(along) < 0.2 * errors[False], errors
