@@ -75,3 +75,36 @@ def test_bench_drag_to_redraw_step(benchmark, qtbot, tmp_path, ict_rig, ict_drag
     c.end_drag()
     benchmark.extra_info["regions"] = w.segmentation.segmentation.levels[c.level].n_regions
     assert benchmark.stats.stats.median < 0.050
+
+
+def test_bench_one_drag_move_with_correctives(benchmark, ict_rig, ict_drag):
+    """One move of a drag on ICT with four correctives (Smith's brow pair and three mouth and eye pairs):
+    the Gauss–Newton solves of ``MarkerController._solve_with_correctives``."""
+    from types import SimpleNamespace
+
+    from app.marker_controller import MarkerController
+    from model.correctives import Corrective, set_correctives, solver_correctives
+    from solvers.correctives import driver_region
+    _, level, ms = ict_drag
+    rig = ict_rig.copy()
+    cs = []
+    for drivers in (["browInnerUp_L", "browInnerUp_R"], ["mouthSmile_L", "jawOpen"], ["mouthSmile_R", "jawOpen"],
+                    ["eyeLookUp_L", "eyeWide_L"]):
+        d = rig.deltas[[rig.shape_index(n) for n in drivers]]
+        cs.append(Corrective(drivers=drivers, delta=-0.2 * driver_region(d)[:, None] * d.sum(axis=0)))
+    set_correctives(rig, cs)
+    activate, E, drivers = solver_correctives(rig)
+    solver = RegionalSolver([r.vertices for r in level.regions], ms.S, ms.delta_rows(rig.deltas),
+                            deltas=rig.deltas, solve_background=True)
+    W = np.zeros((level.n_regions + 1, rig.n_shapes))
+    W[:, rig.shape_index("jawOpen")] = 0.5
+    dr = SimpleNamespace(W=W, solver=solver, correctives=(activate, ms.delta_rows(E), np.asarray(drivers)))
+    targets = ms.positions(ict_rig.neutral + 0.5 * rig.deltas[rig.shape_index("jawOpen")])
+    targets[1] += np.array([0.5, 0.4, 0.0])  # pull a mouth corner
+    b = (targets - ms.positions(rig.neutral)).reshape(-1)
+    dr.W = MarkerController._solve_with_correctives(dr, b)     # the previous move: the warm start
+    b[3:6] += 0.01
+    out = benchmark(MarkerController._solve_with_correctives, dr, b)
+    smiles = [rig.shape_index("mouthSmile_L"), rig.shape_index("mouthSmile_R")]
+    assert out.min() >= 0 and out.max() <= 1 and out[:, smiles].any()
+    assert benchmark.stats.stats.median < 0.02
