@@ -91,11 +91,13 @@ def cmd_solve(args) -> int:
         "mode": "regional" if regional else "global",
         "head": "fixed" if fixed_head else "solved",
         "residual": options.get("residual", DEFAULTS["residual"]),
+        "correctives": [c.name for c in rig.correctives if not c.muted],   # solved with the shapes
     }
     if args.report:
         from model.atomic import atomic_write
         atomic_write(args.report, json.dumps(report, indent=1).encode("utf-8"))
-    print(f"solved {sol.n_frames} frames in {sol.solve_seconds:.2f} s ({sol.frames_per_second:.0f} fps); "
+    with_c = f" with {len(report['correctives'])} corrective(s)" if report["correctives"] else ""
+    print(f"solved {sol.n_frames} frames{with_c} in {sol.solve_seconds:.2f} s ({sol.frames_per_second:.0f} fps); "
           f"marker RMSE {report['marker_rmse']:.4f} {rig.units}; wrote {args.output}"
           + (f", {args.cache}" if args.cache else "") + (f", {args.report}" if args.report else ""))
     return 0

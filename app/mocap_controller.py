@@ -319,7 +319,8 @@ class MocapController(QtCore.QObject):
         self.error_plot.set_curves([("projection", err), ("dense", solution.marker_rmse_residual * mm)])
         self._init_weight_curves(solution.weights)
         self.panel.set_frames(solution.n_frames, self.rate)
-        self.panel.set_status(f"Solved {solution.n_frames} frames in {solution.solve_seconds:.1f} s "
+        with_c = "" if not solution.solver.C else f" with the rig's {solution.solver.C} corrective(s)"
+        self.panel.set_status(f"Solved {solution.n_frames} frames{with_c} in {solution.solve_seconds:.1f} s "
                               f"({solution.frames_per_second:.0f} frames/s); marker RMS {np.nanmean(err):.2f} mm "
                               f"mean, {np.nanmax(err):.2f} mm max.")
         self._sync_panel()
