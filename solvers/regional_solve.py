@@ -159,8 +159,8 @@ class RegionalSolver:
             out[self.R] = self._background.solve(b, w_ref=wr, w_start=wr, w_prev=prev)
         return out
 
-
     def _solve_linearised(self, b, weights, w_prev, offset, J) -> np.ndarray:
+        """``solve`` with ``linearised=(offset, J)``: one Gauss–Newton step per region (see ``solve``)."""
         W = np.asarray(weights, dtype=np.float64)
         b = np.asarray(b, dtype=np.float64).reshape(-1)
         if W.shape != (self.R + 1, self.K) or b.shape[0] != 3 * self.n_markers or not np.isfinite(b).all():
