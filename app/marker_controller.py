@@ -22,6 +22,7 @@ from app.marker_commands import SetMarkersCommand, SetPoseCommand
 from model.correctives import solver_correctives
 from model.errors import RigInputError
 from model.markers import Marker, MarkerSet
+from solvers.correctives import linearised_correctives
 from solvers.damping import damping_gains, point_mobility
 from solvers.regional_solve import RegionalSolver, shape_region_max
 from widgets.marker_overlay import MarkerOverlay
@@ -52,8 +53,7 @@ class DragState:
     correctives: tuple | None = None   # the rig's live correctives: (activate, marker rows (3M, C), drivers)
 
 
-DRAG_CORRECTIVE_STEPS = 4   # Gauss–Newton solves a move at most, on a rig with correctives (~1 ms each on ICT)
-_JACOBIAN_STEP = 1e-6
+DRAG_CORRECTIVE_STEPS = 4   # Gauss–Newton solves a move at most, on a rig with correctives (~2 ms each on ICT)
 
 
 def same_blend(a: sp.spmatrix | None, b: sp.spmatrix | None) -> bool:
@@ -392,14 +392,11 @@ class MarkerController(QtCore.QObject):
         region's weights, linearised at the latest weights (``RegionalSolver.solve(linearised=...)``)."""
         activate, rows, drivers = dr.correctives          # rows (3M, C): each corrective's marker displacement
         W = dr.W
-        n, R1 = drivers.size, dr.W.shape[0]
+        Em = np.ascontiguousarray(rows.T)
         for _ in range(DRAG_CORRECTIVE_STEPS):
-            probe = np.repeat(W[:, None, :], 1 + n, axis=1)                        # (R+1, 1+n, K)
-            probe[:, np.arange(1, n + 1), drivers] += _JACOBIAN_STEP
-            a = activate(probe.reshape(-1, W.shape[1])).reshape(R1, 1 + n, -1)     # (R+1, 1+n, C)
-            C = a[:, 0] @ rows.T                                                   # (R+1, 3M)
-            J = np.zeros((R1, rows.shape[0], W.shape[1]))
-            J[:, :, drivers] = np.einsum("rnc,mc->rmn", (a[:, 1:] - a[:, :1]) / _JACOBIAN_STEP, rows)
+            C, Jd = linearised_correctives(activate, Em, drivers, W)             # (R+1, 3M), (R+1, 3M, n)
+            J = np.zeros((W.shape[0], rows.shape[0], W.shape[1]))
+            J[:, :, drivers] = Jd
             offset = C - np.einsum("rmk,rk->rm", J, W)
             new = dr.solver.solve(b, dr.W, linearised=(offset, J))
             done = np.abs(new - W).max() < 1e-6

@@ -4,6 +4,8 @@
 - ``fit_scan_weights`` / ``driver_region`` / ``corrective_from_scan``: a corrective from a scan of a
   combination (Smith §6, future work 1): fit the rig's weights to the scan by bounded least squares, keep
   the residual over the drivers' region.
+- ``linearised_correctives``: the correctives' marker displacement and its Jacobian, for solvers that fit the
+  rig with its correctives (take solves, marker drags).
 - ``shape_overlap`` / ``shape_overshoot`` / ``rank_interference`` / ``interference_heat``: which shape
   pairs interfere and need a corrective, ranked by the overlap of their displacement fields or by how much
   their sum overshoots where both act.
@@ -110,6 +112,28 @@ def corrective_from_scan(scan, x_fit, region, activation: float) -> np.ndarray:
         raise RigInputError(f"The scan has {scan.shape[0]} vertices but the rig has {x_fit.shape[0]}.")
     rho = np.asarray(region, dtype=np.float64).reshape(-1, 1)
     return corrective_delta(x_fit + rho * (scan - x_fit), x_fit, activation)
+
+
+# --- fitting a rig with correctives --------------------------------------------------------------
+JACOBIAN_STEP = 1e-6   # forward-difference step of the activation rules' gradient
+
+
+def linearised_correctives(activate, Em, drivers, W) -> tuple[np.ndarray, np.ndarray]:
+    """The correctives' displacement of the markers and its derivative at weights W (R, K) (Smith 2006 §4.5:
+    C(w) = Σ_c a_c(w) e_c is nonlinear in w; a solver linearises it, C(w) ≈ C(W) + J (w − W)).
+
+    ``activate`` maps weights (U, K) to activations (U, C), ``Em`` (C, 3M) holds each corrective's marker
+    displacement and ``drivers`` (n,) the shapes the activations depend on. Returns C (R, 3M) and J (R, 3M, n),
+    J = Σ_c e_c ∂a_c/∂w_d by forward differences (one activation call for every row and driver).
+    """
+    W = np.atleast_2d(np.asarray(W, dtype=np.float64))
+    d = np.asarray(drivers, dtype=np.intp)
+    R, n = W.shape[0], d.size
+    probe = np.repeat(W[:, None, :], 1 + n, axis=1)                          # (R, 1+n, K)
+    probe[:, np.arange(1, n + 1), d] += JACOBIAN_STEP
+    a = np.asarray(activate(probe.reshape(R * (1 + n), -1))).reshape(R, 1 + n, -1)   # (R, 1+n, C)
+    grad = (a[:, 1:] - a[:, :1]) / JACOBIAN_STEP                              # (R, n, C)
+    return a[:, 0] @ Em, np.einsum("rnc,cm->rmn", grad, Em)
 
 
 # --- interference finder ------------------------------------------------------------------------

@@ -32,6 +32,7 @@ import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
 
+from .correctives import linearised_correctives
 from .rbf import KERNELS, RBFResidual, phantom_points
 from .rigid import to_matrix, umeyama
 from .weight_solve import WeightSolver
@@ -39,7 +40,6 @@ from .weight_solve import WeightSolver
 Progress = Optional[Callable[[int, int, str], None]]
 
 CORRECTIVE_STEPS = 6      # Gauss–Newton steps per weight solve on a rig with correctives (quadratic: 2–3 suffice)
-_JACOBIAN_STEP = 1e-6     # forward-difference step of the activation rules' gradient
 
 # Defaults chosen by measurement on the ICT Live Link take (see tests/benchmarks/test_bench_take_solve.py).
 DEFAULTS = dict(lam_sparsity=0.0, lam_temporal=1.0, iterations=3, two_pass=True, marker_smoothing=0.7,
@@ -547,7 +547,7 @@ class TakeSolver:
                  steps: int = 1) -> np.ndarray:
         """The frame's weights for head-stabilised marker displacements ``b`` (3M,): the linear QP (``_qp``), or
         with correctives ``steps`` Gauss–Newton steps on Aw + C(w) ≈ b: linearise C(w) = Σ_c a_c(w) e_c at the
-        current w (J = Σ_c e_c ∇a_cᵀ over the drivers, by forward differences of the activation rules) and
+        current w (J = Σ_c e_c ∇a_cᵀ over the drivers, ``solvers.correctives.linearised_correctives``) and
         solve the box QP of (A + J) w ≈ b − C(w₀) + J w₀, stopping early once a step moves less than 1e-7.
         Where no corrective acts or varies (its drivers at 0) a step is the linear QP with its cached factors."""
         if self._activate is None:
@@ -562,15 +562,12 @@ class TakeSolver:
         A = self.A[rows]
         w = np.minimum(np.maximum(w_start, self.lower), self.upper)
         for _ in range(steps):
-            probe = np.repeat(w[None], 1 + d.size, axis=0)
-            probe[np.arange(1, d.size + 1), d] += _JACOBIAN_STEP
-            a = self._activate(probe)                                        # (1 + n, C)
-            grad = (a[1:] - a[0]) / _JACOBIAN_STEP                           # (n, C): ∂a_c/∂w_d
-            if not a[0].any() and not grad.any():    # no corrective acts or varies here: the linear QP
+            C0, J = linearised_correctives(self._activate, self.Em, d, w)    # (1, 3M), (1, 3M, n)
+            if not C0.any() and not J.any():    # no corrective acts or varies here: the linear QP
                 step = self._qp(valid, b, w_prev, w)
             else:
-                Jd = (grad @ self.Em).T[rows]                                # (3M', n): ∂C/∂w_d
-                r = b[rows] - (a[0] @ self.Em)[rows] + Jd @ w[d]
+                Jd = J[0][rows]                                              # (3M', n): ∂C/∂w_d
+                r = b[rows] - C0[0][rows] + Jd @ w[d]
                 AtJ = A.T @ Jd                                               # (K, n)
                 H = linear.H.copy()                                          # (A + J)ᵀ(A + J) + λ terms
                 H[:, d] += AtJ
