@@ -49,11 +49,9 @@ def _write_trc(path, labels, points_mm):
     path.write_text("\n".join(lines) + "\n")
 
 
-def test_one_frame_trc_global_recovers_weights(ict_rig, ict_dir, tmp_path):
-    rig = ict_rig
-    truth_w = rig.weights_from_dict({"jawOpen": 0.6, "mouthSmile_L": 0.8, "browInnerUp_R": 0.5,
-                                     "eyeBlink_L": 0.9, "mouthPucker": 0.3, "cheekPuff_R": 0.4})
-    posed = rig.neutral + np.einsum("k,kvc->vc", truth_w, rig.deltas)
+def _write_keyframe(tmp_path, rig, posed) -> np.ndarray:
+    """A one-frame TRC (mm) of 50 markers spread over the face vertices the rig moves, at ``posed`` (cm), and
+    its marker map: key.trc and map.json in ``tmp_path``. Returns the moving face vertices."""
     face = np.arange(9409)
     moving = face[np.linalg.norm(rig.deltas[:, face], axis=2).max(axis=0) > 1e-4]
     markers = moving[np.linspace(0, moving.size - 1, 50).astype(int)]
@@ -61,6 +59,15 @@ def test_one_frame_trc_global_recovers_weights(ict_rig, ict_dir, tmp_path):
     _write_trc(tmp_path / "key.trc", labels, posed[markers] * 10.0)
     (tmp_path / "map.json").write_text(json.dumps({"rig_units": "cm", "take_units": "mm",
                                                    "markers": {l: int(v) for l, v in zip(labels, markers)}}))
+    return moving
+
+
+def test_one_frame_trc_global_recovers_weights(ict_rig, ict_dir, tmp_path):
+    rig = ict_rig
+    truth_w = rig.weights_from_dict({"jawOpen": 0.6, "mouthSmile_L": 0.8, "browInnerUp_R": 0.5,
+                                     "eyeBlink_L": 0.9, "mouthPucker": 0.3, "cheekPuff_R": 0.4})
+    posed = rig.neutral + np.einsum("k,kvc->vc", truth_w, rig.deltas)
+    moving = _write_keyframe(tmp_path, rig, posed)
     run_cli("solve", ict_dir, tmp_path / "key.trc", "--map", tmp_path / "map.json", "--global", "--residual", "none",
             "-o", tmp_path / "w.csv", "--cache", tmp_path / "d.pc2", "--report", tmp_path / "r.json")
     assert json.loads((tmp_path / "r.json").read_text())["head"] == "fixed"
@@ -107,13 +114,7 @@ def test_solve_a_project_with_a_corrective(ict_dir, tmp_path):
     rig = load_project(tmp_path / "fixed.bsproj").rig
     truth_w = rig.weights_from_dict({"browInnerUp_L": 0.8, "browInnerUp_R": 0.7, "jawOpen": 0.3})
     posed = PoseEvaluator(rig, dtype=np.float64).evaluate(truth_w)
-    face = np.arange(9409)
-    moving = face[np.linalg.norm(rig.deltas[:, face], axis=2).max(axis=0) > 1e-4]
-    markers = moving[np.linspace(0, moving.size - 1, 50).astype(int)]
-    labels = [f"K{i:02d}" for i in range(50)]
-    _write_trc(tmp_path / "key.trc", labels, posed[markers] * 10.0)
-    (tmp_path / "map.json").write_text(json.dumps({"rig_units": "cm", "take_units": "mm",
-                                                   "markers": {l: int(m) for l, m in zip(labels, markers)}}))
+    moving = _write_keyframe(tmp_path, rig, posed)
     out = run_cli("solve", tmp_path / "fixed.bsproj", tmp_path / "key.trc", "--map", tmp_path / "map.json",
                   "--global", "--residual", "none", "-o", tmp_path / "w.csv", "--cache", tmp_path / "d.pc2",
                   "--report", tmp_path / "r.json").stdout
