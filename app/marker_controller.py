@@ -50,7 +50,7 @@ class DragState:
     press_world: np.ndarray | None = None
     moved: bool = False
     W: np.ndarray | None = None    # (R+1, K) pose after the last move
-    correctives: tuple | None = None   # the rig's live correctives: (activate, marker rows (3M, C), drivers)
+    correctives: tuple | None = None   # the rig's live correctives: (activate, marker displacements (C, 3M), drivers)
 
 
 DRAG_CORRECTIVE_STEPS = 4   # Gauss–Newton solves a move at most, on a rig with correctives (~2 ms each on ICT)
@@ -350,7 +350,8 @@ class MarkerController(QtCore.QObject):
         start = self.marker_positions()
         gain = float(np.asarray(ms.S[index] @ self._gains).reshape(-1)[0])
         live = solver_correctives(rig)
-        correctives = None if live is None else (live[0], ms.delta_rows(live[1]), np.asarray(live[2], np.intp))
+        correctives = None if live is None else \
+            (live[0], np.ascontiguousarray(ms.delta_rows(live[1]).T), np.asarray(live[2], np.intp))
         self.drag = DragState(index=index, old=old, level=level, blend=blend, W0=W0, solver=solver,
                               neutral_at=ms.positions(rig.neutral), start=start, targets=start.copy(), gain=gain,
                               W=W0.copy(), correctives=correctives)
@@ -390,12 +391,11 @@ class MarkerController(QtCore.QObject):
         """The drag's weights when the surface also carries the correctives they fire (Smith §4.5): Gauss–Newton
         on each region's model A w + C(w) ≈ b, C the correctives' displacement of the markers with the
         region's weights, linearised at the latest weights (``RegionalSolver.solve(linearised=...)``)."""
-        activate, rows, drivers = dr.correctives          # rows (3M, C): each corrective's marker displacement
+        activate, Em, drivers = dr.correctives            # Em (C, 3M): each corrective's marker displacement
         W = dr.W
-        Em = np.ascontiguousarray(rows.T)
         for _ in range(DRAG_CORRECTIVE_STEPS):
             C, Jd = linearised_correctives(activate, Em, drivers, W)             # (R+1, 3M), (R+1, 3M, n)
-            J = np.zeros((W.shape[0], rows.shape[0], W.shape[1]))
+            J = np.zeros((W.shape[0], Em.shape[1], W.shape[1]))
             J[:, :, drivers] = Jd
             offset = C - np.einsum("rmk,rk->rm", J, W)
             new = dr.solver.solve(b, dr.W, linearised=(offset, J))

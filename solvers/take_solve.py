@@ -557,9 +557,9 @@ class TakeSolver:
             for _ in range(steps):
                 w = self._qp(valid, b - self.corrective_markers(w)[0], w_prev, w)
             return w
-        rows, _, linear = self._qp_entry(valid)
+        rows, At, linear = self._qp_entry(valid)
+        At = self.At if At is None else At                                   # (K, 3M'): Aᵀ of the present rows
         d = self._drivers
-        A = self.A[rows]
         w = np.minimum(np.maximum(w_start, self.lower), self.upper)
         for _ in range(steps):
             C0, J = linearised_correctives(self._activate, self.Em, d, w)    # (1, 3M), (1, 3M, n)
@@ -568,12 +568,12 @@ class TakeSolver:
             else:
                 Jd = J[0][rows]                                              # (3M', n): ∂C/∂w_d
                 r = b[rows] - C0[0][rows] + Jd @ w[d]
-                AtJ = A.T @ Jd                                               # (K, n)
+                AtJ = At @ Jd                                                # (K, n)
                 H = linear.H.copy()                                          # (A + J)ᵀ(A + J) + λ terms
                 H[:, d] += AtJ
                 H[d, :] += AtJ.T
                 H[np.ix_(d, d)] += Jd.T @ Jd
-                g = A.T @ r + self.lam_temporal * w_prev
+                g = At @ r + self.lam_temporal * w_prev
                 g[d] += Jd.T @ r
                 step = _CachedBoxQP(H, self.lower, self.upper, cache=False).solve(g, w.copy())
             done = np.abs(step - w).max() < 1e-7

@@ -98,7 +98,7 @@ def test_bench_one_drag_move_with_correctives(benchmark, ict_rig, ict_drag):
                             deltas=rig.deltas, solve_background=True)
     W = np.zeros((level.n_regions + 1, rig.n_shapes))
     W[:, rig.shape_index("jawOpen")] = 0.5
-    dr = SimpleNamespace(W=W, solver=solver, correctives=(activate, ms.delta_rows(E), np.asarray(drivers)))
+    dr = SimpleNamespace(W=W, solver=solver, correctives=(activate, ms.delta_rows(E).T, np.asarray(drivers)))
     targets = ms.positions(ict_rig.neutral + 0.5 * rig.deltas[rig.shape_index("jawOpen")])
     targets[1] += np.array([0.5, 0.4, 0.0])  # pull a mouth corner
     b = (targets - ms.positions(rig.neutral)).reshape(-1)
