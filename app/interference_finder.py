@@ -23,7 +23,7 @@ class InterferenceFinder:
     """Owned by the CorrectiveController; ``start_authoring(drivers, rule)`` enters sculpt mode on a pair."""
 
     def __init__(self, window, panel: CorrectivesPanel, start_authoring) -> None:
-        self.window, self.panel, self._start_authoring = window, panel, start_authoring
+        self.panel, self._start_authoring = panel, start_authoring
         self.document, self.viewport = window.document, window.viewport
         self._overlap: dict[str, np.ndarray] = {}  # (K, K) scores by measure, until the shapes change
         self._scored_deltas: np.ndarray | None = None   # the rig.deltas array the scores were computed from
