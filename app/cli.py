@@ -13,61 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
+from app import cli_pairs, cli_solve
+from app.cli_common import EXIT_INPUT, load_rig_arg, parse_size, pose_weights
 from model.errors import RigInputError
 
-EXIT_INPUT = 2
-
-
-def parse_weights(text: str | None) -> dict[str, float]:
-    """'jawOpen=1,mouthSmile_L=0.5' -> {'jawOpen': 1.0, 'mouthSmile_L': 0.5}."""
-    out: dict[str, float] = {}
-    if not text:
-        return out
-    for item in text.split(","):
-        item = item.strip()
-        if not item:
-            continue
-        name, sep, value = item.partition("=")
-        if not sep:
-            raise RigInputError(f"--weights: '{item}' is not NAME=VALUE.")
-        try:
-            v = float(value)
-        except ValueError:
-            raise RigInputError(f"--weights: the value of '{name}' is not a number: '{value}'.") from None
-        if not np.isfinite(v):
-            raise RigInputError(f"--weights: the value of '{name}' is not finite.")
-        out[name.strip()] = v
-    return out
-
-
-def parse_size(text: str) -> tuple[int, int]:
-    try:
-        w, h = (int(x) for x in text.split(","))
-    except ValueError:
-        raise RigInputError(f"--size: '{text}' is not W,H (two whole numbers).") from None
-    if not (16 <= w <= 8192 and 16 <= h <= 8192):
-        raise RigInputError(f"--size: {w}x{h} is outside 16..8192 pixels.")
-    return w, h
-
-
-def _load(args):
-    from model.readers import load_rig
-    return load_rig(args.rig, neutral=getattr(args, "neutral", None), units=getattr(args, "units", None))
-
-
-def _pose_weights(rig, args) -> np.ndarray:
-    named = {}
-    if getattr(args, "preset", None):
-        if args.preset not in rig.presets:
-            raise RigInputError(f"--preset: the rig has no preset '{args.preset}' "
-                                f"(it has: {', '.join(sorted(rig.presets)) or 'none'}).")
-        named.update(rig.presets[args.preset])
-    named.update(parse_weights(getattr(args, "weights", None)))
-    return rig.weights_from_dict(named)
-
-
 def cmd_info(args) -> int:
-    rig = _load(args)
+    rig = load_rig_arg(args)
     moving = int((np.abs(rig.deltas).max(axis=(0, 2)) > 0).sum()) if rig.n_shapes else 0
     info = {
         "path": str(args.rig),
@@ -101,8 +52,8 @@ def cmd_render(args) -> int:
     from widgets.scene import use_offscreen_backend_if_headless
     use_offscreen_backend_if_headless()
     from app.views import build_view
-    rig = _load(args)
-    weights = _pose_weights(rig, args)
+    rig = load_rig_arg(args)
+    weights = pose_weights(rig, args)
     size = parse_size(args.size)
     view = build_view(rig, weights, args.view, threshold=args.threshold, level=args.level)
     from widgets.scene import render_png
@@ -116,8 +67,8 @@ def cmd_render(args) -> int:
 def cmd_export(args) -> int:
     from model.obj_io import write_obj
     from model.pose import PoseEvaluator
-    rig = _load(args)
-    weights = _pose_weights(rig, args)
+    rig = load_rig_arg(args)
+    weights = pose_weights(rig, args)
     points = PoseEvaluator(rig, dtype=np.float64).evaluate(weights)
     header = f"Blendshape Studio export of {rig.name}\nweights: " + json.dumps(rig.weights_to_dict(weights))
     write_obj(args.output, points, rig.face_counts, rig.face_indices, header=header)
@@ -128,7 +79,7 @@ def cmd_export(args) -> int:
 def cmd_segment(args) -> int:
     from model.atomic import atomic_write
     from model.segmentation import SegmentationSettings, segment_rig, segmentation_to_json
-    rig = _load(args)
+    rig = load_rig_arg(args)
     settings = SegmentationSettings(t=args.threshold, levels=args.levels, map_kind=args.map,
                                     min_region_size=args.min_size, overlap_rings=args.overlap, method=args.method)
     seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, settings)
@@ -147,7 +98,7 @@ def cmd_corrective(args) -> int:
     from model.project import Project, load_project, save_project
     from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
     path = Path(args.rig)
-    project = load_project(path) if path.suffix.lower() == ".bsproj" else Project(rig=_load(args))
+    project = load_project(path) if path.suffix.lower() == ".bsproj" else Project(rig=load_rig_arg(args))
     rig = project.rig
     drivers = [d.strip() for d in args.drivers.split(",") if d.strip()]
     if len(drivers) < 2:
@@ -252,7 +203,6 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
     sp.set_defaults(func=cmd_corrective)
 
-    from app import cli_pairs, cli_solve
     cli_solve.add_parser(sub, rig_arg)
     cli_pairs.add_parser(sub, rig_arg)
 

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 
+from app.cli_common import load_rig_arg
 from model.interference import (MEASURES, hot_area, pair_heat, pair_scores, ranked_pairs, rig_vertex_areas,
                                 row_correctives)
 
@@ -27,10 +28,9 @@ def add_parser(sub, rig_arg) -> None:
 
 
 def cmd_pairs(args) -> int:
-    from app.cli import _load
     from model.errors import RigInputError
 
-    rig = _load(args)
+    rig = load_rig_arg(args)
     if args.top < 1:
         raise RigInputError(f"--top: {args.top} rows is fewer than one.")
     if rig.n_shapes < 2:

@@ -9,6 +9,7 @@ import json
 
 import numpy as np
 
+from app.cli_common import load_rig_arg
 from model.errors import RigInputError
 
 
@@ -35,14 +36,13 @@ def add_parser(sub, rig_arg) -> None:
 
 
 def cmd_solve(args) -> int:
-    from app.cli import _load
     from model.marker_map import auto_marker_map, load_marker_map
     from model.pc2 import write_pc2
     from model.takes import MarkerTake, load_take
     from model.weights_csv import write_weights_csv
     from solvers.take_solve import DEFAULTS, solve_take
 
-    rig = _load(args)
+    rig = load_rig_arg(args)
     if args.rig_units:
         rig.units = args.rig_units
     take = load_take(args.take)

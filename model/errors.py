@@ -1,5 +1,7 @@
-"""Errors the readers and the model raise: one clear sentence naming the file and the problem."""
+"""Errors the readers and the model raise: one clear sentence naming the file and the problem.
 
+The type itself is defined in ``solvers.errors`` (solvers import nothing from model); this is its name for
+model/ and app/."""
+from solvers.errors import RigInputError
 
-class RigInputError(ValueError):
-    """Bad input: the message is one sentence a user can act on (file and problem)."""
+__all__ = ["RigInputError"]

@@ -16,7 +16,7 @@ import numpy as np
 from scipy.optimize import lsq_linear
 from scipy.spatial.distance import pdist, squareform
 
-from model.errors import RigInputError
+from .errors import RigInputError
 
 
 def _points(a, what: str) -> np.ndarray:

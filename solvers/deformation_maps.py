@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from model.errors import RigInputError
+from .errors import RigInputError
 
 MAP_KINDS = ("laplacian", "displacement")
 

@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from model.errors import RigInputError
+from .errors import RigInputError
 
 
 def level_targets(n_regions: int, levels: int | None = None) -> list[int]:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from model.errors import RigInputError
+from .errors import RigInputError
 
 
 def polygon_edges(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
@@ -142,13 +142,6 @@ def mesh_laplacian(vertices: np.ndarray, face_counts: np.ndarray, face_indices: 
         A = adjacency if adjacency is not None else mesh_adjacency(n, face_counts, face_indices)
         return uniform_laplacian(A)
     if kind == "cotangent":
-        from model.rig import fan_triangulate
+        from .mesh import fan_triangulate
         return cotangent_laplacian(vertices, fan_triangulate(face_counts, face_indices))
     raise RigInputError(f"Unknown Laplacian '{kind}': use 'uniform' or 'cotangent'.")
-
-
-def directed_edges(adjacency: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
-    """(rows, cols) of every stored entry of a CSR adjacency, each undirected edge both ways (ALGORITHMS.md §3)."""
-    A = sp.csr_matrix(adjacency)
-    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-    return rows, A.indices.astype(np.int64)

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from model.rig import fan_triangulate
+from .mesh import fan_triangulate
 
 NORMAL_SCALE = 127.0  # int8 quantisation of unit normals: 3 bytes a vertex, about half a degree of error
 

@@ -5,7 +5,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from model.errors import RigInputError
+from .errors import RigInputError
 
 
 def grow_regions(values: np.ndarray, adjacency: sp.spmatrix, ratio: float = 0.75,

@@ -3,8 +3,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from model.errors import RigInputError
-from model.rig import fan_triangulate
+from .errors import RigInputError
+from .mesh import fan_triangulate
 
 from .normals import vertex_normals
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from model.errors import RigInputError
+from .errors import RigInputError
 
 from .weight_solve import WeightSolver
 

@@ -72,17 +72,3 @@ def to_matrix(s, R, t) -> np.ndarray:
     M[:, :3, 3] = tb
     M[:, 3, 3] = 1.0
     return M[0] if single else M
-
-
-def apply(M: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Apply a 4×4 transform to (N, 3) points (or (F, 4, 4) to (F, N, 3))."""
-    M = np.asarray(M)
-    P = np.asarray(points, dtype=np.float64)
-    if M.ndim == 2:
-        return P @ M[:3, :3].T + M[:3, 3]
-    return np.einsum("fij,fnj->fni", M[:, :3, :3], P) + M[:, None, :3, 3]
-
-
-def invert(M: np.ndarray) -> np.ndarray:
-    """Inverse of a similarity transform (4×4 or (F, 4, 4))."""
-    return np.linalg.inv(M)

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from model.errors import RigInputError
+from .errors import RigInputError
 
 from .normals import vertex_normals
 from .symmetry import REFLECT_X as _R

@@ -11,7 +11,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse import csgraph
 
-from model.errors import RigInputError
+from .errors import RigInputError
 
 BACKGROUND = -1
 
@@ -209,30 +209,6 @@ def threshold_labels(values: np.ndarray, adjacency: sp.spmatrix, t: float, *,
 
 
 # --- overlap and blending -----------------------------------------------------------------------------
-
-def ring_distances(core: np.ndarray, adjacency: sp.spmatrix, rings: int,
-                   n_vertices: int | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices at graph distance 1..rings from ``core`` and their distances: the overlap rings of
-    Joshi et al. 2003, §2 (ALGORITHMS.md §3), by breadth-first search."""
-    A = sp.csr_matrix(adjacency)
-    n = A.shape[0] if n_vertices is None else n_vertices
-    seen = np.zeros(n, dtype=bool)
-    seen[core] = True
-    frontier = np.asarray(core, dtype=np.int64)
-    out_v, out_d = [], []
-    for d in range(1, rings + 1):
-        if frontier.size == 0:
-            break
-        nb = A[frontier].indices
-        nb = np.unique(nb[~seen[nb]])
-        seen[nb] = True
-        out_v.append(nb)
-        out_d.append(np.full(nb.size, d, dtype=np.int64))
-        frontier = nb
-    if not out_v:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    return np.concatenate(out_v), np.concatenate(out_d)
-
 
 def region_cores(labels: np.ndarray) -> list[np.ndarray]:
     """Sorted core vertex indices of each region 0..R-1 of a label array (ALGORITHMS.md §3)."""

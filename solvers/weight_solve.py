@@ -36,7 +36,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.linalg.lapack import dposv as _dposv
 
-from model.errors import RigInputError
+from .errors import RigInputError
 
 MODES = ("box", "convex")
 

@@ -83,9 +83,6 @@ class MarkersPanel(QtWidgets.QWidget):
         data = self.level.currentData()
         return None if data is None else int(data)
 
-    def set_level(self, level: int) -> None:
-        self.level.setCurrentIndex(level)
-
     def _level_changed(self, _i: int) -> None:
         if not self._updating and self.current_level() is not None:
             self.level_changed.emit(self.current_level())

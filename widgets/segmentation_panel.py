@@ -207,9 +207,6 @@ class SegmentationPanel(QtWidgets.QWidget):
     def set_status(self, text: str) -> None:
         self.status.setText(text)
 
-    def current_view(self) -> str:
-        return self.view.currentData()
-
     def set_view(self, view: str) -> None:
         self.view.setCurrentIndex(max(0, self.view.findData(view)))
 
