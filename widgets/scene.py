@@ -213,7 +213,7 @@ def focus_vertices(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
         moving = np.abs(deltas).max(axis=(0, 2)) > 1e-6 * max(1.0, np.abs(neutral).max())
         if moving.sum() >= 3:
             pts = neutral[moving]
-            # Drop interior parts (teeth, tongue, eyeballs move too but sit inside the face box).
+            # Interior parts that move (teeth, tongue, eyeballs) are kept: they lie inside the face's box.
             return pts
     return neutral
 
