@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from app import cli_pairs, cli_solve
-from app.cli_common import EXIT_INPUT, load_rig_arg, parse_size, pose_weights
+from app.cli_common import EXIT_INPUT, EXIT_UNEXPECTED, load_rig_arg, parse_size, pose_weights
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -236,6 +236,10 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:   # the reader went away (`blendshape-studio pairs RIG | head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except Exception as exc:  # a bug or an input no check foresaw: one sentence, the traceback in a crash log
+        from app.crash import describe_unexpected
+        print(f"error: {describe_unexpected(exc, f'{args.command!r}')}", file=sys.stderr)
+        return EXIT_UNEXPECTED
 
 
 _COMMANDS = {"info", "render", "export", "sample", "segment", "solve", "corrective", "pairs"}
