@@ -5,6 +5,7 @@ import json
 from pathlib import Path
 
 from .errors import RigInputError
+from .input_files import regular_file
 
 MAX_JSON_BYTES = 256 << 20   # far above any manifest, map or preset file; a larger one is refused unread
 
@@ -28,11 +29,7 @@ def parse_json_text(text: str, where: str):
 
 def read_json_file(path: str | Path):
     """The parsed content of a JSON file; a missing, special, huge, empty or invalid file raises RigInputError."""
-    path = Path(path)
-    if not path.exists():
-        raise RigInputError(f"{path}: does not exist.")
-    if not path.is_file():
-        raise RigInputError(f"{path}: is not a regular file.")
+    path = regular_file(path)
     size = path.stat().st_size
     if size > MAX_JSON_BYTES:
         raise RigInputError(f"{path}: is {size / 2**20:.0f} MB, too large for a JSON file of this application.")

@@ -215,13 +215,13 @@ _BOMB: list[bytes] = []
 
 
 def _bomb() -> bytes:
-    """An .npy member that deflates 256 MiB of zeros behind a header declaring 3 GiB."""
+    """An .npy member that deflates 64 MiB of zeros behind a header declaring 3 GiB."""
     if not _BOMB:
         header = np.lib.format.header_data_from_array_1_0(np.zeros((1, 3)))
         header["shape"] = (134_217_728, 3)
         buf = io.BytesIO()
         np.lib.format.write_array_header_1_0(buf, header)
-        _BOMB.append(buf.getvalue() + bytes(256 << 20))
+        _BOMB.append(buf.getvalue() + bytes(64 << 20))
     return _BOMB[0]
 
 
