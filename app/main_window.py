@@ -179,7 +179,8 @@ class MainWindow(QtWidgets.QMainWindow):
         act("edit", "&Mirror Pose", self.mirror_pose, "Ctrl+M",
             "Swap the weights of left and right shapes (_L↔_R): the pose of the other side")
 
-        act("view", "&Wireframe", self.viewport.set_wireframe, "W", "Draw polygon edges over the surface", checkable=True)
+        act("view", "&Wireframe", self.viewport.set_wireframe, "W", "Draw polygon edges over the surface",
+            checkable=True)
         self.add_separator("view")
         for i, (name, label) in enumerate([("front", "&Front"), ("left", "&Left Side"),
                                            ("right", "&Right Side"), ("three-quarter", "&Three-Quarter")]):
@@ -194,11 +195,11 @@ class MainWindow(QtWidgets.QMainWindow):
         self._rebuild_recent_menu()
 
     def _arrange_docks(self) -> None:
-        """Left: Segmentation, Markers, Correctives as tabs. Right: Shapes, History, Mocap. Bottom: the
+        """Left: Segmentation, Correctives, Markers as tabs. Right: Shapes, History, Mocap. Bottom: the
         timeline with the mocap views above it when they are shown."""
         self.tabifyDockWidget(self.shapes_dock, self.history_dock)
+        self.tabifyDockWidget(self.segmentation_dock, self.correctives.dock)
         self.tabifyDockWidget(self.segmentation_dock, self.markers.dock)
-        self.tabifyDockWidget(self.markers.dock, self.correctives.dock)
         self.tabifyDockWidget(self.history_dock, self.mocap.dock)
         self.splitDockWidget(self.mocap.views_dock, self.keyframes.dock, QtCore.Qt.Vertical)
         self.segmentation_dock.raise_()

@@ -49,10 +49,6 @@ class SculptTool(ViewportTool):
         self._hide_cursor()
         self.set_brush_actions(False)
 
-    @property
-    def enabled(self) -> bool:
-        return self.viewport.has_tool(self)
-
     def set_brush_actions(self, on: bool) -> None:
         for act in self.brush_actions:
             act.setEnabled(on)

@@ -73,7 +73,3 @@ class MarkerOverlay:
     def n_markers(self) -> int:
         m = self._meshes.get("markers")
         return 0 if m is None else m.n_points
-
-    def target_points(self) -> np.ndarray | None:
-        m = self._meshes.get("targets")
-        return None if m is None else np.asarray(m.points)
