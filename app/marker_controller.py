@@ -188,6 +188,8 @@ class MarkerController(QtCore.QObject):
             self.viewport.push_tool(self.tool)
         else:
             self.viewport.remove_tool(self.tool)
+            if self.drag is not None:   # leaving marker mode mid-drag (M with the button held) ends the drag
+                self.end_drag()
         if self.mode:
             self.message("Marker mode: click the face to add a marker, drag a marker to pose, right-click removes.")
         self.refresh_overlay(render=True)
