@@ -217,7 +217,7 @@ class MocapController(QtCore.QObject):
         s = dict(self.panel.settings())
         mode, level = s.pop("mode"), s.pop("level")
         if mode == "region":
-            seg = getattr(getattr(self.window, "segmentation", None), "segmentation", None)
+            seg = self.window.segmentation.segmentation
             if seg is None:
                 raise RigInputError("A per-region solve needs a segmentation: segment the rig first.")
             if level >= len(seg.levels):
@@ -618,19 +618,16 @@ class MocapController(QtCore.QObject):
 
 
 def install(window) -> MocapController:
-    """Add the Mocap panel (right) and the Mocap Views dock (bottom) to a MainWindow; returns the controller,
-    also kept as ``window.mocap``."""
-    existing = getattr(window, "mocap", None)
-    if isinstance(existing, MocapController):  # the main window installs it; installing twice returns the same one
-        return existing
+    """Plug the Mocap panel (right), the Mocap Views dock (bottom) and the take actions of the Animation menu
+    into ``window`` (a MainWindow, through its public interface); the window calls it once and keeps the
+    controller as ``window.mocap``."""
     panel = MocapPanel(window)
-    window.mocap_panel = panel
     # the solve's mode, residual kernel and calibration length come back in the next session (the λs and the
     # kernel length stay at their measured defaults: they depend on the rig's units and the take)
     for widget, key in ((panel.mode_combo, "mocap/mode"), (panel.residual_combo, "mocap/residual"),
                         (panel.calibration_spin, "mocap/calibrationFrames")):
         app_settings.remember(widget, key)
-    window.mocap_dock = window._add_dock("Mocap", panel, QtCore.Qt.RightDockWidgetArea, scroll=True)
+    dock = window.add_dock("Mocap", panel, QtCore.Qt.RightDockWidgetArea, scroll=True)
     views = SideBySideView()
     weight_plot, error_plot = CurvePlot("weights"), CurvePlot("marker error RMS (mm)")
     # The two faces beside each other, the curves stacked on their right: a face is framed by the views' height,
@@ -649,25 +646,20 @@ def install(window) -> MocapController:
     holder.setStretchFactor(1, 1)
     holder.setCollapsible(0, False)
     holder.setCollapsible(1, False)
-    window.mocap_views_dock = window._add_dock("Mocap Views", holder, QtCore.Qt.BottomDockWidgetArea)
-    window.mocap_views_dock.hide()  # shown after the first solve
-    window.panels_menu.addAction(window.mocap_dock.toggleViewAction())
-    window.panels_menu.addAction(window.mocap_views_dock.toggleViewAction())
+    views_dock = window.add_dock("Mocap Views", holder, QtCore.Qt.BottomDockWidgetArea)
+    views_dock.hide()  # shown after the first solve
     controller = MocapController(window, panel, views, weight_plot, error_plot, window)
-    controller.views_dock = window.mocap_views_dock
-    window.mocap = controller
+    controller.dock, controller.views_dock = dock, views_dock
     _add_take_actions(window, controller)
     return controller
 
 
 def _add_take_actions(window, controller: MocapController) -> None:
     """Animation menu: play / pause and step the take from the keyboard (Space plays the keyed animation)."""
-    menus = {a.text().replace("&", ""): a.menu() for a in window.menuBar().actions()}
-    menu = menus.get("Animation") or window.menuBar().addMenu("&Animation")
-    menu.addSeparator()
+    window.add_separator("animation")
     for text, slot, key, tip in (
             ("Play / Pause &Take", controller.toggle_play, "Ctrl+Space", "Play or pause the loaded take"),
             ("Previous Take Frame", lambda: controller.step(-1), "Alt+,", "Step the take one frame back"),
             ("Next Take Frame", lambda: controller.step(1), "Alt+.", "Step the take one frame on")):
-        window.addAction(window._action(menu, text, lambda _=False, f=slot: f(), key, tip))
+        window.add_action("animation", text, lambda _=False, f=slot: f(), key, tip)
     controller.panel.play_button.setToolTip("Play or pause the take (Ctrl+Space); Alt+, and Alt+. step a frame")

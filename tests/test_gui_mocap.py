@@ -12,9 +12,8 @@ from tests.image_compare import assert_matches_reference
 
 
 def _install(qtbot, tmp_path, size=(1400, 1000)):
-    from app.mocap_controller import install
     w = make_window(qtbot, tmp_path, size=size)
-    return w, install(w)
+    return w, w.mocap
 
 
 def _not_background(img: np.ndarray) -> float:
@@ -38,13 +37,13 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
 
     assert mc.load_take(take_dir / "take.c3d")
     assert mc.load_map(take_dir / "marker_map.json")
-    assert "60 markers" in w.mocap_panel.map_label.text()
+    assert "60 markers" in mc.panel.map_label.text()
     with qtbot.waitSignal(mc.solved, timeout=120000):
         mc.solve()
     sol = mc.solution
     assert sol.n_frames == 358 and sol.weights.shape == (358, rig.n_shapes)
     assert mc.views.has_residual_bar()
-    assert w.mocap_views_dock.isVisible()
+    assert mc.views_dock.isVisible()
     # with every panel and the Mocap Views open the window still fits its 1400x900 default (a 1080p screen);
     # the faces and the curves share the dock's width
     assert w.minimumSizeHint().height() <= 900
@@ -60,9 +59,9 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     # scrub: both views and the markers move; residual colours change; cursors follow
     shots = {}
     for f in (0, 120, 240):
-        w.mocap_panel.slider.setValue(f)
+        mc.panel.slider.setValue(f)
         QtWidgets.QApplication.processEvents()
-        assert mc.frame == f and w.mocap_panel.frame_label.text().startswith(f"frame {f + 1}/358")
+        assert mc.frame == f and mc.panel.frame_label.text().startswith(f"frame {f + 1}/358")
         assert mc.weight_plot.cursor == f and mc.error_plot.cursor == f
         shots[f] = (np.array(mc.views.left_mesh.points), np.array(mc.views.right_mesh.points),
                     np.array(mc.views.right_mesh.point_data["values"]), np.array(mc.views.marker_cloud.points))
@@ -72,7 +71,7 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     # the keyboard: Alt+. / Alt+, step the take, Ctrl+Space plays and pauses it
     acts = {a.text(): a for a in w.actions()}
     acts["Next Take Frame"].trigger()
-    assert mc.frame == 241 and w.mocap_panel.slider.value() == 241
+    assert mc.frame == 241 and mc.panel.slider.value() == 241
     acts["Previous Take Frame"].trigger()
     acts["Previous Take Frame"].trigger()
     assert mc.frame == 239
@@ -127,7 +126,7 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     # a Live Link Face take plays on ICT in the main viewport, without undo steps
     undo_before = w.document.undo_stack.count()
     assert mc.load_take(llf_csv)
-    assert mc.take.unmapped == ["TongueOut"] and "TongueOut" in w.mocap_panel.take_label.text()
+    assert mc.take.unmapped == ["TongueOut"] and "TongueOut" in mc.panel.take_label.text()
     _check_weight_playback(qtbot, w, mc)
     assert w.document.undo_stack.count() == undo_before
 
@@ -164,8 +163,8 @@ def test_live_link_face_plays_on_sample_rig(qtbot, tmp_path, llf_csv):
     assert mc.load_take(llf_csv)
     take = mc.take
     assert take.names == rig.shape_names and take.n_frames == 328
-    assert take.unmapped and all(c in w.mocap_panel.take_label.text() for c in take.unmapped)
-    assert not w.mocap_panel.solve_button.isEnabled()
+    assert take.unmapped and all(c in mc.panel.take_label.text() for c in take.unmapped)
+    assert not mc.panel.solve_button.isEnabled()
     _check_weight_playback(qtbot, w, mc)
     assert w.document.undo_stack.count() == 0
     assert mc.export_pc2(tmp_path / "llf.pc2")

@@ -42,17 +42,16 @@ def test_bench_one_drag_solve(benchmark, ict_rig, ict_drag):
 
 def test_bench_drag_to_redraw_step(benchmark, qtbot, tmp_path, ict_rig, ict_drag):
     """Solve + regional evaluation + viewport point update + render, through the window's marker controller."""
-    from app.marker_controller import install
     from model.project import Project
     from tests.gui_helpers import make_window
     seg, level, ms = ict_drag
     w = make_window(qtbot, tmp_path)
-    c = install(w)
+    c = w.markers
     qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
     w.document.set_project(Project(rig=ict_rig.copy()), None)
     qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=120000)
     w.segmentation.runner.wait() if hasattr(w.segmentation.runner, "wait") else None
-    qtbot.waitUntil(lambda: w.markers_panel.level.count() > 1, timeout=120000)
+    qtbot.waitUntil(lambda: c.panel.level.count() > 1, timeout=120000)
     for m in ms.markers:
         assert c.add_marker_at(m.vertex, name=m.name)
     c.begin_drag(1)
