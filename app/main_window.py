@@ -11,6 +11,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 from app import corrective_controller, mocap_controller
 from app import settings as app_settings
+from app.autosave import AutosaveController
 from app.commands import SetWeightsCommand
 from app.document import Document
 from app.keyframe_controller import KeyframeController
@@ -75,6 +76,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.keyframes = KeyframeController(self)
         self.correctives = corrective_controller.install(self)
         self.mocap = mocap_controller.install(self)
+        self.autosave = AutosaveController(self)
         self._arrange_docks()
         self._restore_layout()
 
@@ -603,6 +605,7 @@ class MainWindow(QtWidgets.QMainWindow):
         s.setValue("window/geometry", self.saveGeometry())
         s.setValue("window/state", self.saveState())
         self.shutdown_background()
+        self.autosave.shutdown(clean_quit=True)
         self.viewport.close_viewport()
         super().closeEvent(event)
 
