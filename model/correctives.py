@@ -316,35 +316,70 @@ def authoring_surface(rig, drivers, weights=None, evaluator=None) -> tuple[np.nd
     """The current surface ``x_cur`` (V, 3) float64 for authoring a corrective on ``drivers``, and its pose.
 
     The drivers are set to ``weights`` (default 1) and every other shape to 0; every corrective already
-    on the rig except the one for this exact driver set is applied. Correctives of the same or higher
-    order on other driver sets contain a driver at 0 and so add exactly 0, which leaves every
+    on the rig except the one for this exact driver set is applied, muted or not. Correctives of the same or
+    higher order on other driver sets contain a driver at 0 and so add exactly 0, which leaves every
     lower-order corrective applied, as Smith's authoring step requires: ``e_c = (x_des − x_cur) / a_c(w)``.
 
-    With ``evaluator`` (a ``model.pose.PoseEvaluator`` of this rig, float64 for exact authoring) the pose
-    is evaluated by it and the existing corrective of this driver set, if any, is subtracted. Without
-    one, the same equation ``b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c`` is summed over the few non-zero terms
-    directly (no evaluator build, which costs about 0.3 s on ICT FaceKit). Returns (x_cur, w).
+    ``evaluator``: the rig's float64 ``model.pose.PoseEvaluator`` (the document keeps one); built here if not
+    given (about 0.3 s on ICT FaceKit). Returns (x_cur, w).
     """
     drivers = list(drivers)
     if len(drivers) < 2:
         raise RigInputError(f"A corrective needs two or more driver shapes, got {len(drivers)}.")
     w = driver_pose(rig, drivers, weights)
-    key = frozenset(drivers)
-    correctives = list(rig.correctives)
-    a = corrective_activations(correctives, rig.shape_names, w) if correctives else np.zeros(0)
-    own = [i for i, c in enumerate(correctives) if frozenset(c.drivers) == key]
-    if evaluator is not None:
-        x_cur = np.array(evaluator.evaluate(w), dtype=np.float64)
-        for i in own:
-            x_cur -= a[i] * correctives[i].delta
-        return x_cur, w
-    x_cur = rig.neutral.copy()
-    for k in np.flatnonzero(w):
-        x_cur += w[k] * rig.deltas[k]
-    for i in np.flatnonzero(a):
-        if i not in own:
-            x_cur += a[i] * correctives[i].delta
-    return x_cur, w
+    return _pose_without(rig, drivers, w, evaluator), w
+
+
+def _pose_without(rig, drivers, w, evaluator=None) -> np.ndarray:
+    """(V, 3) float64 pose ``w`` of ``rig`` with every corrective, muted or not, except the one on ``drivers``."""
+    from .pose import PoseEvaluator
+    if evaluator is None or evaluator.dtype != np.float64:
+        evaluator = PoseEvaluator(rig, dtype=np.float64)
+    own = find_corrective(rig.correctives, drivers)
+    return np.asarray(evaluator.evaluate(w, exclude=[own.name] if own is not None else (), include_muted=True),
+                      dtype=np.float64)
+
+
+SCAN_MIN_ACTIVATION = 1e-3   # a fitted scan whose corrective fires less than this does not show the combination
+
+
+def corrective_from_scan(rig, drivers, scan, rule: str = "product", *, fit: bool = False, name: str = "",
+                         source: str = "the scan", evaluator=None) -> tuple[Corrective, np.ndarray]:
+    """The corrective of ``drivers`` made from a scan (V, 3) in the rig's vertex order (Smith §5.6; future work 1),
+    and the pose it was made at: what the GUI's "From scan…" and the ``corrective`` command both do.
+
+    ``fit`` False: the scan is the drivers at 1, ``e = (scan − x_cur) / a`` (``authoring_surface``). ``fit``
+    True: the scan is a free performance: fit all weights (bounded least squares), keep the residual over the
+    drivers' region (``solvers.correctives.corrective_from_scan``). ``source`` names the scan in messages.
+    Raises RigInputError (one sentence) for bad drivers or rule, a scan of another vertex count or with NaN,
+    and a fitted scan in which the combination does not fire.
+    """
+    from solvers.correctives import corrective_delta, driver_region, fit_scan_weights
+    from solvers.correctives import corrective_from_scan as residual_corrective
+    drivers = [str(d).strip() for d in drivers if str(d).strip()]
+    if len(drivers) < 2:
+        raise RigInputError(f"A corrective needs two or more driver shapes, got {len(drivers)}.")
+    idx = [rig.shape_index(d) for d in drivers]
+    if rule not in RULES:
+        raise RigInputError(f"'{rule}' is an unknown rule for a corrective; use one of {', '.join(RULES)}.")
+    scan = np.asarray(scan, dtype=np.float64)
+    if scan.ndim != 2 or scan.shape != rig.neutral.shape:
+        raise RigInputError(f"{source} has {scan.shape[0] if scan.ndim else 0} vertices but the rig has "
+                            f"{rig.n_vertices}; a scan must have the rig's vertices in the same order.")
+    if not np.isfinite(scan).all():
+        raise RigInputError(f"{source} has NaN or infinite coordinates.")
+    if fit:
+        w = fit_scan_weights(rig.neutral, rig.deltas, scan)
+        a = activation_for(drivers, rule, rig.shape_names, w)
+        if a < SCAN_MIN_ACTIVATION:
+            raise RigInputError(f"{source} does not show {' + '.join(drivers)}: the fitted weights leave the "
+                                f"corrective's activation at {a:.2g}.")
+        x_fit = _pose_without(rig, drivers, w, evaluator)
+        delta = residual_corrective(scan, x_fit, driver_region(rig.deltas[idx]), a)
+    else:
+        x_cur, w = authoring_surface(rig, drivers, evaluator=evaluator)
+        delta = corrective_delta(scan, x_cur, activation_for(drivers, rule, rig.shape_names, w))
+    return Corrective(name=name, drivers=drivers, rule=rule, delta=delta), w
 
 
 def activation_for(drivers, rule: str, shape_names, weights) -> float:
