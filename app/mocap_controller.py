@@ -221,6 +221,7 @@ class MocapController(QtCore.QObject):
         self._stop_fill()
         self._cancel = cancel = threading.Event()
         relay, version = self._relay, self.document.rig_version
+        take, marker_map = ws.take, ws.marker_map
 
         def job():
             try:
@@ -228,7 +229,7 @@ class MocapController(QtCore.QObject):
                                         progress=lambda d, t, w: relay.progress.emit(d, t, w))
             except SolveCancelled:
                 return None
-            return sol, settings, version
+            return sol, settings, (version, take, marker_map)
 
         dlg = QtWidgets.QProgressDialog("Solving the take…", "Cancel", 0, ws.take.n_frames, self.window)
         dlg.setWindowTitle("Solving")
@@ -266,10 +267,11 @@ class MocapController(QtCore.QObject):
             self.panel.set_status("Solve cancelled; nothing changed.")
             self.solve_failed.emit("cancelled")
             return
-        solution, settings, version = result
-        if version != self.document.rig_version:  # the rig changed while solving
-            self.panel.set_status("The rig changed during the solve; solve again.")
-            self.solve_failed.emit("rig changed")
+        solution, settings, (version, take, marker_map) = result
+        ws = self.workspace
+        if version != self.document.rig_version or ws.take is not take or ws.marker_map is not marker_map:
+            self.panel.set_status("The rig, the take or the map changed during the solve; solve again.")
+            self.solve_failed.emit("changed")
             return
         self._drop_solution()
         self.workspace.accept(solution, settings)
