@@ -119,6 +119,7 @@ def solve_report(rig: Rig, take: MarkerTake, solution: TakeSolution, settings: d
     def clean(a) -> list:
         return [None if not np.isfinite(x) else float(x) for x in np.ravel(a)]
     labels = list(sol.labels or [])
+    used = set(labels)
     return {
         "rig": rig.name, "take": str(take_path) if take_path else take.source,
         "marker_map": map_source or "automatic",
@@ -132,7 +133,7 @@ def solve_report(rig: Rig, take: MarkerTake, solution: TakeSolution, settings: d
         "marker_rmse_per_marker": dict(zip(labels, clean(per_marker))),
         "worst_marker": labels[int(np.nanargmax(per_marker))] if np.isfinite(per_marker).any() else None,
         "missing_samples": {lab: int(np.isnan(d[:, i]).sum()) for i, lab in enumerate(labels)},
-        "markers_left_out": [lab for lab in take.labels if lab not in set(labels)],
+        "markers_left_out": [lab for lab in take.labels if lab not in used],
         "neutral_frames": [0, min(calibration, take.n_frames) - 1] if calibration > 0 else None,
         "mode": "regional" if settings.get("mode") == "region" else "global",
         "level": int(settings["level"]) if settings.get("mode") == "region" else None,
