@@ -19,29 +19,13 @@ from app.commands import SetEditOffsetCommand, SetWeightsCommand
 from app.corrective_commands import SetCorrectivesCommand
 from app.interference_finder import InterferenceFinder
 from app.sculpt_tool import SculptTool
-from model.correctives import (Corrective, activation_for, authoring_surface, corrective_activation,
-                               corrective_activations, driver_pose, find_corrective, mirrored_corrective,
-                               symmetrized_corrective, validate_correctives)
+from model.correctives import (Corrective, activation_for, corrective_activation, corrective_activations, find_corrective,
+                               mirrored_corrective, symmetrized_corrective, validate_correctives)
+from model.corrective_authoring import authoring_surface, corrective_from_scan, driver_pose
 from model.errors import RigInputError
 from model.sides import mirror_drivers
-from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
+from solvers.correctives import corrective_delta
 from widgets.correctives_panel import CORRECTIVES_TAB, INTERFERENCE_TAB, CorrectivesPanel
-
-
-def pose_surface64(rig, weights, skip_drivers=None) -> np.ndarray:
-    """(V, 3) float64 ``b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c`` (ALGORITHMS.md §1), leaving out the corrective on
-    exactly the driver set ``skip_drivers`` (the one being authored), summed over the non-zero terms only."""
-    w = np.asarray(weights, dtype=np.float64)
-    x = rig.neutral.astype(np.float64).copy()
-    for k in np.flatnonzero(w):
-        x += w[k] * rig.deltas[k]
-    if rig.correctives:
-        skip = frozenset(skip_drivers) if skip_drivers is not None else None
-        a = corrective_activations(rig.correctives, rig.shape_names, w)
-        for c, ac in zip(rig.correctives, a):
-            if ac != 0 and frozenset(c.drivers) != skip:
-                x += ac * c.delta
-    return x
 
 
 class CorrectiveController(QtCore.QObject):
@@ -246,7 +230,7 @@ class CorrectiveController(QtCore.QObject):
         if doc.edit_offset is None and own is None:
             self._error("Nothing to save yet: sculpt the surface with a brush first.")
             return False
-        x_cur, _ = authoring_surface(rig, drivers, weights=w[idx])
+        x_cur, _ = authoring_surface(rig, drivers, weights=w[idx], evaluator=doc.evaluator64())
         x_des = x_cur.copy()
         if own is not None:
             x_des += corrective_activation(own, rig.shape_names, w) * own.delta
@@ -301,29 +285,12 @@ class CorrectiveController(QtCore.QObject):
                 return False
         path = Path(path)
         mode = mode or self.panel.scan_mode.currentData()
+        own = find_corrective(rig.correctives, drivers)
+        rule = own.rule if own is not None else self.panel.current_rule()
+        name = own.name if own is not None else "+".join(drivers)
         try:
-            scan = read_obj(path).vertices.astype(np.float64)
-            if scan.shape[0] != rig.n_vertices:
-                raise RigInputError(f"{path.name} has {scan.shape[0]} vertices but the rig has {rig.n_vertices}; "
-                                    "a scan must have the rig's vertices in the same order.")
-            if not np.isfinite(scan).all():
-                raise RigInputError(f"{path.name} has NaN or infinite coordinates.")
-            own = find_corrective(rig.correctives, drivers)
-            rule = own.rule if own is not None else self.panel.current_rule()
-            name = own.name if own is not None else "+".join(drivers)
-            idx = [rig.shape_index(d) for d in drivers]
-            if mode == "fit":
-                w = fit_scan_weights(rig.neutral, rig.deltas, scan)
-                a = activation_for(drivers, rule, rig.shape_names, w)
-                if a < 1e-3:
-                    raise RigInputError(f"{path.name} does not show {' + '.join(drivers)}: the fitted weights leave "
-                                        f"the corrective's activation at {a:.2g}.")
-                x_fit = pose_surface64(rig, w, skip_drivers=drivers)
-                delta = corrective_from_scan(scan, x_fit, driver_region(rig.deltas[idx]), a)
-            else:
-                x_cur, w = authoring_surface(rig, drivers)
-                delta = corrective_delta(scan, x_cur, activation_for(drivers, rule, rig.shape_names, w))
-            made = Corrective(name=name, drivers=drivers, rule=rule, delta=delta)
+            made, w = corrective_from_scan(rig, drivers, read_obj(path).vertices, rule, fit=mode == "fit",
+                                           name=name, source=path.name, evaluator=doc.evaluator64())
             new = [c for c in rig.correctives if frozenset(c.drivers) != frozenset(drivers)] + [made]
             validate_correctives(new, rig.shape_names, rig.n_vertices)
         except RigInputError as exc:

@@ -7,12 +7,11 @@ import os
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
-from PySide6 import QtCore, QtTest, QtWidgets
+from PySide6 import QtCore, QtTest
 
 from model.correctives import Corrective, add_corrective
 from model.project import Project, load_project, save_project
@@ -25,7 +24,7 @@ CORRECTIVE = "browInnerUp_L+browInnerUp_R"
 
 DRIVER = r"""
 import sys
-from PySide6 import QtCore, QtTest, QtWidgets
+from PySide6 import QtCore, QtTest
 QtCore.QSettings.setPath(QtCore.QSettings.IniFormat, QtCore.QSettings.UserScope, sys.argv[2])
 from app import settings as app_settings
 s = app_settings.settings()

@@ -7,6 +7,7 @@ import json
 import numpy as np
 from PySide6 import QtWidgets
 
+from tests.cli_runner import run_cli
 from tests.gui_helpers import make_window, open_and_wait
 from tests.image_compare import assert_matches_reference
 
@@ -109,8 +110,17 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     np.testing.assert_allclose(W, sol.weights)
     assert mc.export_report(tmp_path / "report.json")
     rep = json.loads((tmp_path / "report.json").read_text())
-    assert rep["units"] == "mm" and len(rep["per_frame_rmse"]) == 358 and len(rep["per_marker_rmse"]) == 60
-    assert 0 < rep["summary"]["rmse_mean"] < 2.0
+    assert rep["rig_units"] == "cm" and rep["frames"] == 358 and rep["markers"] == 60
+    assert len(rep["marker_rmse_per_frame"]) == 358 and len(rep["marker_rmse_per_marker"]) == 60
+    assert 0 < rep["marker_rmse"] < 0.2 and rep["neutral_frames"] == [0, 29] and rep["mode"] == "global"
+    np.testing.assert_allclose(rep["marker_rmse_per_frame"], sol.marker_rmse, rtol=1e-12)
+    # `solve --report` on the same take and map writes the same report: same keys, same values but the timings
+    run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json", "-o", tmp_path / "c.csv",
+            "--report", tmp_path / "cli_report.json")
+    cli = json.loads((tmp_path / "cli_report.json").read_text())
+    assert set(cli) == set(rep)
+    for key in set(rep) - {"solve_seconds", "frames_per_second"}:
+        assert _same(cli[key], rep[key]), key
 
     # a map naming markers the take lacks is refused; the solve and the map stay
     bad = json.loads((take_dir / "marker_map.json").read_text())
@@ -139,6 +149,17 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     mc2._show_views_dock()
     qtbot.waitUntil(lambda: mc2.views.parentWidget().sizes() == chosen, timeout=5000)
     w2.close()
+
+
+def _same(a, b) -> bool:
+    """Equal JSON values, numbers to 1e-9 relative (the two solves run the same code on the same data)."""
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return isinstance(b, list) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, float) and isinstance(b, (int, float)):
+        return abs(a - b) <= 1e-9 * max(1.0, abs(a))
+    return a == b
 
 
 def _check_weight_playback(qtbot, w, mc):

@@ -11,6 +11,7 @@ import pytest
 import scipy.sparse as sp
 
 from model.marker_map import load_marker_map
+from model.pose import PoseEvaluator
 from model.take_c3d import read_c3d
 from solvers.take_solve import TakeSolver
 
@@ -32,7 +33,8 @@ def dense_rms_mm(sol, truth) -> float:
 
 def test_bench_take_solve(benchmark, ict_rig, setup):
     B, X, truth = setup
-    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B)  # everything rig/marker-set dependent, once
+    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B,
+                        surface=PoseEvaluator(ict_rig, dtype=np.float64).evaluate)  # everything rig/marker-set dependent, once
     sol = benchmark.pedantic(solver.solve, args=(X,), kwargs={"unit_factor": 0.1}, rounds=5, iterations=1)
     err = dense_rms_mm(sol, truth)
     fps = X.shape[0] / benchmark.stats.stats.min
@@ -57,7 +59,8 @@ def test_bench_take_solve_with_correctives(benchmark, ict_rig, setup):
         d = rig.deltas[[rig.shape_index(n) for n in drivers]]
         cs.append(Corrective(drivers=drivers, delta=-0.2 * driver_region(d)[:, None] * d.sum(axis=0)))
     set_correctives(rig, cs)
-    solver = TakeSolver(rig.neutral, rig.deltas, B, correctives=solver_correctives(rig))
+    solver = TakeSolver(rig.neutral, rig.deltas, B, correctives=solver_correctives(rig),
+                        surface=PoseEvaluator(rig, dtype=np.float64).evaluate)
     sol = benchmark.pedantic(solver.solve, args=(X,), kwargs={"unit_factor": 0.1}, rounds=3, iterations=1)
     fps = X.shape[0] / benchmark.stats.stats.min
     err = dense_rms_mm(sol, truth)
@@ -69,7 +72,8 @@ def test_bench_take_solve_with_correctives(benchmark, ict_rig, setup):
 
 def test_bench_take_dense_all_frames(benchmark, ict_rig, setup):
     B, X, _ = setup
-    sol = TakeSolver(ict_rig.neutral, ict_rig.deltas, B).solve(X, unit_factor=0.1)
+    sol = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, surface=PoseEvaluator(ict_rig, dtype=np.float64).evaluate
+                     ).solve(X, unit_factor=0.1)
 
     def all_frames():
         n = 0
@@ -85,7 +89,8 @@ def test_bench_take_solve_residual_kernels(benchmark, ict_rig, setup, residual):
     """Accuracy of each residual kernel with the solver's defaults otherwise (scale/λ per kernel below)."""
     B, X, truth = setup
     opts = {"joshi": dict(rbf_scale=3.0, rbf_lambda=0.3), "multiquadric": dict(rbf_lambda=0.01)}.get(residual, {})
-    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, residual=residual, **opts)
+    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, residual=residual,
+                        surface=PoseEvaluator(ict_rig, dtype=np.float64).evaluate, **opts)
     sol = benchmark.pedantic(solver.solve, args=(X,), kwargs={"unit_factor": 0.1}, rounds=1, iterations=1)
     err = dense_rms_mm(sol, truth)
     benchmark.extra_info.update(residual=residual, dense_rms_mm=err)
@@ -102,7 +107,9 @@ def test_bench_take_solve_regional(benchmark, ict_rig, setup):
     blend[lower, 1] = 1.0
     both = np.intersect1d(upper, lower)
     blend[both, 0] = blend[both, 1] = 0.5
-    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, regions=[upper, lower], blend=sp.csr_matrix(blend))
+    ev = PoseEvaluator(ict_rig, dtype=np.float64)
+    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, regions=[upper, lower], blend=sp.csr_matrix(blend),
+                        surface=lambda W: ev.evaluate_regional(W, blend))
     sol = benchmark.pedantic(solver.solve, args=(X,), kwargs={"unit_factor": 0.1}, rounds=1, iterations=1)
     err = dense_rms_mm(sol, truth)
     benchmark.extra_info.update(dense_rms_mm=err)

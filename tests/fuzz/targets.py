@@ -3,7 +3,6 @@ writes), how a mutated input is laid out on disk, and what a valid result must s
 from __future__ import annotations
 
 import io
-import json
 import os
 import random
 import shutil
