@@ -412,7 +412,11 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _on_worker_finished(self) -> None:
         if self._progress is not None:
+            # reset() stops the dialog's own show-after-300-ms timer: close() alone left it to pop up, modal and
+            # without a Cancel button, after every fast open
+            self._progress.reset()
             self._progress.close()
+            self._progress.deleteLater()
             self._progress = None
         self._worker = None
 

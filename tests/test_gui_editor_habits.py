@@ -1,4 +1,4 @@
-"""The Shapes panel as a rigger uses it, with real input events (issue 18)."""
+"""The editor as riggers use it, with real input events (issue 18): the Shapes panel and opening files."""
 from __future__ import annotations
 
 import numpy as np
@@ -82,3 +82,21 @@ def test_ctrl_z_undoes_while_a_number_box_has_focus(qtbot, tmp_path):
     assert w.document.weights[i] == 0.0 and box.value() == 0.0
     qtbot.keyClick(focus, QtCore.Qt.Key_Z, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
     assert w.document.weights[i] == pytest.approx(0.6)
+
+
+def test_no_opening_dialog_stays_up_after_an_open(qtbot, tmp_path, ict_rig):
+    """The 'Opening…' dialog must go when the open ends: it came back (window-modal, no Cancel) after every
+    project open and after an error box."""
+    from model.project import Project, save_project
+    from tests.gui_helpers import open_and_wait
+    w = make_window(qtbot, tmp_path)
+    path = tmp_path / "ict.bsproj"
+    save_project(Project(rig=ict_rig), path)
+
+    def shown():
+        return [d.labelText() for d in QtWidgets.QApplication.topLevelWidgets()
+                if isinstance(d, QtWidgets.QProgressDialog) and d.isVisible()]
+    for target in (path, path, tmp_path / "missing.bsproj"):
+        open_and_wait(qtbot, w, target)
+        qtbot.wait(1500)                       # well past the dialog's own 300 ms show delay
+        assert shown() == [], target
