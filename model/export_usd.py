@@ -50,7 +50,10 @@ def usd_names(names: list[str]) -> list[str]:
 def frame_rate(times: np.ndarray) -> float:
     """Frames per second of per-frame times (the median frame interval); 24 for one frame."""
     steps = np.diff(np.asarray(times, dtype=np.float64))
-    return float(1.0 / np.median(steps)) if steps.size else 24.0
+    if not steps.size:
+        return 24.0
+    rate = float(1.0 / np.median(steps))
+    return float(round(rate)) if abs(rate - round(rate)) < 1e-6 * rate else rate
 
 
 def usd_stage(content, corners=None):
@@ -113,6 +116,8 @@ def usd_stage(content, corners=None):
     if content.times is not None:
         rate = frame_rate(content.times)
         codes = content.times * rate
+        whole = np.round(codes)
+        codes = np.where(np.abs(codes - whole) < 1e-6, whole, codes)  # frame numbers, not 1.0000000000000036
         stage.SetTimeCodesPerSecond(rate)
         stage.SetFramesPerSecond(rate)
         stage.SetStartTimeCode(float(codes[0]))
