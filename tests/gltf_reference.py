@@ -17,12 +17,14 @@ def reference_accessors(path):
     pygltflib = pytest.importorskip("pygltflib")
     g = pygltflib.GLTF2().load(str(path))
 
+    cache: dict[int, bytes] = {}
+
     def buffer_bytes(i):
-        b = g.buffers[i]
-        if b.uri is None:
-            return g.binary_blob()
-        # pygltflib decodes only application/octet-stream data URIs; SimpleMorph's is application/gltf-buffer
-        return base64.b64decode(b.uri.split(",", 1)[1])
+        if i not in cache:
+            b = g.buffers[i]
+            # pygltflib decodes only application/octet-stream data URIs; SimpleMorph's is application/gltf-buffer
+            cache[i] = g.binary_blob() if b.uri is None else base64.b64decode(b.uri.split(",", 1)[1])
+        return cache[i]
 
     def view_values(view_index, offset, ctype, width, count):
         v = g.bufferViews[view_index]
