@@ -84,6 +84,9 @@ def cmd_info(args) -> int:
         "presets": sorted(rig.presets),
         "bounds": [rig.neutral.min(axis=0).round(6).tolist(), rig.neutral.max(axis=0).round(6).tolist()],
     }
+    if Path(args.rig).suffix.lower() in (".gltf", ".glb"):  # which mesh was read, and the others (--mesh NAME)
+        from model.gltf import gltf_meshes
+        info["meshes"] = gltf_meshes(args.rig)
     if args.json:
         print(json.dumps(info, indent=2))
     else:
@@ -95,6 +98,9 @@ def cmd_info(args) -> int:
             print(f"  correctives: {', '.join(names)}")
         if info["presets"]:
             print(f"  presets: {', '.join(info['presets'])}")
+        if len(info.get("meshes", [])) > 1:
+            print("  meshes (--mesh NAME): " + ", ".join(f"{m['name']} ({m['targets']} targets, {m['vertices']} vertices)"
+                                                      for m in info["meshes"]))
     return 0
 
 

@@ -26,8 +26,6 @@ _F_LINE = re.compile(rb"^f[ \t]+([^\n]*)", re.M)
 
 _VT_LINE = re.compile(rb"^vt[ \t]+([^\n]*)", re.M)
 _VN_LINE = re.compile(rb"^vn[ \t]+([^\n]*)", re.M)
-_RECORD_LINE = re.compile(rb"^(?:g|o|s|usemtl|mtllib)(?:[ \t][^\n]*)?$", re.M)
-_F_START = re.compile(rb"^f[ \t]", re.M)
 
 
 @dataclass
@@ -102,8 +100,9 @@ def _parse_vertices(path: Path, data: bytes) -> np.ndarray:
     return verts
 
 
-def _parse_faces(path: Path, data: bytes, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
-    records = _F_LINE.findall(data)
+def _parse_faces(path: Path, data: bytes, n_vertices: int, records: list[bytes] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    records = _F_LINE.findall(data) if records is None else records
     if not records:
         return np.zeros(0, np.int32), np.zeros(0, np.int32)
     # Keep only the vertex index of each corner ("12/5/7" -> "12"), then parse all at once.
@@ -111,7 +110,7 @@ def _parse_faces(path: Path, data: bytes, n_vertices: int) -> tuple[np.ndarray, 
     lines = text.split(b"\n")
     counts = np.fromiter((len(l.split()) for l in lines), dtype=np.int32, count=len(lines))
     try:
-        idx = np.array(text.split(), dtype=np.int64)
+        idx = _whole_numbers(text, int(counts.sum()))
     except ValueError:
         raise RigInputError(f"{path}: a face record has an index that is not a whole number.") from None
     if (counts < 3).any():
@@ -127,6 +126,9 @@ def _parse_faces(path: Path, data: bytes, n_vertices: int) -> tuple[np.ndarray, 
 
 
 def _parse_table(path: Path, data: bytes, line: re.Pattern, what: str, width: tuple[int, int]) -> np.ndarray | None:
+    key = line.pattern[1:3]  # b"vt" or b"vn"
+    if not (data.startswith(key) or b"\n" + key in data):
+        return None
     rows = line.findall(data)
     if not rows:
         return None
@@ -139,6 +141,19 @@ def _parse_table(path: Path, data: bytes, line: re.Pattern, what: str, width: tu
         if table is None:
             raise RigInputError(f"{path}: its {what} records have too few numbers.")
     return table
+
+
+def _whole_numbers(text: bytes, expected: int) -> np.ndarray:
+    """The whitespace-separated whole numbers of ``text`` (ValueError unless there are ``expected`` of them)."""
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DeprecationWarning)  # fromstring stops early on a bad token: counted below
+        out = np.fromstring(text, dtype=np.int64, sep=" ")
+    if out.size != expected:
+        out = np.array(text.split(), dtype=np.int64)  # the careful way; raises ValueError on a bad token
+        if out.size != expected:
+            raise ValueError("unexpected number count")
+    return out
 
 
 def _corner_index(path: Path, idx: np.ndarray, n: int, what: str) -> np.ndarray:
@@ -154,17 +169,21 @@ def _corner_index(path: Path, idx: np.ndarray, n: int, what: str) -> np.ndarray:
 def _corner_columns(path: Path, tokens: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
     """The vt and vn numbers (0 = none) of face corners written ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``."""
     n = len(tokens)
+    text = b" ".join(tokens)
     k = tokens[0].count(b"/") if tokens else 0
-    try:
-        if k in (1, 2) and all(t.count(b"/") == k for t in tokens):  # every corner written alike: one parse
-            text = b" ".join(tokens).replace(b"//", b"/0/")
-            if text.endswith(b"/") or b"/ " in text:
-                raise ValueError
-            cols = np.array(text.replace(b"/", b" ").split(), dtype=np.int64).reshape(n, k + 1)
-            zero = np.zeros(n, np.int64)
-            return cols[:, 1], (cols[:, 2] if k == 2 else zero)
-    except ValueError:
-        pass
+    if k in (1, 2):
+        chars = np.frombuffer(text, np.uint8)
+        token_of = np.cumsum(chars == ord(" "))
+        per_token = np.bincount(token_of[chars == ord("/")], minlength=n)
+        if (per_token == k).all():  # every corner written alike: one parse of all the numbers
+            text = text.replace(b"//", b"/0/")
+            try:
+                if text.endswith(b"/") or b"/ " in text:
+                    raise ValueError
+                cols = _whole_numbers(text.replace(b"/", b" "), n * (k + 1)).reshape(n, k + 1)
+                return cols[:, 1], (cols[:, 2] if k == 2 else np.zeros(n, np.int64))
+            except ValueError:
+                pass
     try:
         parts = [t.split(b"/") for t in tokens]
         return tuple(np.array([int(p[j]) if len(p) > j and p[j] else 0 for p in parts], dtype=np.int64)
@@ -173,25 +192,45 @@ def _corner_columns(path: Path, tokens: list[bytes]) -> tuple[np.ndarray, np.nda
         raise RigInputError(f"{path}: a face record has a texture or normal index that is not a whole number.") from None
 
 
-def _parse_corners(path: Path, data: bytes, n_corners: int) -> CornerAttributes | None:
+def _records(data: bytes) -> list[tuple[int, str]]:
+    """(byte offset, line) of the g/o/s/usemtl/mtllib lines, in file order (a find per keyword: fast)."""
+    found = []
+    for key in (b"g", b"o", b"s", b"usemtl", b"mtllib"):
+        starts = [0] if data.startswith(key) else []
+        pos = data.find(b"\n" + key)
+        while pos >= 0:
+            starts.append(pos + 1)
+            pos = data.find(b"\n" + key, pos + 1)
+        for start in starts:
+            if data[start + len(key):start + len(key) + 1] in (b" ", b"\t", b"\r", b"\n", b""):
+                end = data.find(b"\n", start)
+                found.append((start, data[start:end if end >= 0 else len(data)].decode("utf-8").rstrip()))
+    return sorted(found)
+
+
+def _parse_corners(path: Path, data: bytes, n_corners: int, faces: list[bytes]) -> CornerAttributes | None:
     """The file's vt/vn lists, each face corner's vt/vn index and the group records, without touching v/f."""
     uvs = _parse_table(path, data, _VT_LINE, "texture coordinate ('vt')", (2, 3))
     normals = _parse_table(path, data, _VN_LINE, "normal ('vn')", (3, 3))
-    records = [(m.start(), m.group(0).decode("utf-8").rstrip()) for m in _RECORD_LINE.finditer(data)]
+    records = _records(data)
     if uvs is None and normals is None and not records:
         return None
     corner_uv = corner_normal = None
-    tokens = b" ".join(_F_LINE.findall(data)).split()
+    tokens = b" ".join(faces).split()
     if len(tokens) == n_corners and (uvs is not None or normals is not None):
         vt, vn = _corner_columns(path, tokens)
         if uvs is not None:
             corner_uv = _corner_index(path, vt, len(uvs), "texture coordinate")
         if normals is not None:
             corner_normal = _corner_index(path, vn, len(normals), "normal")
-    face_starts = np.array([m.start() for m in _F_START.finditer(data)], dtype=np.int64)
-    at = np.searchsorted(face_starts, [pos for pos, _ in records]).tolist()
+    # the face number of each record: the face records before it (counted between consecutive records)
+    at, count, prev = [], 0, 0
+    for pos, _ in records:
+        count += data.count(b"\nf ", prev, pos) + data.count(b"\nf\t", prev, pos) + (pos > 0 and data.startswith(b"f ") and prev == 0)
+        at.append(count)
+        prev = pos
     return CornerAttributes(uvs=uvs, corner_uv=corner_uv, normals=normals, corner_normal=corner_normal,
-                            records=[(int(f), line) for f, (_, line) in zip(at, records)])
+                            records=[(f, line) for f, (_, line) in zip(at, records)])
 
 
 def _face_section(data: bytes) -> bytes:
@@ -204,8 +243,9 @@ def read_obj(path: str | Path) -> ObjMesh:
     path = Path(path)
     data = _read_bytes(path)
     verts = _parse_vertices(path, data)
-    counts, idx = _parse_faces(path, data, len(verts))
-    return ObjMesh(verts, counts, idx, _face_section(data), _parse_corners(path, data, idx.size))
+    faces = _F_LINE.findall(data)
+    counts, idx = _parse_faces(path, data, len(verts), faces)
+    return ObjMesh(verts, counts, idx, _face_section(data), _parse_corners(path, data, idx.size, faces))
 
 
 def read_obj_target(path: str | Path, neutral: ObjMesh) -> np.ndarray:
