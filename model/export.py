@@ -61,6 +61,21 @@ def animation_for_rig(rig: Rig, names: list[str], weights: np.ndarray, times: np
     return WeightAnimation(times=times, weights=W, source=source)
 
 
+def animation_from_timeline(timeline, rate: float = 30.0) -> WeightAnimation:
+    """Keyframes (model.keyframes.Timeline of global poses) sampled at every frame from the first key to the last."""
+    if not len(timeline):
+        raise RigInputError("The timeline has no keys to export.")
+    if not rate > 0:
+        raise RigInputError(f"The frame rate must be positive, not {rate}.")
+    T = timeline.times
+    frames = np.arange(int(np.floor((T[-1] - T[0]) * rate + 1e-9)) + 1)
+    times = T[0] + frames / rate
+    W = np.stack([timeline.evaluate(t) for t in times])
+    if W.ndim != 2:
+        raise RigInputError("Only a timeline of global poses can be exported as blend shape weights.")
+    return WeightAnimation(times=times - T[0], weights=W, source="keyframes")
+
+
 def load_animation(path: str | Path, rig: Rig) -> WeightAnimation:
     """A weights CSV (``frame,time,<shapes>``, as ``solve`` writes) or a Live Link Face CSV, for ``rig``."""
     path = Path(path)

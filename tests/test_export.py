@@ -434,3 +434,17 @@ def test_blender_imports_the_glb_and_the_obj(exported, rig_with_corrective, ict_
     assert span == pytest.approx(327 / 60, abs=1.5 / glb["fps"])
     assert glb["polygons"] == len(rig_with_corrective.triangles())
     assert seen["obj"]["vertices"] == 26719 and seen["obj"]["uv_layers"] == 1 and seen["obj"]["materials"] == 12
+
+
+def test_keyframes_are_sampled_at_every_frame(tmp_path, sample_rig):
+    from model.export import animation_from_timeline
+    from model.keyframes import Keyframe, Timeline
+    K = sample_rig.n_shapes
+    timeline = Timeline([Keyframe(0.5, np.zeros(K)), Keyframe(1.0, np.full(K, 0.8)), Keyframe(1.5, np.zeros(K))],
+                        interpolation="smooth")
+    anim = animation_from_timeline(timeline, rate=24)
+    assert anim.n_frames == 25 and np.allclose(anim.times, np.arange(25) / 24)
+    assert np.allclose(anim.weights[12], 0.8) and np.allclose(anim.weights[6], timeline.evaluate(0.75))
+    export_rig(sample_rig, tmp_path / "keys.glb", animation=anim)
+    times, W = reference_animation(tmp_path / "keys.glb")
+    assert np.allclose(times, anim.times, atol=1e-6) and np.allclose(W[:, :K], anim.weights, atol=1e-6)
