@@ -33,6 +33,9 @@ def cmd_info(args) -> int:
         "presets": sorted(rig.presets),
         "bounds": [rig.neutral.min(axis=0).round(6).tolist(), rig.neutral.max(axis=0).round(6).tolist()],
     }
+    if Path(args.rig).suffix.lower() in (".gltf", ".glb"):  # which mesh was read, and the others (--mesh NAME)
+        from model.gltf import gltf_meshes
+        info["meshes"] = gltf_meshes(args.rig)
     if args.json:
         print(json.dumps(info, indent=2))
     else:
@@ -44,6 +47,9 @@ def cmd_info(args) -> int:
             print(f"  correctives: {', '.join(names)}")
         if info["presets"]:
             print(f"  presets: {', '.join(info['presets'])}")
+        if len(info.get("meshes", [])) > 1:
+            print("  meshes (--mesh NAME): " + ", ".join(f"{m['name']} ({m['targets']} targets, {m['vertices']} vertices)"
+                                                      for m in info["meshes"]))
     return 0
 
 
@@ -64,14 +70,14 @@ def cmd_render(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from model.obj_io import write_obj
-    from model.pose import PoseEvaluator
+    from model.export import export_rig, load_animation
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
-    points = PoseEvaluator(rig, dtype=np.float64).evaluate(weights)
-    header = f"Blendshape Studio export of {rig.name}\nweights: " + json.dumps(rig.weights_to_dict(weights))
-    write_obj(args.output, points, rig.face_counts, rig.face_indices, header=header)
-    print(f"wrote {args.output} ({rig.n_vertices} vertices, {rig.n_faces} faces)")
+    animation = load_animation(args.animation, rig) if args.animation else None
+    export_rig(rig, args.output, weights, animation, units=args.out_units, up=args.up)
+    frames = f", {animation.n_frames} frames" if animation is not None else ""
+    print(f"wrote {args.output} ({rig.n_vertices} vertices, {rig.n_faces} faces, {rig.n_shapes} shapes, "
+          f"{len(rig.correctives)} correctives{frames})")
     return 0
 
 
@@ -130,6 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("rig", metavar="RIG", help="an OBJ folder, a .gltf/.glb file or a .bsproj project")
         sp.add_argument("--neutral", help="file name of the neutral OBJ in a folder (default: the one named *neutral*)")
         sp.add_argument("--units", choices=["cm", "mm", "m"], help="units of the rig files (default: cm for OBJ)")
+        sp.add_argument("--mesh", help="glTF: the mesh to read (default: the most morph targets, then vertices)")
 
     def pose_args(sp):
         sp.add_argument("--weights", help="NAME=V,... shape weights of the pose (default: neutral)")
@@ -153,10 +160,14 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--label", action="store_true", help="write the view's name in the corner")
     sp.set_defaults(func=cmd_render)
 
-    sp = sub.add_parser("export", help="write the posed surface as an OBJ, vertex order kept")
+    sp = sub.add_parser("export", help="write the rig for other tools: glTF/USD blend shapes and animation, or a posed OBJ")
     rig_arg(sp)
     pose_args(sp)
-    sp.add_argument("-o", "--output", required=True, help="OBJ file to write")
+    sp.add_argument("-o", "--output", required=True, help=".glb, .gltf, .usd, .usda, .usdc or .obj file to write")
+    sp.add_argument("--animation", help="weights CSV (as solve writes) or Live Link Face CSV to animate (glTF, USD)")
+    sp.add_argument("--out-units", choices=["m", "cm", "mm"],
+                    help="units of the file written (default: m for glTF and USD, the rig's for OBJ)")
+    sp.add_argument("--up", choices=["y", "z"], default="y", help="up axis of the file written (default y)")
     sp.set_defaults(func=cmd_export)
 
     sp = sub.add_parser("segment", help="segment the face into regions and a hierarchy (JSON)")
