@@ -19,7 +19,6 @@ buffers before reading. Coordinates are labelled ``units`` (glTF's own conventio
 from __future__ import annotations
 
 import base64
-import json
 import struct
 from pathlib import Path
 from urllib.parse import unquote
@@ -219,7 +218,9 @@ def _parse(path: Path) -> _Doc:
     try:
         text = json_bytes.decode("utf-8")
     except UnicodeDecodeError:
-        raise RigInputError(f"{path}: is neither valid glTF JSON nor a GLB file.") from None
+        text = ""
+    if not text.lstrip().startswith("{"):
+        raise RigInputError(f"{path}: is neither valid glTF JSON nor a GLB file.")
     gltf = parse_json_text(text, str(path))
     if not isinstance(gltf, dict):
         raise RigInputError(f"{path}: is not a glTF document (the JSON is not an object).")
