@@ -64,12 +64,12 @@ class _Params:
         self.endian = ">" if proc == 86 else "<"
         groups: dict[int, str] = {}
         raw: dict[tuple[int, str], tuple[int, tuple, bytes]] = {}
-        # The section ends where the data starts (the header's word 9) or after its declared blocks,
-        # whichever is later: some writers leave bytes after the last entry that are not an end marker,
-        # others declare fewer blocks than they fill. With neither known the file's end bounds it.
+        # The section ends where the header says the data starts (word 9): some writers declare fewer
+        # parameter blocks than they fill, others more, so that the last entry runs on into the frames
+        # without an end marker. Without that the declared blocks bound it, and without those the file's end.
         e = self.endian
         data_start = (struct.unpack_from(e + "H", data, 16)[0] - 1) * BLOCK
-        end = max(start + self.n_blocks * BLOCK, data_start if data_start > start else 0)
+        end = data_start if data_start > start + 4 else start + self.n_blocks * BLOCK
         end = min(len(data), end) if end > start + 4 else len(data)
         pos = start + 4
         while pos + 4 <= end:
@@ -239,16 +239,20 @@ def _points(data: bytes, lay: _Layout, params: _Params, frames: int, scale: floa
     return xyz
 
 
-def _jumpiness(xyz: np.ndarray) -> float:
-    """Median frame-to-frame step over the median spread of the coordinates: small for trajectories (markers
-    move little between frames), near or above 1 for bytes read with the wrong layout. NaN if too few samples."""
-    step = np.abs(np.diff(xyz, axis=0))
-    step = step[np.isfinite(step)]
-    v = xyz[np.isfinite(xyz)]
-    if step.size < 30:
+def _coherence(xyz: np.ndarray) -> float:
+    """How much the points behave like markers: the share of samples that lie nearer to the same marker in
+    the frame before than to its neighbour in the list in that frame. Trajectories score near 1; bytes read
+    with a wrong layout (points shifted between frames, analog words taken for points) score near 1/2 or
+    less. Scale-free and robust to outliers. NaN when there are too few samples to tell."""
+    if xyz.shape[1] < 2:
         return float("nan")
-    spread = float(np.median(np.abs(v - np.median(v))))
-    return float(np.median(step)) / spread if spread > 0 else float("nan")
+    xyz = np.where((xyz == 0).all(axis=-1, keepdims=True), np.nan, xyz)   # (0, 0, 0): unseen, in many writers
+    own = np.linalg.norm(xyz[1:] - xyz[:-1], axis=-1)
+    other = np.linalg.norm(xyz[1:] - np.roll(xyz[:-1], 1, axis=1), axis=-1)
+    ok = np.isfinite(own) & np.isfinite(other)
+    if ok.sum() < 30:
+        return float("nan")
+    return float(np.mean(own[ok] <= other[ok]))
 
 
 _SCORED_FRAMES = 240
@@ -307,13 +311,13 @@ def _choose_layout(data: bytes, params: _Params, hdr: dict, path: Path, pblock: 
             readable.append((lay, held))
     if not readable:
         raise RigInputError(f"{path}: the C3D file is truncated: it ends before its first whole frame.")
-    jump = {lay: _jumpiness(_points(data, lay, params, min(held, _SCORED_FRAMES), 1.0)) for lay, held in readable}
-    finite = [j for j in jump.values() if np.isfinite(j)]
+    coherence = {lay: _coherence(_points(data, lay, params, min(held, _SCORED_FRAMES), 1.0)) for lay, held in readable}
+    finite = [c for c in coherence.values() if np.isfinite(c)]
 
     def rank(item):
         lay, held = item
-        j = jump[lay]
-        noise = bool(finite) and not (np.isfinite(j) and j <= 2 * min(finite))
+        c = coherence[lay]
+        noise = bool(finite) and not (np.isfinite(c) and c >= max(finite) - 0.1)
         left = lay.leftover(size)
         return (noise, held < lay.frames, left > max(BLOCK, lay.frame_bytes), len(deviations(lay)), abs(left))
 
@@ -325,6 +329,10 @@ def _choose_layout(data: bytes, params: _Params, hdr: dict, path: Path, pblock: 
         shown = " or ".join(str(v) for v in said[key])
         warnings.append(f"{path}: {_PARAMETER_NAMES[key]} says {shown}, which does not fit the data; "
                         f"the header's {getattr(best, key)} does and was used.")
+    arate, used = params.number("ANALOG", "RATE"), params.number("ANALOG", "USED", unsigned=True)
+    if used and arate and rate and abs(arate / rate - round(arate / rate)) >= 1e-3:
+        warnings.append(f"{path}: ANALOG:RATE ({arate:g}) is not a whole multiple of the frame rate ({rate:g}); "
+                        f"{best.analog_words} analog samples per frame fit the data and were used.")
     left = best.leftover(size)
     if held < best.frames:
         warnings.append(f"{path}: the file ends early: {best.frames} frames declared but {held} whole frames "
