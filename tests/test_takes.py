@@ -229,3 +229,71 @@ def test_umeyama_recovers_similarity_batched_and_weighted():
     assert np.allclose(s2, 0.1) and np.allclose(R2, R) and np.allclose(t2, t)
     R3, t3 = kabsch(X[0, 5:], np.einsum("ij,nj->ni", R[0], X[0, 5:]) + t[0])
     assert np.allclose(R3, R[0]) and np.allclose(t3, t[0]) and np.isclose(np.linalg.det(R3), 1.0)
+
+
+# --- marker CSV layouts of the common exporters ---------------------------------------------------
+VICON_NEXUS_CSV = """Devices
+1000
+,,Force Plate::Force,,
+Frame,Sub Frame,Fx,Fy,Fz
+,,N,N,N
+1,0,0.1,0.2,0.3
+
+Trajectories
+100
+,,Actor:LASI,,,Actor:RASI,,,Actor:LASI,,
+Frame,Sub Frame,X,Y,Z,X,Y,Z,X,Y,Z
+,,mm,mm,mm,mm,mm,mm,mm,mm,mm
+1,0,-391.888,-6180.01,1734.43,-378.647,-6190.14,1713.82,1,2,3
+2,0,-391.978,-6180.03,1734.43,,,,4,5,6
+3,0,-392.012,-6180.04,1734.48,-378.718,-6189.96,1714.06,7,8,9
+
+Model Outputs
+100
+"""
+
+MOTIVE_CSV = """Format Version,1.23,Take Name,Take 2024-03-01 10.00.00 AM,Capture Frame Rate,240.000000,Export Frame Rate,120.000000,Capture Start Time,2024-03-01 10.00.00.000 AM,Total Frames in Take,3,Total Exported Frames,3,Rotation Type,Quaternion,Length Units,Meters,Coordinate Space,Global
+
+,Type,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Marker,Marker,Marker,Marker,Marker,Marker
+,Name,Head,Head,Head,Head,Head,Head,Head,Face:Brow_L,Face:Brow_L,Face:Brow_L,Face:Chin,Face:Chin,Face:Chin
+,ID,1,1,1,1,1,1,1,2,2,2,3,3,3
+,,Rotation,Rotation,Rotation,Rotation,Position,Position,Position,Position,Position,Position,Position,Position,Position
+Frame,Time (Seconds),X,Y,Z,W,X,Y,Z,X,Y,Z,X,Y,Z
+0,0.000000,0,0,0,1,0.1,1.6,0.2,0.031,1.702,0.090,0.002,1.581,0.101
+1,0.008333,0,0,0,1,0.1,1.6,0.2,0.032,1.703,0.091,,,
+2,0.016667,0,0,0,1,0.1,1.6,0.2,0.033,1.704,0.092,0.004,1.583,0.103
+"""
+
+
+def test_vicon_nexus_marker_csv(tmp_path):
+    path = tmp_path / "nexus.csv"
+    path.write_text(VICON_NEXUS_CSV)
+    take = load_take(path)
+    assert take.rate == 100.0 and take.units == "mm" and take.first_frame == 1
+    # the subject prefix goes, the repeated LASI is kept apart and said aloud; the Devices section is not markers
+    assert take.labels == ["LASI", "RASI", "LASI_2"]
+    assert any("LASI -> LASI_2" in w for w in take.warnings)
+    assert take.positions.shape == (3, 3, 3)
+    np.testing.assert_allclose(take.positions[0, 0], [-391.888, -6180.01, 1734.43])
+    np.testing.assert_allclose(take.positions[2, 2], [7, 8, 9])
+    assert np.isnan(take.positions[1, 1]).all() and take.missing.sum() == 1
+
+
+def test_optitrack_motive_marker_csv(tmp_path):
+    path = tmp_path / "motive.csv"
+    path.write_text(MOTIVE_CSV)
+    take = load_take(path)
+    # the export rate, metres, and only the measured markers (the rigid body's pose is not a marker)
+    assert take.rate == 120.0 and take.units == "m" and take.first_frame == 0
+    assert take.labels == ["Brow_L", "Chin"] and take.warnings == []
+    np.testing.assert_allclose(take.positions[:, 0, 1], [1.702, 1.703, 1.704])
+    np.testing.assert_allclose(take.positions[2, 1], [0.004, 1.583, 0.103])
+    assert np.isnan(take.positions[1, 1]).all() and take.missing.sum() == 1
+    bad = tmp_path / "motive_bad.csv"
+    bad.write_text(MOTIVE_CSV.replace("Length Units,Meters", "Length Units,Furlongs"))
+    with pytest.raises(RigInputError, match="motive_bad.csv.*unknown units 'Furlongs'"):
+        load_take(bad)
+    cut = tmp_path / "motive_cut.csv"
+    cut.write_text("\n".join(MOTIVE_CSV.splitlines()[:6]))
+    with pytest.raises(RigInputError, match="motive_cut.csv.*'Frame, Time \\(Seconds\\)'"):
+        load_take(cut)
