@@ -297,3 +297,60 @@ def test_optitrack_motive_marker_csv(tmp_path):
     cut.write_text("\n".join(MOTIVE_CSV.splitlines()[:6]))
     with pytest.raises(RigInputError, match="motive_cut.csv.*'Frame, Time \\(Seconds\\)'"):
         load_take(cut)
+
+
+# --- Live Link Face timing -----------------------------------------------------------------------
+def _llf_file(path, codes, jaw):
+    lines = ["Timecode,BlendShapeCount,JawOpen,EyeBlinkLeft,HeadYaw"]
+    lines += [f"{c},2,{j:.4f},0.1,0.0" for c, j in zip(codes, jaw)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _codes(frames, tc_rate, start=(14, 2, 59), sub=0.0):
+    h, m, s = start
+    out = []
+    for f in frames:   # f counts timecode frames from the start
+        sec, ff = divmod(f, tc_rate)
+        total = h * 3600 + m * 60 + s + sec
+        out.append(f"{total // 3600:02d}:{total // 60 % 60:02d}:{total % 60:02d}:{int(ff):02d}.{int(sub * 1000):03d}")
+    return out
+
+
+def test_livelink_30_fps_plays_in_real_time(tmp_path):
+    """A recording at 30 fps (FF 00..29) is 30 fps: 90 rows last 3 s, not 1.5 s as at a fixed 60."""
+    jaw = np.linspace(0, 1, 90)
+    take = read_livelink_csv(_llf_file(tmp_path / "llf30.csv", _codes(range(90), 30), jaw))
+    assert take.rate == 30.0 and take.n_frames == 90 and take.warnings == []
+    assert take.times()[-1] == pytest.approx(89 / 30)
+    np.testing.assert_allclose(take.weights[:, take.names.index("JawOpen")], np.round(jaw, 4))
+    take60 = read_livelink_csv(_llf_file(tmp_path / "llf60.csv", _codes(range(150), 60, sub=0.867), np.zeros(150)))
+    assert take60.rate == 60.0 and take60.n_frames == 150
+
+
+def test_livelink_dropped_frames_keep_time(tmp_path):
+    """Rows 10-12 and 40 were dropped by the phone: the take still has a frame every 1/30 s, the frames after
+    a gap sit at their timecodes' times, and the dropped ones are interpolated (and said to be)."""
+    kept = [f for f in range(60) if f not in (10, 11, 12, 40)]
+    jaw = np.array(kept) / 100.0   # a ramp: interpolation across a gap gives the ramp back
+    take = read_livelink_csv(_llf_file(tmp_path / "drop.csv", _codes(kept, 30), jaw), ["jawOpen", "eyeBlink_L"])
+    assert take.rate == 30.0 and take.n_frames == 60
+    np.testing.assert_allclose(take.weights[:, 0], np.arange(60) / 100.0, atol=1e-12)
+    assert take.filled.tolist() == [f in (10, 11, 12, 40) for f in range(60)]
+    assert take.timecodes[13] == _codes([13], 30)[0] and take.timecodes[11] == ""
+    assert len(take.warnings) == 1 and "4 dropped frames" in take.warnings[0] and "drop.csv" in take.warnings[0]
+    # 60 fps recorded under a 30 fps timecode: half-frame steps
+    half = [c.replace(".000", f".{500 * (k % 2):03d}") for k, c in enumerate(_codes([k // 2 for k in range(130)], 30))]
+    take = read_livelink_csv(_llf_file(tmp_path / "half.csv", half, np.zeros(130)))
+    assert take.rate == 60.0 and take.n_frames == 130 and take.warnings == []
+
+
+def test_livelink_timecodes_that_go_back_or_are_not_timecodes(tmp_path):
+    codes = _codes(range(10), 30)
+    codes[5] = codes[3]
+    with pytest.raises(RigInputError, match="back.csv.*row 7.*does not come after row 6"):
+        read_livelink_csv(_llf_file(tmp_path / "back.csv", codes, np.zeros(10)))
+    codes = _codes(range(10), 30)
+    codes[2] = "soon"
+    with pytest.raises(RigInputError, match="words.csv.*row 4.*'soon'"):
+        read_livelink_csv(_llf_file(tmp_path / "words.csv", codes, np.zeros(10)))
