@@ -5,8 +5,8 @@ frame rate and units. A ``WeightTake`` holds per-frame weights (F, K) for named 
 ``load_take(path)`` picks the reader from the file's extension (and, for CSV, its header).
 
 Both carry ``warnings``: one sentence each about what a reader had to decide for a file that bends its
-format (labels renamed, a short file read to its last whole frame, units guessed); the command line
-prints them and the GUI shows them beside the take.
+format (labels renamed, a short file read to its last whole frame, units guessed); ``take-info`` prints
+them, and any caller can show them beside the take.
 """
 from __future__ import annotations
 
@@ -145,6 +145,24 @@ def unique_labels(labels: list[str], where: str) -> tuple[list[str], str | None]
         return out, None
     shown = ", ".join(renamed[:6]) + (f" and {len(renamed) - 6} more" if len(renamed) > 6 else "")
     return out, f"{where}: {len(renamed)} repeated marker labels were made unique ({shown})."
+
+
+def take_summary(take: MarkerTake | WeightTake) -> dict:
+    """What a take holds, as the readers see it (``take-info --json``): frames, rate, units, labels, missing
+    samples per label, the coordinates' bounds per axis, and the readers' warnings."""
+    if isinstance(take, MarkerTake):
+        miss = take.missing
+        seen = take.positions[~miss]
+        bounds = ({"min": seen.min(axis=0).round(6).tolist(), "max": seen.max(axis=0).round(6).tolist()}
+                  if seen.size else None)
+        return {"path": take.source, "kind": "markers", "frames": take.n_frames, "rate": take.rate,
+                "units": take.units, "labels": list(take.labels),
+                "missing": {label: int(n) for label, n in zip(take.labels, miss.sum(axis=0))},
+                "bounds": bounds, "first_frame": take.first_frame, "warnings": list(take.warnings)}
+    filled = take.filled if take.filled is not None else np.zeros(take.n_frames, dtype=bool)
+    return {"path": take.source, "kind": "weights", "frames": take.n_frames, "rate": take.rate, "units": None,
+            "labels": list(take.names), "missing": {}, "bounds": None, "dropped_frames": int(filled.sum()),
+            "warnings": list(take.warnings)}
 
 
 def load_take(path: str | Path, **kwargs) -> MarkerTake | WeightTake:
