@@ -144,7 +144,8 @@ def unique_labels(labels: list[str], where: str) -> tuple[list[str], str | None]
     if not renamed:
         return out, None
     shown = ", ".join(renamed[:6]) + (f" and {len(renamed) - 6} more" if len(renamed) > 6 else "")
-    return out, f"{where}: {len(renamed)} repeated marker labels were made unique ({shown})."
+    what = "repeated marker label was" if len(renamed) == 1 else "repeated marker labels were"
+    return out, f"{where}: {len(renamed)} {what} made unique ({shown})."
 
 
 def take_summary(take: MarkerTake | WeightTake) -> dict:

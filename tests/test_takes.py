@@ -354,3 +354,105 @@ def test_livelink_timecodes_that_go_back_or_are_not_timecodes(tmp_path):
     codes[2] = "soon"
     with pytest.raises(RigInputError, match="words.csv.*row 4.*'soon'"):
         read_livelink_csv(_llf_file(tmp_path / "words.csv", codes, np.zeros(10)))
+
+
+# --- C3D files that bend the standard (built here, one bend at a time) ----------------------------
+def _bent_c3d(path, pos, labels, *, units=(b"mm", (2,)), scale_dims=(), rate_dims=(), analog_used=0,
+              analog_ratio=1, header_analog=None, cut=0):
+    """A float C3D of ``pos`` with the given parameter shapes; analog channels hold noise."""
+    import struct
+    from model.take_c3d import BLOCK, _group, _param
+    F, M, _ = pos.shape
+    width = max(len(s) for s in labels)
+    plist = [_group(1, "POINT"), _param(1, "USED", 2, (), struct.pack("<h", M)),
+             _param(1, "FRAMES", 2, (), struct.pack("<H", F)),
+             _param(1, "SCALE", 4, scale_dims, struct.pack("<f", -0.1)),
+             _param(1, "RATE", 4, rate_dims, struct.pack("<f", 60.0)),
+             _param(1, "UNITS", -1, units[1], units[0]),
+             _param(1, "LABELS", -1, (width, M), b"".join(s.encode().ljust(width) for s in labels)),
+             _group(2, "ANALOG"), _param(2, "USED", 2, (), struct.pack("<h", analog_used)),
+             _param(2, "RATE", 4, (), struct.pack("<f", 60.0 * analog_ratio))]
+    body = b"".join(plist)
+    n_blocks = (4 + len(body) + 16 + BLOCK - 1) // BLOCK
+    body += _param(1, "DATA_START", 2, (), struct.pack("<h", 2 + n_blocks)) + b"\x00\x00"
+    psec = (bytes([1, 80, n_blocks, 84]) + body).ljust(n_blocks * BLOCK, b"\x00")
+    words = analog_used * analog_ratio
+    header = np.zeros(256, dtype="<u2")
+    header[0], header[1], header[2], header[3], header[4] = 0x5002, M, words if header_analog is None else header_analog, 1, F
+    header[8] = 2 + n_blocks
+    hb = bytearray(header.tobytes())
+    hb[12:16], hb[20:24] = struct.pack("<f", -0.1), struct.pack("<f", 60.0)
+    frames = np.zeros((F, 4 * M + words), dtype="<f4")
+    frames[:, :4 * M] = np.concatenate([np.nan_to_num(pos), np.where(np.isnan(pos).any(2), -1.0, 0.0)[..., None]],
+                                       axis=2).reshape(F, 4 * M)
+    frames[:, 4 * M:] = np.random.default_rng(0).uniform(-5, 5, size=(F, words))
+    data = bytes(hb) + psec + frames.tobytes()
+    path.write_bytes(data[:len(data) - cut])
+    return path
+
+
+@pytest.fixture(scope="module")
+def bent_positions():
+    rng = np.random.default_rng(7)
+    F, M = 50, 4
+    pos = np.cumsum(rng.normal(scale=0.5, size=(F, M, 3)), axis=0) + rng.uniform(-500, 500, size=(1, M, 3))
+    pos[10:14, 2] = np.nan
+    return pos
+
+
+def test_c3d_analog_samples_only_in_the_analog_group(bent_positions, tmp_path):
+    """The header says no analog samples follow a frame; ANALOG:USED 3 at twice the frame rate says 6 do."""
+    path = _bent_c3d(tmp_path / "analog.c3d", bent_positions, ["A", "B", "C", "D"], analog_used=3, analog_ratio=2,
+                     header_analog=0)
+    take = read_c3d(path)
+    assert take.n_frames == 50 and take.warnings == []
+    np.testing.assert_allclose(take.positions, bent_positions.astype(np.float32), equal_nan=True)
+
+
+def test_c3d_parameters_as_arrays_nul_padded_and_abbreviated(bent_positions, tmp_path):
+    path = _bent_c3d(tmp_path / "arrays.c3d", bent_positions, ["A", "B", "C", "D"], scale_dims=(1,), rate_dims=(1,),
+                     units=(b"mete\x00\x00", (6, 1)))
+    take = read_c3d(path)
+    assert take.units == "m" and take.rate == 60.0 and take.warnings == []
+    np.testing.assert_allclose(take.positions, bent_positions.astype(np.float32), equal_nan=True)
+    bad = _bent_c3d(tmp_path / "inches.c3d", bent_positions, ["A", "B", "C", "D"], units=(b"in", (2,)))
+    with pytest.raises(RigInputError, match="inches.c3d.*unknown units 'in' in POINT:UNITS"):
+        read_c3d(bad)
+
+
+def test_c3d_duplicate_labels_and_a_short_file(bent_positions, tmp_path):
+    path = _bent_c3d(tmp_path / "dup.c3d", bent_positions, ["A", "B", "A", "D"], cut=10)
+    take = read_c3d(path)
+    assert take.labels == ["A", "B", "A_2", "D"] and take.n_frames == 49
+    said = " ".join(take.warnings)
+    assert len(take.warnings) == 2 and "1 repeated marker label was made unique (A -> A_2)" in said
+    assert "50 frames declared but 49 whole frames present" in said
+    np.testing.assert_allclose(take.positions, bent_positions[:49].astype(np.float32), equal_nan=True)
+    with pytest.raises(RigInputError, match="half.c3d.*truncated: 50 frames declared but only 20"):
+        read_c3d(_bent_c3d(tmp_path / "half.c3d", bent_positions, ["A", "B", "C", "D"], cut=30 * 4 * 4 * 4 + 8))
+
+
+def test_c3d_damaged_parameters_never_crash_or_loop(take_dir, tmp_path):
+    """A next-entry offset pointing backwards ends the walk (with a warning); random damage to the header
+    and the parameter section gives a reading or one sentence, never a traceback or a hang."""
+    import struct
+    data = bytearray((take_dir / "take.c3d").read_bytes())
+    start = (data[0] - 1) * 512 + 4
+    name_len = abs(struct.unpack_from("b", data, start)[0])
+    struct.pack_into("<h", data, start + 2 + name_len, -6)   # the first entry points back before itself
+    back = tmp_path / "back.c3d"
+    back.write_bytes(bytes(data))
+    take = read_c3d(back)   # the header still tells the layout
+    assert take.n_frames == 358 and any("points backwards" in w for w in take.warnings)
+    rng = np.random.default_rng(16)
+    clean = (take_dir / "take.c3d").read_bytes()
+    for trial in range(150):
+        damaged = bytearray(clean)
+        for at in rng.integers(0, 3 * 512, size=rng.integers(1, 12)):
+            damaged[at] = rng.integers(0, 256)
+        path = tmp_path / f"damaged{trial}.c3d"
+        path.write_bytes(bytes(damaged))
+        try:
+            read_c3d(path)
+        except RigInputError as exc:
+            assert path.name in str(exc) and "\n" not in str(exc)
