@@ -428,7 +428,7 @@ def test_c3d_duplicate_labels_and_a_short_file(bent_positions, tmp_path):
     assert len(take.warnings) == 2 and "1 repeated marker label was made unique (A -> A_2)" in said
     assert "50 frames declared but 49 whole frames present" in said
     np.testing.assert_allclose(take.positions, bent_positions[:49].astype(np.float32), equal_nan=True)
-    with pytest.raises(RigInputError, match="half.c3d.*truncated: 50 frames declared but only 20"):
+    with pytest.raises(RigInputError, match="half.c3d.*truncated: 50 frames declared but only 19 complete"):
         read_c3d(_bent_c3d(tmp_path / "half.c3d", bent_positions, ["A", "B", "C", "D"], cut=30 * 4 * 4 * 4 + 8))
 
 
