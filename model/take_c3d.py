@@ -37,7 +37,8 @@ def _vax_to_ieee(raw: np.ndarray) -> np.ndarray:
     """DEC (VAX F) floats, 4 bytes each as two little-endian 16-bit words -> float32 (swap words, / 4)."""
     u = np.ascontiguousarray(raw, dtype=np.uint8).reshape(-1, 4).view("<u2").astype(np.uint32)
     bits = ((u[:, 0] << 16) | u[:, 1]).astype("<u4")
-    return bits.view("<f4") / np.float32(4.0)
+    with np.errstate(invalid="ignore", over="ignore"):   # damaged words decode to NaN/inf, read as missing
+        return bits.view("<f4") / np.float32(4.0)
 
 
 def _text(raw: bytes) -> str:
@@ -226,9 +227,14 @@ def _points(data: bytes, lay: _Layout, params: _Params, frames: int, scale: floa
     raw = np.frombuffer(data, dtype=np.uint8, count=F * lay.frame_bytes,
                         offset=(lay.start_block - 1) * BLOCK).reshape(F, lay.frame_bytes)
     pts = raw[:, :M * 4 * word]
-    if lay.is_float:
-        vals = _vax_to_ieee(pts).reshape(F, M, 4) if params.processor == 85 \
-            else np.ascontiguousarray(pts).view(e + "f4").reshape(F, M, 4)
+    with np.errstate(invalid="ignore", over="ignore"):   # NaN/inf bytes are missing samples, not news
+        return _decode(pts, F, M, e, lay.is_float, params.processor == 85, scale)
+
+
+def _decode(pts: np.ndarray, F: int, M: int, e: str, is_float: bool, vax: bool, scale: float) -> np.ndarray:
+    """Points of (F, M * 4) words: int16 times |scale| or float32 (VAX floats on DEC); NaN where missing."""
+    if is_float:
+        vals = _vax_to_ieee(pts).reshape(F, M, 4) if vax else np.ascontiguousarray(pts).view(e + "f4").reshape(F, M, 4)
         xyz = vals[..., :3].astype(np.float64)
     else:
         vals = np.ascontiguousarray(pts).view(e + "i2").reshape(F, M, 4)
