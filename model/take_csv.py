@@ -71,7 +71,7 @@ def _names(raw: list[str], path: Path, warnings: list[str]) -> list[str]:
     return labels
 
 
-def _take(path, rows, data_rows, xyz_columns, raw_names, rate, units, warnings) -> MarkerTake:
+def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings) -> MarkerTake:
     if not data_rows:
         raise RigInputError(f"{path}: holds no frames.")
     if not xyz_columns:
@@ -117,7 +117,7 @@ def _read_vicon(path: Path, rows: list[list[str]], start: int) -> MarkerTake:
         if not any(rows[i]):
             break   # a blank line ends the section
         data.append((i + 1, rows[i]))
-    return _take(path, rows, data, xyz, raw, rate, _units(units.pop(), path, "the Trajectories units row"), warnings)
+    return _take(path, data, xyz, raw, rate, _units(units.pop(), path, "the Trajectories units row"), warnings)
 
 
 def _read_motive(path: Path, rows: list[list[str]]) -> MarkerTake:
@@ -148,7 +148,7 @@ def _read_motive(path: Path, rows: list[list[str]]) -> MarkerTake:
             xyz.append((c, c + 1, c + 2))
             raw.append(names[c] if c < len(names) else "")
     data = [(i + 1, r) for i, r in enumerate(rows[axis_at + 1:], start=axis_at + 1) if any(r)]
-    return _take(path, rows, data, xyz, raw, rate, units, warnings)
+    return _take(path, data, xyz, raw, rate, units, warnings)
 
 
 def _read_plain(path: Path, rows: list[list[str]], rate: float, units: str) -> MarkerTake:
@@ -169,7 +169,7 @@ def _read_plain(path: Path, rows: list[list[str]], rate: float, units: str) -> M
         if len(r) > len(head) and any(r[len(head):]):
             raise RigInputError(f"{path}: line {line_no} has more columns than the header.")
     xyz = [(1 + 3 * k, 2 + 3 * k, 3 + 3 * k) for k in range(len(raw))]
-    return _take(path, rows, rows[1:], xyz, raw, rate, units, [])
+    return _take(path, rows[1:], xyz, raw, rate, units, [])
 
 
 def read_marker_csv(path: str | Path, *, rate: float = 60.0, units: str = "mm") -> MarkerTake:
