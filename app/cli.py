@@ -120,6 +120,24 @@ def cmd_corrective(args) -> int:
     return 0
 
 
+def cmd_take_info(args) -> int:
+    from model.takes import load_take, take_summary
+    info = take_summary(load_take(args.take))
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    gaps = sum(info["missing"].values())
+    print(f"{Path(args.take).name}: {info['kind']} take, {info['frames']} frames at {info['rate']:g} fps, "
+          f"{len(info['labels'])} {'markers' if info['kind'] == 'markers' else 'weight columns'}"
+          + (f" ({info['units']}), {gaps} missing samples" if info["kind"] == "markers" else ""))
+    if info["bounds"]:
+        print(f"  bounds: {info['bounds']['min']} .. {info['bounds']['max']}")
+    print(f"  labels: {', '.join(info['labels'])}")
+    for w in info["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
+    return 0
+
+
 def cmd_sample(args) -> int:
     from resources.sample_rig import write_sample
     out = write_sample(args.output)
@@ -146,6 +164,11 @@ def build_parser() -> argparse.ArgumentParser:
     rig_arg(sp)
     sp.add_argument("--json", action="store_true", help="machine-readable output")
     sp.set_defaults(func=cmd_info)
+
+    sp = sub.add_parser("take-info", help="print what a take (C3D, TRC, marker CSV, Live Link Face CSV) holds")
+    sp.add_argument("take", metavar="TAKE", help="a .c3d, .trc or .csv take")
+    sp.add_argument("--json", action="store_true", help="machine-readable output")
+    sp.set_defaults(func=cmd_take_info)
 
     sp = sub.add_parser("render", help="render a pose or a map to a PNG, off screen")
     rig_arg(sp)
@@ -233,7 +256,7 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_UNEXPECTED
 
 
-_COMMANDS = {"info", "render", "export", "sample", "segment", "solve", "corrective", "pairs"}
+_COMMANDS = {"info", "take-info", "render", "export", "sample", "segment", "solve", "corrective", "pairs"}
 
 if __name__ == "__main__":
     sys.exit(main())

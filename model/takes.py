@@ -3,6 +3,10 @@
 A ``MarkerTake`` holds positions (F, M, 3) float64 with NaN where a marker is missing, its labels,
 frame rate and units. A ``WeightTake`` holds per-frame weights (F, K) for named shapes.
 ``load_take(path)`` picks the reader from the file's extension (and, for CSV, its header).
+
+Both carry ``warnings``: one sentence each about what a reader had to decide for a file that bends its
+format (labels renamed, a short file read to its last whole frame, units guessed); ``take-info`` prints
+them, and any caller can show them beside the take.
 """
 from __future__ import annotations
 
@@ -25,6 +29,7 @@ class MarkerTake:
     units: str = "mm"
     source: str = ""
     first_frame: int = 1
+    warnings: list[str] = field(default_factory=list)
 
     def __post_init__(self) -> None:
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float64)
@@ -84,6 +89,8 @@ class WeightTake:
     unmapped: list[str] = field(default_factory=list)
     channels: dict[str, np.ndarray] = field(default_factory=dict)
     source: str = ""
+    warnings: list[str] = field(default_factory=list)
+    filled: np.ndarray | None = None   # (F,) bool: frames the recording dropped, interpolated in time
 
     def __post_init__(self) -> None:
         self.weights = np.ascontiguousarray(self.weights, dtype=np.float64)
@@ -93,6 +100,70 @@ class WeightTake:
     @property
     def n_frames(self) -> int:
         return int(self.weights.shape[0])
+
+    def times(self) -> np.ndarray:
+        """Seconds from the first frame; frames are evenly spaced (dropped frames are filled in)."""
+        return np.arange(self.n_frames) / self.rate
+
+
+_UNIT_WORDS = {"mm": ("millimeters", "millimetres"), "cm": ("centimeters", "centimetres"), "m": ("meters", "metres")}
+
+
+def units_from_text(text: str) -> str | None:
+    """'mm', 'cm' or 'm' from how files spell a length unit: 'mm', 'Millimeters', 'metres', NUL-padded
+    'mm\\0\\0', or cut short ('mete', 'milli'); None if the text names no length unit."""
+    word = str(text).replace("\x00", " ").strip().lower().rstrip(".")
+    if word in _UNIT_WORDS:
+        return word
+    if len(word) >= 3:
+        for unit, spellings in _UNIT_WORDS.items():
+            if any(s.startswith(word) for s in spellings):
+                return unit
+    return None
+
+
+def unique_labels(labels: list[str], where: str) -> tuple[list[str], str | None]:
+    """Labels made unique: a repeated label's later copies become LABEL_2, LABEL_3, ... (never clashing
+    with another label). Returns the labels and a warning sentence, or None if all were unique."""
+    labels = [str(s) for s in labels]
+    taken = set(labels)
+    seen: dict[str, int] = {}
+    out, renamed = [], []
+    for s in labels:
+        seen[s] = seen.get(s, 0) + 1
+        if seen[s] == 1:
+            out.append(s)
+            continue
+        k = seen[s]
+        while f"{s}_{k}" in taken:
+            k += 1
+        new = f"{s}_{k}"
+        taken.add(new)
+        out.append(new)
+        renamed.append(f"{s or repr(s)} -> {new}")
+    if not renamed:
+        return out, None
+    shown = ", ".join(renamed[:6]) + (f" and {len(renamed) - 6} more" if len(renamed) > 6 else "")
+    what = "repeated marker label was" if len(renamed) == 1 else "repeated marker labels were"
+    return out, f"{where}: {len(renamed)} {what} made unique ({shown})."
+
+
+def take_summary(take: MarkerTake | WeightTake) -> dict:
+    """What a take holds, as the readers see it (``take-info --json``): frames, rate, units, labels, missing
+    samples per label, the coordinates' bounds per axis, and the readers' warnings."""
+    if isinstance(take, MarkerTake):
+        miss = take.missing
+        seen = take.positions[~miss]
+        bounds = ({"min": seen.min(axis=0).round(6).tolist(), "max": seen.max(axis=0).round(6).tolist()}
+                  if seen.size else None)
+        return {"path": take.source, "kind": "markers", "frames": take.n_frames, "rate": take.rate,
+                "units": take.units, "labels": list(take.labels),
+                "missing": {label: int(n) for label, n in zip(take.labels, miss.sum(axis=0))},
+                "bounds": bounds, "first_frame": take.first_frame, "warnings": list(take.warnings)}
+    filled = take.filled if take.filled is not None else np.zeros(take.n_frames, dtype=bool)
+    return {"path": take.source, "kind": "weights", "frames": take.n_frames, "rate": take.rate, "units": None,
+            "labels": list(take.names), "missing": {}, "bounds": None, "dropped_frames": int(filled.sum()),
+            "warnings": list(take.warnings)}
 
 
 def load_take(path: str | Path, **kwargs) -> MarkerTake | WeightTake:
