@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError
-from .takes import WeightTake
+from .take_data import WeightTake
 
 ROTATION_COLUMNS = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
                     "RightEyeYaw", "RightEyePitch", "RightEyeRoll")

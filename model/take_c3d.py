@@ -26,7 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError
-from .takes import MarkerTake, unique_labels, units_from_text
+from .take_data import MarkerTake, unique_labels, units_from_text
 
 BLOCK = 512
 SHORT_FILE_FRACTION = 0.5   # a short file holding less than this share of its declared frames is refused

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError
-from .takes import MarkerTake, unique_labels, units_from_text
+from .take_data import MarkerTake, unique_labels, units_from_text
 
 
 def _cells(line: str) -> list[str]:
