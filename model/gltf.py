@@ -25,7 +25,8 @@ from urllib.parse import unquote
 
 import numpy as np
 
-from .errors import RigInputError
+from .errors import RigInputError, shown
+from .input_files import regular_file
 from .json_file import parse_json_text
 from .rig import Rig
 
@@ -184,6 +185,74 @@ def _int(value, bad: int = -1) -> int:
     return value if isinstance(value, int) and not isinstance(value, bool) else bad
 
 
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_num(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+# What this reader uses of a glTF document and the JSON type each must have (glTF 2.0 §5): anything else there
+# is refused in one sentence before it is used, never met as a Python error half-way through reading.
+_ARRAY_FIELDS = ("accessors", "bufferViews", "buffers", "meshes", "nodes", "scenes")
+_FIELD_TYPES = {
+    "accessors": {"bufferView": _is_int, "byteOffset": _is_int, "componentType": _is_int, "count": _is_int,
+                  "type": lambda v: isinstance(v, str), "normalized": lambda v: isinstance(v, bool),
+                  "sparse": lambda v: isinstance(v, dict)},
+    "bufferViews": {"buffer": _is_int, "byteOffset": _is_int, "byteLength": _is_int, "byteStride": _is_int},
+    "buffers": {"byteLength": _is_int, "uri": lambda v: isinstance(v, str)},
+    "meshes": {"primitives": lambda v: isinstance(v, list) and all(isinstance(p, dict) for p in v),
+               "extras": lambda v: isinstance(v, dict), "name": lambda v: isinstance(v, str)},
+    "nodes": {"mesh": _is_int, "children": lambda v: isinstance(v, list) and all(_is_int(c) for c in v),
+              "matrix": lambda v: isinstance(v, list) and len(v) == 16 and all(_is_num(c) for c in v),
+              "translation": lambda v: isinstance(v, list) and len(v) == 3 and all(_is_num(c) for c in v),
+              "rotation": lambda v: isinstance(v, list) and len(v) == 4 and all(_is_num(c) for c in v),
+              "scale": lambda v: isinstance(v, list) and len(v) == 3 and all(_is_num(c) for c in v)},
+    "scenes": {"nodes": lambda v: isinstance(v, list) and all(_is_int(c) for c in v)},
+}
+
+
+def _index_map(v) -> bool:
+    return isinstance(v, dict) and all(isinstance(k, str) and _is_int(i) for k, i in v.items())
+
+
+_PRIMITIVE_TYPES = {"attributes": _index_map, "indices": _is_int, "mode": _is_int,
+                    "targets": lambda v: isinstance(v, list) and all(_index_map(t) for t in v),
+                    "extras": lambda v: isinstance(v, dict)}
+
+
+def _check_structure(path: Path, gltf: dict) -> None:
+    """Raise RigInputError naming the first property of the wrong JSON type among those this reader uses."""
+    def bad(where: str) -> RigInputError:
+        return RigInputError(f"{path}: {where} has a value of the wrong type; the file is damaged.")
+    for key in ("asset", "extras"):
+        if key in gltf and not isinstance(gltf[key], dict):
+            raise bad(f"'{key}'")
+    for key in ("extensionsRequired", "extensionsUsed"):
+        if key in gltf and not (isinstance(gltf[key], list) and all(isinstance(e, str) for e in gltf[key])):
+            raise bad(f"'{key}'")
+    if "scene" in gltf and not _is_int(gltf["scene"]):
+        raise bad("'scene'")
+    for key in _ARRAY_FIELDS:
+        items = gltf.get(key, [])
+        if not isinstance(items, list) or not all(isinstance(it, dict) for it in items):
+            raise bad(f"'{key}'")
+        checks = _FIELD_TYPES[key]
+        for i, it in enumerate(items):
+            for field, ok in checks.items():
+                if field in it and not ok(it[field]):
+                    raise bad(f"{key}[{i}].{field}")
+            if key == "meshes":
+                for j, prim in enumerate(it.get("primitives", [])):
+                    for field, ok in _PRIMITIVE_TYPES.items():
+                        if field in prim and not ok(prim[field]):
+                            raise bad(f"meshes[{i}].primitives[{j}].{field}")
+                names = it.get("extras", {}).get("targetNames")
+                if names is not None and not (isinstance(names, list) and all(isinstance(n, str) for n in names)):
+                    raise bad(f"meshes[{i}].extras.targetNames")
+
+
 def _parse(path: Path) -> _Doc:
     try:
         raw = path.read_bytes()
@@ -224,6 +293,7 @@ def _parse(path: Path) -> _Doc:
     gltf = parse_json_text(text, str(path))
     if not isinstance(gltf, dict):
         raise RigInputError(f"{path}: is not a glTF document (the JSON is not an object).")
+    _check_structure(path, gltf)
     version = str(gltf.get("asset", {}).get("version", ""))
     if not version.startswith("2"):
         raise RigInputError(f"{path}: glTF version '{version}' is not supported (glTF 2.0 only).")
@@ -359,9 +429,15 @@ def load_gltf(path: str | Path, units: str = "m", mesh: str | None = None) -> Ri
 
     ``mesh`` names the mesh to read (default: the most morph targets, then the most vertices).
     """
-    path = Path(path)
-    if not path.is_file():
-        raise RigInputError(f"{path}: does not exist.")
+    path = regular_file(path)
+    try:
+        return _load(path, units, mesh)
+    except (TypeError, AttributeError, KeyError, IndexError, ValueError, OverflowError) as exc:
+        # the structure check covers what this reader uses; this is the last line for what it missed
+        raise RigInputError(f"{path}: the glTF is damaged ({type(exc).__name__}: {shown(exc, 80)}).") from None
+
+
+def _load(path: Path, units: str, mesh: str | None) -> Rig:
     doc = _parse(path)
     mesh_index = _choose_mesh(doc, mesh)
     mesh = doc.gltf["meshes"][mesh_index]

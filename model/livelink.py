@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import RigInputError
+from .errors import RigInputError, shown
 from .take_data import WeightTake
 
 ROTATION_COLUMNS = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
@@ -123,8 +123,13 @@ def read_livelink_raw(path: str | Path) -> tuple[list[str], list[str], np.ndarra
     path = Path(path)
     if not path.is_file():
         raise RigInputError(f"{path}: does not exist.")
-    with open(path, newline="", encoding="utf-8", errors="replace") as f:
-        rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
+    try:
+        with open(path, newline="", encoding="utf-8", errors="replace") as f:
+            rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
+    except OSError as exc:
+        raise RigInputError(f"{path}: cannot be read ({exc.strerror}).") from None
+    except csv.Error as exc:   # a cell over the csv module's 131,072 characters, a NUL byte, ...
+        raise RigInputError(f"{path}: is not a readable CSV ({shown(exc, 80)}).") from None
     if not rows:
         raise RigInputError(f"{path}: the file is empty.")
     head = [c.strip() for c in rows[0]]

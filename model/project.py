@@ -12,6 +12,7 @@ from __future__ import annotations
 import io
 import json
 import tokenize
+import zlib
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -109,7 +110,8 @@ def read_npy_member(z: zipfile.ZipFile, name: str, path: Path, key: str) -> np.n
             data = f.read(nbytes + 1)
     except RigInputError:
         raise
-    except (ValueError, OSError, zipfile.BadZipFile, EOFError, SyntaxError, TypeError, tokenize.TokenError) as exc:
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError, SyntaxError, TypeError, tokenize.TokenError,
+            zlib.error) as exc:
         raise RigInputError(f"{path}: the array '{key}' is damaged ({shown(exc, 80)}).") from None
     if len(data) != nbytes:
         raise RigInputError(f"{path}: the array '{key}' is truncated.")
@@ -185,7 +187,7 @@ def load_project(path: str | Path) -> Project:
             manifest = parse_json_text(z.read(MANIFEST).decode("utf-8"), f"{path}: the project manifest")
         except KeyError:
             raise RigInputError(f"{path}: the project has no manifest.json; it is damaged.") from None
-        except (ValueError, UnicodeDecodeError, zipfile.BadZipFile) as exc:
+        except (ValueError, UnicodeDecodeError, zipfile.BadZipFile, zlib.error, OSError) as exc:
             raise RigInputError(f"{path}: the project manifest is damaged ({exc}).") from None
         if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
             raise RigInputError(f"{path}: is not a Blendshape Studio project.")

@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import RigInputError
+from .errors import RigInputError, shown
 from .take_data import MarkerTake, unique_labels, units_from_text
 
 
@@ -47,6 +47,8 @@ def _rows(path: Path) -> list[list[str]]:
             return [[c.strip() for c in r] for r in csv.reader(f, delimiter=delimiter)]
     except OSError as exc:
         raise RigInputError(f"{path}: cannot be read ({exc.strerror}).") from None
+    except csv.Error as exc:   # a cell over the csv module's 131,072 characters, a NUL byte, ...
+        raise RigInputError(f"{path}: is not a readable CSV ({shown(exc, 80)}).") from None
 
 
 def _table(path: Path, rows: list[tuple[int, list[str]]], columns: list[int]) -> np.ndarray:
@@ -88,7 +90,7 @@ def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings) -> Mar
 def _units(text: str, path: Path, what: str) -> str:
     units = units_from_text(text)
     if units is None:
-        raise RigInputError(f"{path}: unknown units '{text}' in {what} (use mm, cm or m).")
+        raise RigInputError(f"{path}: unknown units '{shown(text, 20)}' in {what} (use mm, cm or m).")
     return units
 
 
@@ -106,7 +108,7 @@ def _read_vicon(path: Path, rows: list[list[str]], start: int) -> MarkerTake:
     for c, name in enumerate(names):
         if name:
             if axes[c:c + 3] != ["X", "Y", "Z"]:
-                raise RigInputError(f"{path}: marker {name} has no X, Y, Z columns under it.")
+                raise RigInputError(f"{path}: marker {shown(name, 40)} has no X, Y, Z columns under it.")
             xyz.append((c, c + 1, c + 2))
             raw.append(name)
     units = {u for trip in xyz for u in (unit_row[k] if k < len(unit_row) else "" for k in trip)}
@@ -163,7 +165,8 @@ def _read_plain(path: Path, rows: list[list[str]], rate: float, units: str) -> M
         stems = {c.rsplit("_", 1)[0] for c in trip}
         axes = [c.rsplit("_", 1)[-1].upper() if "_" in c else "" for c in trip]
         if len(stems) != 1 or axes != ["X", "Y", "Z"]:
-            raise RigInputError(f"{path}: columns {', '.join(trip)} are not one marker's name_X, name_Y, name_Z.")
+            raise RigInputError(f"{path}: columns {shown(', '.join(trip), 80)} are not one marker's name_X, name_Y, "
+                                  "name_Z.")
         raw.append(stems.pop())
     for line_no, r in rows[1:]:
         if len(r) > len(head) and any(r[len(head):]):

@@ -9,8 +9,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import RigInputError
-from .rig import UNIT_IN_METRES, unit_scale
+from .errors import RigInputError, shown
+from .rig import MAX_COORDINATE, MAX_WEIGHT, UNIT_IN_METRES, unit_scale
+
+MAX_RATE = 100_000.0   # frames per second: no capture system records faster
 
 
 @dataclass
@@ -38,8 +40,14 @@ class MarkerTake:
             raise RigInputError(f"{where}: duplicate marker labels: {', '.join(dup)}.")
         if self.units not in UNIT_IN_METRES:
             raise RigInputError(f"{where}: unknown units '{self.units}' (use mm, cm or m).")
-        if not (np.isfinite(self.rate) and self.rate > 0):
-            raise RigInputError(f"{where}: the frame rate must be a positive number, not {self.rate}.")
+        if not (np.isfinite(self.rate) and 0 < self.rate <= MAX_RATE):
+            raise RigInputError(f"{where}: the frame rate must be a number above 0 and at most {MAX_RATE:g} fps, "
+                                f"not {shown(self.rate, 20)}.")
+        if np.isinf(self.positions).any():
+            raise RigInputError(f"{where}: holds infinite coordinates; the file is damaged.")
+        if self.positions.size and np.nanmax(np.abs(self.positions), initial=0.0) > MAX_COORDINATE:
+            raise RigInputError(f"{where}: holds coordinates beyond ±{MAX_COORDINATE:g} {self.units}; "
+                                "the file is damaged.")
 
     @property
     def n_frames(self) -> int:
@@ -88,8 +96,13 @@ class WeightTake:
 
     def __post_init__(self) -> None:
         self.weights = np.ascontiguousarray(self.weights, dtype=np.float64)
+        where = self.source or "take"
         if self.weights.ndim != 2 or self.weights.shape[1] != len(self.names):
-            raise RigInputError(f"{self.source or 'take'}: weights do not match the {len(self.names)} shape names.")
+            raise RigInputError(f"{where}: weights do not match the {len(self.names)} shape names.")
+        if not np.isfinite(self.weights).all() or np.abs(self.weights).max(initial=0.0) > MAX_WEIGHT:
+            raise RigInputError(f"{where}: holds a weight that is not a number within ±{MAX_WEIGHT:g}.")
+        if not (np.isfinite(self.rate) and 0 < self.rate <= MAX_RATE):
+            raise RigInputError(f"{where}: the frame rate must be above 0 and at most {MAX_RATE:g} fps.")
 
     @property
     def n_frames(self) -> int:
