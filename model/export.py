@@ -61,8 +61,10 @@ def animation_for_rig(rig: Rig, names: list[str], weights: np.ndarray, times: np
     return WeightAnimation(times=times, weights=W, source=source)
 
 
-def animation_from_timeline(timeline, rate: float = 30.0) -> WeightAnimation:
-    """Keyframes (model.keyframes.Timeline of global poses) sampled at every frame from the first key to the last."""
+def animation_from_timeline(timeline, rate: float = 30.0, *, deltas=None, blend=None) -> WeightAnimation:
+    """Keyframes (model.keyframes.Timeline) sampled at every frame from the first key to the last. A timeline of
+    regional poses (per-region weights blended by ``blend``) becomes, frame by frame, the global weights whose
+    surface is closest to it (``solvers.surface_fit``; pass the rig's ``deltas`` and the keys' ``blend``)."""
     if not len(timeline):
         raise RigInputError("The timeline has no keys to export.")
     if not rate > 0:
@@ -71,8 +73,11 @@ def animation_from_timeline(timeline, rate: float = 30.0) -> WeightAnimation:
     frames = np.arange(int(np.floor((T[-1] - T[0]) * rate + 1e-9)) + 1)
     times = T[0] + frames / rate
     W = np.stack([timeline.evaluate(t) for t in times])
-    if W.ndim != 2:
-        raise RigInputError("Only a timeline of global poses can be exported as blend shape weights.")
+    if W.ndim == 3:
+        if deltas is None or blend is None:
+            raise RigInputError("A timeline of regional poses needs the rig's shapes and the keys' blend to export.")
+        from solvers.surface_fit import global_weights_of_regional
+        W = global_weights_of_regional(deltas, blend, W, lower=timeline.lower, upper=timeline.upper)
     return WeightAnimation(times=times - T[0], weights=W, source="keyframes")
 
 
