@@ -84,10 +84,47 @@ def region_contacts(labels: np.ndarray, adjacency: sp.spmatrix) -> tuple[np.ndar
     return gap, bnd
 
 
+def mirror_partners(positions: np.ndarray, per_shape_displacement: np.ndarray,
+                    tolerance: float = 0.05) -> np.ndarray:
+    """(K,) each shape's mirror partner across x = 0 (itself if none): the shape whose displacement-weighted
+    centre ``Σ_v ‖d_k(v)‖ x_v / Σ_v ‖d_k(v)‖`` is the reflection of this one's, within ``tolerance`` of the
+    rig's size, found both ways. From the geometry alone, so it needs no naming convention."""
+    X = np.asarray(positions, dtype=np.float64)
+    D = np.asarray(per_shape_displacement, dtype=np.float64)
+    K = D.shape[1]
+    w = D.sum(axis=0)
+    c = (D.T @ X) / np.where(w > 0, w, 1.0)[:, None]
+    size = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0))) or 1.0
+    refl = c * np.array([-1.0, 1.0, 1.0])
+    dist = np.linalg.norm(refl[:, None, :] - c[None, :, :], axis=2)
+    dist[w == 0, :] = np.inf
+    dist[:, w == 0] = np.inf
+    best = np.argmin(dist, axis=1)
+    ok = (dist[np.arange(K), best] < tolerance * size) & (best[best] == np.arange(K))
+    return np.where(ok, best, np.arange(K))
+
+
+def region_activity(labels: np.ndarray, support: np.ndarray, partners: np.ndarray | None = None) -> np.ndarray:
+    """(R, K) how much each shape moves each region, ``Σ_{v∈core r} support(v, k)``; with ``partners`` a shape
+    and its mirror partner count as one (they fire together in symmetric expressions), so the two brows,
+    moved by browInnerUp_L and browInnerUp_R, move together."""
+    lab = np.asarray(labels, dtype=np.int64)
+    S = np.asarray(support, dtype=np.float64)
+    R = int(lab.max()) + 1 if (lab >= 0).any() else 0
+    fg = np.flatnonzero(lab >= 0)
+    act = np.zeros((R, S.shape[1]))
+    np.add.at(act, lab[fg], S[fg])
+    if partners is not None:
+        act = act + act[:, partners]
+    return act
+
+
 def merge_clusters(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.ndarray,
-                   levels: int | None = None) -> list[np.ndarray]:
+                   levels: int | None = None, activity: np.ndarray | None = None) -> list[np.ndarray]:
     """Cluster id of each level-0 region for every level (Joshi et al. 2003, §4; rule in the module doc).
 
+    With ``activity`` (R, K) (``region_activity``), contiguous clusters that move together merge first: pairs
+    go by the cosine similarity of their summed activity (shape co-activation), then the rule above.
     Returns a list of (R,) int arrays, level 0 first (the identity), the last all zeros (one region).
     """
     labels = np.asarray(labels, dtype=np.int64)
@@ -122,7 +159,14 @@ def merge_clusters(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.nda
             finite = np.isfinite(g)
             if finite.any():
                 pa, pb, g, b = pa[finite], pb[finite], g[finite], cb[pa[finite], pb[finite]]
-                order = np.lexsort((pb, pa, -b, g))
+                if activity is None:
+                    order = np.lexsort((pb, pa, -b, g))
+                else:
+                    ca = np.zeros((n, activity.shape[1]))
+                    np.add.at(ca, cluster, activity)
+                    ca /= np.maximum(np.linalg.norm(ca, axis=1, keepdims=True), 1e-300)
+                    sim = np.round(np.einsum("ij,ij->i", ca[pa], ca[pb]), 2)  # ties go to the rule above
+                    order = np.lexsort((pb, pa, -b, g, -sim))
                 pairs = list(zip(pa[order], pb[order]))
             else:  # no contiguous pair left: closest centroids (separate mesh pieces)
                 csum = np.zeros((n, 3))
@@ -150,7 +194,7 @@ def merge_clusters(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.nda
 
 
 def hierarchy_labels(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.ndarray,
-                     levels: int | None = None) -> list[np.ndarray]:
+                     levels: int | None = None, activity: np.ndarray | None = None) -> list[np.ndarray]:
     """Per-vertex core labels of every level (level 0 = ``labels``); background (-1) is kept at every level.
 
     Joshi et al. 2003, §4: each level merges contiguous regions of the level below; the top has one region.
@@ -158,7 +202,7 @@ def hierarchy_labels(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.n
     labels = np.asarray(labels, dtype=np.int64)
     fg = labels >= 0
     out = []
-    for cl in merge_clusters(labels, adjacency, positions, levels):
+    for cl in merge_clusters(labels, adjacency, positions, levels, activity):
         lab = np.full(labels.size, -1, dtype=np.int64)
         lab[fg] = cl[labels[fg]]
         out.append(lab)
