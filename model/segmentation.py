@@ -91,7 +91,7 @@ class SegmentationSettings:
     growth_ratio      region growing: neighbours join while value ≥ ratio · seed [0.75].
     max_groups        region growing: number of groups [5].
     laplacian         'uniform' (umbrella, Joshi) or 'cotangent'.
-    normalise         True: each shape's map is divided by its 95% quantile over the vertices it moves before
+    normalise         True: each shape's map is divided by its 99% quantile over the vertices it moves before
                       the maximum (every shape has its say); False: Joshi's raw maximum.
     smoothing         rounds of 1-ring averaging of the map (0 = none; only with ``normalise``).
     split_by_shapes   regions are cut where the group of shapes that moves the skin most changes.
@@ -257,7 +257,7 @@ class SegmentationCache:
         return self._get("domain", lambda: self.pieces()[1] & self.moves().any(axis=1))
 
     def support(self) -> np.ndarray:
-        """(V, K) where each shape acts: its displacement over its own 95% quantile, at most 1."""
+        """(V, K) where each shape acts: its displacement over its own 99% quantile, at most 1."""
         def make():
             D = self.maps().per_shape_displacement
             return np.minimum(D / shape_scales(D, self.moves())[None, :], 1.0)
@@ -322,10 +322,10 @@ def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.n
     secs["graph"] = time.perf_counter() - t_start
 
     t0 = time.perf_counter()
-    raw = cache.maps(s.laplacian).values(s.map_kind)
-    scale = float(cache.maps(s.laplacian).displacement.max())
-    if raw.max() <= 1e-9 * scale:  # zero up to rounding (e.g. a rig of pure translations)
-        raise RigInputError(f"The {s.map_kind} map is zero everywhere: no shape deforms the surface, "
+    maps = cache.maps(s.laplacian)
+    kind = "displacement" if s.map_kind == "displacement" else "laplacian"  # what must not vanish
+    if maps.values(kind).max() <= 1e-9 * float(maps.displacement.max()):  # zero up to rounding
+        raise RigInputError(f"The {kind} map is zero everywhere: no shape deforms the surface, "
                             "so there is nothing to segment.")
     values, sorted_values = cache.values(s.map_kind, s.laplacian, s.normalise, s.smoothing)
     secs["maps"] = time.perf_counter() - t0

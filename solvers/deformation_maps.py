@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from .errors import RigInputError
 
 MAP_KINDS = ("laplacian", "displacement", "laplacian+displacement")
-NORMALISE_QUANTILE = 0.95   # each shape's map is divided by this quantile of itself over the vertices it moves
+NORMALISE_QUANTILE = 0.99   # each shape's map is divided by this quantile of itself over the vertices it moves
 MOVING_FRACTION = 0.01      # a shape moves a vertex when it displaces it by > 1% of its largest displacement
 
 
