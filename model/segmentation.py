@@ -272,6 +272,11 @@ class SegmentationCache:
         return self._get("split", lambda: _seg.split_graph(
             self.adjacency, _seg.dominant_group(self.support(), self.shape_groups())))
 
+    def vertex_mirror(self) -> np.ndarray:
+        """(V,) each vertex's mirror image across x = 0 (``solvers.symmetry.mirror_map``)."""
+        from solvers.symmetry import mirror_map
+        return self._get("mirror", lambda: mirror_map(self._neutral))
+
     def mirror_partners(self) -> np.ndarray:
         return self._get("partners", lambda: _hier.mirror_partners(self._neutral, self.maps().per_shape_displacement))
 
@@ -346,6 +351,7 @@ def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.n
         labels = np.where(main, labels, _seg.BACKGROUND)
         if s.separate_meshes == "follow":
             labels = _seg.attach_separate_meshes(labels, piece, main, cache.support())
+        labels = _seg.relabel(labels)
     secs["cleanup"] = time.perf_counter() - t0
     if not (labels >= 0).any():
         raise RigInputError(
@@ -357,7 +363,8 @@ def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.n
         per_level = [labels]
     else:
         activity = _hier.region_activity(labels, cache.support(), cache.mirror_partners())
-        per_level = _hier.hierarchy_labels(labels, A, cache.neutral, s.levels, activity)
+        mirrors = _hier.region_mirrors(labels, cache.vertex_mirror())
+        per_level = _hier.hierarchy_labels(labels, A, cache.neutral, s.levels, activity, mirrors)
     secs["hierarchy"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()

@@ -280,24 +280,21 @@ def attach_separate_meshes(labels: np.ndarray, piece: np.ndarray, main: np.ndarr
     shape moves, or none like any region, stays in the background. Nothing is joined by proximity."""
     lab = np.asarray(labels, dtype=np.int64).copy()
     S = np.asarray(support)
+    off = np.flatnonzero(~main)
+    lab[off] = BACKGROUND
     R = int(lab.max()) + 1 if (lab >= 0).any() else 0
-    if R == 0:
+    if R == 0 or off.size == 0:
         return lab
-    fg = np.flatnonzero((lab >= 0) & main)
-    act = np.zeros((R, S.shape[1]))
-    np.add.at(act, lab[fg], S[fg])
+    fg = np.flatnonzero(lab >= 0)
+    act = sp.csr_matrix((np.ones(fg.size), (lab[fg], fg)), shape=(R, lab.size)) @ S  # (R, K) per region
     act /= np.maximum(np.linalg.norm(act, axis=1, keepdims=True), 1e-300)
-    for p in np.unique(piece[~main]):
-        members = np.flatnonzero(piece == p)
-        a = S[members].sum(axis=0)
-        na = float(np.linalg.norm(a))
-        lab[members] = BACKGROUND
-        if na <= 0:
-            continue
-        sim = act @ (a / na)
-        r = int(np.argmax(sim))
-        if sim[r] >= min_similarity:
-            lab[members] = r
+    ids, pid = np.unique(piece[off], return_inverse=True)
+    pact = sp.csr_matrix((np.ones(off.size), (pid, off)), shape=(ids.size, lab.size)) @ S  # (P, K) per piece
+    norm = np.linalg.norm(pact, axis=1)
+    sim = (pact / np.maximum(norm, 1e-300)[:, None]) @ act.T
+    best = sim.argmax(axis=1)
+    ok = (norm > 0) & (sim[np.arange(ids.size), best] >= min_similarity)
+    lab[off] = np.where(ok, best, BACKGROUND)[pid]
     return lab
 
 
