@@ -256,12 +256,15 @@ class SegmentationCache:
         """(V,) bool: the skin that moves, where the threshold quantile is taken and regions can form."""
         return self._get("domain", lambda: self.pieces()[1] & self.moves().any(axis=1))
 
+    def scales(self, kind: str, laplacian: str = "uniform") -> np.ndarray:
+        """(K,) each shape's 99% quantile of its ``kind`` map over the vertices it moves."""
+        return self._get(f"scales-{kind}-{laplacian}", lambda: shape_scales(
+            self.maps(laplacian).per_shape_values(kind), self.moves()))
+
     def support(self) -> np.ndarray:
         """(V, K) where each shape acts: its displacement over its own 99% quantile, at most 1."""
-        def make():
-            D = self.maps().per_shape_displacement
-            return np.minimum(D / shape_scales(D, self.moves())[None, :], 1.0)
-        return self._get("support", make)
+        return self._get("support", lambda: np.minimum(
+            self.maps().per_shape_displacement / self.scales("displacement")[None, :], 1.0))
 
     def shape_groups(self) -> np.ndarray:
         """(K,) groups of shapes that act on the same part of the face."""
@@ -291,8 +294,7 @@ class SegmentationCache:
                 kinds = ("laplacian", "displacement") if map_kind == "laplacian+displacement" else (map_kind,)
                 parts = []
                 for kind in kinds:
-                    P = maps.per_shape_values(kind)
-                    parts.append(normalised_map(P, shape_scales(P, self.moves())))
+                    parts.append(normalised_map(maps.per_shape_values(kind), self.scales(kind, laplacian)))
                 vals = smooth_map(np.max(parts, axis=0), self.adjacency, smoothing)
             else:
                 vals = maps.values(map_kind)
