@@ -166,8 +166,8 @@ class SegmentationPanel(QtWidgets.QWidget):
         self._settings = dict(settings)
         self._updating = True
         try:
-            self.map_kind.setCurrentIndex(max(0, self.map_kind.findData(
-                (settings["map_kind"], bool(settings.get("normalise", True))))))
+            choice = (settings["map_kind"], bool(settings.get("normalise", True)))
+            self.map_kind.setCurrentIndex(next((i for i, (k, n, _) in enumerate(MAP_CHOICES) if (k, n) == choice), 0))
             self.separate.setCurrentIndex(max(0, self.separate.findData(settings.get("separate_meshes", "follow"))))
             self.method.setCurrentIndex(max(0, self.method.findData(settings["method"])))
             self.t_slider.setValue(int(round(settings["t"] * 1000)))
