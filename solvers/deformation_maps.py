@@ -117,22 +117,23 @@ def deformation_maps(laplacian: sp.spmatrix, deltas: np.ndarray) -> DeformationM
     K = d.shape[0]
     if K == 0:
         raise RigInputError("The rig has no blendshapes, so there is no deformation map to compute.")
-    per_shape = np.empty((V, K))
-    disp = np.empty((V, K))
+    # (K, V) rows written contiguously; handed out as their (V, K) transposes (column-major views)
+    per_shape = np.empty((K, V))
+    disp = np.empty((K, V))
     combined = np.full(V, -1.0)
     arg = np.zeros(V, dtype=np.int64)
     vector = np.zeros((V, 3))
     for k in range(K):  # one (V, 3) product per shape, the running arg-max kept as it goes
         y = L @ d[k]
-        m = _norm3(y)
-        per_shape[:, k] = m
-        disp[:, k] = _norm3(d[k])
+        m = per_shape[k]
+        m[:] = _norm3(y)
+        disp[k] = _norm3(d[k])
         better = m > combined
         combined[better] = m[better]
         arg[better] = k
         vector[better] = y[better]
-    return DeformationMaps(per_shape=per_shape, combined=combined, argmax_shape=arg, vector=vector,
-                           displacement=disp.max(axis=1), per_shape_displacement=disp)
+    return DeformationMaps(per_shape=per_shape.T, combined=combined, argmax_shape=arg, vector=vector,
+                           displacement=disp.max(axis=0), per_shape_displacement=disp.T)
 
 
 def shape_moves(per_shape_displacement: np.ndarray, fraction: float = MOVING_FRACTION) -> np.ndarray:
@@ -150,7 +151,7 @@ def shape_scales(per_shape: np.ndarray, moves: np.ndarray, quantile: float = NOR
     K = P.shape[1]
     out = np.ones(K)
     for k in range(K):
-        vals = P[moves[:, k], k]
+        vals = P[:, k][moves[:, k]]
         if vals.size:
             q = float(np.quantile(vals, quantile))
             if q > 0:
