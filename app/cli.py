@@ -5,7 +5,6 @@ Every error in the input is one sentence on stderr naming the file and the probl
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import os
 import sys
@@ -14,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from app import cli_pairs, cli_solve
-from app.cli_common import EXIT_INPUT, load_rig_arg, parse_size, pose_weights
+from app.cli_common import EXIT_INPUT, EXIT_UNEXPECTED, load_rig_arg, parse_size, pose_weights
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -98,37 +97,18 @@ def cmd_segment(args) -> int:
 
 def cmd_corrective(args) -> int:
     """Smith §4.5 from a scan: e = (x_scan − x_cur) / a(w) at full drivers (or fit weights first with --fit)."""
-    from model.correctives import (Corrective, RULES, activation_for, add_corrective, authoring_surface,
-                                   mirrored_corrective)
+    from model.corrective_authoring import corrective_from_scan
+    from model.correctives import add_corrective, mirrored_corrective
     from model.obj_io import read_obj
     from model.project import Project, load_project, save_project
-    from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
     path = Path(args.rig)
     project = load_project(path) if path.suffix.lower() == ".bsproj" else Project(rig=load_rig_arg(args))
     rig = project.rig
     drivers = [d.strip() for d in args.drivers.split(",") if d.strip()]
     if len(drivers) < 2:
         raise RigInputError(f"--drivers: a corrective needs two or more driver shapes, got {len(drivers)}.")
-    for d in drivers:
-        rig.shape_index(d)
-    if args.rule not in RULES:
-        raise RigInputError(f"--rule: unknown rule '{args.rule}'; use one of {', '.join(RULES)}.")
-    scan = read_obj(args.target).vertices
-    if scan.shape != rig.neutral.shape:
-        raise RigInputError(f"{args.target}: has {scan.shape[0]} vertices but the rig has {rig.n_vertices}; "
-                            "the scan must have the rig's vertices in order.")
-    if args.fit:
-        idx = [rig.shape_index(d) for d in drivers]
-        w = fit_scan_weights(rig.neutral, rig.deltas, scan)
-        others = [c for c in rig.correctives if frozenset(c.drivers) != frozenset(drivers)]
-        from model.pose import PoseEvaluator
-        x_fit = PoseEvaluator(dataclasses.replace(rig, correctives=others), dtype=np.float64).evaluate(w)
-        a = activation_for(drivers, args.rule, rig.shape_names, w)
-        delta = corrective_from_scan(scan, x_fit, driver_region(rig.deltas[idx]), a)
-    else:
-        x_cur, w = authoring_surface(rig, drivers)
-        delta = corrective_delta(scan, x_cur, activation_for(drivers, args.rule, rig.shape_names, w))
-    corrective = Corrective(drivers=drivers, delta=delta, rule=args.rule, name=args.name or "")
+    corrective, _ = corrective_from_scan(rig, drivers, read_obj(args.target).vertices, args.rule, fit=args.fit,
+                                         name=args.name or "", source=str(args.target))
     made = [corrective]
     if args.mirror:
         made.append(mirrored_corrective(corrective, rig.shape_names, rig.neutral, units=rig.units))
@@ -136,7 +116,7 @@ def cmd_corrective(args) -> int:
         add_corrective(rig, c)
     save_project(project, args.output)
     print(f"wrote {args.output} with corrective {' and '.join(c.name for c in made)} ({args.rule}); "
-          f"largest correction {np.linalg.norm(delta, axis=1).max():.4g} {rig.units}")
+          f"largest correction {np.linalg.norm(corrective.delta, axis=1).max():.4g} {rig.units}")
     return 0
 
 
@@ -254,6 +234,10 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:   # the reader went away (`blendshape-studio pairs RIG | head`): stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except Exception as exc:  # a bug or an input no check foresaw: one sentence, the traceback in a crash log
+        from app.crash import describe_unexpected
+        print(f"error: {describe_unexpected(exc, f'{args.command!r}')}", file=sys.stderr)
+        return EXIT_UNEXPECTED
 
 
 _COMMANDS = {"info", "render", "export", "sample", "segment", "solve", "corrective", "pairs"}

@@ -7,7 +7,8 @@ import numpy as np
 
 from model.errors import RigInputError
 
-EXIT_INPUT = 2
+EXIT_INPUT = 2        # bad input: one sentence naming the file and the problem
+EXIT_UNEXPECTED = 1   # anything else: one sentence and a crash log with the traceback
 
 
 def parse_weights(text: str | None) -> dict[str, float]:

@@ -19,29 +19,13 @@ from app.commands import SetEditOffsetCommand, SetWeightsCommand
 from app.corrective_commands import SetCorrectivesCommand
 from app.interference_finder import InterferenceFinder
 from app.sculpt_tool import SculptTool
-from model.correctives import (Corrective, activation_for, authoring_surface, corrective_activation,
-                               corrective_activations, driver_pose, find_corrective, mirrored_corrective,
-                               symmetrized_corrective, validate_correctives)
+from model.correctives import (Corrective, activation_for, corrective_activation, corrective_activations, find_corrective,
+                               mirrored_corrective, symmetrized_corrective, validate_correctives)
+from model.corrective_authoring import authoring_surface, corrective_from_scan, driver_pose
 from model.errors import RigInputError
 from model.sides import mirror_drivers
-from solvers.correctives import corrective_delta, corrective_from_scan, driver_region, fit_scan_weights
+from solvers.correctives import corrective_delta
 from widgets.correctives_panel import CORRECTIVES_TAB, INTERFERENCE_TAB, CorrectivesPanel
-
-
-def pose_surface64(rig, weights, skip_drivers=None) -> np.ndarray:
-    """(V, 3) float64 ``b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c`` (ALGORITHMS.md §1), leaving out the corrective on
-    exactly the driver set ``skip_drivers`` (the one being authored), summed over the non-zero terms only."""
-    w = np.asarray(weights, dtype=np.float64)
-    x = rig.neutral.astype(np.float64).copy()
-    for k in np.flatnonzero(w):
-        x += w[k] * rig.deltas[k]
-    if rig.correctives:
-        skip = frozenset(skip_drivers) if skip_drivers is not None else None
-        a = corrective_activations(rig.correctives, rig.shape_names, w)
-        for c, ac in zip(rig.correctives, a):
-            if ac != 0 and frozenset(c.drivers) != skip:
-                x += ac * c.delta
-    return x
 
 
 class CorrectiveController(QtCore.QObject):
@@ -76,10 +60,8 @@ class CorrectiveController(QtCore.QObject):
         p.rule_requested.connect(self.set_rule)
         p.tab_changed.connect(self.finder.on_tab_change)
         p.brush_changed.connect(self.sculpt.update_cursor_radius)
-        seg = getattr(window, "segmentation", None)
-        if seg is not None and hasattr(seg, "segmentation_ready"):
-            # the segmentation view repaints the surface when it finishes: keep the heat map on top
-            seg.segmentation_ready.connect(self.finder.reapply_heat_map)
+        # the segmentation view repaints the surface when it finishes: keep the heat map on top
+        window.segmentation.segmentation_ready.connect(self.finder.reapply_heat_map)
         if dock is not None:
             dock.visibilityChanged.connect(lambda vis: None if vis else self.finder.leave_heat_map())
         if d.project is not None:
@@ -248,7 +230,7 @@ class CorrectiveController(QtCore.QObject):
         if doc.edit_offset is None and own is None:
             self._error("Nothing to save yet: sculpt the surface with a brush first.")
             return False
-        x_cur, _ = authoring_surface(rig, drivers, weights=w[idx])
+        x_cur, _ = authoring_surface(rig, drivers, weights=w[idx], evaluator=doc.evaluator64())
         x_des = x_cur.copy()
         if own is not None:
             x_des += corrective_activation(own, rig.shape_names, w) * own.delta
@@ -303,29 +285,12 @@ class CorrectiveController(QtCore.QObject):
                 return False
         path = Path(path)
         mode = mode or self.panel.scan_mode.currentData()
+        own = find_corrective(rig.correctives, drivers)
+        rule = own.rule if own is not None else self.panel.current_rule()
+        name = own.name if own is not None else "+".join(drivers)
         try:
-            scan = read_obj(path).vertices.astype(np.float64)
-            if scan.shape[0] != rig.n_vertices:
-                raise RigInputError(f"{path.name} has {scan.shape[0]} vertices but the rig has {rig.n_vertices}; "
-                                    "a scan must have the rig's vertices in the same order.")
-            if not np.isfinite(scan).all():
-                raise RigInputError(f"{path.name} has NaN or infinite coordinates.")
-            own = find_corrective(rig.correctives, drivers)
-            rule = own.rule if own is not None else self.panel.current_rule()
-            name = own.name if own is not None else "+".join(drivers)
-            idx = [rig.shape_index(d) for d in drivers]
-            if mode == "fit":
-                w = fit_scan_weights(rig.neutral, rig.deltas, scan)
-                a = activation_for(drivers, rule, rig.shape_names, w)
-                if a < 1e-3:
-                    raise RigInputError(f"{path.name} does not show {' + '.join(drivers)}: the fitted weights leave "
-                                        f"the corrective's activation at {a:.2g}.")
-                x_fit = pose_surface64(rig, w, skip_drivers=drivers)
-                delta = corrective_from_scan(scan, x_fit, driver_region(rig.deltas[idx]), a)
-            else:
-                x_cur, w = authoring_surface(rig, drivers)
-                delta = corrective_delta(scan, x_cur, activation_for(drivers, rule, rig.shape_names, w))
-            made = Corrective(name=name, drivers=drivers, rule=rule, delta=delta)
+            made, w = corrective_from_scan(rig, drivers, read_obj(path).vertices, rule, fit=mode == "fit",
+                                           name=name, source=path.name, evaluator=doc.evaluator64())
             new = [c for c in rig.correctives if frozenset(c.drivers) != frozenset(drivers)] + [made]
             validate_correctives(new, rig.shape_names, rig.n_vertices)
         except RigInputError as exc:
@@ -501,62 +466,47 @@ class CorrectiveController(QtCore.QObject):
 
 
 def install(window) -> CorrectiveController:
-    """Add the Correctives dock, its menu and its controller to ``window`` (a MainWindow); returns the controller.
-
-    Idempotent: a window that already has one gets the same controller back."""
-    existing = getattr(window, "correctives", None)
-    if isinstance(existing, CorrectiveController):
-        return existing
+    """Plug the Correctives dock, the Correctives menu and its controller into ``window`` (a MainWindow, through
+    its public interface: ``add_dock``, ``add_menu``, ``add_action``); the window calls it once and keeps the
+    controller as ``window.correctives``."""
     panel = CorrectivesPanel(window)
-    dock = window._add_dock("Correctives", panel, QtCore.Qt.LeftDockWidgetArea, scroll=True)
-    seg = getattr(window, "segmentation_dock", None)
-    if seg is not None:
-        window.tabifyDockWidget(seg, dock)
-        seg.raise_()
-    window.correctives_panel, window.correctives_dock = panel, dock
-    window.panels_menu.addAction(dock.toggleViewAction())
+    dock = window.add_dock("Correctives", panel, QtCore.Qt.LeftDockWidgetArea, scroll=True)
     ctrl = CorrectiveController(window, panel, dock)
-    window.correctives = ctrl
     _remember_options(panel)
 
-    menu = QtWidgets.QMenu("&Correctives", window)
-    help_menu = next((a for a in window.menuBar().actions() if a.text().replace("&", "") == "Help"), None)
-    if help_menu is not None:
-        window.menuBar().insertMenu(help_menu, menu)
-    else:
-        window.menuBar().addMenu(menu)
-    act = window._action
-    act(menu, "&New Corrective from Combination", lambda _=False: ctrl.new_from_combination(), "Ctrl+Shift+N",
+    def act(text, slot, shortcut, tip, menu="correctives"):
+        return window.add_action(menu, text, lambda _=False: slot(), shortcut, tip)
+    act("&New Corrective from Combination", ctrl.new_from_combination, "Ctrl+Shift+N",
         "Set the ticked drivers (or the posed shapes) to 1 and sculpt their corrective")
-    act(menu, "Corrective from &Scan…", lambda _=False: ctrl.from_scan(), "Ctrl+Shift+I",
+    act("Corrective from &Scan…", ctrl.from_scan, "Ctrl+Shift+I",
         "Make the corrective of the ticked drivers from an OBJ of the desired combination")
-    act(menu, "&Save Corrective", lambda _=False: ctrl.save(), "Ctrl+Return", "Store the sculpt as the corrective: e = (x_des − x_cur) / a")
-    act(menu, "&Discard Sculpt", lambda _=False: ctrl.discard_sculpt(), None, "Drop the pending sculpt (undoable)")
-    act(menu, "S&top Sculpting", lambda _=False: ctrl.stop_sculpting(), None, "Leave sculpt mode")
-    act(menu, "&Mirror Corrective", lambda _=False: ctrl.mirror(), "Ctrl+Shift+M",
+    act("&Save Corrective", ctrl.save, "Ctrl+Return", "Store the sculpt as the corrective: e = (x_des − x_cur) / a")
+    act("&Discard Sculpt", ctrl.discard_sculpt, None, "Drop the pending sculpt (undoable)")
+    act("S&top Sculpting", ctrl.stop_sculpting, None, "Leave sculpt mode")
+    act("&Mirror Corrective", ctrl.mirror, "Ctrl+Shift+M",
         "Add the other side's version of the selected corrective (drivers _L↔_R, reflected across x = 0)")
-    act(menu, "Mirror &All Correctives", lambda _=False: ctrl.mirror_all(), None,
+    act("Mirror &All Correctives", ctrl.mirror_all, None,
         "Add the other side's version of every corrective that lacks one (one undoable edit)")
-    act(menu, "Symmetri&ze Corrective", lambda _=False: ctrl.symmetrize(), None,
+    act("Symmetri&ze Corrective", ctrl.symmetrize, None,
         "Make the selected two-sided corrective (drivers that mirror onto themselves) exactly symmetric")
-    menu.addSeparator()
+    window.add_separator("correctives")
 
     def _find():
         dock.show()
         dock.raise_()
         panel.tabs.setCurrentIndex(INTERFERENCE_TAB)
         ctrl.finder.find_pairs()
-    act(menu, "&Find Interfering Pairs", lambda _=False: _find(), "Ctrl+Shift+F", "Rank shape pairs by the overlap of their displacements")
-    menu.addSeparator()
-    brushes = menu.addMenu("&Brush")
+    act("&Find Interfering Pairs", _find, "Ctrl+Shift+F", "Rank shape pairs by the overlap of their displacements")
+    window.add_separator("correctives")
+    window.add_menu("brush", "&Brush", parent="correctives")
     ctrl.sculpt.brush_actions = [
-        act(brushes, "&Grab", lambda _=False: ctrl.set_brush("grab"), "G", "Grab brush: drag the surface"),
-        act(brushes, "&Smooth", lambda _=False: ctrl.set_brush("smooth"), "Shift+S", "Smooth brush: relax the surface"),
-        act(brushes, "&Inflate", lambda _=False: ctrl.set_brush("inflate"), "I", "Inflate brush: push along the normals"),
-        act(brushes, "&Deflate", lambda _=False: ctrl.set_brush("deflate"), "D", "Deflate brush: pull along the normals"),
-        act(brushes, "S&ymmetric", lambda _=False: panel.symmetric.toggle(), "X", "Mirror strokes across x = 0"),
-        act(brushes, "S&maller Brush", lambda _=False: ctrl.scale_radius(1 / 1.25), "[", "Shrink the brush radius"),
-        act(brushes, "&Larger Brush", lambda _=False: ctrl.scale_radius(1.25), "]", "Grow the brush radius"),
+        act("&Grab", lambda: ctrl.set_brush("grab"), "G", "Grab brush: drag the surface", "brush"),
+        act("&Smooth", lambda: ctrl.set_brush("smooth"), "Shift+S", "Smooth brush: relax the surface", "brush"),
+        act("&Inflate", lambda: ctrl.set_brush("inflate"), "I", "Inflate brush: push along the normals", "brush"),
+        act("&Deflate", lambda: ctrl.set_brush("deflate"), "D", "Deflate brush: pull along the normals", "brush"),
+        act("S&ymmetric", panel.symmetric.toggle, "X", "Mirror strokes across x = 0", "brush"),
+        act("S&maller Brush", lambda: ctrl.scale_radius(1 / 1.25), "[", "Shrink the brush radius", "brush"),
+        act("&Larger Brush", lambda: ctrl.scale_radius(1.25), "]", "Grow the brush radius", "brush"),
     ]
     ctrl.sculpt.set_brush_actions(False)
     return ctrl

@@ -58,7 +58,9 @@ class Document(QtCore.QObject):
         self.undo_stack = QUndoStack(self)
         self.project: Project | None = None
         self.path: Path | None = None
-        self.evaluator: PoseEvaluator | None = None
+        self.evaluator: PoseEvaluator | None = None   # float32, for display
+        self.rig_version = 0   # bumped on every new rig and rig edit: what the float64 evaluator is keyed on
+        self._evaluator64: tuple[int, PoseEvaluator] | None = None
         self._surface: np.ndarray | None = None
         self.edit_offset: np.ndarray | None = None  # pending sculpt/nudge (V, 3), shown on top of the pose
         # Regional pose (Joshi §4): per-region weights of one segmentation level, or None for a global pose.
@@ -75,6 +77,7 @@ class Document(QtCore.QObject):
         self.project = project
         self.path = Path(path) if path else None
         self.evaluator = PoseEvaluator(project.rig)
+        self.rig_version += 1
         self._surface = None
         self._mirror = None
         self.edit_offset = None
@@ -191,48 +194,23 @@ class Document(QtCore.QObject):
             self.edit_region = region
             self.pose_changed.emit()
 
+    def evaluator64(self) -> PoseEvaluator:
+        """The float64 evaluator of the current rig (exports, take solves, authoring), built on first use after
+        each rig change."""
+        if self._evaluator64 is None or self._evaluator64[0] != self.rig_version:
+            self._evaluator64 = (self.rig_version, PoseEvaluator(self.project.rig, dtype=np.float64))
+        return self._evaluator64[1]
+
     def evaluate_state(self, state: PoseState, dtype=np.float32) -> np.ndarray:
         """(V, 3) surface of any pose state (for export and playback), without touching the document."""
-        ev = self.evaluator if dtype == np.float32 else PoseEvaluator(self.project.rig, dtype=dtype)
-        if state.region_weights is None:
-            return ev.evaluate(state.weights)
-        return ev.evaluate_regional(state.region_weights, state.blend)
-
-    def _evaluate_regional(self, W: np.ndarray, blend: sp.csr_matrix) -> np.ndarray:
-        """x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v) (Joshi §4) as one gemv per region over the region's own
-        vertices (set up once per blend), so a drag step costs about one global evaluation. Rigs with
-        correctives use ``PoseEvaluator.evaluate_regional`` (per-vertex activations)."""
-        rig = self.project.rig
-        if rig.correctives:
-            return self.evaluator.evaluate_regional(W, blend)
-        cache = getattr(self, "_regional_cache", None)
-        if cache is None or cache[0] is not blend or cache[1] is not rig.deltas:
-            B = sp.csc_matrix(blend)
-            parts = []
-            for r in range(B.shape[1]):
-                lo, hi = B.indptr[r], B.indptr[r + 1]
-                verts, phi = B.indices[lo:hi], B.data[lo:hi]
-                keep = np.abs(rig.deltas[:, verts]).max(axis=(0, 2)) > 0 if verts.size else verts.astype(bool)
-                verts, phi = verts[keep], phi[keep]
-                D = np.ascontiguousarray(rig.deltas[:, verts].reshape(rig.n_shapes, -1), dtype=np.float32)
-                cols = (verts[:, None] * 3 + np.arange(3)).reshape(-1)
-                parts.append((cols, np.repeat(phi, 3).astype(np.float32), D))
-            cache = (blend, rig.deltas, parts, rig.neutral.astype(np.float32).reshape(-1))
-            self._regional_cache = cache
-        out = cache[3].copy()
-        Wf = np.asarray(W, dtype=np.float32)
-        for r, (cols, phi, D) in enumerate(cache[2]):
-            if cols.size and Wf[r].any():
-                out[cols] += phi * (Wf[r] @ D)
-        return out.reshape(-1, 3)
+        ev = self.evaluator if dtype == np.float32 else self.evaluator64()
+        return ev.pose(state.weights if state.region_weights is None else state.region_weights, state.blend)
 
     def posed_surface(self) -> np.ndarray:
         """(V, 3) float32 surface of the pose alone (no pending sculpt), cached."""
         if self._surface is None:
-            if self.region_weights is not None:
-                self._surface = self._evaluate_regional(self.region_weights, self.region_blend)
-            else:
-                self._surface = self.evaluator.evaluate(self.project.weights)
+            self._surface = self.evaluator.pose(
+                self.project.weights if self.region_weights is None else self.region_weights, self.region_blend)
         return self._surface
 
     def surface(self) -> np.ndarray:
@@ -275,6 +253,7 @@ class Document(QtCore.QObject):
             self.edit_region = None
         self._collapsed = None
         self.evaluator = PoseEvaluator(self.project.rig)
+        self.rig_version += 1
         self._surface = None
         self.shapes_changed.emit()
         self.pose_changed.emit()

@@ -16,9 +16,25 @@ def run_gui(path: str | None = None) -> int:
     app.setApplicationName("Blendshape Studio")
     app.setOrganizationName("BlendshapeStudio")
     window = MainWindow()
+    install_excepthook(window)
     window.show()
-    if path:
-        window.open_path(path)
-    else:
-        window.open_sample()
+    if not window.autosave.offer_recovery(path):   # a crash left an autosave: restoring it replaces the open
+        if path:
+            window.open_path(path)
+        else:
+            window.open_sample()
     return app.exec()
+
+
+def install_excepthook(window) -> None:
+    """An exception nobody caught (in a slot, a timer, a paint) becomes one sentence in a dialog and a crash
+    log; the window keeps running with the rig it had (issue 17). Qt calls sys.excepthook and carries on."""
+    from app.crash import describe_unexpected
+
+    def hook(kind, exc, tb):
+        if issubclass(kind, KeyboardInterrupt):
+            sys.__excepthook__(kind, exc, tb)
+            return
+        exc.__traceback__ = tb
+        window.show_error("Something went wrong", describe_unexpected(exc, "The last action"))
+    sys.excepthook = hook

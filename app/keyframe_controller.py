@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
-from PySide6 import QtCore, QtGui, QtWidgets
+from PySide6 import QtCore
 
 from app.document import PoseState
 from app.marker_commands import SetSectionArraysCommand
@@ -31,11 +31,27 @@ DEFAULTS = {"interpolation": "smooth", "fps": 24.0, "duration": 2.0}
 
 
 class KeyframeController(QtCore.QObject):
+    """The keyed animation; owns the Timeline panel (``panel``, in ``dock``, under the viewport) and the
+    Animation menu's Set Key (S, ``set_key_action``), Play / Pause (Space, ``play_action``) and Remove Key, and
+    the File menu's keyed exports."""
+
     time_changed = QtCore.Signal(float)
 
-    def __init__(self, window, panel: TimelinePanel, parent=None) -> None:
-        super().__init__(parent or window)
-        self.window, self.panel, self.document = window, panel, window.document
+    def __init__(self, window) -> None:
+        super().__init__(window)
+        self.window, self.document = window, window.document
+        self.panel = panel = TimelinePanel(window)
+        self.dock = window.add_dock("Timeline", panel, QtCore.Qt.BottomDockWidgetArea)
+        self.set_key_action = window.add_action("animation", "&Set Key", lambda: self.set_key(), "S",
+                                                "Key the current pose at the current time")
+        self.play_action = window.add_action("animation", "&Play / Pause", self.toggle_play, "Space",
+                                             "Play or pause the keyed animation")
+        window.add_action("animation", "&Remove Key", lambda: self.remove_key(), None,
+                          "Remove the key at the current time")
+        window.add_action("file", "Export Keyed &Weights as CSV…", self.export_csv_dialog, None,
+                          "Write the keyed animation's weights per frame as CSV")
+        window.add_action("file", "Export Keyed Animation as P&C2…", self.export_pc2_dialog, None,
+                          "Write the keyed animation as a PC2 point cache")
         self.timeline = Timeline()
         self.blend: sp.csr_matrix | None = None
         self.level: int | None = None
@@ -86,7 +102,7 @@ class KeyframeController(QtCore.QObject):
             self.timeline = Timeline(keys, interpolation=sec["interpolation"])
         except (RigInputError, KeyError, ValueError, TypeError) as exc:
             self.timeline = Timeline()
-            self.window.statusBar().showMessage(f"The project's keyframes were not loaded: {exc}", 10000)
+            self.window.show_status(f"The project's keyframes were not loaded: {exc}", 10000)
         self.time = min(self.time, self.duration)
         self._show()
 
@@ -130,12 +146,12 @@ class KeyframeController(QtCore.QObject):
         if t > self.duration:
             self.duration = t
         self._push(self._snapshot(tl, blend, level), f"Set key at {t:.3g} s")
-        self.window.statusBar().showMessage(f"Key set at {t:.3f} s{note}.", 4000)
+        self.window.show_status(f"Key set at {t:.3f} s{note}.", 4000)
 
     def remove_key(self, time: float | None = None) -> bool:
         t = self.time if time is None else float(time)
         if self.timeline.key_at(t) is None:
-            self.window.statusBar().showMessage(f"There is no key at {t:.3f} s.", 4000)
+            self.window.show_status(f"There is no key at {t:.3f} s.", 4000)
             return False
         tl = Timeline([Keyframe(k.time, k.weights) for k in self.timeline.keys if abs(k.time - t) >= 1e-6],
                       interpolation=self.timeline.interpolation)
@@ -169,7 +185,7 @@ class KeyframeController(QtCore.QObject):
 
     def set_playing(self, on: bool) -> None:
         if on and not self.timeline.keys:
-            self.window.statusBar().showMessage("Set a key first (S) to play an animation.", 4000)
+            self.window.show_status("Set a key first (S) to play an animation.", 4000)
             on = False
         if on:
             self.timer.start(max(1, int(round(1000.0 / self.fps))))
@@ -231,7 +247,7 @@ class KeyframeController(QtCore.QObject):
             except (RigInputError, OSError) as exc:
                 self.window.show_error("Could not export", str(exc))
                 return
-            self.window.statusBar().showMessage(f"Exported {n} frames to {path}", 5000)
+            self.window.show_status(f"Exported {n} frames to {path}", 5000)
         if self.document.project is not None:
             self.window.save_dialog(title, f"{self.document.rig.name}_keys{suffix}", filt, write)
 
@@ -240,50 +256,3 @@ class KeyframeController(QtCore.QObject):
 
     def export_pc2_dialog(self) -> None:
         self._export_dialog("Export Keyed Animation as PC2", ".pc2", "Point cache (*.pc2)", self.export_pc2)
-
-
-def install(window) -> KeyframeController:
-    """Add the timeline under the viewport, Set Key (S), Play/Pause (Space) and the export actions."""
-    existing = getattr(window, "keyframes", None)
-    if isinstance(existing, KeyframeController):  # the main window installs it; installing twice returns the same one
-        return existing
-    panel = TimelinePanel(window)
-    window.timeline_panel = panel
-    window.timeline_dock = window._add_dock("Timeline", panel, QtCore.Qt.BottomDockWidgetArea)
-    window.panels_menu.addAction(window.timeline_dock.toggleViewAction())
-    controller = KeyframeController(window, panel)
-    window.keyframes = controller
-    menus = {a.text().replace("&", ""): a.menu() for a in window.menuBar().actions()}
-    anim = window.menuBar().insertMenu(menus["Help"].menuAction(), QtWidgets.QMenu("&Animation", window)) \
-        if "Help" in menus else None
-    anim_menu = anim.menu() if anim is not None else window.menuBar().addMenu("&Animation")
-
-    def action(menu, text, slot, shortcut=None, tip=""):
-        act = QtGui.QAction(text, window)
-        if shortcut:
-            act.setShortcut(QtGui.QKeySequence(shortcut))
-        act.setToolTip(tip)
-        act.setStatusTip(tip)
-        act.triggered.connect(slot)
-        menu.addAction(act)
-        window.addAction(act)
-        return act
-
-    window.set_key_action = action(anim_menu, "&Set Key", lambda: controller.set_key(), "S",
-                                   "Key the current pose at the current time")
-    window.play_action = action(anim_menu, "&Play / Pause", controller.toggle_play, "Space",
-                                "Play or pause the keyed animation")
-    action(anim_menu, "&Remove Key", lambda: controller.remove_key(), None, "Remove the key at the current time")
-    file_menu = menus.get("File")
-    if file_menu is not None:
-        quit_act = next((a for a in file_menu.actions() if a.text().replace("&", "") == "Quit"), None)
-        for text, slot, tip in (("Export Keyed &Weights as CSV…", controller.export_csv_dialog,
-                                 "Write the keyed animation's weights per frame as CSV"),
-                                ("Export Keyed Animation as P&C2…", controller.export_pc2_dialog,
-                                 "Write the keyed animation as a PC2 point cache")):
-            act = QtGui.QAction(text, window)
-            act.setToolTip(tip)
-            act.setStatusTip(tip)
-            act.triggered.connect(slot)
-            file_menu.insertAction(quit_act, act) if quit_act is not None else file_menu.addAction(act)
-    return controller

@@ -9,21 +9,38 @@ from pathlib import Path
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from app import corrective_controller, mocap_controller
 from app import settings as app_settings
+from app.autosave import AutosaveController
 from app.commands import SetWeightsCommand
 from app.document import Document
+from app.keyframe_controller import KeyframeController
 from app.loading import LoadWorker
+from app.marker_controller import MarkerController
+from app.segmentation_controller import SegmentationController
 from model.project import Project
 from widgets.scene import focus_vertices
 from widgets.segmentation_panel import SegmentationPanel
-from widgets.shapes_panel import ShapesPanel
+from widgets.shapes_panel import PoseEdit, ShapesPanel
 from widgets.viewport import Viewport
 
 RIG_FILTER = "Rigs and projects (*.bsproj *.gltf *.glb *.obj);;Projects (*.bsproj);;glTF (*.gltf *.glb);;OBJ (*.obj)"
 
 
+# The menu bar, left to right: (stable key, label). Controllers address menus by key (``add_action("view", ...)``).
+MENUS = (("file", "&File"), ("edit", "&Edit"), ("view", "&View"), ("animation", "&Animation"),
+         ("correctives", "&Correctives"), ("help", "&Help"))
+
+
 class MainWindow(QtWidgets.QMainWindow):
-    loaded = QtCore.Signal()          # a rig or project finished loading
+    """The viewport, the panels in docks, the menus, undo and the status bar; it owns the controllers.
+
+    Controllers plug in through a small public interface: ``add_dock``, ``add_menu``, ``add_action``,
+    ``add_separator`` (menus by stable key, see MENUS), ``request_render``, ``show_status``, ``show_error``,
+    ``save_dialog`` and ``set_pose``; they read ``document``, ``viewport``, ``segmentation``, ``shapes_panel``
+    and ``segmentation_panel``. Nothing outside this class touches its private members.
+    """
+
     load_failed = QtCore.Signal(str)  # the message shown to the user
 
     def __init__(self, parent=None) -> None:
@@ -33,36 +50,40 @@ class MainWindow(QtWidgets.QMainWindow):
         self.confirm_discard = True   # tests turn the unsaved-changes question off
         self.last_error: str | None = None
         self.shortcuts_dialog: QtWidgets.QDialog | None = None   # Help ▸ Keyboard Shortcuts, once opened
-        self.document = Document(self)
-        self.viewport = Viewport(self)
-        self.setCentralWidget(self.viewport)
-        self.shapes_panel = ShapesPanel(self)
-        self.shapes_dock = self._add_dock("Shapes", self.shapes_panel, QtCore.Qt.RightDockWidgetArea)
         self._worker: LoadWorker | None = None
         self._progress: QtWidgets.QProgressDialog | None = None
         self._drag_old: np.ndarray | None = None
         self._redraw_pending = False
+        self._menus: dict[str, QtWidgets.QMenu] = {}
+        self._menu_ends: dict[str, QtGui.QAction] = {}   # actions added to a menu go before its end (File: Quit)
+        self.document = Document(self)
+        self.viewport = Viewport(self)
+        self.setCentralWidget(self.viewport)
+        self._build_menus()
+        self.shapes_panel = ShapesPanel(self)
+        self.shapes_dock = self.add_dock("Shapes", self.shapes_panel, QtCore.Qt.RightDockWidgetArea)
         self.segmentation_panel = SegmentationPanel(self)
-        self.segmentation_dock = self._add_dock("Segmentation", self.segmentation_panel, QtCore.Qt.LeftDockWidgetArea,
-                                              scroll=True)
-        self._build_actions()
+        self.segmentation_dock = self.add_dock("Segmentation", self.segmentation_panel, QtCore.Qt.LeftDockWidgetArea,
+                                               scroll=True)
+        self.undo_view = QtWidgets.QUndoView(self.document.undo_stack)
+        self.undo_view.setEmptyLabel("<opened>")
+        self.history_dock = self.add_dock("History", self.undo_view, QtCore.Qt.RightDockWidgetArea)
         self._build_status_bar()
         self._connect()
-        from app.segmentation_controller import SegmentationController
+        # The controllers, each plugged in through the interface above (their panels, docks and actions).
         self.segmentation = SegmentationController(self, self.segmentation_panel)
-        from app import keyframe_controller, marker_controller
-        marker_controller.install(self)
-        keyframe_controller.install(self)
-        from app import corrective_controller, mocap_controller
-        corrective_controller.install(self)
-        mocap_controller.install(self)
+        self.markers = MarkerController(self)
+        self.keyframes = KeyframeController(self)
+        self.correctives = corrective_controller.install(self)
+        self.mocap = mocap_controller.install(self)
+        self.autosave = AutosaveController(self)
         self._arrange_docks()
         self._restore_layout()
 
-    # --- construction ------------------------------------------------------------------------------
-    def _add_dock(self, title: str, widget: QtWidgets.QWidget, area, *, scroll: bool = False) -> QtWidgets.QDockWidget:
-        """A dockable panel. ``scroll``: inside a scroll area, so a tall panel never forces the window taller
-        than the screen (the left panels are ~700 px high; the window opens at 1400x900)."""
+    # --- the interface controllers use -------------------------------------------------------------
+    def add_dock(self, title: str, widget: QtWidgets.QWidget, area, scroll: bool = False) -> QtWidgets.QDockWidget:
+        """A dockable panel, listed in View ▸ Panels. ``scroll``: inside a scroll area, so a tall panel never
+        forces the window taller than the screen (the left panels are ~700 px high; the window opens at 1400x900)."""
         dock = QtWidgets.QDockWidget(title, self)
         dock.setObjectName(f"dock_{title.replace(' ', '_')}")
         if scroll:
@@ -73,9 +94,20 @@ class MainWindow(QtWidgets.QMainWindow):
             widget = area_widget
         dock.setWidget(widget)
         self.addDockWidget(area, dock)
+        self._menus["panels"].addAction(dock.toggleViewAction())
         return dock
 
-    def _action(self, menu, text, slot=None, shortcut=None, tip=None, checkable=False):
+    def add_menu(self, key: str, title: str, parent: str) -> QtWidgets.QMenu:
+        """A submenu ``title`` at the end of menu ``parent``, addressed as ``key`` from then on."""
+        menu = QtWidgets.QMenu(title, self)
+        self._menus[parent].insertMenu(self._menu_ends.get(parent), menu)
+        self._menus[key] = menu
+        return menu
+
+    def add_action(self, menu: str, text: str, slot=None, shortcut=None, tip: str | None = None,
+                   checkable: bool = False) -> QtGui.QAction:
+        """An action at the end of menu ``menu`` (a key of MENUS or of ``add_menu``; File: before Quit), its
+        shortcut live in the whole window. ``slot`` gets ``toggled(bool)`` if ``checkable``, else ``triggered``."""
         act = QtGui.QAction(text, self)
         if shortcut:
             act.setShortcut(QtGui.QKeySequence(shortcut))
@@ -85,30 +117,58 @@ class MainWindow(QtWidgets.QMainWindow):
         act.setCheckable(checkable)
         if slot is not None:
             (act.toggled if checkable else act.triggered).connect(slot)
-        menu.addAction(act)
+        self._menus[menu].insertAction(self._menu_ends.get(menu), act)
+        self.addAction(act)
         return act
 
-    def _build_actions(self) -> None:
-        mb = self.menuBar()
-        f = mb.addMenu("&File")
-        self._action(f, "Open Rig &Folder…", self.open_folder_dialog, "Ctrl+O",
-                     "Open a folder of OBJ blendshapes (the neutral is the file named *neutral*)")
-        self._action(f, "&Open File…", self.open_file_dialog, "Ctrl+Shift+O",
-                     "Open a project (.bsproj), a glTF/GLB with morph targets, or an OBJ in a rig folder")
-        self.recent_menu = f.addMenu("Open &Recent")
-        self._action(f, "Open &Sample Rig", self.open_sample, None, "Open the bundled sample face")
-        f.addSeparator()
-        self.save_action = self._action(f, "&Save", self.save, QtGui.QKeySequence.Save, "Save the project (.bsproj)")
-        self._action(f, "Save &As…", self.save_as, QtGui.QKeySequence.SaveAs, "Save the project under a new name")
-        f.addSeparator()
-        self._action(f, "&Export Pose as OBJ…", self.export_pose, "Ctrl+E",
-                     "Write the posed surface as an OBJ, vertex order kept")
-        self._action(f, "Save Viewport &Image…", self.save_image_dialog, "Ctrl+Shift+E",
-                     "Write what the viewport shows (with its colour bar) as a PNG")
-        f.addSeparator()
-        self._action(f, "&Quit", self.close, QtGui.QKeySequence.Quit)
+    def add_separator(self, menu: str) -> None:
+        self._menus[menu].insertSeparator(self._menu_ends.get(menu))
 
-        e = mb.addMenu("&Edit")
+    def request_render(self) -> None:
+        """Redraw the viewport with the current pose once this turn of the event loop is over: bursts of pose
+        changes (slider drags, marker drags) coalesce into one render."""
+        if not self._redraw_pending:
+            self._redraw_pending = True
+            QtCore.QTimer.singleShot(0, self.redraw_now)
+
+    def redraw_now(self) -> None:
+        self._redraw_pending = False
+        if self.document.project is not None:
+            self.viewport.update_points(self.document.surface())
+
+    @property
+    def redraw_pending(self) -> bool:
+        """Whether a requested render has not happened yet."""
+        return self._redraw_pending
+
+    def show_status(self, message: str, timeout: int = 5000) -> None:
+        """A message in the status bar for ``timeout`` ms (0: until the next one)."""
+        self.statusBar().showMessage(message, timeout)
+
+    # --- construction ------------------------------------------------------------------------------
+    def _build_menus(self) -> None:
+        mb = self.menuBar()
+        for key, title in MENUS:
+            self._menus[key] = mb.addMenu(title)
+        act = self.add_action
+        act("file", "Open Rig &Folder…", self.open_folder_dialog, "Ctrl+O",
+            "Open a folder of OBJ blendshapes (the neutral is the file named *neutral*)")
+        act("file", "&Open File…", self.open_file_dialog, "Ctrl+Shift+O",
+            "Open a project (.bsproj), a glTF/GLB with morph targets, or an OBJ in a rig folder")
+        self.recent_menu = self.add_menu("recent", "Open &Recent", parent="file")
+        act("file", "Open &Sample Rig", self.open_sample, None, "Open the bundled sample face")
+        self.add_separator("file")
+        act("file", "&Save", self.save, QtGui.QKeySequence.Save, "Save the project (.bsproj)")
+        act("file", "Save &As…", self.save_as, QtGui.QKeySequence.SaveAs, "Save the project under a new name")
+        self.add_separator("file")
+        act("file", "&Export Pose as OBJ…", self.export_pose, "Ctrl+E",
+            "Write the posed surface as an OBJ, vertex order kept")
+        act("file", "Save Viewport &Image…", self.save_image_dialog, "Ctrl+Shift+E",
+            "Write what the viewport shows (with its colour bar) as a PNG")
+        self.add_separator("file")
+        self._menu_ends["file"] = act("file", "&Quit", self.close, QtGui.QKeySequence.Quit)
+
+        e = self._menus["edit"]
         undo = self.document.undo_stack.createUndoAction(self, "&Undo")
         undo.setShortcut(QtGui.QKeySequence.Undo)
         redo = self.document.undo_stack.createRedoAction(self, "&Redo")
@@ -116,43 +176,34 @@ class MainWindow(QtWidgets.QMainWindow):
         e.addAction(undo)
         e.addAction(redo)
         self.undo_action, self.redo_action = undo, redo
-        e.addSeparator()
-        self._action(e, "Reset &Pose", self.reset_pose, "Ctrl+0", "Set every weight to 0")
-        self._action(e, "&Mirror Pose", self.mirror_pose, "Ctrl+M",
-                     "Swap the weights of left and right shapes (_L↔_R): the pose of the other side")
+        self.add_separator("edit")
+        act("edit", "Reset &Pose", self.reset_pose, "Ctrl+0", "Set every weight to 0")
+        act("edit", "&Mirror Pose", self.mirror_pose, "Ctrl+M",
+            "Swap the weights of left and right shapes (_L↔_R): the pose of the other side")
 
-        v = mb.addMenu("&View")
-        self.wire_action = self._action(v, "&Wireframe", self.viewport.set_wireframe, "W",
-                                        "Draw polygon edges over the surface", checkable=True)
-        v.addSeparator()
+        act("view", "&Wireframe", self.viewport.set_wireframe, "W", "Draw polygon edges over the surface",
+            checkable=True)
+        self.add_separator("view")
         for i, (name, label) in enumerate([("front", "&Front"), ("left", "&Left Side"),
                                            ("right", "&Right Side"), ("three-quarter", "&Three-Quarter")]):
-            self._action(v, f"{label} Camera", lambda _=False, n=name: self.viewport.set_camera(n), str(i + 1),
-                         f"Look at the face from the {name.replace('-', ' ')}")
-        self._action(v, "Reset &View", self.viewport.reset_view, "F", "Frame the face again")
-        v.addSeparator()
-        self.panels_menu = v.addMenu("&Panels")
-        self.panels_menu.addAction(self.shapes_dock.toggleViewAction())
-        self.panels_menu.addAction(self.segmentation_dock.toggleViewAction())
-        self.undo_view = QtWidgets.QUndoView(self.document.undo_stack)
-        self.undo_view.setEmptyLabel("<opened>")
-        self.history_dock = self._add_dock("History", self.undo_view, QtCore.Qt.RightDockWidgetArea)
-        self.tabifyDockWidget(self.shapes_dock, self.history_dock)
-        self.shapes_dock.raise_()
-        self.panels_menu.addAction(self.history_dock.toggleViewAction())
+            act("view", f"{label} Camera", lambda _=False, n=name: self.viewport.set_camera(n), str(i + 1),
+                f"Look at the face from the {name.replace('-', ' ')}")
+        act("view", "Reset &View", self.viewport.reset_view, "F", "Frame the face again")
+        self.add_separator("view")
+        self.add_menu("panels", "&Panels", parent="view")
 
-        h = mb.addMenu("&Help")
-        self._action(h, "&Keyboard Shortcuts", self.show_shortcuts, "F1")
-        self._action(h, "&About Blendshape Studio", self.show_about)
+        act("help", "&Keyboard Shortcuts", self.show_shortcuts, "F1")
+        act("help", "&About Blendshape Studio", self.show_about)
         self._rebuild_recent_menu()
 
     def _arrange_docks(self) -> None:
-        """Left: Segmentation, Markers, Correctives as tabs. Right: Shapes, History, Mocap. Bottom: the
+        """Left: Segmentation, Correctives, Markers as tabs. Right: Shapes, History, Mocap. Bottom: the
         timeline with the mocap views above it when they are shown."""
-        self.tabifyDockWidget(self.segmentation_dock, self.markers_dock)
-        self.tabifyDockWidget(self.markers_dock, self.correctives_dock)
-        self.tabifyDockWidget(self.history_dock, self.mocap_dock)
-        self.splitDockWidget(self.mocap_views_dock, self.timeline_dock, QtCore.Qt.Vertical)
+        self.tabifyDockWidget(self.shapes_dock, self.history_dock)
+        self.tabifyDockWidget(self.segmentation_dock, self.correctives.dock)
+        self.tabifyDockWidget(self.segmentation_dock, self.markers.dock)
+        self.tabifyDockWidget(self.history_dock, self.mocap.dock)
+        self.splitDockWidget(self.mocap.views_dock, self.keyframes.dock, QtCore.Qt.Vertical)
         self.segmentation_dock.raise_()
         self.shapes_dock.raise_()
 
@@ -168,13 +219,8 @@ class MainWindow(QtWidgets.QMainWindow):
         doc.path_changed.connect(self._update_title)
         doc.undo_stack.cleanChanged.connect(self._on_clean_change)
         p = self.shapes_panel
-        p.drag_started.connect(self._on_slider_drag_started)
-        p.weight_dragged.connect(self._on_slider_dragged)
-        p.drag_finished.connect(self._on_slider_drag_finished)
-        p.weight_committed.connect(self._on_weight_committed)
-        p.reset_requested.connect(self.reset_pose)
+        p.pose_edited.connect(self._on_pose_edit)
         p.mirror_shape_requested.connect(lambda k: self.mirror_shape(self.document.rig.shape_names[k]))
-        p.preset_requested.connect(self.apply_preset)
 
     # --- document signals --------------------------------------------------------------------------
     def _on_rig_change(self) -> None:
@@ -198,18 +244,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _on_pose_change(self) -> None:
         self.shapes_panel.set_weights(self.document.weights)
-        self._schedule_redraw()
-
-    def _schedule_redraw(self) -> None:
-        """Coalesce bursts of pose changes (slider drags) into one redraw per event-loop turn."""
-        if not self._redraw_pending:
-            self._redraw_pending = True
-            QtCore.QTimer.singleShot(0, self.redraw_now)
-
-    def redraw_now(self) -> None:
-        self._redraw_pending = False
-        if self.document.project is not None:
-            self.viewport.update_points(self.document.surface())
+        self.request_render()
 
     def _on_clean_change(self, _clean: bool) -> None:
         self._update_title()
@@ -220,30 +255,36 @@ class MainWindow(QtWidgets.QMainWindow):
         self.setWindowModified(self.document.is_modified)
 
     # --- pose edits (each one undo step) -----------------------------------------------------------
-    def _on_slider_drag_started(self, k: int) -> None:
-        self._drag_old = self.document.weights
-
-    def _on_slider_dragged(self, k: int, value: float) -> None:
-        w = self.document.weights
-        w[k] = value
-        self.document.set_weights(w)
-
-    def _on_slider_drag_finished(self, k: int) -> None:
-        if self._drag_old is None:
+    def _on_pose_edit(self, edit: PoseEdit) -> None:
+        """The Shapes panel's gestures: on the global pose here, on a regional pose by the marker controller
+        (the selected region's weights, or every region's)."""
+        doc = self.document
+        if doc.rig is None:
             return
-        old, self._drag_old = self._drag_old, None
-        new = self.document.weights
-        if not np.array_equal(old, new):
-            self.document.undo_stack.push(
-                SetWeightsCommand(self.document, old, new, f"Drag {self.document.rig.shape_names[k]}"))
-
-    def _on_weight_committed(self, k: int, value: float) -> None:
-        old = self.document.weights
-        new = old.copy()
-        new[k] = value
-        if not np.array_equal(old, new):
-            self.document.undo_stack.push(
-                SetWeightsCommand(self.document, old, new, f"Set {self.document.rig.shape_names[k]} to {value:.3g}"))
+        if doc.is_regional:
+            self.markers.edit_regional_pose(edit)
+            return
+        k, name = edit.shape, doc.rig.shape_names[edit.shape] if edit.shape >= 0 else ""
+        if edit.kind == "drag-start":
+            self._drag_old = doc.weights
+        elif edit.kind == "drag":
+            w = doc.weights
+            w[k] = edit.value
+            doc.set_weights(w)
+        elif edit.kind == "drag-end":
+            if self._drag_old is not None:
+                old, self._drag_old = self._drag_old, None
+                new = doc.weights
+                if not np.array_equal(old, new):
+                    doc.undo_stack.push(SetWeightsCommand(doc, old, new, f"Drag {name}"))
+        elif edit.kind == "set":
+            new = doc.weights.copy()
+            new[k] = edit.value
+            self.set_pose(new, f"Set {name} to {edit.value:.3g}")
+        elif edit.kind == "reset":
+            self.reset_pose()
+        elif edit.kind == "preset":
+            self.apply_preset(edit.preset)
 
     def set_pose(self, weights: np.ndarray, text: str) -> None:
         old = self.document.weights
@@ -303,11 +344,11 @@ class MainWindow(QtWidgets.QMainWindow):
         if twin in rig.shape_names:
             self.document.undo_stack.push(SetShapeDeltaCommand(self.document, twin, delta,
                                                                f"Mirror {name} onto {twin}"))
-            self.statusBar().showMessage(f"Replaced {twin} with the mirror image of {name}.", 5000)
+            self.show_status(f"Replaced {twin} with the mirror image of {name}.")
         else:
             self.document.undo_stack.push(AddShapeCommand(self.document, twin, delta, f"Mirror {name} to new {twin}",
                                                           takes_offset=False))
-            self.statusBar().showMessage(f"Added {twin}, the mirror image of {name}.", 5000)
+            self.show_status(f"Added {twin}, the mirror image of {name}.")
         return True
 
     def apply_preset(self, name: str) -> None:
@@ -320,7 +361,6 @@ class MainWindow(QtWidgets.QMainWindow):
         if not self._maybe_discard():
             return
         self.document.set_project(Project(rig=build_sample_rig(), sections=sample_project_sections()), None)
-        self.loaded.emit()
 
     def open_folder_dialog(self) -> None:
         s = app_settings.settings()
@@ -350,7 +390,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self._worker.loaded.connect(lambda project: self._on_loaded(project, path))
         self._worker.failed.connect(self._on_load_failed)
         self._worker.finished.connect(self._on_worker_finished)
-        self.statusBar().showMessage(f"Opening {path}…")
+        self.show_status(f"Opening {path}…", 0)
         self._worker.start()
 
     def _on_load_progress(self, done: int, total: int, what: str) -> None:
@@ -364,8 +404,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.document.set_project(project, path if path.suffix.lower() == ".bsproj" else None)
         app_settings.add_recent_file(str(path))
         self._rebuild_recent_menu()
-        self.statusBar().showMessage(f"Opened {path}", 5000)
-        self.loaded.emit()
+        self.show_status(f"Opened {path}")
 
     def _on_load_failed(self, message: str) -> None:
         self.show_error("Could not open", message)
@@ -377,11 +416,10 @@ class MainWindow(QtWidgets.QMainWindow):
             self._progress = None
         self._worker = None
 
-    def wait_for_load(self) -> None:
-        """Block until a background load is done (for scripts and tests)."""
-        if self._worker is not None:
-            self._worker.wait()
-        QtWidgets.QApplication.processEvents()
+    @property
+    def is_loading(self) -> bool:
+        """Whether a rig or project is being opened in the background."""
+        return self._worker is not None
 
     def save(self) -> bool:
         if self.document.project is None:
@@ -410,7 +448,7 @@ class MainWindow(QtWidgets.QMainWindow):
             return False
         app_settings.add_recent_file(str(path))
         self._rebuild_recent_menu()
-        self.statusBar().showMessage(f"Saved {path}", 5000)
+        self.show_status(f"Saved {path}")
         return True
 
     def save_dialog(self, title: str, default_name: str, file_filter: str, write) -> None:
@@ -436,7 +474,7 @@ class MainWindow(QtWidgets.QMainWindow):
         except OSError as exc:
             self.show_error("Could not export", f"{path}: could not be written ({exc.strerror or exc}).")
             return
-        self.statusBar().showMessage(f"Exported {path}", 5000)
+        self.show_status(f"Exported {path}")
 
     def save_image_dialog(self) -> None:
         if self.document.project is not None:
@@ -460,7 +498,7 @@ class MainWindow(QtWidgets.QMainWindow):
         except OSError as exc:
             self.show_error("Could not save the image", f"{path}: could not be written ({exc.strerror or exc}).")
             return False
-        self.statusBar().showMessage(f"Saved {path} ({w}x{h} pixels)", 5000)
+        self.show_status(f"Saved {path} ({w}x{h} pixels)")
         return True
 
     def _rebuild_recent_menu(self) -> None:
@@ -567,6 +605,7 @@ class MainWindow(QtWidgets.QMainWindow):
         s.setValue("window/geometry", self.saveGeometry())
         s.setValue("window/state", self.saveState())
         self.shutdown_background()
+        self.autosave.shutdown(clean_quit=True)
         self.viewport.close_viewport()
         super().closeEvent(event)
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from PySide6 import QtCore, QtGui
+from PySide6 import QtCore
 
 from app.document import PoseState
 from app.marker_commands import SetMarkersCommand, SetPoseCommand
@@ -27,6 +27,8 @@ from solvers.damping import damping_gains, point_mobility
 from solvers.regional_solve import RegionalSolver, shape_region_max
 from widgets.marker_overlay import MarkerOverlay
 from widgets.markers_panel import MarkersPanel
+from widgets.shapes_panel import PoseEdit
+from widgets.viewport import Gesture, ViewportTool
 
 SECTION = "markers"
 PICK_RADIUS_PX = 12.0       # a press this close (logical pixels) to a marker grabs it
@@ -47,7 +49,6 @@ class DragState:
     start: np.ndarray              # (M, 3) markers on the surface at the press (the pins)
     targets: np.ndarray            # (M, 3) current targets
     gain: float                    # damping gain of the dragged marker
-    press_world: np.ndarray | None = None
     moved: bool = False
     W: np.ndarray | None = None    # (R+1, K) pose after the last move
     correctives: tuple | None = None   # the rig's live correctives: (activate, marker displacements (C, 3M), drivers)
@@ -83,17 +84,59 @@ def pose_at_level(state: PoseState, blend: sp.csr_matrix | None) -> np.ndarray:
     return np.clip(W, 0.0, 1.0)
 
 
+class MarkerTool(ViewportTool):
+    """Marker mode on the viewport: a press on a marker drags it (left button; its target moves in the view
+    plane through it) or removes it (right button). A click elsewhere adds one (``MarkerController._on_picked``)."""
+
+    def __init__(self, controller: "MarkerController") -> None:
+        self.controller = controller
+
+    def press(self, g: Gesture) -> bool:
+        c = self.controller
+        if c.document.project is None or c.drag is not None:
+            return False
+        i = c.marker_at(g.x, g.y)
+        if i is None:
+            return False
+        if g.button == QtCore.Qt.RightButton:
+            c.remove_marker(c.markers.names[i])
+            return True
+        if g.button != QtCore.Qt.LeftButton:
+            return False
+        if i in [c.markers.index(n) for n in c.markers.background]:
+            c.message(f"Marker {c.markers.names[i]} is on the background: no shape can move it.")
+        g.anchor = c.begin_drag(i).start[i]
+        c.panel.select_marker(i)
+        return True
+
+    def drag(self, g: Gesture) -> None:
+        if self.controller.drag is not None:
+            self.controller.drag_by(g.motion)   # the window redraws once per event-loop turn (coalesced)
+
+    def release(self, g: Gesture) -> None:
+        self.controller.end_drag()
+
+
 class MarkerController(QtCore.QObject):
-    """Markers, marker mode and drags; owns the Markers panel and the viewport glyphs."""
+    """Markers, marker mode and drags; owns the Markers panel (``panel``, in ``dock``), the Marker Mode action
+    (``mode_action``, View menu, M), the viewport glyphs and, in marker mode, the viewport tool (``tool``)."""
 
     markers_changed = QtCore.Signal()
     drag_updated = QtCore.Signal()
 
-    def __init__(self, window, panel: MarkersPanel, parent=None) -> None:
-        super().__init__(parent or window)
-        self.window, self.panel = window, panel
+    def __init__(self, window) -> None:
+        super().__init__(window)
+        self.window = window
         self.document, self.viewport = window.document, window.viewport
-        self.overlay = MarkerOverlay(self.viewport.plotter)
+        self.panel = panel = MarkersPanel(window)
+        self.dock = window.add_dock("Markers", panel, QtCore.Qt.LeftDockWidgetArea, scroll=True)
+        self.mode_action = window.add_action(
+            "view", "&Marker Mode", self.set_mode, "M",
+            "Marker mode: click the face to add a marker, drag a marker to pose the face region by region "
+            "(damped where the face barely moves), right-click a marker to remove it", checkable=True)
+        panel.mode_toggled.connect(self.mode_action.setChecked)
+        self.overlay = MarkerOverlay(self.viewport)
+        self.tool = MarkerTool(self)
         self.markers: MarkerSet | None = None
         self.mode = False
         self.lam_reg = 1e-3
@@ -110,7 +153,6 @@ class MarkerController(QtCore.QObject):
         d.shapes_changed.connect(self._on_shapes_change)
         d.section_changed.connect(self._on_section_change)
         d.pose_changed.connect(self._on_pose_change)
-        self.viewport.add_mouse_filter(self._on_mouse)
         self.viewport.picked.connect(self._on_picked)
         seg = window.segmentation
         seg.segmentation_ready.connect(self._on_segmentation_ready)
@@ -121,14 +163,7 @@ class MarkerController(QtCore.QObject):
         panel.level_changed.connect(self._on_level_change)
         panel.remove_requested.connect(self.remove_marker)
         panel.marker_selected.connect(self._on_marker_selected)
-        panel.lam_reg_changed.connect(lambda v: setattr(self, "lam_reg", float(v)))
-        sh = window.shapes_panel
-        sh.routed_drag_started.connect(self._on_region_slider_started)
-        sh.routed_weight_dragged.connect(self._on_region_slider_dragged)
-        sh.routed_drag_finished.connect(self._on_region_slider_finished)
-        sh.routed_weight_committed.connect(self._on_region_weight_committed)
-        sh.routed_reset_requested.connect(self._on_region_reset)
-        sh.routed_preset_requested.connect(self._on_region_preset)
+        panel.lam_reg_changed.connect(self._on_lam_reg_change)
         if d.project is not None:
             self._on_rig_change()
             if seg.segmentation is not None:
@@ -150,12 +185,18 @@ class MarkerController(QtCore.QObject):
         self.mode = bool(on)
         self.panel.set_mode(self.mode)
         if self.mode:
+            self.viewport.push_tool(self.tool)
+        else:
+            self.viewport.remove_tool(self.tool)
+            if self.drag is not None:   # leaving marker mode mid-drag (M with the button held) ends the drag
+                self.end_drag()
+        if self.mode:
             self.message("Marker mode: click the face to add a marker, drag a marker to pose, right-click removes.")
         self.refresh_overlay(render=True)
 
     def message(self, text: str, timeout: int = 8000) -> None:
         self.last_message = text
-        self.window.statusBar().showMessage(text, timeout)
+        self.window.show_status(text, timeout)
         self.panel.set_status(text)
 
     def _on_rig_change(self) -> None:
@@ -204,6 +245,9 @@ class MarkerController(QtCore.QObject):
         self.message(f"Drags solve the {self._level_obj(level).n_regions} regions of level {level}."
                      if self._level_obj(level) is not None else "Drags solve one global pose.", 4000)
 
+    def _on_lam_reg_change(self, value: float) -> None:
+        self.lam_reg = float(value)
+
     def _on_marker_selected(self, index: int) -> None:
         self._selected = index if index >= 0 else None
         self.refresh_overlay(render=True)
@@ -225,7 +269,7 @@ class MarkerController(QtCore.QObject):
             targets = self.drag.targets if self.drag is not None else None
             self.overlay.show(self.marker_positions(), targets, self._selected)
         if render:  # coalesced with the window's pose redraws: one render per event-loop turn
-            self.window._schedule_redraw()
+            self.window.request_render()
 
     def _on_pose_change(self) -> None:
         self.refresh_overlay()  # the window's scheduled redraw renders
@@ -329,7 +373,7 @@ class MarkerController(QtCore.QObject):
             self._region_max[key] = hit
         return hit[1]
 
-    def begin_drag(self, index: int, display_xy=None) -> DragState:
+    def begin_drag(self, index: int) -> DragState:
         """Set up a drag of marker ``index``: the regional solver of the chosen level for the current markers,
         the pins (every marker where it is now) and the damping gain of the dragged marker."""
         rig, doc = self.document.rig, self.document
@@ -355,19 +399,9 @@ class MarkerController(QtCore.QObject):
         self.drag = DragState(index=index, old=old, level=level, blend=blend, W0=W0, solver=solver,
                               neutral_at=ms.positions(rig.neutral), start=start, targets=start.copy(), gain=gain,
                               W=W0.copy(), correctives=correctives)
-        if display_xy is not None:
-            self.drag.press_world = self.viewport.view_plane_point(display_xy[0], display_xy[1], start[index])
         self._selected = index
         self.refresh_overlay(render=True)
         return self.drag
-
-    def drag_to(self, x: float, y: float) -> np.ndarray:
-        """Move the dragged marker's target to display pixel (x, y) (projected to the view plane)."""
-        dr = self.drag
-        hit = self.viewport.view_plane_point(x, y, dr.start[dr.index])
-        if dr.press_world is None:
-            dr.press_world = hit
-        return self.drag_by(hit - dr.press_world)
 
     def drag_by(self, mouse_delta: np.ndarray) -> np.ndarray:
         """Target = press position + damped ``mouse_delta`` (world units); re-solve and show. Returns W."""
@@ -421,31 +455,6 @@ class MarkerController(QtCore.QObject):
         self.refresh_overlay(render=True)
         return changed
 
-    def _on_mouse(self, kind: str, x: int, y: int, button) -> bool:
-        if self.drag is not None:
-            if kind == "move":
-                self.drag_to(x, y)  # the window redraws once per event-loop turn (coalesced)
-                return True
-            if kind == "release":
-                self.end_drag()
-                return True
-            return True
-        if kind != "press" or not self.mode or self.document.project is None:
-            return False
-        i = self.marker_at(x, y)
-        if i is None:
-            return False
-        if button == QtCore.Qt.RightButton:
-            self.remove_marker(self.markers.names[i])
-            return True
-        if button == QtCore.Qt.LeftButton:
-            if i in [self.markers.index(n) for n in self.markers.background]:
-                self.message(f"Marker {self.markers.names[i]} is on the background: no shape can move it.")
-            self.begin_drag(i, (x, y))
-            self.panel.select_marker(i)
-            return True
-        return False
-
     # --- the Shapes panel on a regional pose ------------------------------------------------------------
     def sync_edit_region(self) -> None:
         """The Shapes panel edits the region selected in the Segmentation panel when the pose is regional
@@ -461,46 +470,50 @@ class MarkerController(QtCore.QObject):
         doc.set_edit_region(region)
         sh = self.window.shapes_panel
         if not doc.is_regional:
-            sh.set_target("Editing the global pose", routed=False)
+            sh.set_target("Editing the global pose")
         elif doc.edit_region is not None:
             sh.set_target(f"Editing region {doc.edit_region} of level {doc.region_level} "
-                          f"(selected in the Segmentation panel)", routed=True)
+                          f"(selected in the Segmentation panel)")
         else:
             sh.set_target(f"Regional pose (level {doc.region_level}): sliders show the background row and set "
-                          f"every region; select a region to edit it alone", routed=True)
+                          f"every region; select a region to edit it alone")
 
-    def _region_rows(self) -> np.ndarray:
+    def edit_regional_pose(self, edit: PoseEdit) -> None:
+        """A Shapes panel gesture on a regional pose: it edits the selected region's weights, or every region's
+        (a reset or a preset on every region makes the pose global again). The window routes pose edits here
+        while the pose is regional; each complete edit is one undo step."""
         doc = self.document
-        R1 = doc.region_weights.shape[0]
-        return np.array([doc.edit_region]) if doc.edit_region is not None else np.arange(R1)
-
-    def _regional_with(self, k: int, value: float) -> np.ndarray:
-        W = self.document.region_weights.copy()
-        W[self._region_rows(), k] = value
-        return W
-
-    def _on_region_slider_started(self, k: int) -> None:
-        self._slider_old = self.document.pose_state()
-
-    def _on_region_slider_dragged(self, k: int, value: float) -> None:
-        if self.document.is_regional:
-            self.document.set_region_weights_live(self._regional_with(k, value))
-
-    def _on_region_slider_finished(self, k: int) -> None:
-        old, self._slider_old = self._slider_old, None
-        new = self.document.pose_state()
-        if old is not None and not new.equals(old):
-            self.document.undo_stack.push(SetPoseCommand(self.document, old, new,
-                                                         f"Drag {self.document.rig.shape_names[k]} (regional)"))
-
-    def _on_region_weight_committed(self, k: int, value: float) -> None:
-        doc = self.document
+        if edit.kind == "drag-start":
+            self._slider_old = doc.pose_state()
+            return
+        if edit.kind == "drag-end":
+            old, self._slider_old = self._slider_old, None
+            new = doc.pose_state()
+            if old is not None and not new.equals(old):
+                doc.undo_stack.push(SetPoseCommand(doc, old, new, f"Drag {doc.rig.shape_names[edit.shape]} (regional)"))
+            return
         if not doc.is_regional:
             return
-        old = doc.pose_state()
-        new = PoseState(old.weights, self._regional_with(k, value), old.blend, old.level)
-        if not new.equals(old):
-            doc.undo_stack.push(SetPoseCommand(doc, old, new, f"Set {doc.rig.shape_names[k]} to {value:.3g} (regional)"))
+        if edit.kind == "drag":
+            doc.set_region_weights_live(self._regional_with(edit.shape, edit.value))
+        elif edit.kind == "set":
+            old = doc.pose_state()
+            new = PoseState(old.weights, self._regional_with(edit.shape, edit.value), old.blend, old.level)
+            if not new.equals(old):
+                doc.undo_stack.push(SetPoseCommand(
+                    doc, old, new, f"Set {doc.rig.shape_names[edit.shape]} to {edit.value:.3g} (regional)"))
+        elif edit.kind == "reset":
+            self._set_rows(np.zeros(doc.rig.n_shapes),
+                           "Reset pose" if doc.edit_region is None else f"Reset region {doc.edit_region}")
+        elif edit.kind == "preset":
+            self._set_rows(doc.rig.weights_from_dict(doc.rig.presets[edit.preset]), f"Preset {edit.preset}")
+
+    def _regional_with(self, k: int, value: float) -> np.ndarray:
+        doc = self.document
+        W = doc.region_weights.copy()
+        rows = np.array([doc.edit_region]) if doc.edit_region is not None else np.arange(W.shape[0])
+        W[rows, k] = value
+        return W
 
     def _set_rows(self, w: np.ndarray, text: str) -> None:
         doc = self.document
@@ -513,40 +526,3 @@ class MarkerController(QtCore.QObject):
             new = PoseState(old.weights, W, old.blend, old.level)
         if not new.equals(old):
             doc.undo_stack.push(SetPoseCommand(doc, old, new, text))
-
-    def _on_region_reset(self) -> None:
-        if self.document.is_regional:
-            self._set_rows(np.zeros(self.document.rig.n_shapes), "Reset pose" if self.document.edit_region is None
-                           else f"Reset region {self.document.edit_region}")
-
-    def _on_region_preset(self, name: str) -> None:
-        rig = self.document.rig
-        if self.document.is_regional:
-            self._set_rows(rig.weights_from_dict(rig.presets[name]), f"Preset {name}")
-
-
-def install(window) -> MarkerController:
-    """Add the Markers panel, the marker-mode action (M) and the controller to a MainWindow."""
-    existing = getattr(window, "markers", None)
-    if isinstance(existing, MarkerController):  # the main window installs it; installing twice returns the same one
-        return existing
-    panel = MarkersPanel(window)
-    window.markers_panel = panel
-    window.markers_dock = window._add_dock("Markers", panel, QtCore.Qt.LeftDockWidgetArea, scroll=True)
-    window.panels_menu.addAction(window.markers_dock.toggleViewAction())
-    controller = MarkerController(window, panel)
-    window.markers = controller
-    act = QtGui.QAction("&Marker Mode", window)
-    act.setCheckable(True)
-    act.setShortcut(QtGui.QKeySequence("M"))
-    tip = ("Marker mode: click the face to add a marker, drag a marker to pose the face region by region "
-           "(damped where the face barely moves), right-click a marker to remove it")
-    act.setToolTip(tip)
-    act.setStatusTip(tip)
-    act.toggled.connect(controller.set_mode)
-    panel.mode_toggled.connect(act.setChecked)
-    view_menu = next((a.menu() for a in window.menuBar().actions() if a.text().replace("&", "") == "View"), None)
-    (view_menu or window.menuBar()).addAction(act)
-    window.addAction(act)
-    window.marker_mode_action = act
-    return controller

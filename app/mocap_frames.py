@@ -83,9 +83,9 @@ class FrameCache:
         return self.projection_normals[f], self.dense_normals[f]
 
     def _compute(self, f: int) -> None:
-        sol, s = self.solution, self.solution.solver
-        proj = s.pose_regional(sol.region_weights[f]) if sol.region_weights is not None else s.pose(sol.weights[f])
-        dense = sol.dense(f)
+        sol = self.solution
+        proj = sol.projection(f)
+        dense = sol.dense(f, proj)
         res = np.linalg.norm(dense - proj, axis=1) * self.mm
         if self._normals is not None:
             shown = self._shown

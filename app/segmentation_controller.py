@@ -192,7 +192,7 @@ class SegmentationController(QtCore.QObject):
     # --- nudge (Acosta) ----------------------------------------------------------------------------
     def nudge(self, direction: str, amount: float) -> None:
         if self.segmentation is None or self.highlight is None:
-            self.window.statusBar().showMessage("Select a region to nudge (click it in the list or the viewport).", 5000)
+            self.window.show_status("Select a region to nudge (click it in the list or the viewport).")
             return
         rig, doc = self.document.rig, self.document
         lvl = self.segmentation.levels[self.level]
@@ -201,12 +201,8 @@ class SegmentationController(QtCore.QObject):
         if direction in ("out", "in"):
             vec = direction
         else:
-            cam = self.viewport.plotter.camera
-            up = np.array(cam.up, dtype=float)
-            forward = np.array(cam.focal_point) - np.array(cam.position)
-            right = np.cross(forward, up)
-            right /= np.linalg.norm(right)
-            vec = {"up": up, "down": -up, "right": right, "left": -right}[direction]
+            cam = self.viewport.camera_frame()
+            vec = {"up": cam.up, "down": -cam.up, "right": cam.right, "left": -cam.right}[direction]
         current = doc.surface().astype(np.float64)
         moved = nudge_region(current, region.vertices, amount, direction=vec, weights=phi,
                              face_counts=rig.face_counts, face_indices=rig.face_indices)
@@ -217,7 +213,7 @@ class SegmentationController(QtCore.QObject):
     def save_nudge_as_shape(self, name: str | None = None) -> None:
         doc = self.document
         if doc.edit_offset is None:
-            self.window.statusBar().showMessage("Nothing to save: nudge a region first.", 5000)
+            self.window.show_status("Nothing to save: nudge a region first.")
             return
         rig = doc.rig
         if name is None:

@@ -302,51 +302,6 @@ def solver_correctives(rig):
     return activate, np.stack([np.asarray(c.delta, dtype=np.float64) for c in live]), drivers
 
 
-# --- authoring (Smith §5.6–5.8) ------------------------------------------------------------------
-def driver_pose(rig, drivers, weights=None) -> np.ndarray:
-    """(K,) weight vector with the drivers at ``weights`` (a number, a list, or None for 1) and others 0."""
-    w = np.zeros(rig.n_shapes)
-    vals = np.ones(len(drivers)) if weights is None else np.broadcast_to(np.asarray(weights, float), (len(drivers),))
-    for d, v in zip(drivers, vals):
-        w[rig.shape_index(d)] = v
-    return w
-
-
-def authoring_surface(rig, drivers, weights=None, evaluator=None) -> tuple[np.ndarray, np.ndarray]:
-    """The current surface ``x_cur`` (V, 3) float64 for authoring a corrective on ``drivers``, and its pose.
-
-    The drivers are set to ``weights`` (default 1) and every other shape to 0; every corrective already
-    on the rig except the one for this exact driver set is applied. Correctives of the same or higher
-    order on other driver sets contain a driver at 0 and so add exactly 0, which leaves every
-    lower-order corrective applied, as Smith's authoring step requires: ``e_c = (x_des − x_cur) / a_c(w)``.
-
-    With ``evaluator`` (a ``model.pose.PoseEvaluator`` of this rig, float64 for exact authoring) the pose
-    is evaluated by it and the existing corrective of this driver set, if any, is subtracted. Without
-    one, the same equation ``b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c`` is summed over the few non-zero terms
-    directly (no evaluator build, which costs about 0.3 s on ICT FaceKit). Returns (x_cur, w).
-    """
-    drivers = list(drivers)
-    if len(drivers) < 2:
-        raise RigInputError(f"A corrective needs two or more driver shapes, got {len(drivers)}.")
-    w = driver_pose(rig, drivers, weights)
-    key = frozenset(drivers)
-    correctives = list(rig.correctives)
-    a = corrective_activations(correctives, rig.shape_names, w) if correctives else np.zeros(0)
-    own = [i for i, c in enumerate(correctives) if frozenset(c.drivers) == key]
-    if evaluator is not None:
-        x_cur = np.array(evaluator.evaluate(w), dtype=np.float64)
-        for i in own:
-            x_cur -= a[i] * correctives[i].delta
-        return x_cur, w
-    x_cur = rig.neutral.copy()
-    for k in np.flatnonzero(w):
-        x_cur += w[k] * rig.deltas[k]
-    for i in np.flatnonzero(a):
-        if i not in own:
-            x_cur += a[i] * correctives[i].delta
-    return x_cur, w
-
-
 def activation_for(drivers, rule: str, shape_names, weights) -> float:
     """a_c(w) of a (not yet created) corrective on ``drivers`` with ``rule``, for a global pose (K,)."""
     probe = Corrective(drivers=list(drivers), rule=rule, delta=np.zeros((0, 3)))

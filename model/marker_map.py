@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import RigInputError
+from .errors import RigInputError, shown
 from .rig import UNIT_IN_METRES, Rig, unit_scale
 from .takes import MarkerTake
 
@@ -41,15 +41,12 @@ class MarkerMap:
     def __post_init__(self) -> None:
         where = self.source or "marker map"
         for u in (self.rig_units, self.take_units):
-            if u is not None and u not in UNIT_IN_METRES:
-                raise RigInputError(f"{where}: unknown units '{u}' (use mm, cm or m).")
+            if u is not None and (not isinstance(u, str) or u not in UNIT_IN_METRES):
+                raise RigInputError(f"{where}: unknown units '{shown(u, 20)}' (use mm, cm or m).")
         if not self.markers:
             raise RigInputError(f"{where}: maps no markers.")
         for label, v in self.markers.items():
-            if isinstance(v, (bool, float)) or not isinstance(v, (int, np.integer, dict)):
-                raise RigInputError(f"{where}: marker {label} must map to a vertex index or {{'face', 'bary'}}.")
-            if isinstance(v, dict) and ("face" not in v or "bary" not in v):
-                raise RigInputError(f"{where}: marker {label} needs both 'face' and 'bary'.")
+            self.markers[label] = _checked_entry(v, f"{where}: marker {shown(label, 40)}")
 
     # --- binding to a rig ------------------------------------------------------------------------
     def binding(self, rig: Rig, labels: list[str] | None = None) -> sp.csr_matrix:
@@ -61,24 +58,24 @@ class MarkerMap:
         rows, cols, vals = [], [], []
         for i, label in enumerate(labels):
             if label not in self.markers:
-                raise RigInputError(f"{where}: has no marker labelled '{label}'.")
+                raise RigInputError(f"{where}: has no marker labelled '{shown(label, 40)}'.")
             v = self.markers[label]
             if isinstance(v, dict):
                 f = int(v["face"])
                 if not 0 <= f < rig.n_faces:
-                    raise RigInputError(f"{where}: marker {label} is on face {f}, but the rig has {rig.n_faces} faces.")
+                    raise RigInputError(f"{where}: marker {shown(label, 40)} is on face {f}, but the rig has {rig.n_faces} faces.")
                 corners = rig.face_indices[starts[f]:starts[f + 1]]
                 bary = np.asarray(v["bary"], dtype=np.float64)
                 if bary.size not in (3, corners.size) or not np.isfinite(bary).all():
-                    raise RigInputError(f"{where}: marker {label} needs 3 or {corners.size} barycentric weights.")
+                    raise RigInputError(f"{where}: marker {shown(label, 40)} needs 3 or {corners.size} barycentric weights.")
                 if abs(bary.sum() - 1.0) > 1e-3:
-                    raise RigInputError(f"{where}: marker {label}'s barycentric weights must sum to 1.")
+                    raise RigInputError(f"{where}: marker {shown(label, 40)}'s barycentric weights must sum to 1.")
                 rows += [i] * bary.size
                 cols += list(corners[:bary.size])
                 vals += list(bary)
             else:
                 if not 0 <= int(v) < V:
-                    raise RigInputError(f"{where}: marker {label} is bound to vertex {int(v)}, "
+                    raise RigInputError(f"{where}: marker {shown(label, 40)} is bound to vertex {int(v)}, "
                                         f"but the rig has {V} vertices.")
                 rows.append(i)
                 cols.append(int(v))
@@ -143,6 +140,30 @@ def load_marker_map(path: str | Path) -> MarkerMap:
     extra = {k: v for k, v in d.items() if k not in ("rig_units", "take_units", "markers")}
     return MarkerMap(markers=d["markers"], rig_units=d.get("rig_units", "cm"), take_units=d.get("take_units"),
                      source=str(path), extra=extra)
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+
+
+def _checked_entry(v, what: str):
+    """A map entry as the binding uses it: a vertex index, or {"face": f, "bary": [3 or more finite numbers]}."""
+    if _is_int(v):
+        if not -2**62 < int(v) < 2**62:
+            raise RigInputError(f"{what} is bound to vertex {shown(v, 24)}, which no rig has.")
+        return int(v)
+    if not isinstance(v, dict):
+        raise RigInputError(f"{what} must map to a vertex index or {{'face', 'bary'}}.")
+    if "face" not in v or "bary" not in v:
+        raise RigInputError(f"{what} needs both 'face' and 'bary'.")
+    f, bary = v["face"], v["bary"]
+    if not _is_int(f) or not -2**62 < int(f) < 2**62:
+        raise RigInputError(f"{what}: 'face' must be a face number, not {shown(f, 24)}.")
+    if (not isinstance(bary, list) or not 3 <= len(bary) <= 64
+            or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in bary)
+            or not np.isfinite(np.asarray(bary, dtype=np.float64)).all()):
+        raise RigInputError(f"{what}: 'bary' must be 3 or more finite barycentric weights.")
+    return {**v, "face": int(f), "bary": [float(x) for x in bary]}
 
 
 # --- automatic mapping ---------------------------------------------------------------------------

@@ -1,31 +1,61 @@
-"""Pose evaluation: one blended product, vectorised (ALGORITHMS.md §1 and §4).
+"""Pose evaluation: one blended product, vectorised (ALGORITHMS.md §1 and §4). The one place the posed surface is
+computed: the viewport, exports, take solves (through a callable), marker drags, authoring and the CLI use it.
 
 Global pose:   x = b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c   (muted correctives left out)
 Regional pose: x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v) (+ correctives activated per vertex)
 
-``PoseEvaluator`` is built once per rig (and rebuilt when shapes or correctives change): it keeps the
-deltas as one float32 (K, 3U) matrix over the U vertices that any shape moves, so a global pose is a
-single matrix-vector product plus a copy of the neutral.
+``PoseEvaluator`` is built once per rig content (rebuild it when shapes or correctives change; the document
+does so on every rig edit): it keeps the shape and corrective deltas as one (K+C, 3U) matrix over the U
+vertices that any of them moves, so a global pose is a single matrix-vector product plus a copy of the
+neutral. float32 for display, float64 for solving and exports.
+
+Which correctives take part: the unmuted ones by default; ``exclude`` (names or indices) leaves chosen ones
+out, e.g. the corrective being authored; ``include_muted`` also applies the muted ones (authoring counts a
+muted lower-order corrective as applied, Smith §5.6).
 """
 from __future__ import annotations
+
+from collections.abc import Iterable
 
 import numpy as np
 import scipy.sparse as sp
 
+from .correctives import corrective_activations, corrective_activations_per_vertex
 from .rig import Rig
+
+_BLEND_CACHE = 4     # blends whose per-region set-up is kept (levels the user switches between)
+
+
+class _BlendEntry:
+    """What a regional evaluation needs of one blend (V, R+1), kept with a copy of the blend's content so
+    that a lookup compares content, not object identity."""
+
+    def __init__(self, blend: sp.csr_matrix) -> None:
+        self.shape = blend.shape
+        self.indptr, self.indices, self.data = blend.indptr.copy(), blend.indices.copy(), blend.data.copy()
+        self.moving_rows: np.ndarray | None = None    # blend[moving] (U, R+1) dense-able, for per-vertex weights
+        self.parts: list | None = None                # per-region (cols, phi, D_r) for the gemv path
+
+    def matches(self, blend: sp.csr_matrix) -> bool:
+        return (blend.shape == self.shape and blend.nnz == self.data.size
+                and np.array_equal(blend.indptr, self.indptr) and np.array_equal(blend.indices, self.indices)
+                and np.array_equal(blend.data, self.data))
 
 
 class PoseEvaluator:
-    """Evaluates poses of one rig. Rebuild it after editing the rig's shapes or correctives."""
+    """Evaluates poses of one rig (a snapshot of its arrays at construction)."""
 
     def __init__(self, rig: Rig, dtype=np.float32) -> None:
         self.rig = rig
         self.dtype = dtype
         V = rig.n_vertices
+        self.K = rig.n_shapes
         self._neutral = rig.neutral.astype(dtype).reshape(-1)
         corr = list(rig.correctives)
-        self._n_corr = len(corr)
-        self._live = np.array([0.0 if c.muted else 1.0 for c in corr])  # muted correctives add nothing
+        self._correctives = corr
+        self._names = tuple(rig.shape_names)
+        self._corr_names = [c.name for c in corr]
+        self._muted = np.array([c.muted for c in corr], dtype=bool)
         blocks = [rig.deltas.reshape(rig.n_shapes, -1)]
         if corr:
             blocks.append(np.stack([c.delta for c in corr]).reshape(len(corr), -1))
@@ -35,19 +65,33 @@ class PoseEvaluator:
         self._cols = (moving[:, None] * 3 + np.arange(3)).reshape(-1)
         # (K+C, 3U) row-major: w @ D is a fast BLAS gemv.
         self._D = np.ascontiguousarray(full[:, self._cols], dtype=dtype)
+        self._blends: list[_BlendEntry] = []
+
+    # --- which correctives ------------------------------------------------------------------------
+    def live(self, exclude: Iterable = (), include_muted: bool = False) -> np.ndarray:
+        """(C,) 1.0 for every corrective that is applied, 0.0 for the muted (unless ``include_muted``) and for
+        those named or indexed in ``exclude``."""
+        on = np.ones(len(self._correctives)) if include_muted else (~self._muted).astype(np.float64)
+        for e in exclude:
+            if isinstance(e, (int, np.integer)):
+                on[int(e)] = 0.0
+            else:
+                on[[i for i, n in enumerate(self._corr_names) if n == e]] = 0.0
+        return on
 
     def activations(self, weights: np.ndarray) -> np.ndarray:
-        """Corrective activations a_c(w) (Smith §4.5); empty when the rig has none."""
-        if not self._n_corr:
+        """Corrective activations a_c(w) (Smith §4.5) of every corrective, muted or not; empty when none."""
+        if not self._correctives:
             return np.zeros(0)
-        from .correctives import corrective_activations
-        return corrective_activations(self.rig.correctives, self.rig.shape_names, weights)
+        return corrective_activations(self._correctives, self._names, weights)
 
-    def evaluate(self, weights: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+    # --- evaluation -------------------------------------------------------------------------------
+    def evaluate(self, weights: np.ndarray, out: np.ndarray | None = None, *, exclude: Iterable = (),
+                 include_muted: bool = False) -> np.ndarray:
         """(V, 3) surface for a global weight vector (K,)."""
         w = np.asarray(weights, dtype=np.float64)
-        if self._n_corr:
-            w = np.concatenate([w, self.activations(w) * self._live])
+        if self._correctives:
+            w = np.concatenate([w, self.activations(w) * self.live(exclude, include_muted)])
         if out is None:
             out = self._neutral.copy()
         else:
@@ -56,23 +100,79 @@ class PoseEvaluator:
         out[self._cols] += w.astype(self.dtype) @ self._D
         return out.reshape(-1, 3)
 
-    def evaluate_regional(self, region_weights: np.ndarray, blend: sp.spmatrix) -> np.ndarray:
+    def evaluate_regional(self, region_weights: np.ndarray, blend: sp.spmatrix, *, exclude: Iterable = (),
+                          include_muted: bool = False) -> np.ndarray:
         """(V, 3) surface for per-region weights (R, K) blended by a partition of unity ``blend`` (V, R).
 
-        Joshi §4: x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v). Correctives are activated per vertex
-        from the blended weights.
+        Joshi §4: x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v). Correctives are activated per vertex from the
+        blended weights. Without a corrective to apply, one gemv per region over that region's own vertices
+        (set up once per blend), so a drag step costs about one global evaluation.
         """
         W = np.asarray(region_weights, dtype=np.float64)
-        per_vertex = np.asarray(sp.csr_matrix(blend)[self.moving_vertices] @ W)  # (U, K)
-        if self._n_corr:
-            from .correctives import corrective_activations_per_vertex
-            a = corrective_activations_per_vertex(self.rig.correctives, self.rig.shape_names, per_vertex)
-            a *= self._live
-            per_vertex = np.concatenate([per_vertex, a], axis=1)
+        entry = self._blend_entry(blend)
+        live = self.live(exclude, include_muted)
+        if not live.any():
+            return self._regional_gemv(W, entry)
+        if entry.moving_rows is None:
+            entry.moving_rows = sp.csr_matrix(blend)[self.moving_vertices]
+        per_vertex = np.asarray(entry.moving_rows @ W)  # (U, K)
+        a = corrective_activations_per_vertex(self._correctives, self._names, per_vertex)
+        a *= live
+        per_vertex = np.concatenate([per_vertex, a], axis=1)
         D = self._D.reshape(self._D.shape[0], -1, 3)  # (K+C, U, 3)
         out = self._neutral.copy().reshape(-1, 3)
         out[self.moving_vertices] += np.einsum("uk,kuc->uc", per_vertex.astype(self.dtype), D)
         return out
+
+    def pose(self, weights: np.ndarray, blend: sp.spmatrix | None = None, **options) -> np.ndarray:
+        """(V, 3) surface of a global pose (weights (K,)) or, with ``blend``, a regional one (weights (R+1, K))."""
+        if blend is None or np.ndim(weights) == 1:
+            return self.evaluate(weights, **options)
+        return self.evaluate_regional(weights, blend, **options)
+
+    # --- the regional gemv path ---------------------------------------------------------------------
+    def _blend_entry(self, blend: sp.spmatrix) -> _BlendEntry:
+        B = blend if sp.isspmatrix_csr(blend) else sp.csr_matrix(blend)
+        for i, e in enumerate(self._blends):
+            if e.matches(B):
+                if i:
+                    self._blends.insert(0, self._blends.pop(i))
+                return e
+        e = _BlendEntry(B)
+        self._blends = [e] + self._blends[:_BLEND_CACHE - 1]
+        return e
+
+    def _regional_gemv(self, W: np.ndarray, entry: _BlendEntry) -> np.ndarray:
+        if entry.parts is None:
+            entry.parts = self._region_parts(sp.csr_matrix((entry.data, entry.indices, entry.indptr),
+                                                           shape=entry.shape))
+        out = self._neutral.copy()
+        Wf = W.astype(self.dtype)
+        for r, (cols, phi, D) in enumerate(entry.parts):
+            if cols.size and Wf[r].any():
+                out[cols] += phi * (Wf[r] @ D)
+        return out.reshape(-1, 3)
+
+    def _region_parts(self, blend: sp.csr_matrix) -> list:
+        """Per region r: the columns (3 per vertex) of the vertices it covers that a shape moves, φ_r there,
+        and the shapes' deltas at those vertices as (K, 3n)."""
+        K, U = self.K, self.moving_vertices.size
+        D = self._D[:K].reshape(K, U, 3)
+        shape_moving = np.abs(D).max(axis=(0, 2)) > 0 if U else np.zeros(0, bool)
+        pos = np.full(self.rig.n_vertices, -1, dtype=np.int64)
+        pos[self.moving_vertices[shape_moving]] = np.flatnonzero(shape_moving)
+        B = sp.csc_matrix(blend)
+        parts = []
+        for r in range(B.shape[1]):
+            lo, hi = B.indptr[r], B.indptr[r + 1]
+            verts, phi = B.indices[lo:hi], B.data[lo:hi]
+            p = pos[verts]
+            keep = p >= 0
+            verts, phi, p = verts[keep], phi[keep], p[keep]
+            Dr = np.ascontiguousarray(D[:, p].reshape(K, -1))
+            cols = (verts[:, None] * 3 + np.arange(3)).reshape(-1)
+            parts.append((cols, np.repeat(phi, 3).astype(self.dtype), Dr))
+        return parts
 
 
 def evaluate(rig: Rig, weights: np.ndarray) -> np.ndarray:

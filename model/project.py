@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import io
 import json
+import tokenize
 import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -19,8 +20,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from .atomic import atomic_write_with
-from .errors import RigInputError
-from .rig import Rig
+from .errors import RigInputError, shown
+from .input_files import regular_file
+from .json_file import MAX_JSON_BYTES, parse_json_text
+from .rig import MAX_WEIGHT, Rig
 
 FORMAT = "blendshape-studio-project"
 VERSION = 1
@@ -49,6 +52,10 @@ class Project:
         if self.weights is None:
             self.weights = np.zeros(self.rig.n_shapes)
         self.weights = np.asarray(self.weights, dtype=np.float64)
+        if self.weights.shape != (self.rig.n_shapes,):
+            raise RigInputError(f"the pose has {self.weights.size} weights for {self.rig.n_shapes} shapes.")
+        if not np.isfinite(self.weights).all() or (self.weights.size and np.abs(self.weights).max() > MAX_WEIGHT):
+            raise RigInputError(f"the pose holds a weight that is not a number within ±{MAX_WEIGHT:g}.")
         if self.region_weights is not None:
             self.region_weights = np.asarray(self.region_weights, dtype=np.float64)
             self.region_blend = sp.csr_matrix(self.region_blend)
@@ -57,7 +64,8 @@ class Project:
                 raise RigInputError(f"the regional pose ({self.region_weights.shape[0]} regions x "
                                     f"{self.region_weights.shape[-1]} weights, blend {list(self.region_blend.shape)}) "
                                     f"does not fit the rig ({self.rig.n_vertices} vertices, {self.rig.n_shapes} shapes).")
-            if not np.isfinite(self.region_weights).all() or not np.isfinite(self.region_blend.data).all():
+            if (not np.isfinite(self.region_weights).all() or not np.isfinite(self.region_blend.data).all()
+                    or np.abs(self.region_weights).max(initial=0) > MAX_WEIGHT):
                 raise RigInputError("the regional pose holds NaN or infinite values.")
 
 
@@ -65,6 +73,49 @@ def _npy_bytes(a: np.ndarray) -> bytes:
     buf = io.BytesIO()
     np.save(buf, np.ascontiguousarray(a), allow_pickle=False)
     return buf.getvalue()
+
+
+ARRAY_DTYPES = ("<f8", "<f4", "<i4", "<i8", "<u4", "<u8", "|b1", "|u1", "<i2", "<u2")
+
+
+def read_npy_member(z: zipfile.ZipFile, name: str, path: Path, key: str) -> np.ndarray:
+    """One ``.npy`` member, checked before anything is allocated: a plain numeric dtype, and the header's
+    shape matching the bytes the member holds (so a declared 10¹² elements or a member that inflates far
+    beyond its header is refused, never allocated); floats finite."""
+    try:
+        info = z.getinfo(name)
+    except KeyError:
+        raise RigInputError(f"{path}: the project is missing the array '{key}'.") from None
+    try:
+        with z.open(info) as f:
+            version = np.lib.format.read_magic(f)
+            if version == (1, 0):
+                shape, fortran, dtype = np.lib.format.read_array_header_1_0(f, max_header_size=10000)
+            elif version in ((2, 0), (3, 0)):
+                shape, fortran, dtype = np.lib.format.read_array_header_2_0(f, max_header_size=10000)
+            else:
+                raise ValueError(f"npy version {version}")
+            if dtype.str not in ARRAY_DTYPES:
+                raise RigInputError(f"{path}: the array '{key}' is stored as {shown(dtype, 20)}, not a plain number type.")
+            count = 1
+            for n in shape:
+                count *= int(n)
+            nbytes = count * dtype.itemsize
+            header = f.tell()
+            if header + nbytes != info.file_size:
+                raise RigInputError(f"{path}: the array '{key}' declares {count} values but holds "
+                                    f"{max(info.file_size - header, 0) // max(dtype.itemsize, 1)}; it is damaged.")
+            data = f.read(nbytes + 1)
+    except RigInputError:
+        raise
+    except (ValueError, OSError, zipfile.BadZipFile, EOFError, SyntaxError, TypeError, tokenize.TokenError) as exc:
+        raise RigInputError(f"{path}: the array '{key}' is damaged ({shown(exc, 80)}).") from None
+    if len(data) != nbytes:
+        raise RigInputError(f"{path}: the array '{key}' is truncated.")
+    a = np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")
+    if a.dtype.kind == "f" and not np.isfinite(a).all():
+        raise RigInputError(f"{path}: the array '{key}' holds NaN or infinite values.")
+    return np.array(a)   # writable, owned
 
 
 def save_project(project: Project, path: str | Path) -> None:
@@ -112,7 +163,7 @@ def save_project(project: Project, path: str | Path) -> None:
 
 def load_project(path: str | Path) -> Project:
     """Read a project; a damaged file raises RigInputError naming the file and the problem."""
-    path = Path(path)
+    path = regular_file(path)
     try:
         z = zipfile.ZipFile(path)
     except FileNotFoundError:
@@ -121,30 +172,30 @@ def load_project(path: str | Path) -> Project:
         raise RigInputError(f"{path}: is not a readable project (damaged zip: {exc}).") from None
     with z:
         try:
-            manifest = json.loads(z.read(MANIFEST).decode("utf-8"))
+            info = z.getinfo(MANIFEST)
+            if info.file_size > MAX_JSON_BYTES:
+                raise RigInputError(f"{path}: the project manifest is {info.file_size / 2**20:.0f} MB; it is damaged.")
+            manifest = parse_json_text(z.read(MANIFEST).decode("utf-8"), f"{path}: the project manifest")
         except KeyError:
             raise RigInputError(f"{path}: the project has no manifest.json; it is damaged.") from None
         except (ValueError, UnicodeDecodeError, zipfile.BadZipFile) as exc:
             raise RigInputError(f"{path}: the project manifest is damaged ({exc}).") from None
-        if manifest.get("format") != FORMAT:
+        if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
             raise RigInputError(f"{path}: is not a Blendshape Studio project.")
-        if int(manifest.get("version", 0)) > VERSION:
+        version = manifest.get("version", 0)
+        if isinstance(version, bool) or not isinstance(version, int):
+            raise RigInputError(f"{path}: the project's format version is not a number.")
+        if version > VERSION:
             raise RigInputError(f"{path}: was saved by a newer Blendshape Studio (format "
                                 f"{manifest.get('version')}); update to open it.")
         declared = manifest.get("arrays", {})
 
         def array(key: str) -> np.ndarray:
-            try:
-                with z.open(f"{key}.npy") as f:
-                    a = np.load(io.BytesIO(f.read()), allow_pickle=False)
-            except KeyError:
-                raise RigInputError(f"{path}: the project is missing the array '{key}'.") from None
-            except (ValueError, OSError, zipfile.BadZipFile, EOFError) as exc:
-                raise RigInputError(f"{path}: the array '{key}' is damaged ({exc}).") from None
-            shape = declared.get(key, [None])[0]
+            a = read_npy_member(z, f"{key}.npy", path, key)
+            shape = declared.get(key, [None])[0] if isinstance(declared, dict) else None
             if shape is not None and list(a.shape) != list(shape):
                 raise RigInputError(f"{path}: the array '{key}' has shape {list(a.shape)}, "
-                                    f"the manifest says {shape}.")
+                                    f"the manifest says {shown(shape, 40)}.")
             return a
 
         try:
@@ -177,9 +228,14 @@ def load_project(path: str | Path) -> Project:
         except RigInputError as exc:
             msg = str(exc)
             raise RigInputError(msg if msg.startswith(str(path)) else f"{path}: {msg}") from None
-        except (KeyError, TypeError) as exc:
-            raise RigInputError(f"{path}: the project manifest is incomplete (missing {exc}).") from None
+        except KeyError as exc:
+            raise RigInputError(f"{path}: the project manifest is incomplete (missing {shown(exc, 40)}).") from None
+        except (TypeError, AttributeError, ValueError) as exc:
+            raise RigInputError(f"{path}: the project manifest holds a value of the wrong type ({shown(exc, 80)}).") from None
     try:
-        return Project(rig=rig, weights=weights, sections=manifest.get("sections", {}), arrays=extras, **regional)
+        sections = manifest.get("sections", {})
+        if not isinstance(sections, dict):
+            raise RigInputError("the project's sections are not an object of name: settings.")
+        return Project(rig=rig, weights=weights, sections=sections, arrays=extras, **regional)
     except RigInputError as exc:
         raise RigInputError(f"{path}: {exc}") from None

@@ -8,7 +8,7 @@ import numpy as np
 
 from .errors import RigInputError
 from .obj_io import read_obj, read_obj_target
-from .rig import Rig
+from .rig import Rig, checked_presets
 
 Progress = Optional[Callable[[int, int, str], None]]  # (done, total, what) -> None
 
@@ -74,14 +74,7 @@ def read_presets(path: Path, shape_names: list[str]) -> dict[str, dict[str, floa
     if not path.is_file():
         return {}
     data = read_json_file(path)
-    if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
-        raise RigInputError(f"{path}: presets must be an object of name: {{shape: weight}}.")
-    names = set(shape_names)
-    for preset, weights in data.items():
-        unknown = sorted(set(weights) - names)
-        if unknown:
-            raise RigInputError(f"{path}: preset '{preset}' names shapes the rig does not have: {', '.join(unknown)}.")
-    return {p: {k: float(v) for k, v in w.items()} for p, w in data.items()}
+    return checked_presets(data, shape_names, str(path))
 
 
 def load_rig(path: str | Path, neutral: str | None = None, units: str | None = None,

@@ -11,9 +11,58 @@ import numpy as np
 
 from solvers.mesh import fan_triangulate
 
-from .errors import RigInputError
+from .errors import RigInputError, shown
 
 UNITS = ("cm", "mm", "m")
+MAX_COORDINATE = 1e9   # in any unit: no face is a thousand kilometres across; beyond it a file is damaged
+MAX_WEIGHT = 1e3       # presets and poses: overdrive and negative weights exist, a weight of 10⁴ does not
+
+
+def _float_array(a, where: str, what: str) -> np.ndarray:
+    a = np.asarray(a)
+    if a.dtype.kind not in "fiub":
+        raise RigInputError(f"{where}: {what} are not numbers (stored as {a.dtype}).")
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def _index_array(a, where: str, what: str) -> np.ndarray:
+    """int32 indices, refusing values that int32 cannot hold (a cast would wrap them silently)."""
+    a = np.asarray(a)
+    if a.dtype.kind not in "iu":
+        if a.dtype.kind == "f" and a.size and np.isfinite(a).all() and (a == np.round(a)).all():
+            pass   # whole numbers stored as floats
+        elif a.size:
+            raise RigInputError(f"{where}: {what} are not whole numbers (stored as {a.dtype}).")
+    if a.size and (a.min() < -2**31 or a.max() >= 2**31):
+        raise RigInputError(f"{where}: {what} hold numbers beyond 2³¹; the file is damaged.")
+    return np.ascontiguousarray(a, dtype=np.int32)
+
+
+def checked_presets(presets, shape_names, where: str) -> dict[str, dict[str, float]]:
+    """Named weight sets {preset: {shape: weight}} with known shapes and finite weights within ±MAX_WEIGHT."""
+    if not isinstance(presets, dict):
+        raise RigInputError(f"{where}: presets must be an object of name: {{shape: weight}}.")
+    names = set(shape_names)
+    out: dict[str, dict[str, float]] = {}
+    for preset, weights in presets.items():
+        if not isinstance(weights, dict):
+            raise RigInputError(f"{where}: preset '{shown(preset, 40)}' must be an object of shape: weight.")
+        unknown = sorted(set(weights) - names)
+        if unknown:
+            raise RigInputError(f"{where}: preset '{shown(preset, 40)}' names shapes the rig does not have: "
+                                f"{shown(', '.join(unknown), 120)}.")
+        clean = {}
+        for k, v in weights.items():
+            if isinstance(v, bool) or not isinstance(v, (int, float, np.floating, np.integer)):
+                raise RigInputError(f"{where}: preset '{shown(preset, 40)}' gives {shown(k, 40)} a weight that "
+                                    f"is not a number ({shown(v, 20)}).")
+            f = float(v)
+            if not np.isfinite(f) or abs(f) > MAX_WEIGHT:
+                raise RigInputError(f"{where}: preset '{shown(preset, 40)}' gives {shown(k, 40)} the weight "
+                                    f"{shown(v, 20)}, outside ±{MAX_WEIGHT:g}.")
+            clean[str(k)] = f
+        out[str(preset)] = clean
+    return out
 UNIT_IN_METRES = {"mm": 0.001, "cm": 0.01, "m": 1.0}
 
 
@@ -51,10 +100,16 @@ class Rig:
     presets: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        self.neutral = np.ascontiguousarray(self.neutral, dtype=np.float64)
-        self.face_counts = np.ascontiguousarray(self.face_counts, dtype=np.int32)
-        self.face_indices = np.ascontiguousarray(self.face_indices, dtype=np.int32)
-        self.deltas = np.ascontiguousarray(self.deltas, dtype=np.float64).reshape(-1, self.n_vertices, 3)
+        where = self.source or self.name
+        self.neutral = _float_array(self.neutral, where, "the neutral")
+        self.face_counts = _index_array(self.face_counts, where, "the face sizes")
+        self.face_indices = _index_array(self.face_indices, where, "the face vertex indices")
+        if self.neutral.ndim != 2 or self.neutral.shape[1] != 3:
+            raise RigInputError(f"{where}: the neutral must be an array of 3D points.")
+        deltas = _float_array(self.deltas, where, "the shapes")
+        if deltas.size != len(self.shape_names) * self.neutral.size:
+            raise RigInputError(f"{where}: {len(self.shape_names)} shape names but deltas of shape {deltas.shape}.")
+        self.deltas = deltas.reshape(-1, self.n_vertices, 3)
         self.shape_names = list(self.shape_names)
         self.validate()
 
@@ -78,20 +133,32 @@ class Rig:
             raise RigInputError(f"{where}: the neutral must be an array of 3D points.")
         if not np.isfinite(self.neutral).all():
             raise RigInputError(f"{where}: the neutral has NaN or infinite coordinates.")
+        if self.neutral.size and np.abs(self.neutral).max() > MAX_COORDINATE:
+            raise RigInputError(f"{where}: the neutral has coordinates beyond ±{MAX_COORDINATE:g}; "
+                                "the file is damaged or not in any length unit.")
         if self.deltas.shape != (len(self.shape_names), self.n_vertices, 3):
             raise RigInputError(
                 f"{where}: {len(self.shape_names)} shape names but deltas of shape {self.deltas.shape}.")
         if not np.isfinite(self.deltas).all():
             raise RigInputError(f"{where}: a shape has NaN or infinite coordinates.")
-        if int(self.face_counts.sum()) != self.face_indices.size:
+        if self.deltas.size and np.abs(self.deltas).max() > MAX_COORDINATE:
+            raise RigInputError(f"{where}: a shape moves a vertex by more than {MAX_COORDINATE:g}; the file is damaged.")
+        if self.face_counts.size == 0:
+            raise RigInputError(f"{where}: the rig has no faces.")
+        if self.face_counts.min() < 3:
+            raise RigInputError(f"{where}: a face has {int(self.face_counts.min())} corners; every face needs 3 or more.")
+        if int(self.face_counts.sum(dtype=np.int64)) != self.face_indices.size:
             raise RigInputError(f"{where}: the face list is inconsistent (counts do not match indices).")
         if self.face_indices.size and (self.face_indices.min() < 0 or self.face_indices.max() >= self.n_vertices):
             raise RigInputError(f"{where}: a face refers to a vertex that does not exist.")
-        dup = {n for n in self.shape_names if self.shape_names.count(n) > 1}
+        if not all(isinstance(n, str) and n for n in self.shape_names):
+            raise RigInputError(f"{where}: every shape needs a name (a non-empty text).")
+        dup = sorted({n for n in self.shape_names if self.shape_names.count(n) > 1})
         if dup:
-            raise RigInputError(f"{where}: duplicate shape names: {', '.join(sorted(dup))}.")
-        if self.units not in UNITS:
-            raise RigInputError(f"{where}: unknown units '{self.units}'.")
+            raise RigInputError(f"{where}: duplicate shape names: {shown(', '.join(dup), 200)}.")
+        if not isinstance(self.units, str) or self.units not in UNITS:
+            raise RigInputError(f"{where}: unknown units '{shown(self.units, 20)}'.")
+        self.presets = checked_presets(self.presets, self.shape_names, where)
 
     # --- names and weights -----------------------------------------------------------------------
     def shape_index(self, name: str) -> int:

@@ -5,3 +5,9 @@
 
 class RigInputError(ValueError):
     """Bad input: the message is one sentence a user can act on (file and problem)."""
+
+
+def shown(value, limit: int = 60) -> str:
+    """``value`` as it goes into a one-sentence message: a hostile file can hold a name a megabyte long."""
+    text = str(value)
+    return text if len(text) <= limit else text[: limit - 1] + "…"

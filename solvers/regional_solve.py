@@ -8,7 +8,7 @@ holding markers the bounded least-squares problem of ``solvers.weight_solve`` (J
 other shapes keep their weights, and their contribution at the markers is subtracted from the targets.
 Regions without markers keep their weights; the background row (last) keeps the global weights.
 The result is a (R+1, K) regional pose, evaluated as ``x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v)``
-(``model.pose.PoseEvaluator.evaluate_regional(W, blend)``).
+(``model.pose.PoseEvaluator.evaluate_regional(W, blend)`` evaluates it).
 
 Everything is set up once per (markers, level) in ``RegionalSolver`` (per-region ``AᵀA`` factors), so one
 drag step costs a few small QPs: for ~8 regions and a handful of markers, well under a millisecond each.
@@ -189,11 +189,3 @@ class RegionalSolver:
             out[self.R] = step(self._background, self.A, J[self.R], b - offset[self.R], allk, self.R)
         return out
 
-
-def solve_regions(regions: list[np.ndarray], sampling: sp.spmatrix, marker_rows: np.ndarray, b: np.ndarray,
-                  weights: np.ndarray, *, deltas: np.ndarray | None = None, region_max: np.ndarray | None = None,
-                  **options) -> np.ndarray:
-    """One-off per-region solve (Joshi et al. 2003, §4, Eq. 2): builds a ``RegionalSolver`` and solves once.
-    Returns the new (R+1, K) regional weights. Use the class during a drag (it caches the set-up)."""
-    return RegionalSolver(regions, sampling, marker_rows, deltas=deltas, region_max=region_max,
-                          **options).solve(b, weights)

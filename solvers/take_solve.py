@@ -215,13 +215,16 @@ class TakeSolution:
     def frames_per_second(self) -> float:
         return self.n_frames / self.solve_seconds if self.solve_seconds > 0 else float("inf")
 
-    def dense(self, frame: int) -> np.ndarray:
-        """(V, 3) float64 surface of ``frame``, head-stabilised in rig space and rig units."""
+    def projection(self, frame: int) -> np.ndarray:
+        """(V, 3) float64 blendshape surface of ``frame`` (no residual), head-stabilised in rig space."""
+        W = self.region_weights if self.region_weights is not None else self.weights
+        return self.solver.pose(W[frame])
+
+    def dense(self, frame: int, projection: np.ndarray | None = None) -> np.ndarray:
+        """(V, 3) float64 surface of ``frame``, head-stabilised in rig space and rig units: the projection (given,
+        or evaluated) plus the RBF residual."""
         s = self.solver
-        if self.region_weights is not None:
-            x = s.pose_regional(self.region_weights[frame])
-        else:
-            x = s.pose(self.weights[frame])
+        x = self.projection(frame) if projection is None else np.array(projection, dtype=np.float64)
         if self.coefficients is not None and s.rbf is not None:
             x[s.residual_vertices] += s.rbf.evaluate(self.coefficients[frame])
         return x
@@ -249,6 +252,10 @@ class TakeSolver:
     drivers the indices of the shapes that drive them (``model.correctives.solver_correctives``). The model is
     then x(w) = b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c, solved by Gauss–Newton steps on the weights (``_weights``;
     one per Kabsch alternation), and every pose, fit and dense frame includes the correctives.
+
+    surface: the rig's pose evaluation as a callable, weights (K,) or region weights (R+1, K) -> a new (V, 3)
+    float64 surface with the same correctives (``model.pose.PoseEvaluator.pose`` with the level's blend); the
+    dense frames and projections use it. Without it the solver fits the markers only.
     """
 
     def __init__(self, neutral: np.ndarray, deltas: np.ndarray, binding, *, mode: str = "box",
@@ -264,7 +271,8 @@ class TakeSolver:
                  head_motion: bool = True,
                  rigid_weighting: float = DEFAULTS["rigid_weighting"],
                  rigid_noise: float = DEFAULTS["rigid_noise"],
-                 lam_region: float = DEFAULTS["lam_region"], correctives=None) -> None:
+                 lam_region: float = DEFAULTS["lam_region"], correctives=None,
+                 surface: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         if residual not in KERNELS:
             raise ValueError(f"Unknown residual '{residual}': use one of {', '.join(KERNELS)}.")
         self.neutral = np.asarray(neutral, dtype=np.float64)
@@ -302,11 +310,8 @@ class TakeSolver:
         self.C = E.shape[0]
         self.Em = np.stack([self.binding @ E[c] for c in range(self.C)]).reshape(self.C, 3 * M) if self.C else \
             np.zeros((0, 3 * M))
-        # Dense pose: deltas as (K, 3V) over the vertices any shape (or corrective) moves.
-        self._moving = np.flatnonzero(np.maximum(np.abs(self.deltas).max(axis=(0, 2)),
-                                                 np.abs(E).max(axis=(0, 2), initial=0.0)) > 0)
-        self._Dv = np.ascontiguousarray(self.deltas[:, self._moving].reshape(K, -1))
-        self._Ev = np.ascontiguousarray(E[:, self._moving].reshape(self.C, 3 * self._moving.size))
+        # Dense pose: the rig's one pose evaluation, handed in (model.pose.PoseEvaluator.pose with the blend).
+        self.surface = surface
         # Regions.
         self.lam_region = float(lam_region)
         self.regions = None
@@ -378,24 +383,11 @@ class TakeSolver:
                 + self._corrective_per_marker(per_marker))
 
     def pose(self, w: np.ndarray) -> np.ndarray:
-        """(V, 3) surface for global weights (ALGORITHMS.md §1), correctives included."""
-        x = self.neutral.copy()
-        d = np.asarray(w) @ self._Dv
-        if self._activate is not None:
-            d += self._activate(np.asarray(w, dtype=np.float64)[None])[0] @ self._Ev
-        x[self._moving] += d.reshape(-1, 3)
-        return x
-
-    def pose_regional(self, W: np.ndarray) -> np.ndarray:
-        """(V, 3) surface for region weights: x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v) (Joshi §4), with each
-        vertex's correctives activated by its blended weights (as ``model.pose`` evaluates a regional pose)."""
-        per_vertex = np.asarray(self.blend[self._moving] @ W)  # (U, K)
-        x = self.neutral.copy()
-        D = self._Dv.reshape(self.K, -1, 3)
-        x[self._moving] += np.einsum("uk,kuc->uc", per_vertex, D)
-        if self._activate is not None:
-            x[self._moving] += np.einsum("uc,cux->ux", self._activate(per_vertex), self._Ev.reshape(self.C, -1, 3))
-        return x
+        """(V, 3) float64 surface for global weights (K,) or region weights (R+1, K) (ALGORITHMS.md §1, Joshi §4),
+        correctives included: the ``surface`` callable the solver was given."""
+        if self.surface is None:
+            raise ValueError("This take solver was built without a surface evaluator: it solves the markers only.")
+        return np.array(self.surface(np.asarray(w, dtype=np.float64)), dtype=np.float64)
 
     # --- calibration (Ma §3.1; Umeyama 1991) -----------------------------------------------------
     def calibrate(self, markers: np.ndarray, frames: int) -> np.ndarray:
@@ -621,23 +613,3 @@ class TakeSolver:
                                           w_start=w[shapes] if prev is None else prev[r, shapes])
         return out
 
-
-def solve_take(rig, take, marker_map, *, progress: Progress = None, cancel=None,
-               calibration_frames: int = DEFAULTS["calibration_frames"], **options) -> TakeSolution:
-    """Convenience: solve a ``model.takes.MarkerTake`` onto a ``model.rig.Rig`` with a ``MarkerMap``.
-
-    Uses the take's and rig's units (the map's ``take_units`` if the take has none); markers of the map
-    missing from the take are dropped. ``options`` go to ``TakeSolver``. The solution's marker columns
-    follow ``marker_map.match(take)``.
-    """
-    from model.rig import unit_scale
-    labels, cols = marker_map.match(take)
-    binding = marker_map.binding(rig, labels)
-    from model.correctives import solver_correctives
-    solver = TakeSolver(rig.neutral, rig.deltas, binding, correctives=solver_correctives(rig), **options)
-    factor = unit_scale(take.units, rig.units)
-    sol = solver.solve(take.positions[:, cols], unit_factor=factor, calibration_frames=calibration_frames,
-                       calibrate=calibration_frames > 0,
-                       progress=progress, cancel=cancel)
-    sol.labels = labels
-    return sol

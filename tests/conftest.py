@@ -5,9 +5,16 @@ Tests that need the real data skip with a reason when it is absent, and fail whe
 from __future__ import annotations
 
 import os
+import tempfile
 from pathlib import Path
 
 import pytest
+
+# Autosaves and crash logs of the windows and commands the tests start go to a private folder, never into the
+# user's home (model.recovery, app.crash).
+_PRIVATE = tempfile.mkdtemp(prefix="bs-tests-")
+os.environ.setdefault("XDG_DATA_HOME", os.path.join(_PRIVATE, "data"))
+os.environ.setdefault("BLENDSHAPE_STUDIO_LOGS", os.path.join(_PRIVATE, "crashes"))
 
 from app.runtime import limit_blas_threads
 

@@ -25,7 +25,7 @@ def make_window(qtbot, tmp_path, size=(1200, 800)):
 def open_and_wait(qtbot, window, path, timeout=60000):
     """Open a rig or project through the window's background loader and wait until it is done."""
     window.open_path(path)
-    qtbot.waitUntil(lambda: window._worker is None, timeout=timeout)
+    qtbot.waitUntil(lambda: not window.is_loading, timeout=timeout)
     QtWidgets.QApplication.processEvents()
 
 

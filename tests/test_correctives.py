@@ -1,16 +1,16 @@
 """Corrective shapes (ALGORITHMS.md §6, Smith 2006): authoring, activation rules, scans, interference."""
 from __future__ import annotations
 
+from dataclasses import replace
 from math import comb
 
 import numpy as np
 import pytest
 
-from model.correctives import (RULES, Corrective, activation_for, add_corrective, authoring_surface,
-                               corrective_activations, corrective_activations_per_vertex,
-                               driver_pose, rule_activation,
-                               set_correctives,
+from model.correctives import (RULES, Corrective, activation_for, add_corrective, corrective_activations,
+                               corrective_activations_per_vertex, rule_activation, set_correctives,
                                validate_correctives)
+from model.corrective_authoring import authoring_surface, driver_pose
 from model.errors import RigInputError
 from model.pose import PoseEvaluator
 from model.sides import is_left, mirror_indices, mirror_name
@@ -124,18 +124,23 @@ def test_intermediate_weights_follow_the_rule(brow_rigs, rule):
         assert np.abs(ev.evaluate(w) - x).max() < 1e-9
 
 
-def test_authoring_surface_agrees_with_the_pose_evaluator(brow_rigs):
+def test_authoring_surface_applies_every_other_corrective_muted_or_not(brow_rigs):
+    """x_cur leaves out the set's own corrective and keeps every lower-order one, muted ones included (authoring
+    counts them, Smith §5.6); the evaluator the document keeps gives the same surface as one built for the call."""
     rig, _ = brow_rigs["hierarchical"]
+    rig = replace(rig, correctives=[replace(c, muted=(i == 0)) for i, c in enumerate(rig.correctives)])
+    assert rig.correctives[0].muted
     ev = PoseEvaluator(rig, dtype=np.float64)
     for drivers in (BROWS[:2], BROWS[:3], BROWS):
-        direct, w = authoring_surface(rig, drivers, 0.8)
-        via_evaluator, w2 = authoring_surface(rig, drivers, 0.8, evaluator=ev)
-        assert np.array_equal(w, w2)
-        assert np.abs(direct - via_evaluator).max() < 1e-9
-        # the set's own corrective is left out, every lower-order one is in
+        built, w = authoring_surface(rig, drivers, 0.8)
+        kept, w2 = authoring_surface(rig, drivers, 0.8, evaluator=ev)
+        assert np.array_equal(w, w2) and np.array_equal(built, kept)
+        a = ev.activations(w)
+        by_hand = rig.neutral + np.einsum("k,kvc->vc", w, rig.deltas) + sum(
+            ac * c.delta for ac, c in zip(a, rig.correctives) if set(c.drivers) != set(drivers))
+        assert np.abs(built - by_hand).max() < 1e-9
         own = next(c for c in rig.correctives if set(c.drivers) == set(drivers))
-        a_own = ev.activations(w)[rig.correctives.index(own)]
-        assert np.abs(ev.evaluate(w) - a_own * own.delta - direct).max() < 1e-9
+        assert a[rig.correctives.index(own)] > 0.1 and np.abs(own.delta).max() > 1e-3   # leaving it out matters
 
 
 def test_hierarchical_is_the_product_of_the_two_lower_order_activations(ict_rig):
@@ -196,7 +201,6 @@ def test_project_round_trip_keeps_correctives_and_mute(brow_rigs, tmp_path):
     corrective adds nothing to the pose; a manifest written before muting existed opens unmuted."""
     import json
     import zipfile
-    from dataclasses import replace
     from model.project import Project, load_project, save_project
     rig, _ = brow_rigs["smooth-min"]
     rig = rig.copy()
@@ -512,7 +516,6 @@ def test_heat_map_of_a_pair(ict_rig):
 # --- the bundled sample rig -----------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def sample():
-    pytest.importorskip("resources.sample_rig", reason="resources/sample_rig.py is not written yet")
     from resources.sample_rig import build_sample_rig
     return build_sample_rig()
 

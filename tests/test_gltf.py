@@ -54,7 +54,6 @@ def test_ict_round_trip_as_glb_keeps_vertex_order(tmp_path, ict_rig):
 
 
 def test_sample_rig_round_trip(tmp_path):
-    pytest.importorskip("resources.sample_rig", reason="resources/sample_rig.py is not written yet")
     from resources.sample_rig import build_sample_rig
     rig = build_sample_rig()
     for suffix in (".gltf", ".glb"):

@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 from PySide6 import QtCore, QtWidgets
 
-from app.corrective_controller import install
 from model.obj_io import write_obj
 from model.pose import PoseEvaluator
 from tests.gui_helpers import make_window, mouse
@@ -17,27 +16,22 @@ PAIR = ["browInnerUp_L", "browInnerUp_R"]
 @pytest.fixture
 def win(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path)
-    ctrl = install(w)
-    w.correctives_dock.show()
-    w.correctives_dock.raise_()
+    ctrl = w.correctives
+    ctrl.dock.show()
+    ctrl.dock.raise_()
     QtCore.QCoreApplication.processEvents()
     return w, ctrl
 
 
 def _settle(qtbot, w):
-    qtbot.waitUntil(lambda: not w._redraw_pending)
+    qtbot.waitUntil(lambda: not w.redraw_pending)
     QtCore.QCoreApplication.processEvents()
 
 
 def _display_xy(w, point):
     """Qt widget coordinates of a world point on the viewport (VTK display y is flipped, device pixels)."""
-    r = w.viewport.plotter.renderer
-    r.SetWorldPoint(*map(float, point), 1.0)
-    r.WorldToDisplay()
-    xd, yd, _ = r.GetDisplayPoint()
-    widget = w.viewport.plotter.interactor
-    ratio = widget.devicePixelRatioF()
-    return QtCore.QPointF(xd / ratio, widget.height() - 1 - yd / ratio), (xd, yd)
+    xd, yd, _ = w.viewport.world_to_display(point)[0]
+    return w.viewport.display_to_qt(xd, yd), (xd, yd)
 
 
 def _forehead_vertex(rig, surface):
@@ -77,20 +71,20 @@ def test_real_sculpt_stroke_saved_as_corrective_and_undone(qtbot, win):
     v = _forehead_vertex(rig, before)
     start, (xd, yd) = _display_xy(w, before[v])
     hit = w.viewport.pick(int(round(xd)), int(round(yd)))
-    assert hit is not None and np.linalg.norm(rig.neutral[hit[0]] - rig.neutral[v]) < 1.0
-    widget = w.viewport.plotter.interactor
-    camera_before = np.array(w.viewport.plotter.camera.position)
+    assert hit is not None and np.linalg.norm(rig.neutral[hit.vertex] - rig.neutral[v]) < 1.0
+    widget = w.viewport.canvas
+    camera_before = w.viewport.camera_frame().position
     mouse(widget, "press", start)
     for dy in (8, 16, 24, 32, 40):
         mouse(widget, "move", start + QtCore.QPointF(0, -dy))
     mouse(widget, "release", start + QtCore.QPointF(0, -40))
     _settle(qtbot, w)
-    np.testing.assert_array_equal(np.array(w.viewport.plotter.camera.position), camera_before)  # no rotation
+    np.testing.assert_array_equal(w.viewport.camera_frame().position, camera_before)  # no rotation
     assert doc.undo_stack.count() == steps + 1          # one stroke, one undo step
     moved = np.linalg.norm(doc.edit_offset, axis=1)
-    assert moved[hit[0]] > 0.2 and moved.max() < 10.0   # the brow was pulled up by the drag
-    assert doc.edit_offset[hit[0], 1] > 0.2             # upwards on screen is +y from the front camera
-    centre = np.asarray(hit[1])
+    assert moved[hit.vertex] > 0.2 and moved.max() < 10.0   # the brow was pulled up by the drag
+    assert doc.edit_offset[hit.vertex, 1] > 0.2             # upwards on screen is +y from the front camera
+    centre = np.asarray(hit.position)
     far = (np.linalg.norm(before - centre, axis=1) > 2.4) & \
         (np.linalg.norm(before * [-1, 1, 1] - centre, axis=1) > 2.4)   # outside the brush and its mirror
     assert far.sum() > rig.n_vertices // 2 and np.all(moved[far] == 0)
@@ -131,7 +125,7 @@ def test_smooth_and_inflate_strokes_are_one_step_each(qtbot, win):
     _settle(qtbot, w)
     v = _forehead_vertex(doc.rig, doc.surface())
     start, _ = _display_xy(w, doc.surface()[v])
-    widget = w.viewport.plotter.interactor
+    widget = w.viewport.canvas
     n0 = doc.undo_stack.count()
     ctrl.set_brush("inflate")
     mouse(widget, "press", start)
@@ -153,7 +147,7 @@ def test_smooth_and_inflate_strokes_are_one_step_each(qtbot, win):
     mouse(widget, "release", corner + QtCore.QPointF(30, 30))
     assert doc.undo_stack.count() == n0 + 2 and doc.undo_stack.index() == n0 + 1   # no new step
     ctrl.stop_sculpting()
-    assert not ctrl.sculpt._tags  # the observers are gone outside sculpt mode
+    assert not w.viewport.has_tool(ctrl.sculpt)  # the brushes leave the viewport outside sculpt mode
 
 
 def test_corrective_from_scan_reproduces_the_scan(qtbot, win, tmp_path):
@@ -263,6 +257,25 @@ def test_panel_lists_correctives_with_live_activation_and_undoable_edits(qtbot, 
     assert ctrl.panel.activation_texts()[ctrl.panel.names().index(c.name)] == "0.400"
 
 
+def _assert_heat_picture(w, heat_img, heat):
+    """The picture shows the heat where it is: the pixels at the hottest front-facing vertices changed from the
+    shaded view (shown again after it) and are coloured far from those where the pair does not interfere."""
+    from tests.image_compare import LEVELS, pixel_difference
+    shaded_img = w.viewport.grab_image()
+    mesh = w.viewport.mesh.compute_normals(point_normals=True, cell_normals=False, auto_orient_normals=False)
+    front = np.asarray(mesh.point_data["Normals"])[:, 2] > 0.7
+    d = w.viewport.world_to_display(np.asarray(w.viewport.mesh.points))
+    h, wd = heat_img.shape[:2]
+    col, row = np.round(d[:, 0]).astype(int), np.round(h - 1 - d[:, 1]).astype(int)
+    inside = front & (col >= 0) & (col < wd) & (row >= 0) & (row < h)
+    hot, cold = inside & (heat >= 0.5 * heat.max()), inside & (heat == 0)
+    changed = pixel_difference(heat_img, shaded_img) > LEVELS
+    assert hot.sum() >= 20 and cold.sum() >= 500                     # measured: 48 and 1,756 vertices
+    assert changed[row[hot], col[hot]].mean() > 0.9                  # coloured where the pair interferes (98 %)
+    hot_colour, cold_colour = (np.median(heat_img[row[m], col[m]].astype(float), axis=0) for m in (hot, cold))
+    assert np.abs(hot_colour - cold_colour).max() > 80               # dark red against pale yellow
+
+
 def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     w, ctrl = win
     rig = w.document.rig
@@ -319,10 +332,10 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     with qtbot.waitSignal(w.segmentation.segmentation_ready, timeout=30000):
         w.segmentation.recompute(w.segmentation.settings())   # a finished segmentation repaints the face...
     assert w.viewport.colormap is heat                       # ...but the heat map stays on top
-    img = tmp_path / "interference.png"
-    w.grab().save(str(img))
+    heat_img = w.viewport.grab_image()
     ctrl.panel.tabs.setCurrentIndex(0)                     # leaving restores the previous (shaded) view
     assert w.viewport.colormap is None
+    _assert_heat_picture(w, heat_img, heat.scalars)
     ctrl.panel.tabs.setCurrentIndex(1)
     ctrl.panel.select_pair(0)
     assert w.viewport.colormap is not None

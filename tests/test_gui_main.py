@@ -39,7 +39,7 @@ def test_slider_drag_moves_mesh_and_undo_restores(qtbot, tmp_path):
     w.shapes_dock.raise_()
     before = w.viewport.points().copy()
     _drag_slider(row.slider, 0.8)
-    qtbot.waitUntil(lambda: not w._redraw_pending)
+    qtbot.waitUntil(lambda: not w.redraw_pending)
     weight = w.document.weights[k]
     assert 0.5 < weight <= 1.0
     moved = np.linalg.norm(w.viewport.points() - before, axis=1)
@@ -47,7 +47,7 @@ def test_slider_drag_moves_mesh_and_undo_restores(qtbot, tmp_path):
     assert moved[jaw > 0.5 * jaw.max()].min() > 0.25 * weight * jaw.max()  # the jaw moved, by its weight
     assert w.document.undo_stack.count() == 1  # one drag is one undo step
     w.undo_action.trigger()
-    qtbot.waitUntil(lambda: not w._redraw_pending)
+    qtbot.waitUntil(lambda: not w.redraw_pending)
     assert w.document.weights[k] == 0
     np.testing.assert_array_equal(w.viewport.points(), before)
     assert row.slider.value() == 0
@@ -89,7 +89,7 @@ def test_save_and_reopen_project(qtbot, tmp_path):
 def test_lengths_show_the_rigs_units(qtbot, tmp_path):
     """Brush radius, nudge step and RBF kernel length are in rig units: each box says which."""
     w = make_window(qtbot, tmp_path)
-    boxes = [w.correctives_panel.radius, w.segmentation_panel.nudge_amount, w.mocap_panel.rbf_scale]
+    boxes = [w.correctives.panel.radius, w.segmentation_panel.nudge_amount, w.mocap.panel.rbf_scale]
     assert w.document.rig.units == "cm" and [b.suffix() for b in boxes] == [" cm"] * 3
     rig = w.document.rig.copy()
     rig.units = "mm"
@@ -97,7 +97,7 @@ def test_lengths_show_the_rigs_units(qtbot, tmp_path):
     save_project(Project(rig=rig), tmp_path / "mm.bsproj")
     open_and_wait(qtbot, w, tmp_path / "mm.bsproj")
     assert w.document.rig.units == "mm" and [b.suffix() for b in boxes] == [" mm"] * 3
-    assert "mm" in w.correctives_panel.radius.text()
+    assert "mm" in w.correctives.panel.radius.text()
 
 
 def test_bad_folder_keeps_the_open_rig(qtbot, tmp_path):
@@ -109,7 +109,7 @@ def test_bad_folder_keeps_the_open_rig(qtbot, tmp_path):
     (bad / "raise.obj").write_text("v 0 0 nan\n")
     with qtbot.waitSignal(w.load_failed, timeout=30000) as blocker:
         w.open_path(bad)
-    qtbot.waitUntil(lambda: w._worker is None)
+    qtbot.waitUntil(lambda: not w.is_loading)
     assert "raise.obj" in blocker.args[0] and "raise.obj" in w.last_error
     assert w.document.rig is rig
     np.testing.assert_array_equal(w.document.weights, pose)
@@ -194,9 +194,9 @@ def test_save_viewport_image(qtbot, tmp_path, monkeypatch):
     w = make_window(qtbot, tmp_path)
     assert w.save_image(tmp_path / "shot")               # the .png suffix is added
     img = np.asarray(Image.open(tmp_path / "shot.png").convert("RGB"))
-    ratio = w.viewport.plotter.interactor.devicePixelRatioF()
-    assert img.shape[:2] == (round(w.viewport.plotter.interactor.height() * ratio),
-                             round(w.viewport.plotter.interactor.width() * ratio))
+    ratio = w.viewport.canvas.devicePixelRatioF()
+    assert img.shape[:2] == (round(w.viewport.canvas.height() * ratio),
+                             round(w.viewport.canvas.width() * ratio))
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 100   # a shaded face, not a blank frame
     # through File > Save Viewport Image and File > Export Pose: the dialog's answer is written
     answers = iter([(str(tmp_path / "menu.png"), ""), (str(tmp_path / "menu.obj"), "")])
@@ -249,7 +249,7 @@ def test_mirror_shape_replaces_or_adds_the_other_side(qtbot, tmp_path):
 
 def test_tool_options_come_back_in_the_next_session(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path)
-    cp, mp = w.correctives_panel, w.mocap_panel
+    cp, mp = w.correctives.panel, w.mocap.panel
     cp.brush.setCurrentIndex(cp.brush.findData("smooth"))
     cp.falloff.setCurrentIndex(cp.falloff.count() - 1)
     cp.strength.setValue(0.4)
@@ -260,7 +260,7 @@ def test_tool_options_come_back_in_the_next_session(qtbot, tmp_path):
     falloff = cp.falloff.currentData()
     w.close()
     w2 = make_window(qtbot, tmp_path)       # the same settings folder: the next session
-    cp, mp = w2.correctives_panel, w2.mocap_panel
+    cp, mp = w2.correctives.panel, w2.mocap.panel
     assert (cp.brush.currentData(), cp.falloff.currentData(), cp.strength.value(), cp.top.value()) == \
         ("smooth", falloff, 0.4, 35)
     assert (mp.mode_combo.currentText(), mp.residual_combo.currentText(), mp.calibration_spin.value()) == \
@@ -270,4 +270,4 @@ def test_tool_options_come_back_in_the_next_session(qtbot, tmp_path):
     settings().setValue("sculpt/brush", "chisel")          # an item that no longer exists, a broken number
     settings().setValue("sculpt/strength", "strong")
     w3 = make_window(qtbot, tmp_path)
-    assert w3.correctives_panel.brush.currentData() == "grab" and w3.correctives_panel.strength.value() == 1.0
+    assert w3.correctives.panel.brush.currentData() == "grab" and w3.correctives.panel.strength.value() == 1.0

@@ -22,12 +22,8 @@ def nose_tip(sample_rig, geometry):
     return int(mid[np.argmax(p[mid, 2])])
 
 
-def _window(qtbot, tmp_path, keyframes=False):
-    from app import keyframe_controller, marker_controller
+def _window(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path)
-    marker_controller.install(w)
-    if keyframes:
-        keyframe_controller.install(w)
     qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
     return w
 
@@ -47,10 +43,26 @@ def _screen(w, points):
     return [w.viewport.display_to_qt(x, y) for x, y, _ in d]
 
 
+def _assert_picture_changed_at_the_corner(w, before, P0, corner, nose):
+    """The viewport's picture during the drag differs from the one before it at the mouth, around the dragged
+    corner, and not at the pinned nose tip: the pixels a user sees change are where the edit is."""
+    from tests.image_compare import LEVELS, pixel_difference
+    changed = pixel_difference(w.viewport.grab_image(), before) > LEVELS
+    rows, cols = np.nonzero(changed)
+    d = w.viewport.world_to_display(P0)
+    x, row = d[:, 0], changed.shape[0] - 1 - d[:, 1]             # image column and row of each marker
+    reach = np.hypot(x[nose] - x[corner], row[nose] - row[corner])
+    assert changed.sum() > 500                                  # measured: 1,800 pixels
+    assert (np.hypot(cols - x[corner], rows - row[corner]) < reach).mean() > 0.7   # around the corner (81 %)
+    assert (rows > row[nose]).all()                             # at the mouth, nothing above the nose tip
+    r, c = int(round(row[nose])), int(round(x[nose]))
+    assert not changed[r - 3:r + 4, c - 3:c + 4].any()          # the pinned nose tip stays where it was
+
+
 def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, tmp_path, geometry, nose_tip):
     w = _window(qtbot, tmp_path)
     c = _pins(w, geometry, nose_tip)
-    w.marker_mode_action.trigger()
+    w.markers.mode_action.trigger()
     assert c.mode and "Marker mode" in w.statusBar().currentMessage()
     lvl = w.segmentation.segmentation.levels[c.level]
     assert 1 < lvl.n_regions < w.segmentation.segmentation.levels[0].n_regions  # a middle level by default
@@ -59,7 +71,7 @@ def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, 
     before_pts = w.viewport.points().copy()
     P0 = c.marker_positions()
     corner = 0
-    widget = w.viewport.plotter.interactor
+    widget = w.viewport.canvas
     q = _screen(w, P0[corner:corner + 1])[0]
     start = QtCore.QPoint(round(q.x()), round(q.y()))
     # Outward (screen left is the character's right) and up, by about 1.5 cm and 1 cm on the face, whatever
@@ -67,18 +79,19 @@ def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, 
     q_cm = _screen(w, P0[corner:corner + 1] + np.array([[1.0, 0.0, 0.0]]))[0]
     px_per_cm = np.hypot(q_cm.x() - q.x(), q_cm.y() - q.y())
     drag = QtCore.QPoint(-round(1.5 * px_per_cm), -round(1.0 * px_per_cm))
+    before_img = w.viewport.grab_image()
     mouse(widget, "press", start)
     assert c.drag is not None and c.drag.index == corner
-    cam_before = np.array(w.viewport.plotter.camera.position)
+    cam_before = w.viewport.camera_frame().position
     for i in range(1, 7):
         mouse(widget, "move", start + drag * i / 6)
-    qtbot.waitUntil(lambda: not w._redraw_pending)
+    qtbot.waitUntil(lambda: not w.redraw_pending)
     assert doc.is_regional and doc.region_level == c.level
     np.testing.assert_array_equal(w.viewport.points(), doc.surface())  # the face updated during the drag
     targets = c.drag.targets.copy()
-    w.grab().save(str(tmp_path / "drag.png"))
+    _assert_picture_changed_at_the_corner(w, before_img, P0, corner, nose=2)
     mouse(widget, "release", start + drag)
-    np.testing.assert_array_equal(np.array(w.viewport.plotter.camera.position), cam_before)  # camera stayed
+    np.testing.assert_array_equal(w.viewport.camera_frame().position, cam_before)  # camera stayed
     assert doc.undo_stack.count() == 5  # 4 markers + one drag
     P1 = c.marker_positions()
     moved, wanted = P1[corner] - P0[corner], targets[corner] - P0[corner]
@@ -94,20 +107,20 @@ def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, 
     W = doc.region_weights
     assert W.min() >= 0.0 and W.max() <= 1.0
     w.undo_action.trigger()
-    qtbot.waitUntil(lambda: not w._redraw_pending)
+    qtbot.waitUntil(lambda: not w.redraw_pending)
     assert doc.pose_state().equals(before_state) and not doc.is_regional
     np.testing.assert_array_equal(doc.weights, before_state.weights)
     np.testing.assert_array_equal(w.viewport.points(), before_pts)
     w.redo_action.trigger()
     np.testing.assert_array_equal(doc.region_weights, W)
     # the regional pose is the current pose: saved with the project, shown again on reopening
-    qtbot.waitUntil(lambda: not w._redraw_pending)
+    qtbot.waitUntil(lambda: not w.redraw_pending)
     shown = w.viewport.points().copy()
     np.testing.assert_array_equal(shown, doc.surface())
     assert w.save_to(tmp_path / "regional.bsproj")
     w.document.set_weights(np.zeros(doc.rig.n_shapes))  # another pose in between
     open_and_wait(qtbot, w, tmp_path / "regional.bsproj")
-    qtbot.waitUntil(lambda: not w._redraw_pending)
+    qtbot.waitUntil(lambda: not w.redraw_pending)
     assert w.document.is_regional and w.document.region_level == c.level
     np.testing.assert_array_equal(w.document.region_weights, W)
     np.testing.assert_allclose(w.viewport.points(), shown, atol=1e-6)
@@ -171,7 +184,7 @@ def test_bad_marker_input(qtbot, tmp_path, geometry, nose_tip):
     still = int(np.flatnonzero(np.abs(rig.deltas).max(axis=(0, 2)) == 0)[0])
     assert c.add_marker_at(still)
     assert len(c.markers) == count + 1 and "background" in w.statusBar().currentMessage()
-    assert "(background)" in w.markers_panel.list.item(count).text()
+    assert "(background)" in w.markers.panel.list.item(count).text()
     # A target far out of reach: the weights stay within [0, 1].
     c.begin_drag(c.markers.index("M00"))
     W = c.drag_by(np.array([-40.0, 60.0, 25.0]))
@@ -183,9 +196,9 @@ def test_bad_marker_input(qtbot, tmp_path, geometry, nose_tip):
 def test_click_adds_right_click_removes_and_markers_are_saved(qtbot, tmp_path, geometry, nose_tip):
     w = _window(qtbot, tmp_path)
     c = w.markers
-    assert not w.markers_panel.hint.isHidden()     # an empty list says how to place markers
-    w.marker_mode_action.trigger()
-    widget = w.viewport.plotter.interactor
+    assert not w.markers.panel.hint.isHidden()     # an empty list says how to place markers
+    w.markers.mode_action.trigger()
+    widget = w.viewport.canvas
     corner = int(geometry.mouth.upper[0])
     # A click beside the corner, on the cheek: a marker on the surface where the click was.
     target = w.document.surface()[corner] + np.array([-0.8, 0.4, 0.0], dtype=np.float32)
@@ -197,13 +210,13 @@ def test_click_adds_right_click_removes_and_markers_are_saved(qtbot, tmp_path, g
     P = c.marker_positions()[0]
     q1 = _screen(w, P[None])[0]
     assert abs(q1.x() - pos.x()) < 3 and abs(q1.y() - pos.y()) < 3  # it sits under the click
-    assert w.markers_panel.list.count() == 1 and w.markers.overlay.n_markers == 1
-    assert w.markers_panel.hint.isHidden()
-    w.markers_panel.list.setCurrentRow(0)                 # the Delete key in the list removes it (undoable)
+    assert w.markers.panel.list.count() == 1 and w.markers.overlay.n_markers == 1
+    assert w.markers.panel.hint.isHidden()
+    w.markers.panel.list.setCurrentRow(0)                 # the Delete key in the list removes it (undoable)
     w.activateWindow()
-    w.markers_panel.list.setFocus()
-    qtbot.waitUntil(w.markers_panel.list.hasFocus)
-    qtbot.keyClick(w.markers_panel.list, QtCore.Qt.Key_Delete)
+    w.markers.panel.list.setFocus()
+    qtbot.waitUntil(w.markers.panel.list.hasFocus)
+    qtbot.keyClick(w.markers.panel.list, QtCore.Qt.Key_Delete)
     assert len(c.markers) == 0
     w.document.undo_stack.undo()
     assert len(c.markers) == 1
@@ -211,7 +224,7 @@ def test_click_adds_right_click_removes_and_markers_are_saved(qtbot, tmp_path, g
     mouse(widget, "press", pos2, buttons=QtCore.Qt.RightButton, button=QtCore.Qt.RightButton)
     mouse(widget, "release", pos2, buttons=QtCore.Qt.RightButton, button=QtCore.Qt.RightButton)
     assert len(c.markers) == 0
-    assert not w.markers_panel.hint.isHidden()
+    assert not w.markers.panel.hint.isHidden()
     w.document.undo_stack.undo()
     assert len(c.markers) == 1
     _pins(w, geometry, nose_tip)
@@ -234,8 +247,10 @@ def test_shapes_panel_edits_the_selected_region_of_a_regional_pose(qtbot, tmp_pa
     doc = w.document
     assert doc.is_regional and "background row" in w.shapes_panel.target.text()
     seg = w.segmentation
-    w.segmentation_panel.level.setValue(c.level)
-    seg._on_level_change(c.level)
+    slider = w.segmentation_panel.level                 # the user steps the level slider with the arrow keys
+    for _ in range(abs(c.level - slider.value())):
+        qtbot.keyClick(slider, QtCore.Qt.Key_Right if slider.value() < c.level else QtCore.Qt.Key_Left)
+    assert slider.value() == c.level and seg.level == c.level
     w.segmentation_panel.region_selected.emit(0)
     qtbot.waitUntil(lambda: doc.edit_region == 0)
     assert "region 0" in w.shapes_panel.target.text()
@@ -267,11 +282,11 @@ def test_shapes_panel_edits_the_selected_region_of_a_regional_pose(qtbot, tmp_pa
 def test_keys_interpolate_play_save_and_export(qtbot, tmp_path, geometry, nose_tip):
     from model.pc2 import read_pc2
     from model.weights_csv import read_weights_csv
-    w = _window(qtbot, tmp_path, keyframes=True)
+    w = _window(qtbot, tmp_path)
     c, k = _pins(w, geometry, nose_tip), w.keyframes
     doc = w.document
     k.scrub(0.0)
-    w.set_key_action.trigger()
+    w.keyframes.set_key_action.trigger()
     assert len(k.timeline) == 1 and k.timeline.keys[0].weights.ndim == 1  # a global key
     k.scrub(1.0)  # go to 1 s (shows the key's pose), then pose by dragging and key it
     c.begin_drag(0)
@@ -285,9 +300,9 @@ def test_keys_interpolate_play_save_and_export(qtbot, tmp_path, geometry, nose_t
     k.set_settings(interpolation="linear")
     k.scrub(0.5)
     np.testing.assert_allclose(doc.region_weights, 0.5 * W1)
-    assert "◆" not in w.timeline_panel.time_label.text()
+    assert "◆" not in w.keyframes.panel.time_label.text()
     k.scrub(1.0)
-    assert "◆" in w.timeline_panel.time_label.text()
+    assert "◆" in w.keyframes.panel.time_label.text()
     # Undo the settings change and the second key.
     doc.undo_stack.undo()
     assert k.timeline.interpolation == "smooth"
@@ -298,10 +313,10 @@ def test_keys_interpolate_play_save_and_export(qtbot, tmp_path, geometry, nose_t
     assert len(k.timeline) == 2 and k.timeline.interpolation == "linear"
     # Play advances time.
     k.scrub(0.0)
-    w.play_action.trigger()
+    w.keyframes.play_action.trigger()
     assert k.playing
     qtbot.waitUntil(lambda: k.time > 0.1, timeout=5000)
-    w.play_action.trigger()
+    w.keyframes.play_action.trigger()
     assert not k.playing
     # Export.
     csv_path, pc2_path = tmp_path / "keys.csv", tmp_path / "keys.pc2"

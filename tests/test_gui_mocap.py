@@ -7,14 +7,14 @@ import json
 import numpy as np
 from PySide6 import QtWidgets
 
+from tests.cli_runner import run_cli
 from tests.gui_helpers import make_window, open_and_wait
-from tests.image_compare import assert_matches_reference
+from tests.image_compare import assert_matches_reference, assert_wrong_picture_fails
 
 
 def _install(qtbot, tmp_path, size=(1400, 1000)):
-    from app.mocap_controller import install
     w = make_window(qtbot, tmp_path, size=size)
-    return w, install(w)
+    return w, w.mocap
 
 
 def _not_background(img: np.ndarray) -> float:
@@ -38,13 +38,13 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
 
     assert mc.load_take(take_dir / "take.c3d")
     assert mc.load_map(take_dir / "marker_map.json")
-    assert "60 markers" in w.mocap_panel.map_label.text()
+    assert "60 markers" in mc.panel.map_label.text()
     with qtbot.waitSignal(mc.solved, timeout=120000):
         mc.solve()
     sol = mc.solution
     assert sol.n_frames == 358 and sol.weights.shape == (358, rig.n_shapes)
     assert mc.views.has_residual_bar()
-    assert w.mocap_views_dock.isVisible()
+    assert mc.views_dock.isVisible()
     # with every panel and the Mocap Views open the window still fits its 1400x900 default (a 1080p screen);
     # the faces and the curves share the dock's width
     assert w.minimumSizeHint().height() <= 900
@@ -60,9 +60,9 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     # scrub: both views and the markers move; residual colours change; cursors follow
     shots = {}
     for f in (0, 120, 240):
-        w.mocap_panel.slider.setValue(f)
+        mc.panel.slider.setValue(f)
         QtWidgets.QApplication.processEvents()
-        assert mc.frame == f and w.mocap_panel.frame_label.text().startswith(f"frame {f + 1}/358")
+        assert mc.frame == f and mc.panel.frame_label.text().startswith(f"frame {f + 1}/358")
         assert mc.weight_plot.cursor == f and mc.error_plot.cursor == f
         shots[f] = (np.array(mc.views.left_mesh.points), np.array(mc.views.right_mesh.points),
                     np.array(mc.views.right_mesh.point_data["values"]), np.array(mc.views.marker_cloud.points))
@@ -72,7 +72,7 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     # the keyboard: Alt+. / Alt+, step the take, Ctrl+Space plays and pauses it
     acts = {a.text(): a for a in w.actions()}
     acts["Next Take Frame"].trigger()
-    assert mc.frame == 241 and w.mocap_panel.slider.value() == 241
+    assert mc.frame == 241 and mc.panel.slider.value() == 241
     acts["Previous Take Frame"].trigger()
     acts["Previous Take Frame"].trigger()
     assert mc.frame == 239
@@ -90,7 +90,12 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     img = mc.views.grab_image(size=(560, 440))  # a fixed size, whatever the dock layout
     half = img.shape[1] // 2
     assert _not_background(img[:, :half]) > 0.1 and _not_background(img[:, half:]) > 0.1
-    assert_matches_reference(img, "mocap_side_by_side")
+    assert_matches_reference(img, "mocap_side_by_side", unlike=["mocap_side_by_side_neutral"])
+    # its wrong-picture twin: the first (neutral calibration) frame is not frame 180
+    mc.set_frame(0)
+    neutral = mc.views.grab_image(size=(560, 440))
+    assert_matches_reference(neutral, "mocap_side_by_side_neutral", unlike=["mocap_side_by_side"])
+    assert_wrong_picture_fails(neutral, "mocap_side_by_side", unlike=["mocap_side_by_side_neutral"])
     # orbiting round to the back: culling goes off, so the mask's back is drawn instead of nothing
     assert mc.views.culling()
     mc.views.plotter.renderers[0].GetActiveCamera().Azimuth(180)
@@ -110,8 +115,17 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     np.testing.assert_allclose(W, sol.weights)
     assert mc.export_report(tmp_path / "report.json")
     rep = json.loads((tmp_path / "report.json").read_text())
-    assert rep["units"] == "mm" and len(rep["per_frame_rmse"]) == 358 and len(rep["per_marker_rmse"]) == 60
-    assert 0 < rep["summary"]["rmse_mean"] < 2.0
+    assert rep["rig_units"] == "cm" and rep["frames"] == 358 and rep["markers"] == 60
+    assert len(rep["marker_rmse_per_frame"]) == 358 and len(rep["marker_rmse_per_marker"]) == 60
+    assert 0 < rep["marker_rmse"] < 0.2 and rep["neutral_frames"] == [0, 29] and rep["mode"] == "global"
+    np.testing.assert_allclose(rep["marker_rmse_per_frame"], sol.marker_rmse, rtol=1e-12)
+    # `solve --report` on the same take and map writes the same report: same keys, same values but the timings
+    run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json", "-o", tmp_path / "c.csv",
+            "--report", tmp_path / "cli_report.json")
+    cli = json.loads((tmp_path / "cli_report.json").read_text())
+    assert set(cli) == set(rep)
+    for key in set(rep) - {"solve_seconds", "frames_per_second"}:
+        assert _same(cli[key], rep[key]), key
 
     # a map naming markers the take lacks is refused; the solve and the map stay
     bad = json.loads((take_dir / "marker_map.json").read_text())
@@ -127,7 +141,7 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     # a Live Link Face take plays on ICT in the main viewport, without undo steps
     undo_before = w.document.undo_stack.count()
     assert mc.load_take(llf_csv)
-    assert mc.take.unmapped == ["TongueOut"] and "TongueOut" in w.mocap_panel.take_label.text()
+    assert mc.take.unmapped == ["TongueOut"] and "TongueOut" in mc.panel.take_label.text()
     _check_weight_playback(qtbot, w, mc)
     assert w.document.undo_stack.count() == undo_before
 
@@ -140,6 +154,17 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     mc2._show_views_dock()
     qtbot.waitUntil(lambda: mc2.views.parentWidget().sizes() == chosen, timeout=5000)
     w2.close()
+
+
+def _same(a, b) -> bool:
+    """Equal JSON values, numbers to 1e-9 relative (the two solves run the same code on the same data)."""
+    if isinstance(a, dict):
+        return isinstance(b, dict) and a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, list):
+        return isinstance(b, list) and len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b))
+    if isinstance(a, float) and isinstance(b, (int, float)):
+        return abs(a - b) <= 1e-9 * max(1.0, abs(a))
+    return a == b
 
 
 def _check_weight_playback(qtbot, w, mc):
@@ -164,8 +189,8 @@ def test_live_link_face_plays_on_sample_rig(qtbot, tmp_path, llf_csv):
     assert mc.load_take(llf_csv)
     take = mc.take
     assert take.names == rig.shape_names and take.n_frames == 328
-    assert take.unmapped and all(c in w.mocap_panel.take_label.text() for c in take.unmapped)
-    assert not w.mocap_panel.solve_button.isEnabled()
+    assert take.unmapped and all(c in mc.panel.take_label.text() for c in take.unmapped)
+    assert not mc.panel.solve_button.isEnabled()
     _check_weight_playback(qtbot, w, mc)
     assert w.document.undo_stack.count() == 0
     assert mc.export_pc2(tmp_path / "llf.pc2")

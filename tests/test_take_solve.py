@@ -10,7 +10,8 @@ import scipy.sparse as sp
 from model.marker_map import load_marker_map
 from model.take_c3d import read_c3d
 from solvers.rbf import RBFResidual, phantom_points
-from solvers.take_solve import SolveCancelled, TakeSolver, solve_take
+from model.take_workspace import solve_take
+from solvers.take_solve import SolveCancelled, TakeSolver
 
 
 @pytest.fixture(scope="module")
@@ -45,7 +46,8 @@ def test_dense_accuracy_below_target(solution, take_setup):
 
 def test_residual_improves_on_the_rig_fit(ict_rig, take_setup, solution):
     _, _, B, X, truth = take_setup
-    plain = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, residual="none").solve(X, unit_factor=0.1)
+    plain = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, residual="none", surface=solution.solver.surface
+                       ).solve(X, unit_factor=0.1)
     assert plain.coefficients is None
     assert dense_rms_mm(solution, truth) < dense_rms_mm(plain, truth)
     assert np.allclose(plain.weights, solution.weights)  # the residual does not change the weights
@@ -121,7 +123,10 @@ def test_regional_solve_blends_regions(ict_rig, take_setup):
     blend[upper, 0] = 1.0
     blend[lower, 1] = 1.0
     blend[np.intersect1d(upper, lower), :2] = 0.5
-    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, regions=[upper, lower], blend=sp.csr_matrix(blend))
+    from model.pose import PoseEvaluator
+    ev = PoseEvaluator(ict_rig, dtype=np.float64)
+    solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, regions=[upper, lower], blend=sp.csr_matrix(blend),
+                        surface=lambda W: ev.evaluate_regional(W, blend))
     sol = solver.solve(X[:60], unit_factor=0.1)
     assert sol.region_weights.shape == (60, 3, ict_rig.n_shapes)
     assert np.allclose(sol.region_weights[:, 2], sol.weights)  # background row = the global solve
@@ -178,7 +183,8 @@ def test_a_rig_with_correctives_is_solved_and_played_with_them(ict_rig, take_dir
     opts = dict(head_motion=False, residual="none", two_pass=False, marker_smoothing=0.0, lam_temporal=1e-6,
                 iterations=8)
     live = solver_correctives(rig)
-    with_c = TakeSolver(rig.neutral, rig.deltas, vertices, correctives=live, **opts).solve(markers, calibrate=False)
+    with_c = TakeSolver(rig.neutral, rig.deltas, vertices, correctives=live, surface=ev.evaluate,
+                        **opts).solve(markers, calibrate=False)
     without = TakeSolver(rig.neutral, rig.deltas, vertices, **opts).solve(markers, calibrate=False)
     k = [rig.shape_index(n) for n in brows]
     assert np.abs(with_c.weights[:, k] - W[:, k]).max() < 1e-3      # measured 1.2e-5
@@ -204,7 +210,8 @@ def test_a_rig_with_correctives_is_solved_and_played_with_them(ict_rig, take_dir
     blend[upper, 0] = blend[lower, 1] = 1.0
     blend[np.intersect1d(upper, lower), :2] = 0.5
     regional = TakeSolver(rig.neutral, rig.deltas, vertices, correctives=live, regions=[upper, lower],
-                          blend=sp.csr_matrix(blend), **opts).solve(markers, calibrate=False)
+                          blend=sp.csr_matrix(blend), surface=lambda W: ev.evaluate_regional(W, blend),
+                          **opts).solve(markers, calibrate=False)
     plain = TakeSolver(rig.neutral, rig.deltas, vertices, regions=[upper, lower], blend=sp.csr_matrix(blend),
                        **opts).solve(markers, calibrate=False)
     assert regional.marker_rmse.max() < 1e-5 < 0.001 < plain.marker_rmse.max()     # measured 4e-7 and 2e-3 cm

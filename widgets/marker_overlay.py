@@ -1,5 +1,6 @@
 """Viewport glyphs for markers (ALGORITHMS.md §8): a sphere on the surface per marker, its target in
-another colour and a line between them. Shows what it is given; points are updated in place."""
+another colour and a line between them. Shows what it is given; points are updated in place. Drawn as the
+viewport's overlays (``Viewport.add_overlay``)."""
 from __future__ import annotations
 
 import numpy as np
@@ -11,27 +12,27 @@ LINE_COLOR = (1.0, 1.0, 1.0)
 
 
 class MarkerOverlay:
-    """Marker and target glyphs in a pyvista plotter (sphere impostors: cheap to move every frame)."""
+    """Marker and target glyphs on a Viewport (sphere impostors: cheap to move every frame)."""
 
-    def __init__(self, plotter, point_size: float = 14.0) -> None:
-        self.plotter = plotter
+    def __init__(self, viewport, point_size: float = 14.0) -> None:
+        self.viewport = viewport
         self.point_size = point_size
         self._meshes: dict[str, object] = {}
         self._count = -1
 
     def _actor(self, name: str, mesh, color, size: float, lines: bool = False):
-        kw = dict(color=color, name=f"marker_overlay_{name}", reset_camera=False, pickable=False, lighting=not lines)
+        kw = dict(color=color, lighting=not lines)
         if lines:
-            actor = self.plotter.add_mesh(mesh, line_width=2, **kw)
+            actor = self.viewport.add_overlay(f"marker_overlay_{name}", mesh, line_width=2, **kw)
         else:
-            actor = self.plotter.add_mesh(mesh, render_points_as_spheres=True, point_size=size, **kw)
-        actor.SetPickable(False)
+            actor = self.viewport.add_overlay(f"marker_overlay_{name}", mesh, render_points_as_spheres=True,
+                                              point_size=size, **kw)
         self._meshes[name] = mesh
         return actor
 
     def clear(self) -> None:
         for name in list(self._meshes):
-            self.plotter.remove_actor(f"marker_overlay_{name}", render=False)
+            self.viewport.remove_overlay(f"marker_overlay_{name}")
         self._meshes.clear()
         self._count = -1
 
@@ -72,7 +73,3 @@ class MarkerOverlay:
     def n_markers(self) -> int:
         m = self._meshes.get("markers")
         return 0 if m is None else m.n_points
-
-    def target_points(self) -> np.ndarray | None:
-        m = self._meshes.get("targets")
-        return None if m is None else np.asarray(m.points)

@@ -83,12 +83,13 @@ class MocapPanel(QtWidgets.QWidget):
         exp = QtWidgets.QHBoxLayout()
         self.export_weights_button = QtWidgets.QPushButton("Weights CSV…")
         self.export_pc2_button = QtWidgets.QPushButton("PC2…")
-        self.export_report_button = QtWidgets.QPushButton("Error Report…")
+        self.export_report_button = QtWidgets.QPushButton("Solve Report…")
         for b, tip in ((self.export_weights_button, "Write the solved weights per frame as a CSV (frame, time, "
                                                     "one column per shape)"),
                        (self.export_pc2_button, "Write the dense solved surface per frame as a PC2 point cache "
                                                 "(Blender, Maya, Max), head-stabilised, rig units"),
-                       (self.export_report_button, "Write the per-frame and per-marker errors (mm) as JSON")):
+                       (self.export_report_button, "Write the solve report as JSON (marker errors per frame and "
+                                                   "per marker, rig units), as `solve --report` does")):
             b.setToolTip(tip)
             exp.addWidget(b)
         form.addRow(QtWidgets.QLabel("Export"))
@@ -152,7 +153,8 @@ class MocapPanel(QtWidgets.QWidget):
 
     # --- state shown ------------------------------------------------------------------------------
     def settings(self) -> dict:
-        """Solver options for ``solve_take`` plus ``mode`` ('global' / 'region') and ``level``."""
+        """Solve settings for ``model.take_workspace.TakeWorkspace.solve``: ``mode`` (global / region), ``level``,
+        the solver options and the calibration length."""
         return {"mode": "region" if self.mode_combo.currentIndex() == 1 else "global",
                 "level": self.level_spin.value(), "residual": self.residual_combo.currentText(),
                 "lam_sparsity": self.lam_sparsity.value(), "lam_temporal": self.lam_temporal.value(),

@@ -43,6 +43,7 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
     def __init__(self, parent=None, *, multi_samples: int = 0, **kwargs) -> None:
         with _no_base_plotter_init():
             QVTKRenderWindowInteractor.__init__(self, parent)
+        self._closed = True   # until BasePlotter is initialised (it sets False); close() sets it again
         BasePlotter.__init__(self, **kwargs)
         self.interactor = self
         self.ren_win = self.GetRenderWindow()
@@ -62,23 +63,23 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
 
     def render(self) -> None:
         """Render now into the window (no-op once closed or before the widget has a size)."""
-        if getattr(self, "_closed", True):
+        if self._closed:
             return
         self._rendered = True
         BasePlotter.render(self)
 
     def paintEvent(self, event) -> None:  # Qt override: expose / resize
-        if not getattr(self, "_closed", True):
+        if not self._closed:
             self.ren_win.Render()
 
     def resizeEvent(self, event) -> None:  # Qt override
-        if not getattr(self, "_closed", True):
+        if not self._closed:
             super().resizeEvent(event)
 
     def close(self) -> None:  # both BasePlotter.close and QWidget.close; returns None like pyvistaqt's
         """Release the render window now, X display connection included: left to the garbage collector it
         may be destroyed after the X server is gone (the end of a test run), and Xlib then exits the process."""
-        if getattr(self, "_closed", True):
+        if self._closed:
             return
         BasePlotter.close(self)
         QVTKRenderWindowInteractor.close(self)

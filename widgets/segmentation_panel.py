@@ -28,6 +28,7 @@ class SegmentationPanel(QtWidgets.QWidget):
         super().__init__(parent)
         self._settings: dict = {}
         self._updating = False
+        self._counts: list[int] = []   # regions per level of the segmentation shown
         form = QtWidgets.QFormLayout()
         self.view = QtWidgets.QComboBox()
         for key, label in VIEW_LABELS:
@@ -186,7 +187,7 @@ class SegmentationPanel(QtWidgets.QWidget):
         self._update_level_label()
 
     def _update_level_label(self) -> None:
-        counts = getattr(self, "_counts", [])
+        counts = self._counts
         lv = self.level.value()
         if counts:
             self.level_label.setText(f"{lv} of {len(counts) - 1}: {counts[lv]} regions")

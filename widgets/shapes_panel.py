@@ -3,10 +3,25 @@ reset, and presets. It shows weights and emits the user's gestures; the app turn
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 SLIDER_STEPS = 1000
+
+
+@dataclass(frozen=True)
+class PoseEdit:
+    """One gesture of the Shapes panel on the pose. ``kind``: "drag-start", "drag" (live during a slider
+    drag, not an undo step by itself), "drag-end", "set" (a complete edit of one weight: one undo step),
+    "reset" (every weight to 0) or "preset" (apply ``preset``); ``shape`` is the shape index and ``value``
+    its weight, for the kinds that have them."""
+
+    kind: str
+    shape: int = -1
+    value: float = 0.0
+    preset: str = ""
 
 
 class _ShapeRow(QtWidgets.QWidget):
@@ -63,50 +78,35 @@ class _ShapeRow(QtWidgets.QWidget):
 
     def _pressed(self) -> None:
         self._dragging = True
-        (self.panel.routed_drag_started if self.panel.routed else self.panel.drag_started).emit(self.index)
+        self.panel.pose_edited.emit(PoseEdit("drag-start", self.index))
 
     def _released(self) -> None:
         self._dragging = False
-        (self.panel.routed_drag_finished if self.panel.routed else self.panel.drag_finished).emit(self.index)
+        self.panel.pose_edited.emit(PoseEdit("drag-end", self.index))
 
     def _slider_moved(self, v: int) -> None:
         value = v / SLIDER_STEPS
         self.box.blockSignals(True)
         self.box.setValue(value)
         self.box.blockSignals(False)
-        if self._dragging:
-            self.panel._emit_dragged(self.index, value)
-        else:  # keyboard, wheel or a click on the groove: one step each
-            self.panel._emit_committed(self.index, value)
+        # while dragging: live; keyboard, wheel or a click on the groove: one step each
+        self.panel.pose_edited.emit(PoseEdit("drag" if self._dragging else "set", self.index, value))
 
     def _box_changed(self, value: float) -> None:
-        self.panel._emit_committed(self.index, float(value))
+        self.panel.pose_edited.emit(PoseEdit("set", self.index, float(value)))
 
 
 class ShapesPanel(QtWidgets.QWidget):
-    """Sliders for every shape. Signals carry (shape index, weight)."""
+    """Sliders for every shape. Every gesture on the pose is one ``pose_edited(PoseEdit)``; the window turns it
+    into an edit of the global pose or, while the pose is regional, of the selected region's weights."""
 
-    drag_started = QtCore.Signal(int)
-    weight_dragged = QtCore.Signal(int, float)    # live during a drag: not an undo step by itself
-    drag_finished = QtCore.Signal(int)
-    weight_committed = QtCore.Signal(int, float)  # a complete edit: one undo step
-    reset_requested = QtCore.Signal()
-    preset_requested = QtCore.Signal(str)
+    pose_edited = QtCore.Signal(object)           # a PoseEdit
     mirror_shape_requested = QtCore.Signal(int)   # make the other side's shape from this one (right-click)
-    # The same gestures while the pose is regional (set_target(..., routed=True)): the marker controller
-    # turns them into edits of the selected region's weights (or of every region).
-    routed_drag_started = QtCore.Signal(int)
-    routed_weight_dragged = QtCore.Signal(int, float)
-    routed_drag_finished = QtCore.Signal(int)
-    routed_weight_committed = QtCore.Signal(int, float)
-    routed_reset_requested = QtCore.Signal()
-    routed_preset_requested = QtCore.Signal(str)
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
         self.setMinimumWidth(400)
         lay = QtWidgets.QVBoxLayout(self)
-        self.routed = False
         self.target = QtWidgets.QLabel("Editing the global pose")
         self.target.setWordWrap(True)
         self.target.setToolTip("Which weights the sliders edit: the global pose, or one region's weights of a "
@@ -132,8 +132,7 @@ class ShapesPanel(QtWidgets.QWidget):
         self.apply_preset.clicked.connect(self._preset_clicked)
         self.reset = QtWidgets.QPushButton("Reset all")
         self.reset.setToolTip("Set every weight to 0 (undoable)")
-        self.reset.clicked.connect(lambda: (self.routed_reset_requested if self.routed
-                                            else self.reset_requested).emit())
+        self.reset.clicked.connect(lambda: self.pose_edited.emit(PoseEdit("reset")))
         row.addWidget(QtWidgets.QLabel("Preset"))
         row.addWidget(self.presets, 1)
         row.addWidget(self.apply_preset)
@@ -193,15 +192,8 @@ class ShapesPanel(QtWidgets.QWidget):
 
     def _preset_clicked(self) -> None:
         if self.presets.currentText():
-            (self.routed_preset_requested if self.routed else self.preset_requested).emit(self.presets.currentText())
+            self.pose_edited.emit(PoseEdit("preset", preset=self.presets.currentText()))
 
-    def set_target(self, text: str, routed: bool) -> None:
-        """Say which weights the sliders edit; ``routed`` sends the gestures to the routed_* signals."""
+    def set_target(self, text: str) -> None:
+        """Say which weights the sliders edit (the global pose, a region's weights)."""
         self.target.setText(text)
-        self.routed = bool(routed)
-
-    def _emit_dragged(self, k: int, value: float) -> None:
-        (self.routed_weight_dragged if self.routed else self.weight_dragged).emit(k, value)
-
-    def _emit_committed(self, k: int, value: float) -> None:
-        (self.routed_weight_committed if self.routed else self.weight_committed).emit(k, value)

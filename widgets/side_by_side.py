@@ -105,10 +105,6 @@ class SideBySideView(QtWidgets.QWidget):
         self._focus = np.asarray(points if focus is None else focus)
         self.set_camera(self._camera)
 
-    def set_clim(self, clim: tuple[float, float]) -> None:
-        if self.right_mesh is not None:
-            self._right_actor.mapper.scalar_range = clim
-
     def show_frame(self, projection: np.ndarray, dense: np.ndarray, residual: np.ndarray,
                    markers: np.ndarray | None = None, fitted: np.ndarray | None = None,
                    normals: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> None:

@@ -1,19 +1,111 @@
 """The 3D viewport: a VTK plotter (native window, see native_plotter) showing the rig surface, its colour maps and overlays.
 
-It shows what it is given and turns gestures into signals; it holds no algorithm.
+It shows what it is given and turns gestures into requests; it holds no algorithm. Tools (marker dragging,
+sculpt brushes) use its gesture API and never its VTK internals:
+
+- ``push_tool(tool)`` / ``remove_tool(tool)``: the tool (a ``ViewportTool``) is offered every mouse press on
+  the view, most recently pushed first. The tool that takes a press (``press`` returns True) owns the gesture:
+  it gets its ``drag`` and ``release`` and the camera stays still. Moves with no button held are ``hover``s.
+  A press no tool takes turns the camera; a click (press and release within a few pixels) that no tool took
+  emits ``picked`` with the surface point under it.
+- Each call gets a ``Gesture``: the display position, the button, the surface point under the cursor
+  (``SurfacePoint``: vertex, face, world position; picked only when read) and the view-plane ``motion`` since
+  the press (the world-space displacement in the plane through the gesture's anchor facing the camera).
+- Overlays (``add_overlay`` / ``remove_overlay``): meshes drawn over the surface, never picked, never reframed.
+- Camera and conversions: ``camera_frame()``, ``world_to_display``, ``display_to_world``, ``display_to_qt``,
+  ``view_plane_point``; ``canvas`` is the Qt widget that receives the mouse.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from .scene import ColorMap, SurfaceArrays, add_surface, rig_mesh, set_camera, style_plotter
 
+CLICK_SLOP_PX = 3   # a press and release this close (display pixels, |dx| + |dy|) is a click
+
+
+@dataclass(frozen=True)
+class SurfacePoint:
+    """A point on the shown surface: the picked face (the rig's polygon index), its vertex nearest the point,
+    and the point itself (world coordinates)."""
+
+    vertex: int
+    face: int
+    position: np.ndarray
+
+
+@dataclass(frozen=True)
+class CameraFrame:
+    """Where the camera is and which way it looks: unit ``forward`` (eye to focal point), ``up`` and ``right``."""
+
+    position: np.ndarray
+    focal_point: np.ndarray
+    up: np.ndarray
+    forward: np.ndarray
+    right: np.ndarray
+
+
+class Gesture:
+    """One mouse event of a gesture, as a tool sees it: ``kind`` ("press", "drag", "release", "hover"),
+    display pixel ``x``, ``y`` (VTK's: bottom-left origin, device pixels), the ``button`` pressed (a
+    Qt.MouseButton; NoButton for a hover) and the display position of the ``start`` (the press)."""
+
+    def __init__(self, viewport: "Viewport", kind: str, x: int, y: int, button, start: tuple[int, int],
+                 anchor: np.ndarray | None) -> None:
+        self.viewport, self.kind, self.x, self.y, self.button, self.start = viewport, kind, x, y, button, start
+        self._anchor = anchor
+
+    @cached_property
+    def point(self) -> SurfacePoint | None:
+        """The surface point under the cursor, or None off the surface (picked on first use)."""
+        return self.viewport.pick(self.x, self.y)
+
+    @property
+    def anchor(self) -> np.ndarray | None:
+        """The world point the gesture drags: by default the surface point under the press. A tool that takes
+        a press may set it (a marker's position) so that ``motion`` is measured in the plane through it."""
+        if self._anchor is None and self.kind == "press" and self.point is not None:
+            self._anchor = np.asarray(self.point.position, dtype=np.float64)
+        return self._anchor
+
+    @anchor.setter
+    def anchor(self, world) -> None:
+        self._anchor = np.asarray(world, dtype=np.float64)
+
+    @property
+    def motion(self) -> np.ndarray:
+        """(3,) world-space displacement from the press to now in the plane through ``anchor`` facing the
+        camera (zero without an anchor)."""
+        if self.anchor is None:
+            return np.zeros(3)
+        vp = self.viewport
+        return vp.view_plane_point(self.x, self.y, self.anchor) - vp.view_plane_point(*self.start, self.anchor)
+
+
+class ViewportTool:
+    """What a viewport tool implements (every method optional). ``press`` returns True to take the gesture."""
+
+    def press(self, gesture: Gesture) -> bool:
+        return False
+
+    def drag(self, gesture: Gesture) -> None:
+        pass
+
+    def release(self, gesture: Gesture) -> None:
+        pass
+
+    def hover(self, gesture: Gesture) -> None:
+        pass
+
 
 class Viewport(QtWidgets.QWidget):
     """A VTK view of one surface. Update points in place for animation (no re-upload of topology)."""
 
-    picked = QtCore.Signal(int, object)  # (vertex index, picked point xyz) on a left click
+    picked = QtCore.Signal(int, object)  # (vertex index, picked point xyz) on a left click no tool took
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
@@ -27,23 +119,26 @@ class Viewport(QtWidgets.QWidget):
         lay.setContentsMargins(0, 0, 0, 0)
         lay.addWidget(self.plotter.interactor)
         self.mesh = None
-        self._faces = None
+        self._arrays: SurfaceArrays | None = None
         self._focus = None
         self._colormap: ColorMap | None = None
         self._wireframe = False
         self._camera = "front"
-        self._press_pos = None
-        self._mouse_filters: list = []
+        self._tools: list[ViewportTool] = []
+        self._owner: ViewportTool | None = None      # the tool whose gesture is under way
+        self._press: tuple | None = None             # that gesture's (start, button, anchor)
+        self._click: tuple[int, int] | None = None   # a left press no tool took: a click if released near it
         self.plotter.interactor.installEventFilter(self)
-        iren = self.plotter.iren
-        iren.add_observer("LeftButtonPressEvent", self._on_left_press)
-        iren.add_observer("LeftButtonReleaseEvent", self._on_left_release)
+
+    @property
+    def canvas(self) -> QtWidgets.QWidget:
+        """The Qt widget the view is drawn in and that receives the mouse."""
+        return self.plotter.interactor
 
     # --- content -----------------------------------------------------------------------------------
     def set_surface(self, points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
                     focus: np.ndarray | None = None, *, reset_camera: bool = True) -> None:
         """Show a new surface (a new rig): topology is uploaded once here."""
-        self._faces = (face_counts, face_indices)
         self._focus = focus if focus is not None else points
         self.mesh = rig_mesh(points, face_counts, face_indices)
         self._arrays = SurfaceArrays(self.mesh)
@@ -92,9 +187,21 @@ class Viewport(QtWidgets.QWidget):
                 del self.mesh.point_data[key]
         add_surface(self.plotter, self.mesh, self._colormap, wireframe=self._wireframe)
 
+    # --- overlays ----------------------------------------------------------------------------------
+    def add_overlay(self, name: str, mesh, **style):
+        """Draw ``mesh`` (a pyvista dataset) over the surface under ``name`` (the same name replaces it), with
+        pyvista's ``add_mesh`` style keywords; overlays are never picked and never reframe the camera. Returns
+        the actor (its ``visibility`` can be toggled). Nothing is rendered until ``render``."""
+        actor = self.plotter.add_mesh(mesh, name=name, pickable=False, reset_camera=False, render=False, **style)
+        actor.SetPickable(False)
+        return actor
+
+    def remove_overlay(self, name: str) -> None:
+        self.plotter.remove_actor(name, render=False)
+
     # --- picking -----------------------------------------------------------------------------------
-    def pick(self, x: int, y: int):
-        """(vertex index, point) under display pixel (x, y from the bottom-left), or None."""
+    def pick(self, x: int, y: int) -> SurfacePoint | None:
+        """The surface point under display pixel (x, y from the bottom-left), or None."""
         import vtk
         if self.mesh is None:
             return None
@@ -105,40 +212,82 @@ class Viewport(QtWidgets.QWidget):
         if picker.GetDataSet() is None or picker.GetDataSet().GetNumberOfPoints() != self.mesh.n_points:
             return None
         point = np.array(picker.GetPickPosition())
-        cell = self.mesh.get_cell(picker.GetCellId())
-        ids = np.asarray(cell.point_ids)
+        face = int(picker.GetCellId())
+        ids = np.asarray(self.mesh.get_cell(face).point_ids)
         pts = np.asarray(self.mesh.points)[ids]
-        return int(ids[np.argmin(np.linalg.norm(pts - point, axis=1))]), point
+        return SurfacePoint(int(ids[np.argmin(np.linalg.norm(pts - point, axis=1))]), face, point)
 
-    def _on_left_press(self, *args) -> None:
-        self._press_pos = self.plotter.iren.get_event_position()
+    # --- tools: the gesture API --------------------------------------------------------------------
+    def push_tool(self, tool: ViewportTool) -> None:
+        """Offer the view's mouse presses to ``tool`` first (until ``remove_tool``); pushing it again is a no-op."""
+        if tool not in self._tools:
+            self._tools.append(tool)
 
-    def _on_left_release(self, *args) -> None:
-        pos = self.plotter.iren.get_event_position()
-        if self._press_pos is not None and abs(pos[0] - self._press_pos[0]) + abs(pos[1] - self._press_pos[1]) <= 3:
-            hit = self.pick(*pos)
-            if hit is not None:
-                self.picked.emit(hit[0], hit[1])
-        self._press_pos = None
+    def remove_tool(self, tool: ViewportTool) -> None:
+        """Stop offering the mouse to ``tool``; a gesture it owns ends without a release."""
+        if tool in self._tools:
+            self._tools.remove(tool)
+        if self._owner is tool:
+            self._owner, self._press = None, None
 
-    # --- mouse hooks (marker dragging) -------------------------------------------------------------
-    def add_mouse_filter(self, handler) -> None:
-        """``handler(kind, x, y, button) -> bool`` sees every mouse press/move/release on the view first,
-        with (x, y) in VTK display pixels (bottom-left origin, device pixels). Returning True consumes the
-        event, so the camera does not move (e.g. while a marker is dragged)."""
-        self._mouse_filters.append(handler)
+    def has_tool(self, tool: ViewportTool) -> bool:
+        return tool in self._tools
 
-    def eventFilter(self, obj, event) -> bool:  # Qt override
-        kinds = {QtCore.QEvent.MouseButtonPress: "press", QtCore.QEvent.MouseMove: "move",
-                 QtCore.QEvent.MouseButtonRelease: "release"}
-        kind = kinds.get(event.type())
-        if kind is not None and self._mouse_filters and obj is self.plotter.interactor:
-            x, y = self.qt_to_display(event.position().x(), event.position().y())
-            for handler in self._mouse_filters:
-                if handler(kind, x, y, event.button()):
-                    return True
+    def eventFilter(self, obj, event) -> bool:  # Qt override: the canvas's mouse, before VTK sees it
+        if obj is self.plotter.interactor:
+            t = event.type()
+            if t == QtCore.QEvent.MouseButtonPress:
+                return self._mouse_press(event)
+            if t == QtCore.QEvent.MouseMove:
+                return self._mouse_move(event)
+            if t == QtCore.QEvent.MouseButtonRelease:
+                return self._mouse_release(event)
         return super().eventFilter(obj, event)
 
+    def _event_xy(self, event) -> tuple[int, int]:
+        return self.qt_to_display(event.position().x(), event.position().y())
+
+    def _mouse_press(self, event) -> bool:
+        if self._owner is not None:
+            return True      # another button during a tool's gesture: the tool keeps it, the camera stays
+        x, y = self._event_xy(event)
+        g = Gesture(self, "press", x, y, event.button(), (x, y), None)
+        for tool in reversed(self._tools):
+            if tool.press(g):
+                self._owner, self._press = tool, ((x, y), event.button(), g.anchor)
+                self._click = None
+                return True
+        self._click = (x, y) if event.button() == QtCore.Qt.LeftButton else None
+        return False
+
+    def _mouse_move(self, event) -> bool:
+        x, y = self._event_xy(event)
+        if self._owner is not None:
+            start, button, anchor = self._press
+            self._owner.drag(Gesture(self, "drag", x, y, button, start, anchor))
+            return True
+        if self._tools and event.buttons() == QtCore.Qt.NoButton:
+            g = Gesture(self, "hover", x, y, QtCore.Qt.NoButton, (x, y), None)
+            for tool in reversed(self._tools):
+                tool.hover(g)
+        return False
+
+    def _mouse_release(self, event) -> bool:
+        x, y = self._event_xy(event)
+        if self._owner is not None:
+            owner, (start, button, anchor) = self._owner, self._press
+            self._owner, self._press = None, None
+            owner.release(Gesture(self, "release", x, y, button, start, anchor))
+            return True
+        click, self._click = self._click, None
+        if click is not None and event.button() == QtCore.Qt.LeftButton \
+                and abs(x - click[0]) + abs(y - click[1]) <= CLICK_SLOP_PX:
+            hit = self.pick(x, y)
+            if hit is not None:
+                self.picked.emit(hit.vertex, hit.position)
+        return False
+
+    # --- coordinates -------------------------------------------------------------------------------
     def pixel_ratio(self) -> float:
         return float(self.plotter.interactor.devicePixelRatioF())
 
@@ -148,7 +297,7 @@ class Viewport(QtWidgets.QWidget):
         return int(round(x * s)), int(round((self.plotter.interactor.height() - y - 1) * s))
 
     def display_to_qt(self, x: float, y: float) -> QtCore.QPointF:
-        """VTK display pixel → widget-local Qt position of the interactor widget."""
+        """VTK display pixel → widget-local Qt position of the canvas."""
         s = self.pixel_ratio()
         return QtCore.QPointF(x / s, self.plotter.interactor.height() - 1 - y / s)
 
@@ -172,9 +321,7 @@ class Viewport(QtWidgets.QWidget):
     def view_plane_point(self, x: float, y: float, origin: np.ndarray) -> np.ndarray:
         """Where the ray under display pixel (x, y) meets the plane through ``origin`` facing the camera."""
         near, far = self.display_to_world(x, y, 0.0), self.display_to_world(x, y, 1.0)
-        cam = self.plotter.camera
-        n = np.array(cam.focal_point) - np.array(cam.position)
-        n /= np.linalg.norm(n)
+        n = self.camera_frame().forward
         d = far - near
         denom = float(d @ n)
         if abs(denom) < 1e-12:
@@ -183,6 +330,17 @@ class Viewport(QtWidgets.QWidget):
         return near + t * d
 
     # --- camera ------------------------------------------------------------------------------------
+    def camera_frame(self) -> CameraFrame:
+        """The camera's position, focal point and axes now (``up`` as the camera holds it)."""
+        cam = self.plotter.camera
+        position, focal = np.array(cam.position, dtype=float), np.array(cam.focal_point, dtype=float)
+        up = np.array(cam.up, dtype=float)
+        forward = focal - position
+        forward /= np.linalg.norm(forward)
+        right = np.cross(forward, up)
+        right /= np.linalg.norm(right)
+        return CameraFrame(position, focal, up, forward, right)
+
     def set_camera(self, name: str) -> None:
         self._camera = name
         if self._focus is not None:
@@ -211,4 +369,6 @@ class Viewport(QtWidgets.QWidget):
             self.render()
 
     def close_viewport(self) -> None:
+        self._tools.clear()
+        self._owner = None
         self.plotter.close()

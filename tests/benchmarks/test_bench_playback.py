@@ -14,9 +14,8 @@ from tests.gui_helpers import make_window, open_and_wait
 
 
 def test_playback_step_side_by_side(benchmark, qtbot, tmp_path, ict_dir, take_dir):
-    from app.mocap_controller import install
     w = make_window(qtbot, tmp_path, size=(1400, 900))  # the main window's default size
-    mc = install(w)
+    mc = w.mocap
     open_and_wait(qtbot, w, ict_dir)
     assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
     with qtbot.waitSignal(mc.solved, timeout=180000):

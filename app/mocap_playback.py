@@ -1,0 +1,99 @@
+"""Real-time playback of a take: the current frame, play / pause / step / loop on a precise timer that shows the
+frame the clock is at (frames are skipped when drawing is slow), and a drawn-frames-per-second meter. It knows
+nothing of what a frame shows: ``app.mocap_controller`` listens to ``frame_changed`` and draws it.
+"""
+from __future__ import annotations
+
+import time
+
+from PySide6 import QtCore
+
+
+class TakePlayback(QtCore.QObject):
+    frame_changed = QtCore.Signal(int)       # a new frame is current: show it
+    ticked = QtCore.Signal(int)              # the timer moved to this frame (after frame_changed)
+    playing_changed = QtCore.Signal(bool)
+    fps_measured = QtCore.Signal(float)      # frames drawn per second over the last ticks
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        self.n_frames = 0
+        self.rate = 30.0
+        self.frame = -1
+        self.loop = True
+        self.fps = 0.0
+        self.timer = QtCore.QTimer(self)
+        self.timer.setTimerType(QtCore.Qt.PreciseTimer)
+        self.timer.timeout.connect(self._tick)
+        self._start = (0.0, 0)
+        self._tick_times: list[float] = []
+
+    def set_length(self, n_frames: int, rate: float) -> None:
+        """A new take (or none: 0 frames): stop, and no frame is current until ``set_frame``."""
+        self.pause()
+        self.n_frames, self.rate, self.frame = int(n_frames), float(rate), -1
+
+    def set_frame(self, frame: int) -> None:
+        """Make ``frame`` (clamped to the take) current; emits ``frame_changed`` when it changes."""
+        if self.n_frames == 0:
+            return
+        frame = min(max(int(frame), 0), self.n_frames - 1)
+        if frame == self.frame:
+            return
+        self.frame = frame
+        self.frame_changed.emit(frame)
+
+    @property
+    def playing(self) -> bool:
+        return self.timer.isActive()
+
+    def play(self, on: bool = True) -> None:
+        if not on:
+            self.pause()
+            return
+        if self.n_frames == 0:
+            self.playing_changed.emit(False)
+            return
+        start = 0 if self.frame >= self.n_frames - 1 else max(self.frame, 0)
+        self._start = (time.perf_counter(), start)
+        self._tick_times = []
+        self.timer.start(max(1, int(1000 / min(self.rate, 60.0))))
+        self.playing_changed.emit(True)
+
+    def pause(self) -> None:
+        was = self.timer.isActive()
+        self.timer.stop()
+        if was:
+            self.playing_changed.emit(False)
+
+    def toggle(self) -> None:
+        self.pause() if self.playing else self.play()
+
+    def step(self, frames: int) -> None:
+        """Pause and move ``frames`` frames, clamped to the take."""
+        self.pause()
+        if self.n_frames:
+            self.set_frame(max(self.frame, 0) + frames)
+
+    def _tick(self) -> None:
+        t0, f0 = self._start
+        now = time.perf_counter()
+        target = f0 + int((now - t0) * self.rate)
+        if target >= self.n_frames:
+            if self.loop:
+                self._start = (now, 0)
+                target = 0
+            else:
+                self.set_frame(self.n_frames - 1)
+                self.pause()
+                return
+        if target == self.frame:
+            return
+        self.set_frame(target)
+        self.ticked.emit(target)
+        self._tick_times.append(time.perf_counter())
+        self._tick_times = self._tick_times[-30:]
+        if len(self._tick_times) >= 2:
+            dt = (self._tick_times[-1] - self._tick_times[0]) / (len(self._tick_times) - 1)
+            self.fps = 1.0 / dt if dt > 0 else 0.0
+            self.fps_measured.emit(self.fps)

@@ -1,0 +1,122 @@
+"""Writing several files as one set: after a crash or a kill, either every file is the new one or every
+file is the old one (issue 17: a killed ``solve`` left a new weights CSV beside the old cache and report).
+
+Each file is first written completely to a temporary file beside its target (fsynced). Then a journal
+(``.<first target>.bs-set.json``) lists the moves, and the moves are made; the journal is removed last.
+If the process dies before the journal exists, the old files are untouched and the temporaries are
+leftovers (removed by ``finish_interrupted_sets``); if it dies after, the next ``finish_interrupted_sets`` of
+that folder (every ``write_set`` call runs it first, and the GUI at start) completes the moves: the new set.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import IO, Callable
+
+JOURNAL_SUFFIX = ".bs-set.json"
+TEMP_MARK = ".bs-set-"
+
+
+def _fsync_dir(folder: Path) -> None:
+    try:
+        fd = os.open(folder, os.O_RDONLY)
+    except OSError:
+        return
+    try:
+        os.fsync(fd)
+    except OSError:
+        pass
+    finally:
+        os.close(fd)
+
+
+def _mode() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def write_set(writers: dict[str | Path, Callable[[IO[bytes]], object]]) -> None:
+    """Write every ``path: writer(file)`` as one set (all in their own folders; one journal beside the first)."""
+    items = [(Path(p), w) for p, w in writers.items()]
+    if not items:
+        return
+    for folder in {p.parent for p, _ in items}:
+        folder.mkdir(parents=True, exist_ok=True)
+        finish_interrupted_sets(folder)
+    temps: list[tuple[Path, Path]] = []
+    try:
+        for path, writer in items:
+            tmp = path.with_name(f".{path.name}{TEMP_MARK}{os.getpid()}.tmp")
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, _mode())
+            temps.append((tmp, path))
+            with os.fdopen(fd, "wb") as f:
+                writer(f)
+                f.flush()
+                os.fsync(f.fileno())
+        first = items[0][0]
+        journal = first.with_name(f".{first.name}{JOURNAL_SUFFIX}")
+        data = json.dumps({"moves": [[str(t), str(p)] for t, p in temps]}).encode()
+        jtmp = journal.with_name(f".{first.name}{TEMP_MARK}{os.getpid()}.journal.tmp")
+        with open(jtmp, "wb") as f:
+            f.write(data)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(jtmp, journal)          # the commit point: from here on the new set wins
+        _fsync_dir(journal.parent)
+    except BaseException:
+        for tmp, _ in temps:
+            tmp.unlink(missing_ok=True)
+        raise
+    _complete(journal)
+
+
+def _complete(journal: Path) -> None:
+    try:
+        moves = json.loads(journal.read_text())["moves"]
+    except (OSError, ValueError, KeyError, TypeError):
+        journal.unlink(missing_ok=True)
+        return
+    folders = set()
+    for tmp, final in moves:
+        tmp, final = Path(tmp), Path(final)
+        if tmp.exists():
+            os.replace(tmp, final)
+        folders.add(final.parent)
+    for folder in folders:
+        _fsync_dir(folder)
+    journal.unlink(missing_ok=True)
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def finish_interrupted_sets(folder: str | Path) -> int:
+    """Complete the sets whose journal was written (the new files win), then remove this application's
+    temporaries left by writers that are gone. Returns the number of files finished or removed."""
+    folder = Path(folder)
+    n = 0
+    if not folder.is_dir():
+        return 0
+    for journal in folder.glob(f".*{JOURNAL_SUFFIX}"):
+        _complete(journal)
+        n += 1
+    for tmp in folder.glob(f".*{TEMP_MARK}*.tmp"):
+        try:
+            pid = int(tmp.name.rsplit(TEMP_MARK, 1)[1].split(".")[0])
+        except (IndexError, ValueError):
+            continue
+        if not _pid_alive(pid):
+            tmp.unlink(missing_ok=True)
+            n += 1
+    return n

@@ -1,0 +1,120 @@
+"""One pose evaluation: a rig with correctives (one of them muted) posed regionally and globally through every
+entry point -- the document (viewport and exports), a take's PC2 export, a take solve's dense frames and the
+command line's export -- gives the arrays of ``model.pose.PoseEvaluator``, bit for bit."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+
+from model.correctives import Corrective, set_correctives
+from model.marker_map import MarkerMap
+from model.pc2 import read_pc2
+from model.pose import PoseEvaluator
+from model.project import Project, save_project
+from model.take_exports import export_pc2
+from model.take_workspace import TakeWorkspace, regional_solve_options, solve_take
+from model.takes import MarkerTake, WeightTake
+from tests.cli_runner import run_cli
+
+PAIRS = [["browInnerUp_L", "browInnerUp_R"], ["eyeBlink_L", "eyeWide_L"]]
+
+
+@pytest.fixture(scope="module")
+def posed(sample_rig):
+    """The sample rig with two correctives (the second muted), a segmentation level, and a regional pose in
+    which both correctives fire."""
+    from model.segmentation import SegmentationSettings, segment_rig
+    rig = sample_rig.copy()
+    cs = []
+    for i, drivers in enumerate(PAIRS):
+        d = rig.deltas[[rig.shape_index(n) for n in drivers]].sum(axis=0)
+        cs.append(Corrective(drivers=drivers, delta=(0.3 + 0.2 * i) * np.roll(d, 1, axis=1), muted=i == 1))
+    set_correctives(rig, cs)
+    seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, SegmentationSettings(t=0.75))
+    level = 1
+    blend = seg.levels[level].blend
+    rng = np.random.default_rng(7)
+    W = rng.uniform(0.0, 0.3, (blend.shape[1], rig.n_shapes))
+    W[:, [rig.shape_index(n) for p in PAIRS for n in p]] = rng.uniform(0.5, 1.0, (blend.shape[1], 4))
+    return rig, seg, level, blend, W
+
+
+def test_the_evaluator_applies_live_correctives_and_leaves_muted_and_excluded_ones_out(posed):
+    rig, _, _, blend, W = posed
+    ev = PoseEvaluator(rig, dtype=np.float64)
+    w = W[-1]
+    a = ev.activations(w)
+    assert (a > 0.2).all()                       # both correctives fire at this pose
+    live, muted = rig.correctives
+    by_hand = rig.neutral + np.einsum("k,kvc->vc", w, rig.deltas) + a[0] * live.delta
+    np.testing.assert_allclose(ev.evaluate(w), by_hand, atol=1e-12)
+    np.testing.assert_allclose(ev.evaluate(w, include_muted=True), by_hand + a[1] * muted.delta, atol=1e-12)
+    np.testing.assert_allclose(ev.evaluate(w, exclude=[live.name]), by_hand - a[0] * live.delta, atol=1e-12)
+    np.testing.assert_allclose(ev.evaluate(w, exclude=[0]), by_hand - a[0] * live.delta, atol=1e-12)
+    # regional: per-vertex blended weights activate the correctives; without any live corrective the per-region
+    # gemv path gives the same surface as the per-vertex one
+    per_vertex = np.asarray(sp.csr_matrix(blend) @ W)
+    from model.correctives import corrective_activations_per_vertex
+    av = corrective_activations_per_vertex(rig.correctives, rig.shape_names, per_vertex)
+    regional = rig.neutral + np.einsum("vk,kvc->vc", per_vertex, rig.deltas)
+    np.testing.assert_allclose(ev.evaluate_regional(W, blend), regional + av[:, :1] * live.delta, atol=1e-12)
+    np.testing.assert_allclose(ev.evaluate_regional(W, blend, exclude=[live.name]), regional, atol=1e-12)
+    assert np.abs(av[:, :1] * live.delta).max() > 0.05     # cm: leaving it out is visible
+
+
+def test_every_entry_point_gives_the_evaluators_arrays(qtbot, posed, tmp_path):
+    from app.document import Document, PoseState
+    rig, seg, level, blend, W = posed
+    ev32, ev64 = PoseEvaluator(rig), PoseEvaluator(rig, dtype=np.float64)
+
+    # the document: the viewport's float32 surface and the float64 one of exports, regional and global
+    doc = Document()
+    doc.set_project(Project(rig=rig, weights=np.zeros(rig.n_shapes)), None)
+    state = PoseState(W[-1].copy(), W.copy(), blend, level)
+    doc.set_pose_state(state)
+    assert np.array_equal(doc.posed_surface(), ev32.evaluate_regional(W, blend))
+    assert np.array_equal(doc.evaluate_state(state, dtype=np.float64), ev64.evaluate_regional(W, blend))
+    doc.set_weights(W[-1])
+    assert np.array_equal(doc.posed_surface(), ev32.evaluate(W[-1]))
+    assert np.array_equal(doc.evaluate_state(doc.pose_state(), dtype=np.float64), ev64.evaluate(W[-1]))
+    # a rig edit (muting the live corrective) bumps the version: both evaluators follow, none is stale
+    before = doc.evaluate_state(doc.pose_state(), dtype=np.float64)
+    rig_muted = rig.copy()
+    rig_muted.correctives[0].muted = True
+    doc.project.rig = rig_muted
+    doc.rig_edited()
+    after = doc.evaluate_state(doc.pose_state(), dtype=np.float64)
+    assert np.array_equal(after, PoseEvaluator(rig_muted, dtype=np.float64).evaluate(W[-1]))
+    assert np.abs(after - before).max() > 0.05
+
+    # a take's PC2 export: a weight take posed by the rig, written as float32
+    F = 4
+    frames_w = np.stack([W[r] for r in range(F)])
+    ws = TakeWorkspace(rig)
+    ws.take = WeightTake(weights=frames_w, names=list(rig.shape_names), rate=30.0)
+    export_pc2(ws, tmp_path / "take.pc2")
+    data, _, _ = read_pc2(tmp_path / "take.pc2")
+    assert np.array_equal(data, np.stack([ev64.evaluate(w) for w in frames_w]).astype(np.float32))
+
+    # a take solve's dense frames (per region, no residual): the evaluator at the solved region weights
+    vertices = np.flatnonzero(np.abs(rig.deltas).max(axis=(0, 2)) > 0)[::40]
+    labels = [f"M{i:03d}" for i in range(vertices.size)]
+    mm = MarkerMap(markers=dict(zip(labels, vertices.tolist())), rig_units="cm")
+    truth = np.stack([ev64.evaluate(w) for w in frames_w])
+    take = MarkerTake(positions=truth[:, vertices], labels=labels, rate=30.0, units="cm")
+    sol = solve_take(rig, take, mm, calibration_frames=0, head_motion=False, residual="none", two_pass=False,
+                     **regional_solve_options(seg, level))
+    assert sol.region_weights is not None and sol.solver.C == 1
+    for f in range(F):
+        assert np.array_equal(sol.dense(f), ev64.evaluate_regional(sol.region_weights[f], blend))
+
+    # the command line's export of the project: the evaluator's surface, to the OBJ's six decimals
+    from model.obj_io import read_obj
+    save_project(Project(rig=rig), tmp_path / "rig.bsproj")
+    w = W[-1]
+    text = ",".join(f"{n}={v!r}" for n, v in zip(rig.shape_names, w.tolist()))
+    run_cli("export", tmp_path / "rig.bsproj", "--weights", text, "-o", tmp_path / "pose.obj")
+    written = read_obj(tmp_path / "pose.obj").vertices
+    expected = np.array([[float(f"{x:.6f}") for x in row] for row in ev64.evaluate(w).tolist()])
+    assert np.array_equal(written, expected)
