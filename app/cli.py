@@ -60,7 +60,9 @@ def cmd_render(args) -> int:
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
     size = parse_size(args.size)
-    view = build_view(rig, weights, args.view, threshold=args.threshold, level=args.level)
+    from model.segmentation import SegmentationSettings
+    t = SegmentationSettings().t if args.threshold is None else args.threshold
+    view = build_view(rig, weights, args.view, threshold=t, level=args.level)
     from widgets.scene import render_png
     render_png(view.points, rig.face_counts, rig.face_indices, args.output, focus=view.focus,
                colormap=view.colormap, camera=args.camera, size=size, wireframe=args.wireframe,
@@ -85,8 +87,12 @@ def cmd_segment(args) -> int:
     from model.atomic import atomic_write
     from model.segmentation import SegmentationSettings, segment_rig, segmentation_to_json
     rig = load_rig_arg(args)
-    settings = SegmentationSettings(t=args.threshold, levels=args.levels, map_kind=args.map,
-                                    min_region_size=args.min_size, overlap_rings=args.overlap, method=args.method)
+    chosen = {"t": args.threshold, "map_kind": args.map, "smoothing": args.smoothing,
+              "separate_meshes": args.separate_meshes,
+              "normalise": None if args.normalise is None else args.normalise == "per-shape",
+              "split_by_shapes": None if args.split is None else args.split == "shapes"}
+    settings = SegmentationSettings(levels=args.levels, min_region_size=args.min_size, overlap_rings=args.overlap,
+                                    method=args.method, **{k: v for k, v in chosen.items() if v is not None})
     seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, settings)
     atomic_write(args.output, json.dumps(segmentation_to_json(seg)).encode("utf-8"))
     counts = ", ".join(str(lvl.n_regions) for lvl in seg.levels)
@@ -175,7 +181,8 @@ def build_parser() -> argparse.ArgumentParser:
     pose_args(sp)
     sp.add_argument("-o", "--output", required=True, help="PNG file to write")
     sp.add_argument("--view", default="shaded", choices=["shaded", "deformation", "deformation-rgb", "segmentation"])
-    sp.add_argument("--threshold", type=float, default=0.75, help="segmentation quantile t in [0, 1] (default 0.75)")
+    sp.add_argument("--threshold", type=float, default=None,
+                    help="segmentation quantile t in [0, 1] of the moving skin (default 0.5)")
     sp.add_argument("--level", type=int, default=0, help="hierarchy level to show (0 = finest)")
     sp.add_argument("--size", default="1024,768", help="W,H in pixels (default 1024,768)")
     sp.add_argument("--camera", default="front", choices=["front", "left", "right", "three-quarter"])
@@ -195,9 +202,20 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("segment", help="segment the face into regions and a hierarchy (JSON)")
     rig_arg(sp)
-    sp.add_argument("--threshold", type=float, default=0.75, help="quantile t in [0, 1] of the map (default 0.75)")
+    sp.add_argument("--threshold", type=float, default=None,
+                    help="quantile t in [0, 1] of the map over the skin that moves (default 0.5)")
     sp.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: until one region)")
-    sp.add_argument("--map", default="laplacian", choices=["laplacian", "displacement"])
+    sp.add_argument("--map", default=None, choices=["laplacian", "displacement", "laplacian+displacement"],
+                    help="where the skin bends (Joshi), moves (Acosta), or either (default laplacian+displacement)")
+    sp.add_argument("--normalise", default=None, choices=["per-shape", "none"],
+                    help="per-shape: each shape's map over its own 99%% quantile before the maximum (default); "
+                         "none: the raw maximum (Joshi)")
+    sp.add_argument("--smoothing", type=int, default=None, help="rounds of 1-ring smoothing of the map (default 1)")
+    sp.add_argument("--split", default=None, choices=["shapes", "none"],
+                    help="shapes: cut regions where the group of shapes moving the skin changes (default)")
+    sp.add_argument("--separate-meshes", default=None, choices=["follow", "background"],
+                    help="separate meshes (eyeballs, teeth): follow the region that moves them (default) or stay "
+                         "in the background")
     sp.add_argument("--method", default="threshold", choices=["threshold", "region-growing"])
     sp.add_argument("--min-size", type=int, default=30, help="smallest region in vertices (default 30)")
     sp.add_argument("--overlap", type=int, default=1, help="overlap rings between regions (default 1)")
