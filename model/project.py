@@ -237,6 +237,8 @@ def load_project(path: str | Path) -> Project:
                 try:
                     blend = sp.csr_matrix((array("pose/blend_data"), array("pose/blend_indices"),
                                            array("pose/blend_indptr")), shape=tuple(pose["blend_shape"]))
+                except RigInputError:
+                    raise
                 except ValueError as exc:
                     raise RigInputError(f"{path}: the saved regional pose is damaged ({exc}).") from None
                 regional = dict(region_weights=array("pose/region_weights"), region_blend=blend,

@@ -45,6 +45,8 @@ def read_take(path: str | Path, rig: Rig | None = None) -> MarkerTake | WeightTa
                 raise RigInputError(f"{path}: open a rig before playing a Live Link Face take on it.")
             return read_livelink_csv(path, rig.shape_names)
         return load_take(path)
+    except RigInputError:
+        raise
     except (OSError, ValueError) as exc:
         raise RigInputError(f"{path}: could not be read ({exc}).") from None
 
