@@ -19,6 +19,7 @@ from app.loading import LoadWorker
 from app.marker_controller import MarkerController
 from app.segmentation_controller import SegmentationController
 from model.project import Project
+from model.wording import count
 from widgets.scene import focus_vertices
 from widgets.segmentation_panel import SegmentationPanel
 from widgets.shapes_panel import PoseEdit, ShapesPanel
@@ -234,7 +235,7 @@ class MainWindow(QtWidgets.QMainWindow):
     def _update_counts(self) -> None:
         rig = self.document.rig
         self.counts_label.setText(f"{rig.n_vertices:,} vertices · {rig.n_faces:,} faces · "
-                                  f"{rig.n_shapes} shapes · {len(rig.correctives)} correctives · {rig.units}")
+                                  f"{count(rig.n_shapes, 'shape')} · {count(len(rig.correctives), 'corrective')} · {rig.units}")
 
     def _on_rig_shapes_change(self) -> None:
         rig = self.document.rig

@@ -19,6 +19,7 @@ from app.mocap_frames import FrameCache, captured_area_faces
 from app.mocap_playback import TakePlayback
 from model.errors import RigInputError
 from model.rig import unit_scale
+from model.wording import count
 from model.take_exports import export_pc2, export_report, export_weights_csv, take_surfaces
 from model.take_workspace import TakeWorkspace, solver_options
 from model.takes import MarkerTake, WeightTake
@@ -290,7 +291,7 @@ class MocapController(QtCore.QObject):
         self.error_plot.set_curves([("projection", err), ("dense", solution.marker_rmse_residual * mm)])
         self._init_weight_curves(solution.weights)
         self.panel.set_frames(solution.n_frames, self.rate)
-        with_c = "" if not solution.solver.C else f" with the rig's {solution.solver.C} corrective(s)"
+        with_c = "" if not solution.solver.C else f" with the rig's {count(solution.solver.C, 'corrective')}"
         self.panel.set_status(f"Solved {solution.n_frames} frames{with_c} in {solution.solve_seconds:.1f} s "
                               f"({solution.frames_per_second:.0f} frames/s); marker RMS {np.nanmean(err):.2f} mm "
                               f"mean, {np.nanmax(err):.2f} mm max.")
@@ -333,6 +334,8 @@ class MocapController(QtCore.QObject):
         self.pause()
         self._stop_fill()
         self.workspace.solution = None
+        if self.cache is not None:   # the views showed that solve: nothing of it stays on screen
+            self.views.clear()
         self.cache = None
         self.playback.set_length(self.n_frames, self.rate)
         self.weight_plot.set_curves([])

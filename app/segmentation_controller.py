@@ -14,6 +14,7 @@ from app.background import BackgroundRunner
 from app.commands import AddShapeCommand, SetEditOffsetCommand, SetSectionCommand
 from app.map_views import deformation_colormap, region_palette, segmentation_colormap
 from model.errors import RigInputError
+from model.wording import count
 from model.segmentation import SegmentationCache, SegmentationSettings, region_statistics, segment_rig
 from solvers.region_nudge import nudge_region
 
@@ -124,8 +125,6 @@ class SegmentationController(QtCore.QObject):
         self.panel.set_levels(counts, self.level)
         self.highlight = None
         self._show_regions()
-        self.panel.set_status(f"{counts[0]} regions at level 0 · {len(counts)} levels · "
-                              f"{self.last_seconds * 1000:.0f} ms")
         self.refresh_view()
         self.segmentation_ready.emit()
 
@@ -143,6 +142,9 @@ class SegmentationController(QtCore.QObject):
             return
         rows = self.stats[self.level]
         self.panel.set_regions(rows, region_palette(len(rows)))
+        levels = self.segmentation.levels
+        self.panel.set_status(f"{count(levels[self.level].n_regions, 'region')} at level {self.level} · "
+                              f"{count(len(levels), 'level')} · {self.last_seconds * 1000:.0f} ms")
 
     def _on_view_change(self, view: str) -> None:
         self.view = view

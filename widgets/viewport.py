@@ -181,6 +181,9 @@ class Viewport(QtWidgets.QWidget):
 
     def _redraw_surface(self) -> None:
         self.plotter.remove_scalar_bar() if self.plotter.scalar_bars else None
+        # the previous colour map's legend and its title go with it (they stayed up in Shaded view)
+        self.plotter.remove_legend(render=False)
+        self.plotter.remove_actor("legend_title", render=False)
         # point data from a previous colour map must not leak into the next one
         for key in ("values", "colors"):
             if key in self.mesh.point_data:

@@ -1,0 +1,79 @@
+"""Issue 18's "Bugs seen", each driven with real input events (keyboard and mouse through qtbot) or, where a real
+event is impractical (file dialogs), through the public method the dialog calls: each test failed before its fix."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PySide6 import QtCore, QtWidgets
+
+from tests.gui_helpers import make_window, open_and_wait
+from tests.test_gui_editor_habits import _focus
+
+pytestmark = pytest.mark.gui
+
+
+def _key(qtbot, widget, key, modifier=QtCore.Qt.NoModifier):
+    _focus(qtbot, widget)
+    qtbot.keyClick(widget, key, modifier)
+    QtWidgets.QApplication.processEvents()
+
+
+def _overlays(w) -> set[str]:
+    """What the viewport draws over the surface besides the colour map: its region legend and legend title."""
+    p = w.viewport.plotter
+    return ({"legend"} if p.legend is not None else set()) | ({"legend_title"} & set(p.actors))
+
+
+# --- stale overlays -------------------------------------------------------------------------------------------------
+def test_shaded_view_drops_the_region_legend_and_level_text(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    w.segmentation.wait()
+    combo = w.segmentation_panel.view
+    _key(qtbot, combo, QtCore.Qt.Key_End)              # the last view: Segmentation
+    assert combo.currentData() == "segmentation"
+    assert _overlays(w) == {"legend", "legend_title"}
+    _key(qtbot, combo, QtCore.Qt.Key_Home)             # back to Shaded
+    assert combo.currentData() == "shaded"
+    assert w.viewport.colormap is None
+    assert _overlays(w) == set()
+
+
+def test_status_line_says_the_level_shown_with_plurals(qtbot, tmp_path):
+    from model.correctives import Corrective
+    from model.project import Project
+    from resources.sample_rig import build_sample_rig
+    w = make_window(qtbot, tmp_path)
+    w.segmentation.wait()
+    seg = w.segmentation.segmentation
+    assert len(seg.levels) >= 3 and seg.levels[-1].n_regions == 1
+    slider, status = w.segmentation_panel.level, w.segmentation_panel.status
+    _key(qtbot, slider, QtCore.Qt.Key_Right)
+    assert slider.value() == 1
+    assert status.text().startswith(f"{seg.levels[1].n_regions} regions at level 1 ·"), status.text()
+    _key(qtbot, slider, QtCore.Qt.Key_End)
+    top = len(seg.levels) - 1
+    assert status.text().startswith(f"1 region at level {top} ·"), status.text()
+    assert w.segmentation_panel.level_label.text() == f"{top} of {top}: 1 region"
+    assert "1 regions" not in w.viewport.colormap.title if w.viewport.colormap else True
+    # the window's counts: one corrective is "1 corrective"
+    rig = build_sample_rig()
+    rig.correctives.append(Corrective(drivers=rig.shape_names[:2], delta=np.zeros_like(rig.neutral)))
+    w.document.set_project(Project(rig=rig), None)
+    assert "· 1 corrective ·" in w.counts_label.text(), w.counts_label.text()
+
+
+def test_a_live_link_take_clears_the_previous_solves_views(qtbot, tmp_path, ict_dir, take_dir, llf_csv):
+    """Load Take's file dialog is not driven: the test calls ``load_take``, which the dialog calls."""
+    w = make_window(qtbot, tmp_path, size=(1400, 1000))
+    mc = w.mocap
+    open_and_wait(qtbot, w, ict_dir)
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    with qtbot.waitSignal(mc.solved, timeout=180000):
+        qtbot.mouseClick(mc.panel.solve_button, QtCore.Qt.LeftButton)
+    assert mc.views_dock.isVisible() and mc.views.has_residual_bar()
+    assert {"surface_left", "markers", "errors"} <= set(mc.views.plotter.renderers[0].actors)
+    assert mc.load_take(llf_csv)
+    QtWidgets.QApplication.processEvents()
+    assert not mc.views.has_residual_bar()
+    left, right = (set(r.actors) for r in mc.views.plotter.renderers)
+    assert not ({"surface_left", "markers", "errors"} & left) and "surface_right" not in right
