@@ -17,6 +17,7 @@ import scipy.sparse as sp
 from PySide6 import QtCore
 
 from app.document import PoseState
+from app.mocap_playback import TakePlayback
 from app.marker_commands import SetSectionArraysCommand
 from app.marker_controller import pose_at_level, same_blend
 from model.errors import RigInputError
@@ -58,8 +59,12 @@ class KeyframeController(QtCore.QObject):
         self.fps = DEFAULTS["fps"]
         self.duration = DEFAULTS["duration"]
         self.time = 0.0
-        self.timer = QtCore.QTimer(self)
-        self.timer.timeout.connect(self._tick)
+        # real-time playback on the take player's clock: the frame the clock is at is shown, frames whose time
+        # passed while drawing are skipped (a slow frame never slows the animation down)
+        self.playback = TakePlayback(self)
+        self.playback.frame_changed.connect(lambda f: self.scrub(f / self.fps))
+        self.playback.ticked.connect(lambda _f: window.redraw_now())
+        self.playback.playing_changed.connect(panel.set_playing)
         d = self.document
         d.rig_changed.connect(self._load)
         d.section_changed.connect(lambda name: self._load() if name == SECTION else None)
@@ -187,22 +192,21 @@ class KeyframeController(QtCore.QObject):
         if on and not self.timeline.keys:
             self.window.show_status("Set a key first (S) to play an animation.", 4000)
             on = False
+        pb = self.playback
         if on:
-            self.timer.start(max(1, int(round(1000.0 / self.fps))))
+            pb.set_length(len(self.frame_times()), self.fps)
+            pb.frame = int(round(self.time * self.fps))   # from where the time is (the end: from the start)
+            pb.play()
         else:
-            self.timer.stop()
+            pb.pause()
         self.panel.set_playing(on)
 
     def toggle_play(self) -> None:
-        self.set_playing(not self.timer.isActive())
+        self.set_playing(not self.playing)
 
     @property
     def playing(self) -> bool:
-        return self.timer.isActive()
-
-    def _tick(self) -> None:
-        t = self.time + 1.0 / self.fps
-        self.scrub(0.0 if t > self.duration + 1e-9 else t)
+        return self.playback.playing
 
     def _show(self) -> None:
         self.panel.set_state(self.time, self.duration, self.fps, [k.time for k in self.timeline.keys],

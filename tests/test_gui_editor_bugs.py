@@ -77,3 +77,30 @@ def test_a_live_link_take_clears_the_previous_solves_views(qtbot, tmp_path, ict_
     assert not mc.views.has_residual_bar()
     left, right = (set(r.actors) for r in mc.views.plotter.renderers)
     assert not ({"surface_left", "markers", "errors"} & left) and "surface_right" not in right
+
+
+# --- keyed playback -------------------------------------------------------------------------------------------------
+def test_keyed_playback_keeps_real_time_when_drawing_is_slow(qtbot, tmp_path):
+    """Space plays the keyed animation; with every frame's drawing taking 100 ms (as ICT under software OpenGL),
+    the animation follows the clock by dropping frames instead of running in slow motion."""
+    import time
+    w = make_window(qtbot, tmp_path)
+    kf = w.keyframes
+    kf.set_key(0.0)
+    jaw = w.document.rig.shape_index("jawOpen")
+    pose = np.zeros(w.document.rig.n_shapes)
+    pose[jaw] = 1.0
+    w.set_pose(pose, "jaw")
+    kf.set_key(2.0)
+    kf.scrub(0.0)
+    assert kf.duration == 2.0 and kf.fps == 24.0
+    w.document.pose_changed.connect(lambda: time.sleep(0.1))   # a slow draw of every frame shown
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_Space)
+    assert kf.playing and w.keyframes.panel.play.isChecked()
+    t0 = time.perf_counter()
+    qtbot.wait(1200)
+    elapsed = time.perf_counter() - t0
+    assert abs(kf.time - elapsed) < 0.3, (kf.time, elapsed)
+    assert w.document.weights[jaw] == pytest.approx(kf.timeline.evaluate(kf.time)[jaw], abs=1e-6)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_Space)
+    assert not kf.playing and not w.keyframes.panel.play.isChecked()
