@@ -141,11 +141,20 @@ class KeyframeController(QtCore.QObject):
             blend, level = state.blend, state.level
             for k in tl.keys:  # the global keys become the same vector in every region
                 k.weights = np.tile(k.weights, (blend.shape[1], 1))
+        if blend is not None and state.is_regional and not same_blend(state.blend, blend) \
+                and state.level is not None and (level is None or state.level < level):
+            # a pose of a finer level than the keys': the keys follow it to that level (a coarse region is a
+            # union of fine ones, so the earlier keys keep their surface), and this key is stored exactly
+            background = self.document.project.weights
+            for k in tl.keys:
+                k.weights = pose_at_level(PoseState(background, k.weights, blend, level), state.blend)
+            note = f" (the keys moved to level {state.level}, finer than level {level})"
+            blend, level = state.blend, state.level
         if blend is None:
             w = state.weights
         else:
             if state.is_regional and not same_blend(state.blend, blend):
-                note = f" (averaged onto the keys' level {level})"
+                note = f" (on the keys' finer level {level})"
             w = pose_at_level(state, blend)
         tl.set_key(t, w)
         if t > self.duration:

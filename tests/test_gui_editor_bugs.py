@@ -104,3 +104,34 @@ def test_keyed_playback_keeps_real_time_when_drawing_is_slow(qtbot, tmp_path):
     assert w.document.weights[jaw] == pytest.approx(kf.timeline.evaluate(kf.time)[jaw], abs=1e-6)
     _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_Space)
     assert not kf.playing and not w.keyframes.panel.play.isChecked()
+
+
+# --- marker keys keep the level the user solves at ------------------------------------------------------------------
+def _regional_pose(w, level, seed):
+    from app.document import PoseState
+    lvl = w.segmentation.segmentation.levels[level]
+    rng = np.random.default_rng(seed)
+    W = rng.uniform(0, 1, (lvl.blend.shape[1], w.document.rig.n_shapes))
+    return PoseState(np.zeros(w.document.rig.n_shapes), W, lvl.blend, level)
+
+
+def test_a_key_at_a_finer_level_is_kept_not_averaged_onto_the_first_keys_level(qtbot, tmp_path):
+    """S keys the pose (a real key press); the regional poses are set through ``Document.set_pose_state``, as a
+    marker drag at that level leaves them."""
+    w = make_window(qtbot, tmp_path)
+    w.segmentation.wait()
+    doc, kf = w.document, w.keyframes
+    coarse, fine = _regional_pose(w, 2, 1), _regional_pose(w, 0, 2)
+    doc.set_pose_state(coarse)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_S)
+    kf.scrub(1.0)
+    doc.set_pose_state(fine)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_S)
+    assert [k.time for k in kf.timeline.keys] == [0.0, 1.0]
+    assert kf.level == 0
+    size = np.ptp(doc.rig.neutral, axis=0).max()
+
+    def error(t, state):
+        return np.abs(doc.evaluate_state(kf.pose_at(t)) - doc.evaluate_state(state)).max() / size
+    assert error(1.0, fine) < 1e-6          # the key just set is the pose the user made
+    assert error(0.0, coarse) < 0.02        # the earlier key moved to the finer level keeps its surface
