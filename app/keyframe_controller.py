@@ -21,7 +21,8 @@ from app.mocap_playback import TakePlayback
 from app.marker_commands import SetSectionArraysCommand
 from app.marker_controller import pose_at_level, same_blend
 from model.errors import RigInputError
-from model.keyframes import Keyframe, Timeline
+from model.keyframes import Keyframe, Timeline, keyed_frames, keyed_global_weights
+from model.pose import PoseEvaluator
 from model.pc2 import write_pc2
 from model.weights_csv import write_weights_csv
 from widgets.timeline import TimelinePanel
@@ -49,8 +50,13 @@ class KeyframeController(QtCore.QObject):
                                              "Play or pause the keyed animation")
         window.add_action("animation", "&Remove Key", lambda: self.remove_key(), None,
                           "Remove the key at the current time")
-        window.add_action("file", "Export Keyed &Weights as CSV…", self.export_csv_dialog, None,
-                          "Write the keyed animation's weights per frame as CSV")
+        window.add_action("file", "Export Keyed &Weights as CSV…", lambda: self.export_csv_dialog(), None,
+                          "Write the keyed animation's weights per frame as CSV: one column per shape, the global "
+                          "rig's weights that best reproduce each frame's surface")
+        window.add_action("file", "Export Keyed Weights per Re&gion as CSV…",
+                          lambda: self.export_csv_dialog(per_region=True), None,
+                          "Write a marker-keyed (regional) animation's weights per frame as CSV, one column per "
+                          "shape per region (<shape>@region<r>)")
         window.add_action("file", "Export Keyed Animation as P&C2…", self.export_pc2_dialog, None,
                           "Write the keyed animation as a PC2 point cache")
         self.timeline = Timeline()
@@ -76,7 +82,7 @@ class KeyframeController(QtCore.QObject):
         p.interpolation_changed.connect(lambda v: self.set_settings(interpolation=v))
         p.fps_changed.connect(lambda v: self.set_settings(fps=v))
         p.duration_changed.connect(lambda v: self.set_settings(duration=v))
-        p.export_csv_requested.connect(self.export_csv_dialog)
+        p.export_csv_requested.connect(lambda: self.export_csv_dialog())
         p.export_pc2_requested.connect(self.export_pc2_dialog)
         if d.project is not None:
             self._load()
@@ -229,43 +235,72 @@ class KeyframeController(QtCore.QObject):
         if not self.timeline.keys:
             raise RigInputError("There are no keys to export: set a key first (S).")
 
-    def export_csv(self, path: str | Path) -> int:
-        """Write the keyed animation's weights per frame (frame, time, weights). A regional timeline writes
-        the background row under the shape names and each region's row as ``<shape>@region<r>``.
-        Returns the number of frames."""
+    def _csv_job(self, path: str | Path, per_region: bool):
+        """The CSV export as a job (a closure over a snapshot of the animation, run on any thread)."""
         self._require_keys()
-        rig = self.document.rig
-        times = self.frame_times()
-        W = np.stack([self.timeline.evaluate(t) for t in times])
-        names = list(rig.shape_names)
-        if W.ndim == 3:
-            R = W.shape[1] - 1
-            names = [f"{n}@region{r}" for r in range(R) for n in rig.shape_names] + names
-            W = W.reshape(W.shape[0], -1)
-        write_weights_csv(path, W, names, times=times)
-        return len(times)
+        rig, timeline, blend, times = self.document.rig, self.timeline, self.blend, self.frame_times()
+        names, deltas = list(rig.shape_names), rig.deltas
+
+        def job() -> int:
+            if per_region and blend is not None:
+                W = keyed_frames(timeline, times)
+                R = W.shape[1] - 1
+                cols = [f"{n}@region{r}" for r in range(R) for n in names] + names
+                W = W.reshape(W.shape[0], -1)
+            else:
+                W, cols = keyed_global_weights(timeline, times, deltas, blend), names
+            _written(path, lambda: write_weights_csv(path, W, cols, times=times))
+            return len(times)
+        return job
+
+    def _pc2_job(self, path: str | Path):
+        self._require_keys()
+        rig, times = self.document.rig, self.frame_times()
+        states = [self.pose_at(t) for t in times]
+
+        def job() -> int:
+            ev = PoseEvaluator(rig, dtype=np.float64)   # its own: the GUI thread's evaluator keeps drawing
+            frames = (ev.pose(s.weights if s.region_weights is None else s.region_weights, s.blend) for s in states)
+            return _written(path, lambda: write_pc2(path, frames, n_points=rig.n_vertices, start_frame=0.0,
+                                                    sample_rate=1.0))
+        return job
+
+    def export_csv(self, path: str | Path, per_region: bool = False) -> int:
+        """Write the keyed animation's weights per frame (frame, time, one column per shape): the global rig's
+        weights that best reproduce each frame's surface (a regional timeline is fitted, ``keyed_global_weights``),
+        or with ``per_region`` each region's row as ``<shape>@region<r>`` then the background row under the
+        shape names. Returns the number of frames (runs here; the menu runs it in the background)."""
+        return self._csv_job(path, per_region)()
 
     def export_pc2(self, path: str | Path) -> int:
         """Write the keyed animation as a PC2 point cache (one sample per frame). Returns the frame count."""
-        self._require_keys()
-        times = self.frame_times()
-        doc = self.document
-        frames = (doc.evaluate_state(self.pose_at(t), dtype=np.float64) for t in times)
-        return write_pc2(path, frames, n_points=doc.rig.n_vertices, start_frame=0.0, sample_rate=1.0)
+        return self._pc2_job(path)()
 
-    def _export_dialog(self, title: str, suffix: str, filt: str, fn) -> None:
+    def _export_dialog(self, title: str, suffix: str, filt: str, make_job) -> None:
         def write(path: str) -> None:
             try:
-                n = fn(path)
-            except (RigInputError, OSError) as exc:
+                job = make_job(path)
+            except RigInputError as exc:
                 self.window.show_error("Could not export", str(exc))
                 return
-            self.window.show_status(f"Exported {n} frames to {path}", 5000)
+            self.window.run_in_background(f"{title}…", job,
+                                          lambda n: self.window.show_status(f"Exported {n} frames to {path}", 5000),
+                                          lambda message: self.window.show_error("Could not export", message))
         if self.document.project is not None:
             self.window.save_dialog(title, f"{self.document.rig.name}_keys{suffix}", filt, write)
 
-    def export_csv_dialog(self) -> None:
-        self._export_dialog("Export Keyed Weights as CSV", ".csv", "CSV (*.csv)", self.export_csv)
+    def export_csv_dialog(self, per_region: bool = False) -> None:
+        self._export_dialog("Export Keyed Weights per Region as CSV" if per_region else "Export Keyed Weights as CSV",
+                            "_regions.csv" if per_region else ".csv", "CSV (*.csv)",
+                            lambda path: self._csv_job(path, per_region))
 
     def export_pc2_dialog(self) -> None:
-        self._export_dialog("Export Keyed Animation as PC2", ".pc2", "Point cache (*.pc2)", self.export_pc2)
+        self._export_dialog("Export Keyed Animation as PC2", ".pc2", "Point cache (*.pc2)", self._pc2_job)
+
+
+def _written(path, write):
+    """Run ``write()``; an unwritable file is one sentence naming it."""
+    try:
+        return write()
+    except OSError as exc:
+        raise RigInputError(f"{path}: could not be written ({exc.strerror or exc}).") from exc

@@ -135,3 +135,51 @@ def test_a_key_at_a_finer_level_is_kept_not_averaged_onto_the_first_keys_level(q
         return np.abs(doc.evaluate_state(kf.pose_at(t)) - doc.evaluate_state(state)).max() / size
     assert error(1.0, fine) < 1e-6          # the key just set is the pose the user made
     assert error(0.0, coarse) < 0.02        # the earlier key moved to the finer level keeps its surface
+
+
+# --- the keyed weights CSV ------------------------------------------------------------------------------------------
+def _save_dialog_answers(monkeypatch, path):
+    """The file dialog answers ``path`` (a native dialog cannot be driven by events)."""
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", staticmethod(lambda *a, **k: (str(path), "")))
+
+
+def _menu_action(w, text):
+    return next(a for a in w.actions() if a.text().replace("&", "") == text)
+
+
+def test_keyed_weights_csv_has_one_column_per_shape_fitting_each_frame(qtbot, tmp_path, monkeypatch):
+    """File ▸ Export Keyed Weights as CSV… of a marker-keyed (regional) animation writes the global rig's weights,
+    one column per shape, that reproduce each frame's surface best; ... per Region … keeps the per-region CSV.
+    The menu actions are triggered (their menus are not opened with the mouse) and run in the background."""
+    from model.weights_csv import read_weights_csv
+    w = make_window(qtbot, tmp_path)
+    w.segmentation.wait()
+    doc, kf = w.document, w.keyframes
+    rig = doc.rig
+    lvl = w.segmentation.segmentation.levels[0]
+    rng = np.random.default_rng(3)
+    # a regional pose close to a global one (each region a little off): its best global fit is near that one
+    base = rng.uniform(0.1, 0.6, rig.n_shapes)
+    from app.document import PoseState
+    W = np.clip(base + rng.normal(0, 0.05, (lvl.blend.shape[1], rig.n_shapes)), 0, 1)
+    doc.set_pose_state(PoseState(np.zeros(rig.n_shapes), W, lvl.blend, 0))
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_S)
+    out = tmp_path / "keys.csv"
+    _save_dialog_answers(monkeypatch, out)
+    _menu_action(w, "Export Keyed Weights as CSV…").trigger()
+    qtbot.waitUntil(out.exists, timeout=60000)     # written in the background (atomically)
+    frames, times, names, G = read_weights_csv(out)
+    assert names == rig.shape_names and G.shape == (len(kf.frame_times()), rig.n_shapes)
+    target = doc.evaluate_state(PoseState(np.zeros(rig.n_shapes), W, lvl.blend, 0), dtype=np.float64)
+    fit = doc.evaluate_state(PoseState(G[0]), dtype=np.float64)
+    mean = doc.evaluate_state(PoseState(W.mean(axis=0)), dtype=np.float64)
+    # the fitted global weights reproduce the surface better than the obvious average of the regions' rows
+    assert np.linalg.norm(fit - target) < 0.8 * np.linalg.norm(mean - target)
+    assert np.all((G >= 0) & (G <= 1))
+    per_region = tmp_path / "regions.csv"
+    _save_dialog_answers(monkeypatch, per_region)
+    _menu_action(w, "Export Keyed Weights per Region as CSV…").trigger()
+    qtbot.waitUntil(per_region.exists, timeout=60000)
+    _, _, names_r, Wr = read_weights_csv(per_region)
+    assert len(names_r) == lvl.blend.shape[1] * rig.n_shapes and "jawOpen@region0" in names_r
+    np.testing.assert_allclose(Wr[0], W.reshape(-1))
