@@ -8,8 +8,8 @@ import numpy as np
 
 from model.errors import RigInputError
 from model.rig import Rig
-from model.wording import count
 from model.segmentation import Segmentation, SegmentationCache, SegmentationSettings, segment_rig
+from model.wording import count
 from solvers.deformation_maps import vector_colors
 from widgets.scene import ColorMap
 

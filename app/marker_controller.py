@@ -213,7 +213,12 @@ class MarkerController(QtCore.QObject):
         self._load_markers()
 
     def _on_shapes_change(self) -> None:
-        self._on_rig_change()
+        """Shapes edited, same topology: the damping gains and the markers' shape rows change, the triangles stay."""
+        rig = self.document.rig
+        self._gains = damping_gains(point_mobility(rig.deltas)) if rig.n_shapes else np.zeros(rig.n_vertices)
+        self._region_max.clear()
+        self.drag = None
+        self._load_markers()
 
     def _load_markers(self) -> None:
         data = self.document.section(SECTION)

@@ -183,3 +183,121 @@ def test_keyed_weights_csv_has_one_column_per_shape_fitting_each_frame(qtbot, tm
     _, _, names_r, Wr = read_weights_csv(per_region)
     assert len(names_r) == lvl.blend.shape[1] * rig.n_shapes and "jawOpen@region0" in names_r
     np.testing.assert_allclose(Wr[0], W.reshape(-1))
+
+
+# --- freezes: control comes back at once, the work finishes in the background ---------------------------------------
+def _returns_fast(fn, limit=0.2) -> float:
+    import time
+    t0 = time.perf_counter()
+    fn()
+    took = time.perf_counter() - t0
+    assert took < limit, f"blocked the window {took:.2f} s"
+    return took
+
+
+def test_keyed_pc2_and_pose_obj_exports_return_at_once_on_ict(qtbot, tmp_path, monkeypatch, ict_dir):
+    """File ▸ Export Keyed Animation as PC2… (triggered; 8.3 s on ICT before) and Ctrl+E, Export Pose as OBJ
+    (a real key press; 1.6 s before): control comes back within 0.2 s, a busy bar says what runs, the files
+    arrive complete."""
+    from model.obj_io import read_obj
+    from model.pc2 import read_pc2
+    w = make_window(qtbot, tmp_path)
+    open_and_wait(qtbot, w, ict_dir)
+    rig, kf = w.document.rig, w.keyframes
+    kf.set_key(0.0)
+    pose = np.zeros(rig.n_shapes)
+    pose[rig.shape_index("jawOpen")] = 0.8
+    w.set_pose(pose, "jaw")
+    kf.set_key(2.0)
+    pc2 = tmp_path / "keys.pc2"
+    _save_dialog_answers(monkeypatch, pc2)
+    _returns_fast(_menu_action(w, "Export Keyed Animation as PC2…").trigger)
+    assert w.jobs_bar.isVisible() and "PC2" in w.jobs_bar.format()
+    obj = tmp_path / "pose.obj"
+    _save_dialog_answers(monkeypatch, obj)
+    _focus(qtbot, w.viewport.canvas)
+    _returns_fast(lambda: qtbot.keyClick(w.viewport.canvas, QtCore.Qt.Key_E, QtCore.Qt.ControlModifier))
+    qtbot.waitUntil(lambda: pc2.exists() and obj.exists() and not w.jobs_bar.isVisible(), timeout=120000)
+    cache, _, _ = read_pc2(pc2)
+    assert cache.shape == (49, rig.n_vertices, 3)
+    np.testing.assert_allclose(cache[-1], w.document.evaluate_state(kf.pose_at(2.0), dtype=np.float64), atol=1e-5)
+    assert np.allclose(read_obj(obj).vertices, w.document.surface(), atol=1e-4)
+
+
+def _select_region_in_viewport(qtbot, w, region):
+    """Shows the Segmentation view (keyboard) and picks ``region`` (the pick a click on it emits)."""
+    _key(qtbot, w.segmentation_panel.view, QtCore.Qt.Key_End)
+    lvl = w.segmentation.segmentation.levels[w.segmentation.level]
+    v = int(lvl.regions[region].core[0])
+    w.viewport.picked.emit(v, w.document.rig.neutral[v])
+    assert w.segmentation.highlight == region
+
+
+def test_nudge_falls_off_smoothly_over_the_overlap_rings(qtbot, tmp_path):
+    """Ctrl+Shift+= nudges the selected region out: the core moves by the step, each overlap ring less than the
+    one inside it (a smooth falloff, not a block with a cliff at its edge)."""
+    from solvers.laplacian import mesh_adjacency
+    w = make_window(qtbot, tmp_path)
+    w.segmentation.wait()
+    _key(qtbot, w.segmentation_panel.overlap, QtCore.Qt.Key_Up)     # 2 overlap rings
+    qtbot.waitUntil(lambda: w.segmentation.settings()["overlap_rings"] == 2 and not w.segmentation.runner.busy)
+    w.segmentation.wait()
+    lvl = w.segmentation.segmentation.levels[0]
+    rig = w.document.rig
+    A = mesh_adjacency(rig.n_vertices, rig.face_counts, rig.face_indices)
+    labels = lvl.core_labels()
+
+    def bordering(r):   # core vertices next to another region's core: where the partition of unity dips
+        core = lvl.regions[r].core
+        nb = labels[A[core].indices]
+        return int(((nb >= 0) & (nb != r)).sum())
+    region = max(range(lvl.n_regions), key=bordering)
+    assert bordering(region) > 0
+    _select_region_in_viewport(qtbot, w, region)
+    before = w.document.surface().copy()
+    step = w.segmentation_panel.nudge_amount.value()
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_Equal, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    moved = np.linalg.norm(w.document.surface() - before, axis=1)
+    reg = lvl.regions[region]
+    ring1 = np.setdiff1d(np.unique(A[reg.core].indices), reg.core)
+    ring2 = np.setdiff1d(np.unique(A[ring1].indices), np.union1d(reg.core, ring1))
+    ring1, ring2 = np.intersect1d(ring1, reg.vertices), np.intersect1d(ring2, reg.vertices)
+    assert ring1.size and ring2.size
+    # the whole core moves by the step (the region, not a block whose edge sags where a neighbour overlaps it)
+    np.testing.assert_allclose(moved[reg.core], step, rtol=1e-3)
+    # each ring moves by one amount (no stair steps along the edge), less than the ring inside it
+    assert np.ptp(moved[ring1]) < 1e-3 * step and np.ptp(moved[ring2]) < 1e-3 * step
+    assert step > moved[ring1].max() and moved[ring1].min() > moved[ring2].max() > 0
+    assert moved[ring2].max() < 0.35 * step
+
+
+def test_save_as_new_shape_names_it_sets_it_to_1_keeps_regions_and_returns_at_once(qtbot, tmp_path, monkeypatch):
+    """The Save as new shape… button (a real click): the suggested name is the region and its direction, the
+    shape comes in at 1 (the face stays as nudged), the regions and the selected region stay."""
+    suggested = []
+
+    def answer(parent, title, label, text=""):
+        suggested.append(text)
+        return text, True
+    monkeypatch.setattr(QtWidgets.QInputDialog, "getText", staticmethod(answer))
+    w = make_window(qtbot, tmp_path)
+    w.segmentation.wait()
+    seg = w.segmentation.segmentation
+    lvl = seg.levels[0]
+    region = max(range(lvl.n_regions), key=lambda r: lvl.regions[r].core.size)
+    _select_region_in_viewport(qtbot, w, region)
+    qtbot.mouseClick(w.segmentation_panel.nudge_buttons["up"], QtCore.Qt.LeftButton)
+    nudged = w.document.surface().copy()
+    n = w.document.rig.n_shapes
+    _returns_fast(lambda: qtbot.mouseClick(w.segmentation_panel.save_shape, QtCore.Qt.LeftButton))
+    qtbot.waitUntil(lambda: w.document.rig.n_shapes == n + 1, timeout=30000)
+    name = f"region{region}_up"
+    assert suggested == [name] and w.document.rig.shape_names[-1] == name
+    assert w.document.weights[-1] == 1.0 and w.shapes_panel.row(name).box.value() == 1.0
+    np.testing.assert_allclose(w.document.surface(), nudged, atol=1e-5)
+    QtWidgets.QApplication.processEvents()
+    assert w.segmentation.segmentation is seg and w.segmentation.highlight == region
+    assert w.segmentation_panel.selected_region() == region
+    # a second nudge of the same region and direction gets its own name
+    qtbot.mouseClick(w.segmentation_panel.nudge_buttons["up"], QtCore.Qt.LeftButton)
+    assert w.segmentation.nudge_shape_name() == f"{name}_2"
