@@ -10,6 +10,7 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from app import corrective_controller, mocap_controller
+from app import session_state
 from app import settings as app_settings
 from app.autosave import AutosaveController
 from app.background import JobQueue
@@ -81,6 +82,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.correctives = corrective_controller.install(self)
         self.mocap = mocap_controller.install(self)
         self.autosave = AutosaveController(self)
+        # a saved project's view, take and marker map come back once every controller has the new rig
+        self.document.rig_changed.connect(lambda: session_state.restore(self))
         self._arrange_docks()
         self._restore_layout()
 
@@ -388,7 +391,7 @@ class MainWindow(QtWidgets.QMainWindow):
         s = app_settings.settings()
         folder = QtWidgets.QFileDialog.getExistingDirectory(self, "Open Rig Folder", s.value("lastFolder", ""))
         if folder:
-            s.setValue("lastFolder", folder)
+            s.setValue("lastFolder", str(Path(folder).parent))   # beside it next time: not inside the rig
             self.open_path(folder)
 
     def open_file_dialog(self) -> None:
@@ -458,7 +461,10 @@ class MainWindow(QtWidgets.QMainWindow):
         if self.document.project is None:
             return False
         s = app_settings.settings()
-        start = str(Path(s.value("lastFolder", "")) / f"{self.document.rig.name}.bsproj")
+        # the project's own folder, else the last folder a project was saved in or files were opened from
+        folder = self.document.path.parent if self.document.path else Path(s.value("lastProjectFolder", "") or
+                                                                            s.value("lastFolder", ""))
+        start = str(folder / (self.document.path.name if self.document.path else f"{self.document.rig.name}.bsproj"))
         path, _ = QtWidgets.QFileDialog.getSaveFileName(self, "Save Project", start, "Projects (*.bsproj)")
         if not path:
             return False
@@ -467,12 +473,14 @@ class MainWindow(QtWidgets.QMainWindow):
         return self.save_to(path)
 
     def save_to(self, path: str | Path) -> bool:
+        session_state.store(self)   # the view, the take and the marker map come back with the project
         try:
             self.document.save(path)
         except OSError as exc:
             self.show_error("Could not save", f"{path}: could not be written ({exc.strerror or exc}).")
             return False
         app_settings.add_recent_file(str(path))
+        app_settings.settings().setValue("lastProjectFolder", str(Path(path).parent))
         self._rebuild_recent_menu()
         self.show_status(f"Saved {path}")
         return True

@@ -181,6 +181,17 @@ class MocapController(QtCore.QObject):
         self._describe_map(mm)
         return True
 
+    def use_map(self, marker_map) -> bool:
+        """Use a marker map already read (a saved project's); on failure keep what was loaded and say why."""
+        try:
+            self.workspace.set_map(marker_map)
+        except RigInputError as exc:
+            self._error("Could not use the marker map", str(exc))
+            return False
+        self._drop_solution()
+        self._describe_map(marker_map)
+        return True
+
     def _describe_map(self, mm) -> None:
         name = Path(mm.source).name if mm.source else "automatic map"
         self.panel.map_label.setText(f"{name}: {len(mm.labels)} markers on the rig ({mm.rig_units})")

@@ -173,6 +173,14 @@ class SegmentationController(QtCore.QObject):
         self.shape_map = k
         self.refresh_view()
 
+    def set_level(self, level: int) -> None:
+        """Show hierarchy level ``level`` (clamped to the segmentation's levels when it is ready)."""
+        if self.segmentation is None:
+            self.level = level      # taken when the segmentation in progress arrives
+            return
+        self.panel.set_levels([lvl.n_regions for lvl in self.segmentation.levels], level)
+        self._on_level_change(self.panel.level.value())
+
     def _on_level_change(self, level: int) -> None:
         self.level = level
         self.highlight = None

@@ -2,6 +2,8 @@
 event is impractical (file dialogs), through the public method the dialog calls: each test failed before its fix."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from PySide6 import QtCore, QtWidgets
@@ -301,3 +303,62 @@ def test_save_as_new_shape_names_it_sets_it_to_1_keeps_regions_and_returns_at_on
     # a second nudge of the same region and direction gets its own name
     qtbot.mouseClick(w.segmentation_panel.nudge_buttons["up"], QtCore.Qt.LeftButton)
     assert w.segmentation.nudge_shape_name() == f"{name}_2"
+
+
+# --- saved projects bring back the view, the take and the marker map; Save As starts beside, not inside -------------
+def test_a_saved_project_brings_back_view_level_take_and_map(qtbot, tmp_path, monkeypatch, ict_dir, take_dir):
+    """Ctrl+S saves (the dialog answers the path); reopening the project restores the Segmentation view at its
+    level, the take and the marker map. The take is loaded with ``load_take``/``load_map`` (what their dialogs call)."""
+    w = make_window(qtbot, tmp_path)
+    open_and_wait(qtbot, w, ict_dir)
+    w.segmentation.wait()
+    mc = w.mocap
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    _key(qtbot, w.segmentation_panel.view, QtCore.Qt.Key_End)
+    _key(qtbot, w.segmentation_panel.level, QtCore.Qt.Key_Right)
+    assert w.segmentation.view == "segmentation" and w.segmentation.level == 1
+    project = tmp_path / "projects" / "face.bsproj"
+    project.parent.mkdir()
+    _save_dialog_answers(monkeypatch, project)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_S, QtCore.Qt.ControlModifier)
+    assert project.exists()
+    w.open_sample()                                          # something else, in Shaded view at level 0
+    _key(qtbot, w.segmentation_panel.view, QtCore.Qt.Key_Home)
+    w.segmentation.wait()
+    _key(qtbot, w.segmentation_panel.level, QtCore.Qt.Key_Home)
+    assert w.segmentation.view == "shaded" and w.segmentation.level == 0
+    open_and_wait(qtbot, w, project)
+    w.segmentation.wait()
+    QtWidgets.QApplication.processEvents()
+    assert w.segmentation_panel.view.currentData() == "segmentation" and w.segmentation.view == "segmentation"
+    assert w.segmentation.level == 1 and w.segmentation_panel.level.value() == 1
+    assert w.viewport.colormap is not None and w.viewport.colormap.title.startswith("level 1 of")
+    assert mc.workspace.take_path == take_dir / "take.c3d" and mc.take.n_frames == 358
+    assert mc.marker_map is not None and len(mc.marker_map.labels) == 60
+    assert "60 markers" in mc.panel.map_label.text()
+
+
+def test_save_as_starts_beside_the_rig_folder_then_in_the_projects_folder(qtbot, tmp_path, monkeypatch, ict_dir):
+    """Ctrl+O and Ctrl+Shift+S with real keys; the native dialogs answer through monkeypatched QFileDialog calls,
+    which record the folder each one starts in."""
+    w = make_window(qtbot, tmp_path)
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getExistingDirectory", staticmethod(lambda *a, **k: str(ict_dir)))
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_O, QtCore.Qt.ControlModifier)
+    qtbot.waitUntil(lambda: not w.is_loading and w.document.rig.n_vertices == 26719, timeout=60000)
+    starts = []
+    project = tmp_path / "projects" / "face.bsproj"
+    project.parent.mkdir()
+
+    def save_dialog(parent, title, start, *a, **k):
+        starts.append(Path(start))
+        return str(project), ""
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", staticmethod(save_dialog))
+    shift_s = QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_S, shift_s)
+    assert project.exists()
+    assert starts[0].parent != ict_dir and starts[0].parent == ict_dir.parent and starts[0].suffix == ".bsproj"
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_S, shift_s)
+    assert starts[1] == project                              # the project's own folder and name
+    w.open_sample()
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_S, shift_s)
+    assert starts[2].parent == project.parent                # the last folder a project went to
