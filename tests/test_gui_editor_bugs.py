@@ -362,3 +362,38 @@ def test_save_as_starts_beside_the_rig_folder_then_in_the_projects_folder(qtbot,
     w.open_sample()
     _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_S, shift_s)
     assert starts[2].parent == project.parent                # the last folder a project went to
+
+
+# --- the Mocap panel ------------------------------------------------------------------------------------------------
+def test_mocap_panel_counts_the_takes_frames_says_the_next_step_and_keeps_solve_still(qtbot, tmp_path, ict_dir,
+                                                                                       take_dir):
+    """The take and map are loaded with ``load_take``/``load_map`` (what their file dialogs call); Solve is clicked."""
+    w = make_window(qtbot, tmp_path, size=(1400, 1000))
+    mc = w.mocap
+    open_and_wait(qtbot, w, ict_dir)
+    mc.dock.show()
+    mc.dock.raise_()
+    QtWidgets.QApplication.processEvents()
+    button = mc.panel.solve_button
+
+    def where():
+        return button.mapTo(mc.panel, QtCore.QPoint(0, 0))
+    before = where()
+    assert mc.load_take(take_dir / "take.c3d")
+    QtWidgets.QApplication.processEvents()
+    assert where() == before                       # the take's description did not push Solve down
+    assert "marker map" in mc.panel.status_label.text()
+    assert mc.load_map(take_dir / "marker_map.json")
+    QtWidgets.QApplication.processEvents()
+    assert where() == before
+    assert "Load or build" not in mc.panel.status_label.text() and "Solve" in mc.panel.status_label.text()
+    labels = []
+    with qtbot.waitSignal(mc.solved, timeout=180000):
+        qtbot.mouseClick(button, QtCore.Qt.LeftButton)
+        timer = QtCore.QTimer()
+        timer.timeout.connect(lambda: labels.append(mc._progress.labelText()) if mc._progress else None)
+        timer.start(20)
+    timer.stop()
+    frames = [t for t in labels if "frame" in t]
+    assert frames and all("/358" in t for t in frames), labels[-3:]
+    assert not any("/716" in t for t in labels)
