@@ -82,6 +82,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.correctives = corrective_controller.install(self)
         self.mocap = mocap_controller.install(self)
         self.autosave = AutosaveController(self)
+        # one viewport tool at a time: sculpting turns marker mode off, marker mode (M) stops sculpting
+        self.correctives.sculpting_changed.connect(lambda on: self.markers.mode_action.setChecked(False) if on else None)
+        self.markers.mode_action.toggled.connect(
+            lambda on: self.correctives.stop_sculpting() if on and self.correctives.sculpting else None)
         # a saved project's view, take and marker map come back once every controller has the new rig
         self.document.rig_changed.connect(lambda: session_state.restore(self))
         self._arrange_docks()

@@ -397,3 +397,23 @@ def test_mocap_panel_counts_the_takes_frames_says_the_next_step_and_keeps_solve_
     frames = [t for t in labels if "frame" in t]
     assert frames and all("/358" in t for t in frames), labels[-3:]
     assert not any("/716" in t for t in labels)
+
+
+# --- marker mode and sculpting ----------------------------------------------------------------------------------------
+def test_sculpting_turns_marker_mode_off_and_m_stops_sculpting(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    rig = w.document.rig
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_M)
+    assert w.markers.mode and w.viewport.has_tool(w.markers.tool)
+    pose = np.zeros(rig.n_shapes)
+    pose[[rig.shape_index("browInnerUp_L"), rig.shape_index("browInnerUp_R")]] = 1.0
+    w.set_pose(pose, "brows")
+    w.correctives.dock.show()
+    w.correctives.dock.raise_()
+    QtWidgets.QApplication.processEvents()
+    qtbot.mouseClick(w.correctives.panel.new_button, QtCore.Qt.LeftButton)
+    assert w.correctives.sculpting
+    assert not w.markers.mode and not w.markers.mode_action.isChecked()
+    assert not w.viewport.has_tool(w.markers.tool)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_M)       # back to markers: sculpting stops
+    assert w.markers.mode and not w.correctives.sculpting
