@@ -417,3 +417,52 @@ def test_sculpting_turns_marker_mode_off_and_m_stops_sculpting(qtbot, tmp_path):
     assert not w.viewport.has_tool(w.markers.tool)
     _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_M)       # back to markers: sculpting stops
     assert w.markers.mode and not w.correctives.sculpting
+
+
+# --- the Correctives panel fits its dock ----------------------------------------------------------------------------
+def _fully_visible(widget) -> bool:
+    return widget.isVisible() and widget.visibleRegion().boundingRect() == widget.rect()
+
+
+def test_correctives_panel_fits_its_dock_on_ict(qtbot, tmp_path, ict_dir):
+    """At the default 1400x900 on ICT: New corrective (a click) shows Save corrective without scrolling, the
+    table's columns fit (no horizontal scroll bar, every header label whole), and after a sculpt stroke (real
+    mouse events on the face) and a click on Save corrective the new row is in view."""
+    from tests.gui_helpers import mouse
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    c, panel = w.correctives, w.correctives.panel
+    for pair in (("browInnerUp_L", "browInnerUp_R"), ("mouthSmile_L", "eyeBlink_L"), ("jawOpen", "mouthFunnel"),
+                 ("cheekPuff_L", "cheekPuff_R"), ("mouthSmile_R", "eyeBlink_R")):
+        panel.set_ticked(pair)
+        qtbot.mouseClick(panel.new_button, QtCore.Qt.LeftButton)
+        assert c.sculpting
+        QtWidgets.QApplication.processEvents()
+        qtbot.wait(50)
+        assert _fully_visible(panel.save_button)
+        canvas = w.viewport.canvas
+        centre = QtCore.QPoint(canvas.width() // 2, canvas.height() // 2)
+        mouse(canvas, "press", centre)
+        for k in range(1, 6):
+            mouse(canvas, "move", centre + QtCore.QPoint(0, -6 * k))
+        mouse(canvas, "release", centre + QtCore.QPoint(0, -30))
+        assert w.document.edit_offset is not None
+        names = {k.name for k in w.document.rig.correctives}
+        qtbot.mouseClick(panel.save_button, QtCore.Qt.LeftButton)
+        QtWidgets.QApplication.processEvents()
+        qtbot.wait(50)
+        (name,) = {k.name for k in w.document.rig.correctives} - names
+        table = panel.table
+        item = next(table.topLevelItem(i) for i in range(table.topLevelItemCount())
+                    if table.topLevelItem(i).text(0) == name)
+        assert table.viewport().rect().contains(table.visualItemRect(item)), name     # the new row in view
+        assert table.visibleRegion().boundingRect().intersects(table.viewport().geometry())
+    header = table.header()
+    assert not table.horizontalScrollBar().isVisible()
+    assert sum(header.sectionSize(i) for i in range(header.count())) <= table.viewport().width()
+    fm = header.fontMetrics()
+    for i in range(header.count()):
+        assert header.sectionSize(i) >= fm.horizontalAdvance(table.headerItem().text(i)), table.headerItem().text(i)
+    for i in range(table.topLevelItemCount()):                # every rule label whole
+        text = table.topLevelItem(i).text(2)
+        assert header.sectionSize(2) >= fm.horizontalAdvance(text), text
