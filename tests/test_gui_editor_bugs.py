@@ -466,3 +466,29 @@ def test_correctives_panel_fits_its_dock_on_ict(qtbot, tmp_path, ict_dir):
     for i in range(table.topLevelItemCount()):                # every rule label whole
         text = table.topLevelItem(i).text(2)
         assert header.sectionSize(2) >= fm.horizontalAdvance(text), text
+
+
+def test_marker_drag_release_returns_at_once_on_ict(qtbot, tmp_path, ict_dir):
+    """A marker dragged with the mouse (M, press on the marker, moves, release): the release (1.4 s on ICT when
+    reported) returns within 0.2 s and leaves one undo step."""
+    from tests.gui_helpers import mouse
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    w.segmentation.wait()
+    c, rig = w.markers, w.document.rig
+    lvl = w.segmentation.segmentation.levels[0]
+    for r in range(6):
+        assert c.add_marker_at(int(lvl.regions[r].core[len(lvl.regions[r].core) // 2]))
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_M)
+    assert c.mode
+    w.redraw_now()
+    d = w.viewport.world_to_display(c.marker_positions()[:1])[0]
+    at = w.viewport.display_to_qt(d[0], d[1]).toPoint()
+    steps = w.document.undo_stack.count()
+    canvas = w.viewport.canvas
+    mouse(canvas, "press", at)
+    assert c.drag is not None
+    for k in range(1, 6):
+        mouse(canvas, "move", at + QtCore.QPoint(3 * k, -4 * k))
+    _returns_fast(lambda: mouse(canvas, "release", at + QtCore.QPoint(15, -20)))
+    assert c.drag is None and w.document.undo_stack.count() == steps + 1
