@@ -22,6 +22,7 @@ from app.marker_commands import SetMarkersCommand, SetPoseCommand
 from model.correctives import solver_correctives
 from model.errors import RigInputError
 from model.markers import Marker, MarkerSet
+from model.wording import count
 from solvers.correctives import linearised_correctives
 from solvers.damping import damping_gains, point_mobility
 from solvers.regional_solve import RegionalSolver, shape_region_max
@@ -212,7 +213,12 @@ class MarkerController(QtCore.QObject):
         self._load_markers()
 
     def _on_shapes_change(self) -> None:
-        self._on_rig_change()
+        """Shapes edited, same topology: the damping gains and the markers' shape rows change, the triangles stay."""
+        rig = self.document.rig
+        self._gains = damping_gains(point_mobility(rig.deltas)) if rig.n_shapes else np.zeros(rig.n_vertices)
+        self._region_max.clear()
+        self.drag = None
+        self._load_markers()
 
     def _load_markers(self) -> None:
         data = self.document.section(SECTION)
@@ -242,7 +248,7 @@ class MarkerController(QtCore.QObject):
         self.sync_edit_region()
 
     def _on_level_change(self, level: int) -> None:
-        self.message(f"Drags solve the {self._level_obj(level).n_regions} regions of level {level}."
+        self.message(f"Drags solve the {count(self._level_obj(level).n_regions, 'region')} of level {level}."
                      if self._level_obj(level) is not None else "Drags solve one global pose.", 4000)
 
     def _on_lam_reg_change(self, value: float) -> None:

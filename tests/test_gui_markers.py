@@ -322,7 +322,7 @@ def test_keys_interpolate_play_save_and_export(qtbot, tmp_path, geometry, nose_t
     assert not k.playing
     # Export.
     csv_path, pc2_path = tmp_path / "keys.csv", tmp_path / "keys.pc2"
-    n = k.export_csv(csv_path)
+    n = k.export_csv(csv_path, per_region=True)
     assert n == int(round(k.duration * k.fps)) + 1
     frames, times, names, Wcsv = read_weights_csv(csv_path)
     assert len(frames) == n and "jawOpen@region0" in names and "jawOpen" in names

@@ -42,6 +42,10 @@ class MocapPanel(QtWidgets.QWidget):
         self.take_label.setWordWrap(True)
         self.map_label = QtWidgets.QLabel("no marker map")
         self.map_label.setWordWrap(True)
+        for label, lines in ((self.take_label, 3), (self.map_label, 2)):
+            # a fixed height: a long take description must not push the Solve button from under the pointer
+            label.setFixedHeight(label.fontMetrics().lineSpacing() * lines + 4)
+            label.setAlignment(QtCore.Qt.AlignLeft | QtCore.Qt.AlignTop)
         fl.addWidget(self.take_label, 1, 0, 1, 3)
         fl.addWidget(self.map_label, 2, 0, 1, 3)
         lay.addWidget(files)
