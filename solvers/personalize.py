@@ -54,7 +54,7 @@ from .weight_solve import WeightSolver
 
 LAM_R = 0.1          # Ma et al. 2016, §3.2: deformation-gradient regulariser
 LAM_D = 0.05         # Ma et al. 2016, §3.2: closeness to the template deltas
-LAM_S = 0.0          # Ma et al. 2016, Eq. 3: sparsity (Σw)², relative to a shape's mean squared norm
+LAM_S = 0.01         # Ma et al. 2016, Eq. 3: sparsity (Σw)², relative to a shape's mean squared norm (measured)
 ITERATIONS = 3       # alternations of (a) weights and (b) deltas
 MIN_AREA = 1e-12     # relative to the mean triangle area: below it a triangle has no gradient
 
@@ -211,6 +211,8 @@ class _DeltaSystem:
         """CG on M X = rhs (n, 3) from x0, preconditioned by the exact per-vertex blocks of the data term
         plus the regulariser's diagonal (``_vertex_blocks``): the data term couples the shapes at a vertex
         strongly (shapes used together in the poses), the regulariser couples neighbouring vertices weakly."""
+        if self.n == 0:
+            return x0.copy(), 0
         obs_s = obs[self.vs].astype(np.float64)             # observed (1) or not (0), per Vs vertex
         reg = self.reg
         extra = self.diag_extra
@@ -275,12 +277,13 @@ def _supports(deltas: np.ndarray) -> list[np.ndarray]:
 
 
 def solve_pose_weights(neutral: np.ndarray, deltas: np.ndarray, poses: np.ndarray, *, lam_sparsity: float = LAM_S,
-                       rigid: bool = True, iterations: int = 30, observed: np.ndarray | None = None,
-                       weights0: np.ndarray | None = None):
+                       rigid: bool = True, iterations: int = 10, observed: np.ndarray | None = None,
+                       weights0: np.ndarray | None = None, head0: tuple | None = None):
     """Step (a): per pose the weights in [0, 1] (Ma Eq. 3 with its sparsity term, λ_s relative to a shape's
     mean squared norm) and, with ``rigid``, R_i, t_i by Kabsch (Umeyama 1991, Eq. 40–41) between the
     model and the scan, alternated with the weights until the head pose settles (at most ``iterations``
-    times; Ma §3.1). Returns (W (N, K), R (N, 3, 3), t (N, 3)) with ``P_i ≈ R_i x(w_i) + t_i``."""
+    times; Ma §3.1), started from ``weights0`` and ``head0`` = (R, t) if given. Returns (W (N, K),
+    R (N, 3, 3), t (N, 3)) with ``P_i ≈ R_i x(w_i) + t_i``."""
     K, V = deltas.shape[0], neutral.shape[0]
     obs = np.ones(V, bool) if observed is None else observed
     moving = np.flatnonzero((np.abs(deltas).max(axis=(0, 2)) > 0) & obs)
@@ -288,17 +291,20 @@ def solve_pose_weights(neutral: np.ndarray, deltas: np.ndarray, poses: np.ndarra
     solver = WeightSolver(B, lam_sparsity=lam_sparsity * float(np.einsum("ij,ij->", B, B)) / max(K, 1))
     N = poses.shape[0]
     W = np.zeros((N, K)) if weights0 is None else weights0.copy()
-    R = np.repeat(np.eye(3)[None], N, axis=0)
-    t = np.zeros((N, 3))
+    R = np.repeat(np.eye(3)[None], N, axis=0) if head0 is None else head0[0].copy()
+    t = np.zeros((N, 3)) if head0 is None else head0[1].copy()
     oi = np.flatnonzero(obs)
     size = max(float(np.ptp(neutral[oi], axis=0).max()), 1e-300) if oi.size else 1.0
+    if rigid:
+        rest_o = neutral[oi]
+        flat_o = deltas[:, oi].reshape(K, -1)
     for i in range(N):
         P = poses[i]
         for _ in range(iterations if rigid else 1):
             if rigid:
-                x = neutral[oi] + np.tensordot(W[i], deltas[:, oi], 1)
+                x = rest_o + (W[i] @ flat_o).reshape(-1, 3)
                 R_new, t_new = kabsch(x, P[oi])
-                settled = np.abs(R_new - R[i]).max() < 1e-12 and np.abs(t_new - t[i]).max() < 1e-12 * size
+                settled = np.abs(R_new - R[i]).max() < 1e-7 and np.abs(t_new - t[i]).max() < 1e-7 * size
                 R[i], t[i] = R_new, t_new
             local = (P[moving] - t[i]) @ R[i] - neutral[moving]
             W[i] = solver.solve(local.reshape(-1), w_start=W[i])
@@ -322,7 +328,7 @@ def personalize(template_neutral: np.ndarray, template_deltas: np.ndarray, trian
                 poses: np.ndarray, neutral: np.ndarray | None = None, *, reestimate_neutral: bool | None = None,
                 observed: np.ndarray | None = None, lam_r: float = LAM_R, lam_d: float = LAM_D,
                 lam_sparsity: float = LAM_S, iterations: int = ITERATIONS, rigid: bool = True,
-                mean_data: bool = True, gauge: bool = True, weights: np.ndarray | None = None,
+                mean_data: bool = True, gauge: bool = False, weights: np.ndarray | None = None,
                 tol: float = 1e-5, maxiter: int = 300) -> PersonalizeResult:
     """Ma et al. 2016 §3 personalisation (module docstring). poses (N, V, 3) in actor space; ``neutral``
     the actor's neutral (a scan), or None to start from the template's and re-estimate it (the row of
@@ -395,7 +401,7 @@ def personalize(template_neutral: np.ndarray, template_deltas: np.ndarray, trian
         if N:
             if weights is None:
                 W, R, t = solve_pose_weights(nb, D, P, lam_sparsity=lam_sparsity, rigid=rigid, observed=obs,
-                                             weights0=W)
+                                             weights0=W, head0=(R, t))
             result.fit_rms.append(fit_rms(D, nb, W, R, t))
             Wn = np.hstack([W, np.ones((N, 1))]) if reestimate_neutral else W
             # head-stabilised scans minus the starting neutral, over the vertices the unknowns live on
@@ -413,7 +419,8 @@ def personalize(template_neutral: np.ndarray, template_deltas: np.ndarray, trian
         result.cg_iterations.append(its)
         D, nb = unpack(x)
     if N and weights is None:
-        W, R, t = solve_pose_weights(nb, D, P, lam_sparsity=lam_sparsity, rigid=rigid, observed=obs, weights0=W)
+        W, R, t = solve_pose_weights(nb, D, P, lam_sparsity=lam_sparsity, rigid=rigid, observed=obs, weights0=W,
+                                     head0=(R, t))
     if N and weights is None and gauge:
         D, W = template_gauge(D, Dt, W)
     if N:
