@@ -8,8 +8,9 @@ deformation transfer as the shapes, with no data: they keep their drivers, rule 
 * Scans (the main path): the neutral is the neutral scan (or, without one, re-estimated from the pose
   scans by the row of ones of Ma's W); the deltas are refined by ``solvers.personalize.personalize``.
 * A marker take alone: the template neutral is aligned to the actor's neutral markers (the mean of the
-  calibration frames) rigidly (Kabsch: no scale, the actor's size is identity) and warped onto them by a
-  Gaussian RBF (``solvers.rbf``); the deltas are the template's transferred onto that neutral (the
+  calibration frames): scaled to the actor's size by the similarity (Umeyama 1991) between the rig's
+  marker points and the actor's, then warped onto the markers by a Gaussian RBF (``solvers.rbf``) in the
+  rig's frame; the deltas are the template's transferred onto that neutral (the
   deformation-gradient and closeness terms of Ma's energy, no data term).
 
 ``shape_change_report`` measures how far each shape moved from the template (for the CLI's report and the
@@ -70,7 +71,7 @@ def read_scan(scan, rig: Rig, label: str = "scan") -> np.ndarray:
 def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tuple[np.ndarray, dict]:
     """The template neutral rigidly aligned and RBF-warped onto the actor's neutral markers."""
     from solvers.rbf import RBFResidual
-    from solvers.rigid import kabsch
+    from solvers.rigid import umeyama
 
     from .marker_map import auto_marker_map, calibration_cloud
 
@@ -81,12 +82,13 @@ def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tupl
     binding = marker_map.binding(rig, labels)
     cloud = calibration_cloud(take, calibration_frames, rig.units)[cols]
     rest = binding @ rig.neutral
-    R, t = kabsch(cloud, rest)                       # actor's markers into the rig's frame, size kept
-    aligned = cloud @ R.T + t
-    rbf = RBFResidual(rest, points=rig.neutral, kernel="gaussian", scale=RBF_SCALE * _cm(rig), lam=RBF_LAMBDA)
-    neutral = rig.neutral + rbf.evaluate(rbf.coefficients(aligned - rest))
+    s, R, t = umeyama(rest, cloud, scale=True)       # cloud ≈ s R rest + t
+    aligned = (cloud - t) @ R                        # the actor's markers in the rig's frame, size kept
+    base = s * rig.neutral                           # the template at the actor's size (the whole head)
+    rbf = RBFResidual(s * rest, points=base, kernel="gaussian", scale=RBF_SCALE * s * _cm(rig), lam=RBF_LAMBDA)
+    neutral = base + rbf.evaluate(rbf.coefficients(aligned - s * rest))
     fit = float(np.sqrt(((binding @ neutral - aligned) ** 2).sum(axis=1).mean()))
-    return neutral, {"markers": len(labels), "marker_fit": fit}
+    return neutral, {"markers": len(labels), "marker_fit": fit, "scale": float(s)}
 
 
 def _cm(rig: Rig) -> float:
