@@ -6,7 +6,6 @@ geometry of a scaled and rotated face); the data test checks the issue's figure 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
