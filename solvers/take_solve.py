@@ -243,6 +243,8 @@ class TakeSolution:
     motion_explained_per_marker: np.ndarray | None = None
     neutral_frames: tuple[int, int] | None = None
     neutral_reason: dict | None = None
+    left_out: dict | None = None          # take markers not solved: label -> why (set by the caller)
+    head_labels: list | None = None       # unbound stable markers used for the head motion only
     labels: list | None = None
     solve_seconds: float = 0.0
     solver: "TakeSolver | None" = field(default=None, repr=False)
@@ -560,13 +562,14 @@ class TakeSolver:
         if H.shape[:1] != (F,) or H.ndim != 3:
             raise ValueError(f"The head markers must be {F} frames x markers x 3, not {H.shape}.")
         stable = np.ones(M, dtype=bool) if stable is None else np.asarray(stable, dtype=bool)
+        neutral_frames, why = None, None
+        if calibrate:   # found on the raw markers: the stillness score is measured against their noise
+            neutral_frames, why = self.neutral_range(X, neutral, calibration_frames)
         if self.marker_smoothing and F > 1:  # optical noise is white in time: a light low-pass
             X = _smooth_in_time(X, self.marker_smoothing)
             if H.shape[1]:
                 H = _smooth_in_time(H, self.marker_smoothing)
-        neutral_frames, why = None, None
         if calibrate:
-            neutral_frames, why = self.neutral_range(X, neutral, calibration_frames)
             cal = self.calibrate(X, neutral_frames)
         else:
             cal = np.eye(4)
