@@ -620,7 +620,7 @@ class TakeSolver:
         Zr[~solved] = np.nan
         misfit = Zr - self.to_rig(fit)
         motion = Zr - self.rest
-        with np.errstate(invalid="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore"):
             r2 = np.einsum("fmc,fmc->fm", misfit, misfit)
             d2 = np.einsum("fmc,fmc->fm", motion, motion)
             explained = 1.0 - np.nansum(r2) / np.nansum(d2) if np.nansum(d2) > 0 else float("nan")

