@@ -31,7 +31,7 @@ from .takes import MarkerTake, WeightTake
 SOLVE_DEFAULTS = {"regional": False, "threshold": 0.75, "level": 2}
 
 # The solver options a settings dict may carry (the rest of it says how the solve is set up).
-SOLVER_OPTIONS = ("residual", "lam_sparsity", "lam_temporal", "rbf_scale", "rbf_lambda", "retarget")
+SOLVER_OPTIONS = ("residual", "lam_sparsity", "lam_temporal", "rbf_scale", "rbf_lambda", "retarget", "lam_antagonist")
 
 # A marker missing in more than this fraction of the frames is left out of the solve with a warning.
 MOSTLY_MISSING = 0.5
@@ -142,6 +142,12 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
             left_out.setdefault(lab, f"missing in {100 * missing[i]:.0f}% of the frames" if missing[i] > MOSTLY_MISSING
                                 else "not in the marker map")
     binding = marker_map.binding(rig, labels)
+    if options.get("lam_antagonist", DEFAULTS["lam_antagonist"]) and options.get("antagonists") is None:
+        from .antagonists import rig_antagonists
+        options["antagonists"] = rig_antagonists(rig)
+    if options.get("antagonists") is not None:
+        from .antagonists import pair_indices
+        options["antagonists"] = pair_indices(rig, options["antagonists"])
     if evaluator is None or evaluator.dtype != np.float64:
         evaluator = PoseEvaluator(rig, dtype=np.float64)
     surface = partial(evaluator.pose, blend=options.get("blend"))

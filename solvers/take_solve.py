@@ -32,6 +32,7 @@ import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
 
+from .antagonists import pair_penalty
 from .correctives import linearised_correctives
 from .rbf import KERNELS, RBFResidual, phantom_points
 from .retarget import SmoothWarp, neutral_stretch
@@ -50,10 +51,15 @@ SHRINK = 30.0
 CORRECTIVE_STEPS = 6      # Gauss–Newton steps per weight solve on a rig with correctives (quadratic: 2–3 suffice)
 
 # Defaults chosen by measurement on the ICT Live Link take (see tests/benchmarks/test_bench_take_solve.py).
+# retarget 'scale' (the similarity's scale carries the motion) measured 0.067 weights RMS / 0.31 mm on the actor take
+# against 0.10 / 0.43 mm through the smooth warp's Jacobian ('jacobian'), whose per-marker maps the 60 markers do not
+# determine well (their local scale correlated 0.3 with the true one). lam_antagonist (rig units², per antagonist
+# pair w_i w_j, ALGORITHMS.md §13): 0 left up to 22 frames with both weights of a pair above 0.2; 0.15 none, and
+# the same-face take's dense RMS went from 0.2042 to 0.2025 mm (0.2 gave 0.2075, 0.3 gave 0.2216).
 DEFAULTS = dict(lam_sparsity=0.0, lam_temporal=1.0, iterations=3, two_pass=True, marker_smoothing=0.7,
                 residual="gaussian", rbf_scale=2.0, rbf_lambda=1.0, residual_smoothing=6.0, n_phantoms=48,
                 phantom_distance=2.0, calibration_frames=30, rigid_weighting=0.1, rigid_noise=0.05,
-                lam_region=0.1, retarget="scale", warp_scale=3.0, warp_lambda=0.1, lam_antagonist=0.0)
+                lam_region=0.1, retarget="scale", warp_scale=3.0, warp_lambda=0.1, lam_antagonist=0.15)
 
 
 def _mean_rigid(Ra: np.ndarray, ta: np.ndarray, Rb: np.ndarray, tb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -346,9 +352,7 @@ class TakeSolver:
         self.lower, self.upper = 0.0, 1.0
         # Antagonist pairs (ALGORITHMS.md §13): λ_a w_i w_j added to the QP for each pair (i, j).
         self.lam_antagonist = float(lam_antagonist)
-        self.pair_penalty = np.zeros((K, K))
-        for i, j in (antagonists if antagonists is not None else []):
-            self.pair_penalty[i, j] = self.pair_penalty[j, i] = 0.5 * self.lam_antagonist
+        self.pair_penalty = pair_penalty(antagonists if antagonists is not None else [], K, self.lam_antagonist)
         # Correctives: their activation rule and deltas, at the markers (C, 3M) and on the surface.
         self._activate, E, drivers = correctives if correctives is not None else (None, np.zeros((0, V, 3)), [])
         E = np.asarray(E, dtype=np.float64).reshape(-1, V, 3)
