@@ -56,8 +56,7 @@ def test_no_antagonist_pair_is_both_strongly_on(ict_rig, solution):
 
 def test_residual_improves_on_the_rig_fit(ict_rig, take_setup, solution):
     _, _, B, X, truth = take_setup
-    plain = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, residual="none", surface=solution.solver.surface
-                       ).solve(X, unit_factor=0.1)
+    plain = solve_take(ict_rig, take_setup[0], take_setup[1], residual="none")
     assert plain.coefficients is None
     assert dense_rms_mm(solution, truth) < dense_rms_mm(plain, truth)
     assert np.allclose(plain.weights, solution.weights)  # the residual does not change the weights
