@@ -197,3 +197,32 @@ def test_bad_calibration_input_is_one_sentence(ict_rig, actor, settings, words):
         ws.solve({"mode": "global", **settings})
     msg = str(err.value)
     assert words in msg and msg.count(". ") == 0 and msg.endswith("."), msg
+
+
+def test_a_mouth_corner_drag_on_ict_leaves_no_antagonist_pair_both_on(ict_rig):
+    """The issue's drag at level 3: one marker on the left mouth corner pulled 1.5 cm out and 1 cm up in six steps.
+    Without the exclusion the regional solve leaves cheekPuff_L and mouthStretch_L both above 0.2; with the rig's
+    antagonists, no pair, and the marker still reaches its target."""
+    import scipy.sparse as sp
+    from model.antagonists import pair_indices, rig_antagonists, strong_pairs
+    from model.segmentation import SegmentationSettings, segment_rig
+    from solvers.regional_solve import RegionalSolver, shape_region_max
+    rig = ict_rig
+    seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, SegmentationSettings())
+    regions = [r.vertices for r in seg.levels[3].regions]
+    corner = int(np.argmax(np.linalg.norm(rig.deltas[rig.shape_index("mouthSmile_L"), :9409], axis=1)))
+    S = sp.csr_matrix(([1.0], ([0], [corner])), shape=(1, rig.n_vertices))
+    A = np.stack([S @ rig.deltas[k] for k in range(rig.n_shapes)]).reshape(rig.n_shapes, -1).T
+    pairs = pair_indices(rig, rig_antagonists(rig))
+    region_max = shape_region_max(rig.deltas, regions)
+    found = {}
+    for name, ant in (("plain", None), ("antagonists", pairs)):
+        solver = RegionalSolver(regions, S, A, region_max=region_max, solve_background=True, lam_reg=1e-3,
+                                antagonists=ant)
+        W = np.zeros((len(regions) + 1, rig.n_shapes))
+        for step in range(1, 7):
+            b = np.array([1.5, 1.0, 0.0]) * step / 6
+            W = solver.solve(b, W)
+        found[name] = (strong_pairs(W, pairs), np.linalg.norm(A @ W[-1] - b))
+    assert found["plain"][0], "the drag no longer trades antagonists: the test lost its point"
+    assert found["antagonists"][0] == [] and found["antagonists"][1] < 0.01
