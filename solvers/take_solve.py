@@ -391,6 +391,8 @@ class TakeSolver:
         marker j at weights w sits at anchor_j + J_j Σ_k w_k d_kj (+ correctives). Rebuilds what depends on it."""
         K, M = self.K, self.M
         self.anchor = np.asarray(anchor, dtype=np.float64)
+        if jac is None and getattr(self, "jac", 0) is None:
+            return          # the model's displacements did not change: keep the cached QP factors (warm solves)
         self.jac = jac
         Dm = self._Dm_rig if jac is None else np.einsum("mab,kmb->kma", jac, self._Dm_rig)
         self.Dm = np.ascontiguousarray(Dm.reshape(K, 3 * M))  # w @ Dm -> (3M,)
