@@ -186,7 +186,9 @@ class MocapController(QtCore.QObject):
 
     def auto_map(self) -> bool:
         try:
-            rms = self.workspace.auto_map(self.panel.settings()["calibration_frames"])
+            st = self.panel.settings()
+            rms = self.workspace.auto_map(st["calibration_frames"], neutral_frames=st["neutral_frames"],
+                                          stable=st["stable"])
         except RigInputError as exc:
             self._error("Could not map markers", str(exc))
             return False

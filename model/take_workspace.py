@@ -312,10 +312,13 @@ class TakeWorkspace:
     def auto_map(self, calibration_frames: int = DEFAULTS["calibration_frames"], *, neutral_frames=None,
                  stable=None) -> float:
         """Map the take's markers onto the rig from its neutral frames (the first ``calibration_frames``, a range
-        or 'auto': ``parse_neutral_frames``); returns the fit RMS (rig units). Stable markers off the face (a head
-        band) and markers never seen in the neutral are not mapped."""
+        or 'auto': ``parse_neutral_frames``); returns the fit RMS (rig units). ``stable`` (``resolve_stable``) is
+        checked here so that a bad list is refused before any work; stable markers off the face (a head band) and
+        markers never seen in the neutral are not mapped."""
         if self.marker_take is None or self.rig is None:
             raise RigInputError("Load a marker take (and open a rig) before mapping its markers.")
+        if stable:
+            resolve_stable(self.take.labels, stable)
         take, n = self.take, max(1, int(calibration_frames))
         neutral = parse_neutral_frames(neutral_frames)
         frames: int | slice = n
