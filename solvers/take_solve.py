@@ -768,7 +768,16 @@ class TakeSolver:
         if qp is None:
             rows = np.repeat(valid, 3)
             A = self.A[rows]
-            H = A.T @ A + self.lam_sparsity + (self.lam_temporal + 1e-10) * np.eye(self.K) + self.pair_penalty
+            H = A.T @ A + self.lam_sparsity + (self.lam_temporal + 1e-10) * np.eye(self.K)
+            if self.lam_antagonist:
+                # λ_a w_i w_j is not convex by itself: the temporal term keeps H positive definite along a take;
+                # where it cannot (a one-frame keyframe, λ_t = 0), the penalty is left out of this solve
+                Hp = H + self.pair_penalty
+                try:
+                    la.cho_factor(Hp)
+                    H = Hp
+                except la.LinAlgError:
+                    pass
             # Aᵀ of the present rows, contiguous (one gemv a call), and None for all rows (no row selection)
             qp = self._qps[key] = (rows, None if rows.all() else np.ascontiguousarray(A.T),
                                    _CachedBoxQP(H, self.lower, self.upper))
