@@ -379,6 +379,14 @@ class MarkerController(QtCore.QObject):
             self._region_max[key] = hit
         return hit[1]
 
+    def _antagonists(self, rig) -> list[tuple[int, int]]:
+        """The rig's antagonist pairs (``model.antagonists``), found once per rig: a drag never leaves both on."""
+        from model.antagonists import pair_indices, rig_antagonists
+        hit = getattr(self, "_antagonist_cache", None)
+        if hit is None or hit[0] is not rig.deltas:
+            hit = self._antagonist_cache = (rig.deltas, pair_indices(rig, rig_antagonists(rig)))
+        return hit[1]
+
     def begin_drag(self, index: int) -> DragState:
         """Set up a drag of marker ``index``: the regional solver of the chosen level for the current markers,
         the pins (every marker where it is now) and the damping gain of the dragged marker."""
@@ -394,7 +402,7 @@ class MarkerController(QtCore.QObject):
         W0 = pose_at_level(old, blend)
         ms = self.markers
         solver = RegionalSolver(regions, ms.S, ms.delta_rows(rig.deltas), region_max=region_max,
-                                solve_background=True, lam_reg=self.lam_reg)
+                                solve_background=True, lam_reg=self.lam_reg, antagonists=self._antagonists(rig))
         if blend is not None and not (old.is_regional and same_blend(old.blend, blend)):
             doc.set_pose_state(PoseState(old.weights, W0, blend, level))  # same pose, now per region
         start = self.marker_positions()

@@ -219,7 +219,9 @@ class MocapController(QtCore.QObject):
 
     def auto_map(self) -> bool:
         try:
-            rms = self.workspace.auto_map(self.panel.settings()["calibration_frames"])
+            st = self.panel.settings()
+            rms = self.workspace.auto_map(st["calibration_frames"], neutral_frames=st["neutral_frames"],
+                                          stable=st["stable"])
         except RigInputError as exc:
             self._error("Could not map markers", str(exc))
             return False
@@ -327,7 +329,11 @@ class MocapController(QtCore.QObject):
         with_c = "" if not solution.solver.C else f" with the rig's {count(solution.solver.C, 'corrective')}"
         self.panel.set_status(f"Solved {solution.n_frames} frames{with_c} in {solution.solve_seconds:.1f} s "
                               f"({solution.frames_per_second:.0f} frames/s); marker RMS {np.nanmean(err):.2f} mm "
-                              f"mean, {np.nanmax(err):.2f} mm max.")
+                              f"mean, {np.nanmax(err):.2f} mm max; motion explained "
+                              f"{100 * solution.motion_explained:.1f}%" +
+                              (f"; neutral frames {solution.neutral_frames[0]}–{solution.neutral_frames[1]}"
+                               if solution.neutral_frames is not None else "") +
+                              (f"; left out {', '.join(solution.left_out)}" if solution.left_out else "") + ".")
         self._sync_panel()
         self.playback.set_length(solution.n_frames, self.rate)
         self.set_frame(0)
