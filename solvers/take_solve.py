@@ -92,7 +92,6 @@ def _neutral_mean(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def kabsch_batch(source: np.ndarray, target: np.ndarray, present: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Per frame the rigid (R, t) with target ≈ R source + t over the present points (Umeyama 1991 without scale)."""
-    F = source.shape[0]
     tgt = np.broadcast_to(np.nan_to_num(target), source.shape)
     _, R, t = umeyama(np.nan_to_num(source), tgt, present.astype(np.float64), scale=False)
     return R, t
