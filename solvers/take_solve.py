@@ -39,6 +39,7 @@ from .weight_solve import WeightSolver
 
 Progress = Optional[Callable[[int, int, str], None]]
 
+DENSE_BLOCK = 32          # frames per block of dense results (32 × 106k vertices × 12 bytes = 41 MB)
 CORRECTIVE_STEPS = 6      # Gauss–Newton steps per weight solve on a rig with correctives (quadratic: 2–3 suffice)
 
 # Defaults chosen by measurement on the ICT Live Link take (see tests/benchmarks/test_bench_take_solve.py).
@@ -230,9 +231,32 @@ class TakeSolution:
         return x
 
     def iter_dense(self) -> Iterator[np.ndarray]:
-        """Yield every frame's dense surface in order (e.g. for a PC2 writer)."""
-        for f in range(self.n_frames):
-            yield self.dense(f)
+        """Yield every frame's dense surface in order, (V, 3) float32 (e.g. for a PC2 writer): views into
+        ``dense_blocks``."""
+        for block in self.dense_blocks():
+            yield from block
+
+    def dense_blocks(self, frames: int = DENSE_BLOCK) -> Iterator[np.ndarray]:
+        """Yield the dense surfaces of every frame in order as (n, V, 3) float32 blocks of at most ``frames``
+        frames: with the solver's batch evaluator (``surface_many``, global solves) each block is two matrix
+        products, the pose W (n, K) · D (K, 3V) and the residual Φ (N, M+P) · C (M+P, 3n); otherwise frame by
+        frame. The block bounds the memory: n × V × 3 × 4 bytes."""
+        s = self.solver
+        F = self.n_frames
+        batch = s.surface_many is not None and self.region_weights is None
+        for start in range(0, F, max(1, int(frames))):
+            stop = min(F, start + max(1, int(frames)))
+            if not batch:
+                yield np.stack([self.dense(f) for f in range(start, stop)]).astype(np.float32)
+                continue
+            x = s.surface_many(self.weights[start:stop])
+            if self.coefficients is not None and s.rbf is not None:
+                C = self.coefficients[start:stop]                                    # (n, M+P, 3)
+                n, P = C.shape[0], C.shape[1]
+                E = s.rbf.eval_matrix_as(np.float32)                                 # (N, M+P)
+                r = E @ C.transpose(1, 0, 2).reshape(P, n * 3).astype(np.float32)   # (N, 3n)
+                x[:, s.residual_vertices] += r.reshape(-1, n, 3).transpose(1, 0, 2)
+            yield x
 
 
 class TakeSolver:
@@ -255,7 +279,9 @@ class TakeSolver:
 
     surface: the rig's pose evaluation as a callable, weights (K,) or region weights (R+1, K) -> a new (V, 3)
     float64 surface with the same correctives (``model.pose.PoseEvaluator.pose`` with the level's blend); the
-    dense frames and projections use it. Without it the solver fits the markers only.
+    dense frames and projections use it. Without it the solver fits the markers only. surface_many: the same
+    pose for many global weight vectors at once, (n, K) -> (n, V, 3) float32 (``PoseEvaluator.evaluate_many``):
+    ``TakeSolution.dense_blocks`` then computes all frames as matrix products.
     """
 
     def __init__(self, neutral: np.ndarray, deltas: np.ndarray, binding, *, mode: str = "box",
@@ -272,7 +298,8 @@ class TakeSolver:
                  rigid_weighting: float = DEFAULTS["rigid_weighting"],
                  rigid_noise: float = DEFAULTS["rigid_noise"],
                  lam_region: float = DEFAULTS["lam_region"], correctives=None,
-                 surface: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 surface: Callable[[np.ndarray], np.ndarray] | None = None,
+                 surface_many: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         if residual not in KERNELS:
             raise ValueError(f"Unknown residual '{residual}': use one of {', '.join(KERNELS)}.")
         self.neutral = np.asarray(neutral, dtype=np.float64)
@@ -300,6 +327,9 @@ class TakeSolver:
         self.mode, self.lam_sparsity, self.lam_temporal = mode, float(lam_sparsity), float(lam_temporal)
         self.lower, self.upper = 0.0, 1.0
         self._qps: dict[bytes, tuple] = {}
+        # The compiled sweep (numba, loaded here with the rig's preparation rather than inside the timed solve).
+        from . import take_kernel
+        self._kernel = take_kernel if take_kernel.available() else None
         self.weight_solver = WeightSolver(self.A, mode=mode, lam_sparsity=lam_sparsity, lam_temporal=lam_temporal)
         # Correctives: their activation rule and deltas, at the markers (C, 3M) and on the surface.
         self._activate, E, drivers = correctives if correctives is not None else (None, np.zeros((0, V, 3)), [])
@@ -312,6 +342,7 @@ class TakeSolver:
             np.zeros((0, 3 * M))
         # Dense pose: the rig's one pose evaluation, handed in (model.pose.PoseEvaluator.pose with the blend).
         self.surface = surface
+        self.surface_many = surface_many     # global weights (n, K) -> (n, V, 3) float32, the same pose (exports)
         # Regions.
         self.lam_region = float(lam_region)
         self.regions = None
@@ -482,6 +513,9 @@ class TakeSolver:
         Rs = np.zeros((F, 3, 3))
         ts = np.zeros((F, 3))
         solved = np.zeros(F, dtype=bool)
+        if self._kernel is not None and self.head_motion and self._activate is None and self.mode == "box":
+            self._pass_compiled(Y, np.asarray(order, dtype=np.int64), w, R, t, cancel, report, W, Rs, ts, solved)
+            return W, Rs, ts, solved
         rest, Dm = self.rest, self.Dm
         rw, rw0 = self.rigid_weighting ** 2, self.rigid_noise ** 2
         w_prev = None
@@ -518,6 +552,30 @@ class TakeSolver:
             if report is not None:
                 report(i)
         return W, Rs, ts, solved
+
+    def _pass_compiled(self, Y, order, w, R, t, cancel, report, W, Rs, ts, solved) -> None:
+        """``_pass`` in the compiled kernel (``solvers.take_kernel.solve_pass``, same QP and pivot rules),
+        run over chunks of frames so that ``cancel`` and ``report`` are heard between them. The QP's H per
+        missing-marker mask is the cached one of ``_qp_entry``."""
+        take_kernel = self._kernel
+        masks, mask_of = take_kernel.pass_masks(Y)
+        qps = [self._qp_entry(m)[2] for m in masks]
+        Hs = np.stack([q.H for q in qps])
+        tols = np.array([q.tol for q in qps])
+        w, R, t = np.array(w, dtype=np.float64), np.array(R, dtype=np.float64), np.array(t, dtype=np.float64)
+        Yc = np.ascontiguousarray(Y, dtype=np.float64)
+        F = Y.shape[0]
+        chunk = 64
+        for start in range(0, order.size, chunk):
+            if cancel is not None and cancel():
+                raise SolveCancelled(f"Take solve cancelled at frame {int(order[start])} of {F}.")
+            take_kernel.solve_pass(Yc, order[start:start + chunk], w, R, t, self.rest, self.Dm, self.At, Hs, tols,
+                                   mask_of, self.lam_temporal, self.iterations, self.rigid_weighting ** 2,
+                                   self.rigid_noise ** 2, float(self.lower), float(self.upper), 200,
+                                   W, Rs, ts, solved, bool(solved.any()))
+            if report is not None:
+                for i in range(start, min(start + chunk, order.size)):
+                    report(i)
 
     def residual_coefficients(self, misfit: np.ndarray) -> np.ndarray:
         """(F, M+P, 3) RBF coefficients for per-frame misfits (F, M, 3) (NaN rows = missing markers):

@@ -1,0 +1,295 @@
+"""The compiled inner loop of a take solve (``solvers.take_solve.TakeSolver._pass``): one causal sweep over the
+frames, per frame ``iterations`` alternations of weighted Kabsch (Umeyama 1991, Eq. 40–41) and the box QP of
+Joshi et al. 2003, Eq. 2 with Ma et al. 2016, Eq. 3–4's terms, warm-started from the previous frame.
+
+The QP is the same primal active-set method as ``take_solve._CachedBoxQP`` (Nocedal & Wright, Algorithm 16.3,
+the same step and pivot rules: a blocked step stops at the first bound on the way, lowest index on ties; else
+the most violated multiplier frees its variable), with the Cholesky factor of the free block updated by one
+row per change of the working set (append a row for a freed variable, delete a row and restore the triangle
+by Givens rotations for a bound one: O(n_free²) a change, Golub & Van Loan §6.5.4 / §12.5) instead of a cache
+of inverses. Compiled by numba (``cache=True``: compiled once per machine, then loaded from ``__pycache__``);
+where numba is missing, ``available()`` is False and the solver keeps its Python loop.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+try:
+    import numba
+    from numba import njit
+except ImportError:     # pragma: no cover - numba is a dependency; the Python loop stays as the fallback
+    numba = None
+
+
+def available() -> bool:
+    return numba is not None
+
+
+if numba is not None:
+    @njit(cache=True, nogil=True)
+    def _chol_append(L, order, nf, H, j):
+        """Append variable j to the factor of H over ``order[:nf]``: returns False when the block would not be
+        positive definite (the caller refactors)."""
+        for i in range(nf):
+            s = H[order[i], j]
+            for k in range(i):
+                s -= L[i, k] * L[nf, k]
+            L[nf, i] = s / L[i, i]
+        d = H[j, j]
+        for k in range(nf):
+            d -= L[nf, k] * L[nf, k]
+        if d <= 0.0:
+            return False
+        L[nf, nf] = math.sqrt(d)
+        for k in range(nf + 1, L.shape[1]):
+            L[nf, k] = 0.0
+        order[nf] = j
+        return True
+
+    @njit(cache=True, nogil=True)
+    def _chol_delete(L, order, nf, p):
+        """Delete position p from the factor over ``order[:nf]`` (rows shift up, Givens rotations on columns
+        k, k+1 restore the lower triangle)."""
+        for i in range(p, nf - 1):
+            order[i] = order[i + 1]
+            for k in range(i + 2):
+                L[i, k] = L[i + 1, k]
+        for k in range(p, nf - 1):
+            a, b = L[k, k], L[k, k + 1]
+            r = math.hypot(a, b)
+            if r == 0.0:
+                continue
+            c, s = a / r, b / r
+            for i in range(k, nf - 1):
+                x, y = L[i, k], L[i, k + 1]
+                L[i, k] = c * x + s * y
+                L[i, k + 1] = -s * x + c * y
+            if L[k, k] < 0.0:
+                for i in range(k, nf - 1):
+                    L[i, k] = -L[i, k]
+        for i in range(nf - 1):
+            L[i, nf - 1] = 0.0
+
+    @njit(cache=True, nogil=True)
+    def _chol_build(L, order, H, s):
+        """Factor the free block (s == 0) from scratch; returns the number of free variables."""
+        nf = 0
+        for j in range(H.shape[0]):
+            if s[j] == 0.0:
+                if _chol_append(L, order, nf, H, j):
+                    nf += 1
+        return nf
+
+    @njit(cache=True, nogil=True)
+    def box_qp(H, g, w, lo, hi, tol, max_iter, L, order, pos, x, r):
+        """Minimise ½wᵀHw − gᵀw over lo ≤ w ≤ hi from ``w`` (changed in place; clipped into the box first).
+        L (K, K), order/pos (K,) int, x/r (K,): work space."""
+        K = H.shape[0]
+        s = np.empty(K)
+        for k in range(K):
+            v = min(max(w[k], lo), hi)
+            w[k] = v
+            s[k] = 1.0 if v >= hi else (-1.0 if v <= lo else 0.0)
+        nf = _chol_build(L, order, H, s)
+        for it in range(max_iter):
+            if nf:
+                for i in range(nf):          # the free variables' right-hand side, bound ones held
+                    a = order[i]
+                    v = g[a]
+                    for j in range(K):
+                        if s[j] != 0.0 and w[j] != 0.0:
+                            v -= H[a, j] * w[j]
+                    r[i] = v
+                for i in range(nf):          # L y = r
+                    v = r[i]
+                    for k in range(i):
+                        v -= L[i, k] * x[k]
+                    x[i] = v / L[i, i]
+                for i in range(nf - 1, -1, -1):   # Lᵀ x = y
+                    v = x[i]
+                    for k in range(i + 1, nf):
+                        v -= L[k, i] * x[k]
+                    x[i] = v / L[i, i]
+                blocked = False
+                for i in range(nf):
+                    pos[order[i]] = i
+                    if x[i] < lo or x[i] > hi:
+                        blocked = True
+                if blocked:
+                    best, jb = np.inf, -1
+                    for a in range(K):           # ascending variable order, first minimum (as np.argmin)
+                        if s[a] != 0.0:
+                            continue
+                        i = pos[a]
+                        xi, cur = x[i], w[a]
+                        if xi < lo:
+                            ratio = (lo - cur) / (xi - cur)
+                        elif xi > hi:
+                            ratio = (hi - cur) / (xi - cur)
+                        else:
+                            ratio = np.inf
+                        if ratio < best:
+                            best, jb = ratio, a
+                    step = max(best, 0.0)
+                    for i in range(nf):
+                        a = order[i]
+                        w[a] = w[a] + step * (x[i] - w[a])
+                    if x[pos[jb]] < lo:
+                        w[jb], s[jb] = lo, -1.0
+                    else:
+                        w[jb], s[jb] = hi, 1.0
+                    _chol_delete(L, order, nf, pos[jb])
+                    nf -= 1
+                    continue
+                for i in range(nf):
+                    w[order[i]] = x[i]
+            jmax, vmax = -1, -np.inf
+            for j in range(K):                   # the multipliers' violation (0 for free variables)
+                if s[j] == 0.0:
+                    viol = 0.0
+                else:
+                    v = -g[j]
+                    for k in range(K):
+                        v += H[j, k] * w[k]
+                    viol = v * s[j]
+                if viol > vmax:
+                    vmax, jmax = viol, j
+            if vmax <= tol:
+                break
+            s[jmax] = 0.0
+            if not _chol_append(L, order, nf, H, jmax):
+                nf = _chol_build(L, order, H, s)
+            else:
+                nf += 1
+        for k in range(K):
+            w[k] = min(max(w[k], lo), hi)
+
+    @njit(cache=True, nogil=True)
+    def _kabsch(P, Y, p, weighted, Rout, tout):
+        """Weighted Kabsch / Umeyama 1991 (Eq. 40–41): Y ≈ R P + t over the rows of P, Y (n, 3)."""
+        n = P.shape[0]
+        mp = np.zeros(3)
+        my = np.zeros(3)
+        for i in range(n):
+            wi = p[i] if weighted else 1.0 / n
+            for c in range(3):
+                mp[c] += wi * P[i, c]
+                my[c] += wi * Y[i, c]
+        C = np.zeros((3, 3))
+        for i in range(n):
+            wi = p[i] if weighted else 1.0
+            for a in range(3):
+                ya = Y[i, a] - my[a]
+                for b in range(3):
+                    C[a, b] += ya * (P[i, b] - mp[b]) * wi
+        U, _, Vt = np.linalg.svd(C)
+        if np.linalg.det(U) * np.linalg.det(Vt) < 0.0:
+            for a in range(3):
+                U[a, 2] = -U[a, 2]
+        R = U @ Vt
+        for a in range(3):
+            tout[a] = my[a]
+            for b in range(3):
+                Rout[a, b] = R[a, b]
+                tout[a] -= R[a, b] * mp[b]
+
+    @njit(cache=True, nogil=True)
+    def solve_pass(Y, order, w, R, t, rest, Dm, At, Hs, tols, mask_of, lam_t, iterations, rw, rw0, lo, hi,
+                   max_iter, W, Rs, ts, solved, first_solved_before):
+        """One causal sweep over ``order`` (see the module docstring). Y (F, M, 3) calibrated markers (NaN
+        missing), Dm (K, 3M) the shapes at the markers, At = Dm (Aᵀ), Hs (n_masks, K, K) the QP's H per
+        missing-marker mask and ``mask_of`` (F,) each frame's mask (-1: fewer than 3 markers, the pose is held).
+        Writes W (F, K), Rs (F, 3, 3), ts (F, 3), solved (F,). ``first_solved_before``: a frame of this sweep was
+        solved before ``order`` (a chunk after the first); until one is, the temporal term pulls towards the
+        current weights (``_pass``'s w_prev None)."""
+        K = Dm.shape[0]
+        M = rest.shape[0]
+        L = np.zeros((K, K))
+        od = np.zeros(K, dtype=np.int64)
+        pos = np.zeros(K, dtype=np.int64)
+        x = np.zeros(K)
+        rr = np.zeros(K)
+        wp = np.empty(K)
+        disp = np.zeros(3 * M)
+        b = np.zeros(3 * M)
+        g = np.zeros(K)
+        P = np.zeros((M, 3))
+        Q = np.zeros((M, 3))
+        pw = np.zeros(M)
+        valid = np.zeros(M, dtype=np.bool_)
+        have_prev = first_solved_before
+        for f in order:
+            m = mask_of[f]
+            if m >= 0:
+                nv = 0
+                for i in range(M):
+                    ok = True
+                    for c in range(3):
+                        if not np.isfinite(Y[f, i, c]):
+                            ok = False
+                    valid[i] = ok
+                    if ok:
+                        nv += 1
+                H = Hs[m]
+                for k in range(K):
+                    wp[k] = w[k]
+                for _ in range(iterations):
+                    if not have_prev:      # the sweep's first solved frame: the temporal term pulls to w itself
+                        for k in range(K):
+                            wp[k] = w[k]
+                    for q in range(3 * M):
+                        disp[q] = 0.0
+                    for k in range(K):
+                        if w[k] != 0.0:
+                            for q in range(3 * M):
+                                disp[q] += w[k] * Dm[k, q]
+                    n = 0
+                    tot = 0.0
+                    for i in range(M):
+                        if valid[i]:
+                            d2 = 0.0
+                            for c in range(3):
+                                P[n, c] = rest[i, c] + disp[3 * i + c]
+                                Q[n, c] = Y[f, i, c]
+                                d2 += disp[3 * i + c] * disp[3 * i + c]
+                            pw[n] = 1.0 / (rw0 + rw * d2) if rw != 0.0 else 1.0
+                            tot += pw[n]
+                            n += 1
+                    for i in range(n):
+                        pw[i] /= tot
+                    _kabsch(P[:n], Q[:n], pw[:n], rw != 0.0, R, t)
+                    for i in range(M):     # z = Rᵀ (y − t), b = z − rest over the present markers
+                        for c in range(3):
+                            if valid[i]:
+                                v = 0.0
+                                for a in range(3):
+                                    v += (Y[f, i, a] - t[a]) * R[a, c]
+                                b[3 * i + c] = v - rest[i, c]
+                            else:
+                                b[3 * i + c] = 0.0
+                    for k in range(K):
+                        v = lam_t * wp[k]
+                        for q in range(3 * M):
+                            v += At[k, q] * b[q]
+                        g[k] = v
+                    box_qp(H, g, w, lo, hi, tols[m], max_iter, L, od, pos, x, rr)
+                solved[f] = True
+                have_prev = True
+            for k in range(K):
+                W[f, k] = w[k]
+            for a in range(3):
+                ts[f, a] = t[a]
+                for c in range(3):
+                    Rs[f, a, c] = R[a, c]
+
+
+def pass_masks(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(masks (n, M) bool, mask_of (F,) int64): the distinct missing-marker masks of a take's frames and each
+    frame's index into them; -1 for frames with fewer than 3 markers."""
+    valid = np.isfinite(Y).all(axis=2)
+    masks, inverse = np.unique(valid, axis=0, return_inverse=True)
+    mask_of = inverse.ravel().astype(np.int64)
+    mask_of[valid.sum(axis=1) < 3] = -1
+    return masks, mask_of
