@@ -83,24 +83,54 @@ if numba is not None:
         return nf
 
     @njit(cache=True, nogil=True)
-    def box_qp(H, g, w, lo, hi, tol, max_iter, L, order, pos, x, r):
+    def box_qp(H, g, w, lo, hi, tol, max_iter, L, order, pos, x, r, nf_in):
         """Minimise ½wᵀHw − gᵀw over lo ≤ w ≤ hi from ``w`` (changed in place; clipped into the box first).
-        L (K, K), order/pos (K,) int, x/r (K,): work space."""
+        L (K, K), order/pos (K,) int, x/r (K,): work space. ``nf_in`` ≥ 0: L already holds the factor of the
+        same H over ``order[:nf_in]`` (the last call's free set), updated here to this start's free set by
+        row deletions and appends, so a warm start with a nearly unchanged free set costs O(n_free²), not
+        O(n_free³); -1 builds it. Returns (iterations, the final free-set size for the next call)."""
         K = H.shape[0]
         s = np.empty(K)
         for k in range(K):
             v = min(max(w[k], lo), hi)
             w[k] = v
             s[k] = 1.0 if v >= hi else (-1.0 if v <= lo else 0.0)
-        nf = _chol_build(L, order, H, s)
+        if nf_in < 0:
+            nf = _chol_build(L, order, H, s)
+        else:
+            nf = nf_in
+            i = 0
+            while i < nf:
+                if s[order[i]] != 0.0:
+                    _chol_delete(L, order, nf, i)
+                    nf -= 1
+                else:
+                    i += 1
+            for k in range(K):
+                pos[k] = 0
+            for i in range(nf):
+                pos[order[i]] = 1
+            for k in range(K):
+                if s[k] == 0.0 and pos[k] == 0:
+                    if _chol_append(L, order, nf, H, k):
+                        nf += 1
+                    else:
+                        nf = _chol_build(L, order, H, s)
+                        break
+        held = np.empty(K, dtype=np.int64)
+        nz = np.empty(K, dtype=np.int64)
         for it in range(max_iter):
             if nf:
+                nh = 0                       # bound variables away from 0 (at the upper bound) pull on the free
+                for j in range(K):
+                    if s[j] != 0.0 and w[j] != 0.0:
+                        held[nh] = j
+                        nh += 1
                 for i in range(nf):          # the free variables' right-hand side, bound ones held
                     a = order[i]
                     v = g[a]
-                    for j in range(K):
-                        if s[j] != 0.0 and w[j] != 0.0:
-                            v -= H[a, j] * w[j]
+                    for q in range(nh):
+                        v -= H[a, held[q]] * w[held[q]]
                     r[i] = v
                 for i in range(nf):          # L y = r
                     v = r[i]
@@ -145,14 +175,19 @@ if numba is not None:
                     continue
                 for i in range(nf):
                     w[order[i]] = x[i]
+            nnz = 0
+            for k in range(K):
+                if w[k] != 0.0:
+                    nz[nnz] = k
+                    nnz += 1
             jmax, vmax = -1, -np.inf
             for j in range(K):                   # the multipliers' violation (0 for free variables)
                 if s[j] == 0.0:
                     viol = 0.0
                 else:
                     v = -g[j]
-                    for k in range(K):
-                        v += H[j, k] * w[k]
+                    for q in range(nnz):
+                        v += H[j, nz[q]] * w[nz[q]]
                     viol = v * s[j]
                 if viol > vmax:
                     vmax, jmax = viol, j
@@ -165,6 +200,7 @@ if numba is not None:
                 nf += 1
         for k in range(K):
             w[k] = min(max(w[k], lo), hi)
+        return it + 1, nf
 
     @njit(cache=True, nogil=True)
     def _kabsch(P, Y, p, weighted, Rout, tout):
@@ -201,7 +237,7 @@ if numba is not None:
         """One causal sweep over ``order`` (see the module docstring). Y (F, M, 3) calibrated markers (NaN
         missing), Dm (K, 3M) the shapes at the markers, At = Dm (Aᵀ), Hs (n_masks, K, K) the QP's H per
         missing-marker mask and ``mask_of`` (F,) each frame's mask (-1: fewer than 3 markers, the pose is held).
-        Writes W (F, K), Rs (F, 3, 3), ts (F, 3), solved (F,). ``first_solved_before``: a frame of this sweep was
+        Writes W (F, K), Rs (F, 3, 3), ts (F, 3), solved (F,); returns the number of active-set iterations. ``first_solved_before``: a frame of this sweep was
         solved before ``order`` (a chunk after the first); until one is, the temporal term pulls towards the
         current weights (``_pass``'s w_prev None)."""
         K = Dm.shape[0]
@@ -220,6 +256,9 @@ if numba is not None:
         pw = np.zeros(M)
         valid = np.zeros(M, dtype=np.bool_)
         have_prev = first_solved_before
+        iters = 0
+        nf = -1
+        last_mask = -1
         for f in order:
             m = mask_of[f]
             if m >= 0:
@@ -274,7 +313,11 @@ if numba is not None:
                         for q in range(3 * M):
                             v += At[k, q] * b[q]
                         g[k] = v
-                    box_qp(H, g, w, lo, hi, tols[m], max_iter, L, od, pos, x, rr)
+                    if m != last_mask:
+                        nf = -1                # another H: the factor is built afresh
+                        last_mask = m
+                    n_it, nf = box_qp(H, g, w, lo, hi, tols[m], max_iter, L, od, pos, x, rr, nf)
+                    iters += n_it
                 solved[f] = True
                 have_prev = True
             for k in range(K):
@@ -283,6 +326,7 @@ if numba is not None:
                 ts[f, a] = t[a]
                 for c in range(3):
                     Rs[f, a, c] = R[a, c]
+        return iters
 
 
 def pass_masks(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -303,7 +303,8 @@ class TakeSolver:
         if residual not in KERNELS:
             raise ValueError(f"Unknown residual '{residual}': use one of {', '.join(KERNELS)}.")
         self.neutral = np.asarray(neutral, dtype=np.float64)
-        self.deltas = np.asarray(deltas, dtype=np.float64)
+        deltas = np.asarray(deltas)   # float32 shapes stay float32 (a studio rig's float64 copy is gigabytes)
+        self.deltas = deltas if deltas.dtype in (np.float32, np.float64) else deltas.astype(np.float64)
         K, V, _ = self.deltas.shape
         self.K, self.V = K, V
         if not sp.issparse(binding):
@@ -320,7 +321,7 @@ class TakeSolver:
         self.rigid_weighting = float(rigid_weighting)
         self.rigid_noise = float(rigid_noise)
         self.rest = np.asarray(self.binding @ self.neutral)  # (M, 3) markers at rest
-        Dm = np.stack([self.binding @ self.deltas[k] for k in range(K)])  # (K, M, 3)
+        Dm = np.stack([self.binding @ self.deltas[k].astype(np.float64, copy=False) for k in range(K)])  # (K, M, 3)
         self.Dm = Dm.reshape(K, 3 * M)  # w @ Dm -> (3M,)
         self.A = np.ascontiguousarray(self.Dm.T)  # (3M, K)
         self.At = np.ascontiguousarray(self.Dm)   # (K, 3M) = Aᵀ, row-major for the per-frame Aᵀb
@@ -330,6 +331,7 @@ class TakeSolver:
         # The compiled sweep (numba, loaded here with the rig's preparation rather than inside the timed solve).
         from . import take_kernel
         self._kernel = take_kernel if take_kernel.available() else None
+        self.qp_iterations = 0      # active-set iterations of the compiled sweeps so far (a cost measure)
         self.weight_solver = WeightSolver(self.A, mode=mode, lam_sparsity=lam_sparsity, lam_temporal=lam_temporal)
         # Correctives: their activation rule and deltas, at the markers (C, 3M) and on the surface.
         self._activate, E, drivers = correctives if correctives is not None else (None, np.zeros((0, V, 3)), [])
@@ -565,11 +567,11 @@ class TakeSolver:
         w, R, t = np.array(w, dtype=np.float64), np.array(R, dtype=np.float64), np.array(t, dtype=np.float64)
         Yc = np.ascontiguousarray(Y, dtype=np.float64)
         F = Y.shape[0]
-        chunk = 64
+        chunk = 16          # frames between two looks at cancel / progress (a few ms)
         for start in range(0, order.size, chunk):
             if cancel is not None and cancel():
                 raise SolveCancelled(f"Take solve cancelled at frame {int(order[start])} of {F}.")
-            take_kernel.solve_pass(Yc, order[start:start + chunk], w, R, t, self.rest, self.Dm, self.At, Hs, tols,
+            self.qp_iterations += take_kernel.solve_pass(Yc, order[start:start + chunk], w, R, t, self.rest, self.Dm, self.At, Hs, tols,
                                    mask_of, self.lam_temporal, self.iterations, self.rigid_weighting ** 2,
                                    self.rigid_noise ** 2, float(self.lower), float(self.upper), 200,
                                    W, Rs, ts, solved, bool(solved.any()))
