@@ -231,12 +231,218 @@ if numba is not None:
                 Rout[a, b] = R[a, b]
                 tout[a] -= R[a, b] * mp[b]
 
+
+def pass_masks(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(masks (n, M) bool, mask_of (F,) int64): the distinct missing-marker masks of a take's frames and each
+    frame's index into them; -1 for frames with fewer than 3 markers."""
+    valid = np.isfinite(Y).all(axis=2)
+    masks, inverse = np.unique(valid, axis=0, return_inverse=True)
+    mask_of = inverse.ravel().astype(np.int64)
+    mask_of[valid.sum(axis=1) < 3] = -1
+    return masks, mask_of
+
+
+# --- the low-rank form, for rigs with more shapes than marker coordinates ------------------------------------
+# H = BᵀB + μI with B = [A; √λ_s 1ᵀ] (m × K, m = 3M + 1): the free block's system H_ff x = r is solved by the
+# Woodbury identity, x = (r − B_fᵀ G⁻¹ B_f r) / μ with G = μI + B_f B_fᵀ (m × m), whose Cholesky factor follows
+# the working set by rank-one updates and downdates (Golub & Van Loan §6.5.4). A step costs O(m·n_free + m²):
+# linear in the number of shapes, where the dense factor costs O(n_free²).
+
+_BIG = 1e300      # "no ratio yet" / "no violation yet" in the fastmath kernel (which assumes no infinities)
+
+if numba is not None:
     @njit(cache=True, nogil=True)
-    def solve_pass(Y, order, w, R, t, rest, Dm, At, Hs, tols, mask_of, lam_t, iterations, rw, rw0, lo, hi,
-                   max_iter, W, Rs, ts, solved, first_solved_before):
+    def _chol_rank1(L, x, sign):
+        """L Lᵀ ± x xᵀ in place (x is overwritten); returns False when a downdate loses definiteness."""
+        n = L.shape[0]
+        for k in range(n):
+            d = L[k, k] * L[k, k] + sign * x[k] * x[k]
+            if d <= 0.0:
+                return False
+            r = math.sqrt(d)
+            c = r / L[k, k]
+            s = x[k] / L[k, k]
+            L[k, k] = r
+            for i in range(k + 1, n):
+                L[i, k] = (L[i, k] + sign * s * x[i]) / c
+                x[i] = c * x[i] - s * L[i, k]
+        return True
+
+    @njit(cache=True, nogil=True)
+    def _gram_build(Lg, Bt, s, mu):
+        """Cholesky factor of G = μI + Σ_{free j} b_j b_jᵀ."""
+        K, m = Bt.shape
+        for a in range(m):
+            for b in range(m):
+                Lg[a, b] = 0.0
+        for j in range(K):
+            if s[j] == 0.0:
+                for a in range(m):
+                    bja = Bt[j, a]
+                    if bja != 0.0:
+                        for b in range(a + 1):
+                            Lg[a, b] += bja * Bt[j, b]
+        for a in range(m):
+            Lg[a, a] += mu
+        for j in range(m):                 # in-place Cholesky (lower triangle)
+            d = Lg[j, j]
+            for k in range(j):
+                d -= Lg[j, k] * Lg[j, k]
+            d = math.sqrt(d)
+            Lg[j, j] = d
+            for i in range(j + 1, m):
+                v = Lg[i, j]
+                for k in range(j):
+                    v -= Lg[i, k] * Lg[j, k]
+                Lg[i, j] = v / d
+            for k in range(j + 1, m):
+                Lg[j, k] = 0.0
+
+    @njit(cache=True, nogil=True, fastmath=True)
+    def box_qp_lowrank(Bt, mu, g, w, lo, hi, tol, max_iter, Lg, s, fresh, work):
+        """The box QP of ``box_qp`` for H = BᵀB + μI given as Bt = Bᵀ (K, m): the same steps and pivot rules.
+        ``s`` holds the last call's working set and Lg its Gram factor unless ``fresh``; both are updated to this
+        start and kept for the next call. Returns the number of iterations. Compiled with fastmath (the
+        dot products vectorise; inputs are finite, so sentinels are finite too)."""
+        K, m = Bt.shape
+        x = work[0]
+        r = work[1]
+        v = np.zeros(m)
+        t = np.zeros(m)
+        tmp = np.zeros(m)
+        s_new = np.empty(K)
+        for k in range(K):
+            val = min(max(w[k], lo), hi)
+            w[k] = val
+            s_new[k] = 1.0 if val >= hi else (-1.0 if val <= lo else 0.0)
+        if fresh:
+            _gram_build(Lg, Bt, s_new, mu)
+        else:
+            ok = True
+            for k in range(K):
+                if (s_new[k] == 0.0) != (s[k] == 0.0):
+                    for a in range(m):
+                        tmp[a] = Bt[k, a]
+                    if not _chol_rank1(Lg, tmp, 1.0 if s_new[k] == 0.0 else -1.0):
+                        ok = False
+                        break
+            if not ok:
+                _gram_build(Lg, Bt, s_new, mu)
+        for k in range(K):
+            s[k] = s_new[k]
+        for it in range(max_iter):
+            nfree = 0
+            nheld = 0
+            for a in range(m):
+                v[a] = 0.0
+            for j in range(K):                   # v = B_b w_b: the held (upper-bound) variables' pull
+                if s[j] == 0.0:
+                    nfree += 1
+                elif w[j] != 0.0:
+                    nheld += 1
+                    for a in range(m):
+                        v[a] += Bt[j, a] * w[j]
+            have_u = False
+            if nfree:
+                for a in range(m):
+                    t[a] = 0.0
+                for j in range(K):               # r = g_f − (BᵀB w_b)_f (μI has no off-diagonal pull); t = B_f r
+                    if s[j] == 0.0:
+                        q = g[j]
+                        if nheld:
+                            for a in range(m):
+                                q -= Bt[j, a] * v[a]
+                        r[j] = q
+                        for a in range(m):
+                            t[a] += Bt[j, a] * q
+                for a in range(m):               # G y = t
+                    q = t[a]
+                    for b in range(a):
+                        q -= Lg[a, b] * t[b]
+                    t[a] = q / Lg[a, a]
+                for a in range(m - 1, -1, -1):
+                    q = t[a]
+                    for b in range(a + 1, m):
+                        q -= Lg[b, a] * t[b]
+                    t[a] = q / Lg[a, a]
+                blocked = False
+                for j in range(K):
+                    if s[j] == 0.0:
+                        q = r[j]
+                        for a in range(m):
+                            q -= Bt[j, a] * t[a]
+                        x[j] = q / mu
+                        if x[j] < lo or x[j] > hi:
+                            blocked = True
+                if blocked:
+                    best, jb = _BIG, -1
+                    for j in range(K):
+                        if s[j] != 0.0:
+                            continue
+                        xi, cur = x[j], w[j]
+                        if xi < lo:
+                            ratio = (lo - cur) / (xi - cur)
+                        elif xi > hi:
+                            ratio = (hi - cur) / (xi - cur)
+                        else:
+                            ratio = _BIG
+                        if ratio < best:
+                            best, jb = ratio, j
+                    step = max(best, 0.0)
+                    for j in range(K):
+                        if s[j] == 0.0:
+                            w[j] = w[j] + step * (x[j] - w[j])
+                    if x[jb] < lo:
+                        w[jb], s[jb] = lo, -1.0
+                    else:
+                        w[jb], s[jb] = hi, 1.0
+                    for a in range(m):
+                        tmp[a] = Bt[jb, a]
+                    if not _chol_rank1(Lg, tmp, -1.0):
+                        _gram_build(Lg, Bt, s, mu)
+                    continue
+                for j in range(K):
+                    if s[j] == 0.0:
+                        w[j] = x[j]
+                for a in range(m):               # B_f x = (t − (G − μI) y) / μ = y: so B w = y + v, no pass
+                    v[a] += t[a]
+                have_u = True
+            if not have_u:
+                for a in range(m):               # u = B w
+                    v[a] = 0.0
+                for j in range(K):
+                    if w[j] != 0.0:
+                        for a in range(m):
+                            v[a] += Bt[j, a] * w[j]
+            jmax, vmax = -1, -_BIG
+            for j in range(K):                   # the multipliers' violation (0 for free variables)
+                if s[j] == 0.0:
+                    viol = 0.0
+                else:
+                    q = mu * w[j] - g[j]
+                    for a in range(m):
+                        q += Bt[j, a] * v[a]
+                    viol = q * s[j]
+                if viol > vmax:
+                    vmax, jmax = viol, j
+            if vmax <= tol:
+                break
+            s[jmax] = 0.0
+            for a in range(m):
+                tmp[a] = Bt[jmax, a]
+            _chol_rank1(Lg, tmp, 1.0)
+        for k in range(K):
+            w[k] = min(max(w[k], lo), hi)
+        return it + 1
+
+    @njit(cache=True, nogil=True)
+    def solve_pass(Y, order, w, R, t, rest, Dm, At, Hs, Bts, mu, tols, mask_of, lam_t, iterations, rw, rw0, lo,
+                   hi, max_iter, W, Rs, ts, solved, first_solved_before):
         """One causal sweep over ``order`` (see the module docstring). Y (F, M, 3) calibrated markers (NaN
         missing), Dm (K, 3M) the shapes at the markers, At = Dm (Aᵀ), Hs (n_masks, K, K) the QP's H per
         missing-marker mask and ``mask_of`` (F,) each frame's mask (-1: fewer than 3 markers, the pose is held).
+        With Bts (n_masks, K, m) non-empty the QP runs in the low-rank form (``box_qp_lowrank``, H = BᵀB + μI per
+        mask) and Hs is not read.
         Writes W (F, K), Rs (F, 3, 3), ts (F, 3), solved (F,); returns the number of active-set iterations. ``first_solved_before``: a frame of this sweep was
         solved before ``order`` (a chunk after the first); until one is, the temporal term pulls towards the
         current weights (``_pass``'s w_prev None)."""
@@ -259,6 +465,10 @@ if numba is not None:
         iters = 0
         nf = -1
         last_mask = -1
+        lowrank = Bts.shape[2] > 0
+        s_state = np.zeros(K)
+        Lg = np.zeros((Bts.shape[2], Bts.shape[2]))
+        work = np.zeros((2, K))
         for f in order:
             m = mask_of[f]
             if m >= 0:
@@ -271,7 +481,6 @@ if numba is not None:
                     valid[i] = ok
                     if ok:
                         nv += 1
-                H = Hs[m]
                 for k in range(K):
                     wp[k] = w[k]
                 for _ in range(iterations):
@@ -316,8 +525,13 @@ if numba is not None:
                     if m != last_mask:
                         nf = -1                # another H: the factor is built afresh
                         last_mask = m
-                    n_it, nf = box_qp(H, g, w, lo, hi, tols[m], max_iter, L, od, pos, x, rr, nf)
-                    iters += n_it
+                    if lowrank:
+                        iters += box_qp_lowrank(Bts[m], mu, g, w, lo, hi, tols[m], max_iter, Lg, s_state, nf < 0,
+                                                work)
+                        nf = 0
+                    else:
+                        n_it, nf = box_qp(Hs[m], g, w, lo, hi, tols[m], max_iter, L, od, pos, x, rr, nf)
+                        iters += n_it
                 solved[f] = True
                 have_prev = True
             for k in range(K):
@@ -327,13 +541,3 @@ if numba is not None:
                 for c in range(3):
                     Rs[f, a, c] = R[a, c]
         return iters
-
-
-def pass_masks(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(masks (n, M) bool, mask_of (F,) int64): the distinct missing-marker masks of a take's frames and each
-    frame's index into them; -1 for frames with fewer than 3 markers."""
-    valid = np.isfinite(Y).all(axis=2)
-    masks, inverse = np.unique(valid, axis=0, return_inverse=True)
-    mask_of = inverse.ravel().astype(np.int64)
-    mask_of[valid.sum(axis=1) < 3] = -1
-    return masks, mask_of

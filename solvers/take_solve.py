@@ -561,9 +561,22 @@ class TakeSolver:
         missing-marker mask is the cached one of ``_qp_entry``."""
         take_kernel = self._kernel
         masks, mask_of = take_kernel.pass_masks(Y)
-        qps = [self._qp_entry(m)[2] for m in masks]
-        Hs = np.stack([q.H for q in qps])
-        tols = np.array([q.tol for q in qps])
+        mu = self.lam_temporal + 1e-10                  # H's diagonal term, as _qp_entry builds it
+        if self.K > 2 * (3 * self.M + 1) and mu > 0:
+            # many more shapes than marker coordinates: the QP in its low-rank form, H = BᵀB + μI with
+            # B = [A_present; √λ_s 1ᵀ] (a step O(K·3M) instead of O(n_free²); the dense form is faster up to about
+            # twice 3M + 1 shapes); H's largest entry is on its diagonal
+            Bts = np.zeros((masks.shape[0], self.K, 3 * self.M + 1))
+            for i, m in enumerate(masks):
+                Bts[i, :, :-1] = self.At * np.repeat(m, 3)
+            Bts[:, :, -1] = np.sqrt(self.lam_sparsity)
+            Hs = np.zeros((0, 1, 1))
+            tols = 1e-12 * np.maximum(1.0, (Bts * Bts).sum(axis=2).max(axis=1) + mu)
+        else:
+            qps = [self._qp_entry(m)[2] for m in masks]
+            Hs = np.stack([q.H for q in qps])
+            tols = np.array([q.tol for q in qps])
+            Bts = np.zeros((masks.shape[0], 1, 0))
         w, R, t = np.array(w, dtype=np.float64), np.array(R, dtype=np.float64), np.array(t, dtype=np.float64)
         Yc = np.ascontiguousarray(Y, dtype=np.float64)
         F = Y.shape[0]
@@ -571,10 +584,10 @@ class TakeSolver:
         for start in range(0, order.size, chunk):
             if cancel is not None and cancel():
                 raise SolveCancelled(f"Take solve cancelled at frame {int(order[start])} of {F}.")
-            self.qp_iterations += take_kernel.solve_pass(Yc, order[start:start + chunk], w, R, t, self.rest, self.Dm, self.At, Hs, tols,
-                                   mask_of, self.lam_temporal, self.iterations, self.rigid_weighting ** 2,
-                                   self.rigid_noise ** 2, float(self.lower), float(self.upper), 200,
-                                   W, Rs, ts, solved, bool(solved.any()))
+            self.qp_iterations += take_kernel.solve_pass(
+                Yc, order[start:start + chunk], w, R, t, self.rest, self.Dm, self.At, Hs, Bts, mu, tols, mask_of, self.lam_temporal, self.iterations, self.rigid_weighting ** 2,
+                self.rigid_noise ** 2, float(self.lower), float(self.upper), 200, W, Rs, ts, solved,
+                bool(solved.any()))
             if report is not None:
                 for i in range(start, min(start + chunk, order.size)):
                     report(i)
