@@ -97,3 +97,31 @@ def test_pc2_block_with_a_nan_names_its_frame(tmp_path):
     with pytest.raises(RigInputError, match="frame 5 has NaN"):
         write_pc2(tmp_path / "x.pc2", iter([good, bad]))
     assert not (tmp_path / "x.pc2").exists()
+
+
+def test_low_rank_qp_sweep_equals_the_python_sweep_with_many_shapes():
+    """400 local shapes seen by 20 markers (K > 2(3M + 1)): the low-rank QP, same weights as the Python sweep."""
+    rng = np.random.default_rng(7)
+    V, K, M, F = 300, 400, 20, 40
+    neutral = rng.normal(size=(V, 3)) * 5
+    deltas = np.zeros((K, V, 3))
+    for k in range(K):                     # each shape moves a patch of 30 vertices
+        c = rng.integers(0, V - 30)
+        deltas[k, c:c + 30] = rng.normal(size=(30, 3)) * 0.3
+    markers = np.sort(rng.choice(V, M, replace=False))
+    W = np.clip(rng.normal(0.2, 0.3, size=(F, K)), 0, 1)
+    W[:5] = 0.0
+    X = neutral[markers][None] + np.einsum("fk,kmc->fmc", W, deltas[:, markers])
+    X[12:15, 3] = np.nan                   # a gap: a second missing-marker mask
+    s = TakeSolver(neutral, deltas, markers, residual="none", lam_sparsity=0.05, marker_smoothing=0.0)
+    assert s.K > 2 * (3 * s.M + 1)
+    kernel = s._kernel
+    out = {}
+    for name in ("compiled", "python"):
+        s._kernel = kernel if name == "compiled" else None
+        out[name] = s.solve(X, calibration_frames=5)
+    s._kernel = kernel
+    a, b = out["compiled"], out["python"]
+    assert np.abs(a.weights - b.weights).max() < 1e-8
+    assert np.abs(a.head - b.head).max() < 1e-8
+    assert 0.0 < a.weights.max() <= 1.0 and a.weights.min() >= 0.0
