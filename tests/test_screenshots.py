@@ -17,8 +17,8 @@ from tests.gui_helpers import make_window
 from tests.image_compare import assert_matches_reference, assert_wrong_picture_fails, load_png
 
 SIZE = "480,360"
-SEGMENT_SAMPLE = ("--view", "segmentation", "--threshold", "0.9")
-SEGMENT_ICT = ("--view", "segmentation", "--threshold", "0.75")
+SEGMENT_SAMPLE = ("--view", "segmentation")   # the default threshold (0.5 of the skin that moves)
+SEGMENT_ICT = ("--view", "segmentation")
 
 # reference name: (rig, render arguments)
 SHOTS = {
