@@ -44,12 +44,13 @@ def _read_bytes(path: Path) -> bytes:
         raise RigInputError(f"{path}: is a folder, not an OBJ file.") from None
     except OSError as exc:
         raise RigInputError(f"{path}: cannot be read ({exc.strerror}).") from None
-    if not data.strip():
+    if not data or data.isspace():      # (no copy of the file, unlike strip())
         raise RigInputError(f"{path}: the file is empty.")
     if b"\0" in data[:65536]:
         raise RigInputError(f"{path}: is a binary file, not a text OBJ.")
     try:
-        data.decode("utf-8")
+        if not data.isascii():    # ASCII is UTF-8: the check is one fast scan; only other text is decoded
+            data.decode("utf-8")
     except UnicodeDecodeError as exc:
         raise RigInputError(f"{path}: is not UTF-8 text (bad byte at offset {exc.start}).") from None
     return data
@@ -238,6 +239,14 @@ def _face_section(data: bytes) -> bytes:
     return data[i:] if i >= 0 else b""
 
 
+def _same_face_section(data: bytes, section: bytes) -> bool:
+    """``_face_section(data) == section`` without copying the section out of ``data``."""
+    i = data.find(b"\nf ")
+    if i < 0:
+        return section == b""
+    return len(data) - i == len(section) and data.endswith(section)
+
+
 def read_obj(path: str | Path) -> ObjMesh:
     """Read vertices and polygon faces of an OBJ in file order (vertex order is sacred)."""
     path = Path(path)
@@ -259,7 +268,7 @@ def read_obj_target(path: str | Path, neutral: ObjMesh) -> np.ndarray:
     if len(verts) != len(neutral.vertices):
         raise RigInputError(f"{path}: has {len(verts)} vertices but the neutral has "
                             f"{len(neutral.vertices)}; every shape must have the neutral's vertices in order.")
-    if _face_section(data) != neutral.face_section:
+    if not _same_face_section(data, neutral.face_section):
         counts, idx = _parse_faces(path, data, len(verts))
         if counts.size == 0:
             pass  # points-only targets are fine: faces come from the neutral

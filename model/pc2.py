@@ -32,7 +32,8 @@ def write_pc2(path: str | Path, frames: np.ndarray | Iterable[np.ndarray], *, n_
 def pc2_writer(path: str | Path, frames, *, n_points: int | None = None, start_frame: float = 0.0,
                sample_rate: float = 1.0):
     """(writer(file), count): what ``write_pc2`` writes, for ``model.output_set.write_set``; ``count[0]`` is the
-    number of samples once the writer has run."""
+    number of samples once the writer has run. ``frames``: an (F, N, 3) array, or an iterable of (N, 3) frames
+    or of (n, N, 3) blocks of frames (written whole)."""
     if isinstance(frames, np.ndarray):
         if frames.ndim != 3 or frames.shape[2] != 3:
             raise RigInputError(f"{path}: a point cache needs frames of shape (F, N, 3), not {frames.shape}.")
@@ -42,16 +43,22 @@ def pc2_writer(path: str | Path, frames, *, n_points: int | None = None, start_f
     def writer(f):
         f.write(HEADER.pack(MAGIC, 1, int(n_points or 0), float(start_frame), float(sample_rate), 0))
         npts = n_points
-        for frame in frames:
-            a = np.asarray(frame, dtype="<f4")
-            if npts is None:
-                npts = a.shape[0]
-            if a.shape != (npts, 3):
-                raise RigInputError(f"{path}: frame {count[0]} has shape {a.shape}, expected ({npts}, 3).")
-            if not np.isfinite(a).all():
-                raise RigInputError(f"{path}: frame {count[0]} has NaN or infinite coordinates.")
-            f.write(np.ascontiguousarray(a).tobytes())
-            count[0] += 1
+        blocks = (frames[i:i + 64] for i in range(0, frames.shape[0], 64)) if isinstance(frames, np.ndarray) \
+            else frames
+        for block in blocks:
+            a = np.asarray(block, dtype="<f4")
+            shown = a.shape
+            a = a[None] if a.ndim == 2 else a
+            if npts is None and a.ndim == 3:
+                npts = a.shape[1]
+            if a.ndim != 3 or a.shape[1:] != (npts, 3):
+                raise RigInputError(f"{path}: frame {count[0]} has shape {shown[-2:] if len(shown) == 3 else shown}, "
+                                    f"expected ({npts}, 3).")
+            bad = ~np.isfinite(a).reshape(a.shape[0], -1).all(axis=1)
+            if bad.any():
+                raise RigInputError(f"{path}: frame {count[0] + int(np.argmax(bad))} has NaN or infinite coordinates.")
+            f.write(np.ascontiguousarray(a).data)
+            count[0] += a.shape[0]
         if npts is None:
             raise RigInputError(f"{path}: no frames to write and no point count given.")
         f.seek(0)

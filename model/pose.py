@@ -101,6 +101,25 @@ class PoseEvaluator:
         out[self._cols] += w.astype(self.dtype) @ self._D
         return out.reshape(-1, 3)
 
+    def evaluate_many(self, weights: np.ndarray, dtype=np.float32) -> np.ndarray:
+        """(n, V, 3) surfaces for global weight vectors (n, K) as one matrix product (take exports, PC2 caches),
+        in ``dtype``. Uses a copy of the deltas over all 3V columns (zero where nothing moves) in ``dtype``, made
+        on first use and kept: one GEMM and one add, no scatter (a scatter into the moving columns costs more
+        than the product)."""
+        W = np.atleast_2d(np.asarray(weights, dtype=np.float64))
+        if self._correctives:
+            a = corrective_activations_per_vertex(self._correctives, self._names, W) * self.live()
+            W = np.concatenate([W, a], axis=1)
+        dtype = np.dtype(dtype)
+        full = getattr(self, "_D_full", None)
+        if full is None or full.dtype != dtype:
+            full = np.zeros((self._D.shape[0], self._neutral.size), dtype=dtype)
+            full[:, self._cols] = self._D
+            self._D_full = full
+        out = np.matmul(W.astype(dtype), full)
+        out += self._neutral.astype(dtype, copy=False)
+        return out.reshape(W.shape[0], -1, 3)
+
     def evaluate_regional(self, region_weights: np.ndarray, blend: sp.spmatrix, *, exclude: Iterable = (),
                           include_muted: bool = False) -> np.ndarray:
         """(V, 3) surface for per-region weights (R, K) blended by a partition of unity ``blend`` (V, R).

@@ -159,7 +159,7 @@ class Rig:
                 f"{where}: {len(self.shape_names)} shape names but deltas of shape {self.deltas.shape}.")
         if not np.isfinite(self.deltas).all():
             raise RigInputError(f"{where}: a shape has NaN or infinite coordinates.")
-        if self.deltas.size and np.abs(self.deltas).max() > MAX_COORDINATE:
+        if self.deltas.size and max(float(self.deltas.max()), -float(self.deltas.min())) > MAX_COORDINATE:  # no |d| copy
             raise RigInputError(f"{where}: a shape moves a vertex by more than {MAX_COORDINATE:g}; the file is damaged.")
         if self.face_counts.size == 0:
             raise RigInputError(f"{where}: the rig has no faces.")

@@ -10,6 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from solvers.take_solve import DENSE_BLOCK
+
 from .errors import RigInputError
 from .pose import PoseEvaluator
 from .takes import WeightTake
@@ -25,13 +27,14 @@ def export_weights_csv(workspace, path: str | Path) -> None:
 
 
 def take_surfaces(workspace, evaluator: PoseEvaluator | None = None) -> Iterable[np.ndarray]:
-    """Every frame's surface: the solve's dense result (head-stabilised, rig units), or the rig posed by the
-    weight take (``evaluator``, the rig's pose evaluation)."""
+    """Every frame's surface, in blocks of frames (n, V, 3): the solve's dense result (head-stabilised, rig
+    units), or the rig posed by the weight take (``evaluator``, the rig's pose evaluation, as matrix products)."""
     if workspace.solution is not None:
-        return workspace.solution.iter_dense()
+        return workspace.solution.dense_blocks()     # (n, V, 3) float32 blocks: the PC2 writer takes them whole
     if isinstance(workspace.take, WeightTake):
         ev = evaluator if evaluator is not None else PoseEvaluator(workspace.rig, dtype=np.float64)
-        return (ev.evaluate(w) for w in workspace.take.weights)
+        W = workspace.take.weights
+        return (ev.evaluate_many(W[i:i + DENSE_BLOCK]) for i in range(0, W.shape[0], DENSE_BLOCK))
     raise RigInputError("Nothing to export: solve a marker take or load a Live Link Face take first.")
 
 

@@ -154,8 +154,9 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
     if evaluator is None or evaluator.dtype != np.float64:
         evaluator = PoseEvaluator(rig, dtype=np.float64)
     surface = partial(evaluator.pose, blend=options.get("blend"))
+    many = evaluator.evaluate_many if options.get("blend") is None else None
     solver = TakeSolver(rig.neutral, rig.deltas, binding, correctives=solver_correctives(rig), surface=surface,
-                        **options)
+                        surface_many=many, **options)
     try:
         sol = solver.solve(take.positions[:, cols], unit_factor=unit_scale(take.units, rig.units),
                            calibration_frames=calibration_frames, calibrate=calibration_frames > 0,

@@ -13,8 +13,6 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy.optimize import lsq_linear
-from scipy.spatial.distance import pdist, squareform
 
 from .errors import RigInputError
 
@@ -72,6 +70,7 @@ def fit_scan_weights(neutral, deltas, scan, free=None, lower: float = 0.0, upper
     b = A @ r
     L = np.linalg.cholesky(G)
     rhs = np.linalg.solve(L, b)
+    from scipy.optimize import lsq_linear     # imported here: scipy.optimize costs 0.3 s to import
     res = lsq_linear(L.T, rhs, bounds=(lower, upper), method="bvls")
     w[free] = res.x
     return w
@@ -188,6 +187,7 @@ def shape_overlap(deltas, directional: bool = False, areas=None) -> np.ndarray:
             dots /= big
             inter += dots.sum(axis=0, dtype=np.float64)
     else:
+        from scipy.spatial.distance import pdist, squareform
         l1 = squareform(pdist(n, "cityblock"))
         Sk = n.sum(axis=1)
         inter = 0.5 * (Sk[:, None] + Sk[None, :] - l1)

@@ -141,6 +141,15 @@ class RBFResidual:
             self._eval = kernel_matrix(self.points, self.centres, self.kernel, self.scale, self.stiffness)
         return self._eval
 
+    def eval_matrix_as(self, dtype) -> np.ndarray:
+        """``eval_matrix`` in ``dtype`` (a float32 copy for batched exports, made once)."""
+        E = self.eval_matrix
+        if E.dtype == np.dtype(dtype):
+            return E
+        if getattr(self, "_eval_cast", None) is None or self._eval_cast.dtype != np.dtype(dtype):
+            self._eval_cast = E.astype(dtype)
+        return self._eval_cast
+
     def evaluate(self, C: np.ndarray) -> np.ndarray:
         """(N, 3) interpolated residual at the evaluation points (Joshi Eq. 3: Σ_i φ_i(‖x_v − x_i‖) c_i)."""
         return self.eval_matrix @ C

@@ -48,6 +48,8 @@ RETARGET = ("jacobian", "scale", "none")   # how the markers' motion is carried 
 # same-face take, 9 gave 0.2052, 30 gave 0.2042 (0.2049 fitting the rig's own neutral); the actor take's weights
 # (0.067 RMS) do not change.
 SHRINK = 30.0
+
+DENSE_BLOCK = 32          # frames per block of dense results (32 × 106k vertices × 12 bytes = 41 MB)
 CORRECTIVE_STEPS = 6      # Gauss–Newton steps per weight solve on a rig with correctives (quadratic: 2–3 suffice)
 
 # Defaults chosen by measurement on the ICT Live Link take (see tests/benchmarks/test_bench_take_solve.py).
@@ -277,9 +279,32 @@ class TakeSolution:
         return x
 
     def iter_dense(self) -> Iterator[np.ndarray]:
-        """Yield every frame's dense surface in order (e.g. for a PC2 writer)."""
-        for f in range(self.n_frames):
-            yield self.dense(f)
+        """Yield every frame's dense surface in order, (V, 3) float32 (e.g. for a PC2 writer): views into
+        ``dense_blocks``."""
+        for block in self.dense_blocks():
+            yield from block
+
+    def dense_blocks(self, frames: int = DENSE_BLOCK) -> Iterator[np.ndarray]:
+        """Yield the dense surfaces of every frame in order as (n, V, 3) float32 blocks of at most ``frames``
+        frames: with the solver's batch evaluator (``surface_many``, global solves) each block is two matrix
+        products, the pose W (n, K) · D (K, 3V) and the residual Φ (N, M+P) · C (M+P, 3n); otherwise frame by
+        frame. The block bounds the memory: n × V × 3 × 4 bytes."""
+        s = self.solver
+        F = self.n_frames
+        batch = s.surface_many is not None and self.region_weights is None
+        for start in range(0, F, max(1, int(frames))):
+            stop = min(F, start + max(1, int(frames)))
+            if not batch:
+                yield np.stack([self.dense(f) for f in range(start, stop)]).astype(np.float32)
+                continue
+            x = s.surface_many(self.weights[start:stop])
+            if self.coefficients is not None and s.rbf is not None:
+                C = self.coefficients[start:stop]                                    # (n, M+P, 3)
+                n, P = C.shape[0], C.shape[1]
+                E = s.rbf.eval_matrix_as(np.float32)                                 # (N, M+P)
+                r = E @ C.transpose(1, 0, 2).reshape(P, n * 3).astype(np.float32)   # (N, 3n)
+                x[:, s.residual_vertices] += r.reshape(-1, n, 3).transpose(1, 0, 2)
+            yield x
 
 
 class TakeSolver:
@@ -302,7 +327,9 @@ class TakeSolver:
 
     surface: the rig's pose evaluation as a callable, weights (K,) or region weights (R+1, K) -> a new (V, 3)
     float64 surface with the same correctives (``model.pose.PoseEvaluator.pose`` with the level's blend); the
-    dense frames and projections use it. Without it the solver fits the markers only.
+    dense frames and projections use it. Without it the solver fits the markers only. surface_many: the same
+    pose for many global weight vectors at once, (n, K) -> (n, V, 3) float32 (``PoseEvaluator.evaluate_many``):
+    ``TakeSolution.dense_blocks`` then computes all frames as matrix products.
     """
 
     def __init__(self, neutral: np.ndarray, deltas: np.ndarray, binding, *, mode: str = "box",
@@ -322,14 +349,16 @@ class TakeSolver:
                  surface: Callable[[np.ndarray], np.ndarray] | None = None,
                  retarget: str = DEFAULTS["retarget"], warp_scale: float = DEFAULTS["warp_scale"],
                  warp_lambda: float = DEFAULTS["warp_lambda"], antagonists=None,
-                 lam_antagonist: float = DEFAULTS["lam_antagonist"]) -> None:
+                 lam_antagonist: float = DEFAULTS["lam_antagonist"],
+                 surface_many: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         if residual not in KERNELS:
             raise ValueError(f"Unknown residual '{residual}': use one of {', '.join(KERNELS)}.")
         if retarget not in RETARGET:
             raise ValueError(f"Unknown retargeting '{retarget}': use one of {', '.join(RETARGET)}.")
         self.retarget, self.warp_scale, self.warp_lambda = retarget, float(warp_scale), float(warp_lambda)
         self.neutral = np.asarray(neutral, dtype=np.float64)
-        self.deltas = np.asarray(deltas, dtype=np.float64)
+        deltas = np.asarray(deltas)   # float32 shapes stay float32 (a studio rig's float64 copy is gigabytes)
+        self.deltas = deltas if deltas.dtype in (np.float32, np.float64) else deltas.astype(np.float64)
         K, V, _ = self.deltas.shape
         self.K, self.V = K, V
         if not sp.issparse(binding):
@@ -338,6 +367,9 @@ class TakeSolver:
         self.binding = sp.csr_matrix(binding)
         M = self.binding.shape[0]
         self.M = M
+        # head stabilisation: (head-band markers per frame, their neutral, which mapped markers are stable);
+        # solve() sets it from the take, and by default every marker is stable and there is no head band
+        self._head = (np.zeros((0, 0, 3)), np.zeros((0, 3)), np.ones(M, dtype=bool))
         self.iterations = int(iterations)
         self.residual_smoothing = float(residual_smoothing)
         self.two_pass = bool(two_pass)
@@ -352,6 +384,10 @@ class TakeSolver:
         # Antagonist pairs (ALGORITHMS.md §13): λ_a w_i w_j added to the QP for each pair (i, j).
         self.lam_antagonist = float(lam_antagonist)
         self.pair_penalty = pair_penalty(antagonists if antagonists is not None else [], K, self.lam_antagonist)
+        # The compiled sweep (numba, loaded here with the rig's preparation rather than inside the timed solve).
+        from . import take_kernel
+        self._kernel = take_kernel if take_kernel.available() else None
+        self.qp_iterations = 0      # active-set iterations of the compiled sweeps so far (a cost measure)
         # Correctives: their activation rule and deltas, at the markers (C, 3M) and on the surface.
         self._activate, E, drivers = correctives if correctives is not None else (None, np.zeros((0, V, 3)), [])
         E = np.asarray(E, dtype=np.float64).reshape(-1, V, 3)
@@ -362,6 +398,7 @@ class TakeSolver:
         self._Em_rig = np.stack([self.binding @ E[c] for c in range(self.C)]) if self.C else np.zeros((0, M, 3))
         # Dense pose: the rig's one pose evaluation, handed in (model.pose.PoseEvaluator.pose with the blend).
         self.surface = surface
+        self.surface_many = surface_many     # global weights (n, K) -> (n, V, 3) float32, the same pose (exports)
         # Regions.
         self.lam_region = float(lam_region)
         self.regions = None
@@ -658,6 +695,11 @@ class TakeSolver:
         Rs = np.zeros((F, 3, 3))
         ts = np.zeros((F, 3))
         solved = np.zeros(F, dtype=bool)
+        Yh, head_anchor, stable = self._head
+        if (self._kernel is not None and self.head_motion and self._activate is None and self.mode == "box"
+                and bool(stable.all()) and head_anchor.shape[0] == 0):
+            self._pass_compiled(Y, np.asarray(order, dtype=np.int64), w, R, t, cancel, report, W, Rs, ts, solved)
+            return W, Rs, ts, solved
         rest, Dm = self.anchor, self.Dm
         rw, rw0 = self.rigid_weighting ** 2, self.rigid_noise ** 2
         Yh, head_anchor, stable = self._head
@@ -704,6 +746,43 @@ class TakeSolver:
             if report is not None:
                 report(i)
         return W, Rs, ts, solved
+
+    def _pass_compiled(self, Y, order, w, R, t, cancel, report, W, Rs, ts, solved) -> None:
+        """``_pass`` in the compiled kernel (``solvers.take_kernel.solve_pass``, same QP and pivot rules),
+        run over chunks of frames so that ``cancel`` and ``report`` are heard between them. The QP's H per
+        missing-marker mask is the cached one of ``_qp_entry``."""
+        take_kernel = self._kernel
+        masks, mask_of = take_kernel.pass_masks(Y)
+        mu = self.lam_temporal + 1e-10                  # H's diagonal term, as _qp_entry builds it
+        if self.K > 2 * (3 * self.M + 1) and mu > 0 and not self.pair_penalty.any():
+            # many more shapes than marker coordinates: the QP in its low-rank form, H = BᵀB + μI with
+            # B = [A_present; √λ_s 1ᵀ] (a step O(K·3M) instead of O(n_free²); the dense form is faster up to about
+            # twice 3M + 1 shapes); H's largest entry is on its diagonal
+            Bts = np.zeros((masks.shape[0], self.K, 3 * self.M + 1))
+            for i, m in enumerate(masks):
+                Bts[i, :, :-1] = self.At * np.repeat(m, 3)
+            Bts[:, :, -1] = np.sqrt(self.lam_sparsity)
+            Hs = np.zeros((0, 1, 1))
+            tols = 1e-12 * np.maximum(1.0, (Bts * Bts).sum(axis=2).max(axis=1) + mu)
+        else:
+            qps = [self._qp_entry(m)[2] for m in masks]
+            Hs = np.stack([q.H for q in qps])
+            tols = np.array([q.tol for q in qps])
+            Bts = np.zeros((masks.shape[0], 1, 0))
+        w, R, t = np.array(w, dtype=np.float64), np.array(R, dtype=np.float64), np.array(t, dtype=np.float64)
+        Yc = np.ascontiguousarray(Y, dtype=np.float64)
+        F = Y.shape[0]
+        chunk = 16          # frames between two looks at cancel / progress (a few ms)
+        for start in range(0, order.size, chunk):
+            if cancel is not None and cancel():
+                raise SolveCancelled(f"Take solve cancelled at frame {int(order[start])} of {F}.")
+            self.qp_iterations += take_kernel.solve_pass(
+                Yc, order[start:start + chunk], w, R, t, self.anchor, self.Dm, self.At, Hs, Bts, mu, tols, mask_of,
+                self.lam_temporal, self.iterations, self.rigid_weighting ** 2, self.rigid_noise ** 2, float(self.lower), float(self.upper), 200, W, Rs, ts, solved,
+                bool(solved.any()))
+            if report is not None:
+                for i in range(start, min(start + chunk, order.size)):
+                    report(i)
 
     def residual_coefficients(self, misfit: np.ndarray) -> np.ndarray:
         """(F, M+P, 3) RBF coefficients for per-frame misfits (F, M, 3) (NaN rows = missing markers):

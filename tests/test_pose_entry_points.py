@@ -88,14 +88,17 @@ def test_every_entry_point_gives_the_evaluators_arrays(qtbot, posed, tmp_path):
     assert np.array_equal(after, PoseEvaluator(rig_muted, dtype=np.float64).evaluate(W[-1]))
     assert np.abs(after - before).max() > 0.05
 
-    # a take's PC2 export: a weight take posed by the rig, written as float32
+    # a take's PC2 export: a weight take posed by the rig, written as float32 by the evaluator's batched
+    # evaluation (all frames as one float32 matrix product), which is its per-frame pose to float32 rounding
     F = 4
     frames_w = np.stack([W[r] for r in range(F)])
     ws = TakeWorkspace(rig)
     ws.take = WeightTake(weights=frames_w, names=list(rig.shape_names), rate=30.0)
     export_pc2(ws, tmp_path / "take.pc2")
     data, _, _ = read_pc2(tmp_path / "take.pc2")
-    assert np.array_equal(data, np.stack([ev64.evaluate(w) for w in frames_w]).astype(np.float32))
+    assert np.array_equal(data, PoseEvaluator(rig, dtype=np.float64).evaluate_many(frames_w))
+    per_frame = np.stack([ev64.evaluate(w) for w in frames_w])
+    assert np.abs(data - per_frame).max() < 4e-7 * max(1.0, float(np.abs(per_frame).max()))
 
     # a take solve's dense frames (per region, no residual): the evaluator at the solved region weights
     vertices = np.flatnonzero(np.abs(rig.deltas).max(axis=(0, 2)) > 0)[::40]

@@ -136,14 +136,17 @@ def test_bench_take_solve_cli_fresh_process(benchmark, ict_dir, take_dir, tmp_pa
 
 
 def test_bench_take_dense_all_frames(benchmark, ict_rig, setup):
+    """Every frame's dense surface as the exports compute it: float32 blocks of frames, each two matrix products
+    (the pose and the RBF residual) with the evaluator's batch evaluation."""
     B, X, _ = setup
-    sol = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, surface=PoseEvaluator(ict_rig, dtype=np.float64).evaluate
+    ev = PoseEvaluator(ict_rig, dtype=np.float64)
+    sol = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, surface=ev.evaluate, surface_many=ev.evaluate_many
                      ).solve(X, unit_factor=0.1)
 
     def all_frames():
         n = 0
-        for x in sol.iter_dense():
-            n += x.shape[0]
+        for x in sol.dense_blocks():
+            n += x.shape[0] * x.shape[1]
         return n
 
     assert benchmark.pedantic(all_frames, rounds=2, iterations=1) == X.shape[0] * ict_rig.n_vertices

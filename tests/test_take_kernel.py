@@ -1,0 +1,127 @@
+"""The compiled take-solve sweep (solvers.take_kernel) against the Python sweep it replaces, the batched dense
+results and PC2 blocks against the per-frame ones (issue 20)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from model.marker_map import load_marker_map
+from model.pc2 import read_pc2, write_pc2
+from model.take_c3d import read_c3d
+from model.take_workspace import solve_take
+from solvers import take_kernel
+from solvers.take_solve import TakeSolver, _CachedBoxQP, _smooth_in_time
+
+
+@pytest.fixture(scope="module")
+def take_setup(ict_rig, take_dir):
+    take = read_c3d(take_dir / "take.c3d")
+    mm = load_marker_map(take_dir / "marker_map.json")
+    labels, cols = mm.match(take)
+    return take, mm, mm.binding(ict_rig, labels), take.positions[:, cols]
+
+
+def test_numba_kernel_is_available():
+    assert take_kernel.available(), "numba is a dependency (pyproject.toml): the take solve needs its kernel"
+
+
+def test_box_qp_matches_the_python_active_set_on_random_problems():
+    rng = np.random.default_rng(3)
+    K = 40
+    L, order, pos, x, r = np.zeros((K, K)), np.zeros(K, np.int64), np.zeros(K, np.int64), np.zeros(K), np.zeros(K)
+    nf = -1
+    H = None
+    for trial in range(60):
+        if trial % 20 == 0:      # a new H every 20 problems; between, the factor is carried over (warm)
+            A = rng.normal(size=(90, K)) * (rng.random(K) < 0.7)
+            H = A.T @ A + 0.5 * np.eye(K)
+            nf = -1
+        g = rng.normal(size=K) * 15
+        w0 = np.clip(rng.normal(size=K) * 0.5 + 0.3, 0, 1)
+        ref = _CachedBoxQP(H, cache=False).solve(g, w0.copy())
+        w = w0.copy()
+        _, nf = take_kernel.box_qp(H, g, w, 0.0, 1.0, 1e-12 * np.abs(H).max(), 200, L, order, pos, x, r, nf)
+        assert np.abs(w - ref).max() < 1e-9
+        # and it is the optimum: projected gradient zero
+        grad = H @ w - g
+        assert np.all(grad[w <= 0] >= -1e-8) and np.all(grad[w >= 1] <= 1e-8)
+        assert np.abs(grad[(w > 0) & (w < 1)]).max(initial=0) < 1e-8
+
+
+def test_compiled_sweep_equals_the_python_sweep_on_the_ict_take(ict_rig, take_setup):
+    """Both sweeps (forward and backward, gaps in the take) give the same weights and head motion."""
+    _, _, B, X = take_setup
+    s = TakeSolver(ict_rig.neutral, ict_rig.deltas, B, residual="none")
+    Xs = _smooth_in_time(X[:200] * 0.1, s.marker_smoothing)
+    cal = s.calibrate(Xs, 30)
+    Y = Xs @ cal[:3, :3].T + cal[:3, 3]
+    assert np.isnan(Y).any()        # the take has occlusion gaps: several missing-marker masks
+    kernel = s._kernel
+    assert kernel is not None
+    out = {}
+    for name in ("compiled", "python"):
+        s._kernel = kernel if name == "compiled" else None
+        order = range(Y.shape[0] - 1, -1, -1)
+        out[name] = s._pass(Y, order, np.zeros(s.K), np.eye(3), np.zeros(3), None, None)
+    s._kernel = kernel
+    (Wc, Rc, tc, okc), (Wp, Rp, tp, okp) = out["compiled"], out["python"]
+    assert np.array_equal(okc, okp) and okc.all()
+    assert np.abs(Wc - Wp).max() < 1e-9
+    assert np.abs(Rc - Rp).max() < 1e-9 and np.abs(tc - tp).max() < 1e-9
+    assert Wc.max() > 0.5      # a real expression, not the neutral
+
+
+def test_dense_blocks_are_the_dense_frames_in_float32(ict_rig, take_setup, tmp_path):
+    take, mm, _, _ = take_setup
+    sol = solve_take(ict_rig, take, mm)
+    blocks = list(sol.dense_blocks(frames=100))
+    assert [b.shape[0] for b in blocks] == [100, 100, 100, 58] and blocks[0].dtype == np.float32
+    frames = np.concatenate(blocks)
+    for f in (0, 99, 100, 201, 357):
+        ref = sol.dense(f)
+        assert np.abs(frames[f] - ref).max() < 1e-5          # float32 rounding of centimetres
+    assert np.abs(frames[150] - sol.dense(149)).max() > 1e-3   # and each block row is its own frame
+    # the PC2 writer takes the blocks whole: the same file as frame by frame
+    write_pc2(tmp_path / "blocks.pc2", iter(blocks))
+    write_pc2(tmp_path / "frames.pc2", (frames[f] for f in range(frames.shape[0])))
+    assert (tmp_path / "blocks.pc2").read_bytes() == (tmp_path / "frames.pc2").read_bytes()
+    data, _, _ = read_pc2(tmp_path / "blocks.pc2")
+    assert np.array_equal(data, frames)
+
+
+def test_pc2_block_with_a_nan_names_its_frame(tmp_path):
+    from model.errors import RigInputError
+    good = np.zeros((3, 5, 3), np.float32)
+    bad = good.copy()
+    bad[2, 1, 0] = np.nan
+    with pytest.raises(RigInputError, match="frame 5 has NaN"):
+        write_pc2(tmp_path / "x.pc2", iter([good, bad]))
+    assert not (tmp_path / "x.pc2").exists()
+
+
+def test_low_rank_qp_sweep_equals_the_python_sweep_with_many_shapes():
+    """400 local shapes seen by 20 markers (K > 2(3M + 1)): the low-rank QP, same weights as the Python sweep."""
+    rng = np.random.default_rng(7)
+    V, K, M, F = 300, 400, 20, 40
+    neutral = rng.normal(size=(V, 3)) * 5
+    deltas = np.zeros((K, V, 3))
+    for k in range(K):                     # each shape moves a patch of 30 vertices
+        c = rng.integers(0, V - 30)
+        deltas[k, c:c + 30] = rng.normal(size=(30, 3)) * 0.3
+    markers = np.sort(rng.choice(V, M, replace=False))
+    W = np.clip(rng.normal(0.2, 0.3, size=(F, K)), 0, 1)
+    W[:5] = 0.0
+    X = neutral[markers][None] + np.einsum("fk,kmc->fmc", W, deltas[:, markers])
+    X[12:15, 3] = np.nan                   # a gap: a second missing-marker mask
+    s = TakeSolver(neutral, deltas, markers, residual="none", lam_sparsity=0.05, marker_smoothing=0.0)
+    assert s.K > 2 * (3 * s.M + 1)
+    kernel = s._kernel
+    out = {}
+    for name in ("compiled", "python"):
+        s._kernel = kernel if name == "compiled" else None
+        out[name] = s.solve(X, calibration_frames=5)
+    s._kernel = kernel
+    a, b = out["compiled"], out["python"]
+    assert np.abs(a.weights - b.weights).max() < 1e-8
+    assert np.abs(a.head - b.head).max() < 1e-8
+    assert 0.0 < a.weights.max() <= 1.0 and a.weights.min() >= 0.0
