@@ -46,7 +46,7 @@ def livelink_timing(timecodes: list[str], path: str | Path) -> tuple[float, np.n
     for i, code in enumerate(timecodes):
         m = _TIMECODE.match(code.strip())
         if not m:
-            raise RigInputError(f"{path}: row {i + 2} has the timecode '{code}', not HH:MM:SS:FF.")
+            raise RigInputError(f"{path}: row {i + 2} has the timecode '{shown(code, 30)}', not HH:MM:SS:FF.")
         h, mi, sec, ff, frac = m.groups()
         parts.append((int(h) * 3600 + int(mi) * 60 + int(sec), int(ff) + (float(frac) if frac else 0.0)))
     whole = np.array([p[0] for p in parts], dtype=np.float64)
