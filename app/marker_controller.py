@@ -129,6 +129,7 @@ class MarkerController(QtCore.QObject):
         super().__init__(window)
         self.window = window
         self.document, self.viewport = window.document, window.viewport
+        self._antagonist_cache: tuple[int, list] | None = None   # (rig version, the rig's antagonist pairs)
         self.panel = panel = MarkersPanel(window)
         self.dock = window.add_dock("Markers", panel, QtCore.Qt.LeftDockWidgetArea, scroll=True)
         self.mode_action = window.add_action(
@@ -382,9 +383,9 @@ class MarkerController(QtCore.QObject):
     def _antagonists(self, rig) -> list[tuple[int, int]]:
         """The rig's antagonist pairs (``model.antagonists``), found once per rig: a drag never leaves both on."""
         from model.antagonists import pair_indices, rig_antagonists
-        hit = getattr(self, "_antagonist_cache", None)
-        if hit is None or hit[0] is not rig.deltas:
-            hit = self._antagonist_cache = (rig.deltas, pair_indices(rig, rig_antagonists(rig)))
+        hit = self._antagonist_cache
+        if hit is None or hit[0] != self.document.rig_version:
+            hit = self._antagonist_cache = (self.document.rig_version, pair_indices(rig, rig_antagonists(rig)))
         return hit[1]
 
     def begin_drag(self, index: int) -> DragState:

@@ -92,9 +92,7 @@ def load_animation(path: str | Path, rig: Rig) -> WeightAnimation:
     if is_livelink_csv(path):
         from .livelink import read_livelink_csv
         take = read_livelink_csv(path, rig.shape_names)
-        times = getattr(take, "times", None)  # the frame times from the timecodes, where the take has them
-        times = times() if callable(times) else times
-        times = np.arange(take.n_frames) / take.rate if times is None else np.asarray(times, dtype=np.float64)
+        times = np.asarray(take.times(), dtype=np.float64)   # the frame times from the timecodes
         return WeightAnimation(times=times - times[0], weights=take.weights, source=str(path))
     from .weights_csv import read_weights_csv
     _frames, times, names, W = read_weights_csv(path)

@@ -48,6 +48,7 @@ class PoseEvaluator:
     def __init__(self, rig: Rig, dtype=np.float32) -> None:
         self.rig = rig
         self.dtype = dtype
+        self._D_full: np.ndarray | None = None   # the deltas over every vertex, made on the first evaluate_many
         V = rig.n_vertices
         self.K = rig.n_shapes
         self._neutral = rig.neutral.astype(dtype).reshape(-1)
@@ -111,7 +112,7 @@ class PoseEvaluator:
             a = corrective_activations_per_vertex(self._correctives, self._names, W) * self.live()
             W = np.concatenate([W, a], axis=1)
         dtype = np.dtype(dtype)
-        full = getattr(self, "_D_full", None)
+        full = self._D_full
         if full is None or full.dtype != dtype:
             full = np.zeros((self._D.shape[0], self._neutral.size), dtype=dtype)
             full[:, self._cols] = self._D
