@@ -29,6 +29,21 @@ def available() -> bool:
 
 if numba is not None:
     @njit(cache=True, nogil=True)
+    def _cho_solve(L, rhs, out, n):
+        """Solve L Lᵀ out = rhs[:n] with the lower triangle L[:n, :n] (forward, then back substitution); ``out``
+        may be ``rhs`` itself."""
+        for i in range(n):
+            v = rhs[i]
+            for k in range(i):
+                v -= L[i, k] * out[k]
+            out[i] = v / L[i, i]
+        for i in range(n - 1, -1, -1):
+            v = out[i]
+            for k in range(i + 1, n):
+                v -= L[k, i] * out[k]
+            out[i] = v / L[i, i]
+
+    @njit(cache=True, nogil=True)
     def _chol_append(L, order, nf, H, j):
         """Append variable j to the factor of H over ``order[:nf]``: returns False when the block would not be
         positive definite (the caller refactors)."""
@@ -132,16 +147,7 @@ if numba is not None:
                     for q in range(nh):
                         v -= H[a, held[q]] * w[held[q]]
                     r[i] = v
-                for i in range(nf):          # L y = r
-                    v = r[i]
-                    for k in range(i):
-                        v -= L[i, k] * x[k]
-                    x[i] = v / L[i, i]
-                for i in range(nf - 1, -1, -1):   # Lᵀ x = y
-                    v = x[i]
-                    for k in range(i + 1, nf):
-                        v -= L[k, i] * x[k]
-                    x[i] = v / L[i, i]
+                _cho_solve(L, r, x, nf)      # L Lᵀ x = r
                 blocked = False
                 for i in range(nf):
                     pos[order[i]] = i
@@ -355,16 +361,7 @@ if numba is not None:
                         r[j] = q
                         for a in range(m):
                             t[a] += Bt[j, a] * q
-                for a in range(m):               # G y = t
-                    q = t[a]
-                    for b in range(a):
-                        q -= Lg[a, b] * t[b]
-                    t[a] = q / Lg[a, a]
-                for a in range(m - 1, -1, -1):
-                    q = t[a]
-                    for b in range(a + 1, m):
-                        q -= Lg[b, a] * t[b]
-                    t[a] = q / Lg[a, a]
+                _cho_solve(Lg, t, t, m)          # G Gᵀ y = t, in place
                 blocked = False
                 for j in range(K):
                     if s[j] == 0.0:
