@@ -26,7 +26,7 @@ from urllib.parse import unquote
 import numpy as np
 
 from .errors import RigInputError, shown
-from .input_files import regular_file
+from .input_files import read_input_bytes, regular_file
 from .json_file import parse_json_text
 from .rig import Rig
 
@@ -254,12 +254,7 @@ def _check_structure(path: Path, gltf: dict) -> None:
 
 
 def _parse(path: Path) -> _Doc:
-    try:
-        raw = path.read_bytes()
-    except OSError as e:
-        raise RigInputError(f"{path}: cannot be read ({e.strerror or e}).") from None
-    if not raw:
-        raise RigInputError(f"{path}: the file is empty.")
+    raw = read_input_bytes(path)
     bin_chunk = None
     if raw[:4] == _GLB_MAGIC:
         if len(raw) < 20:

@@ -23,3 +23,16 @@ def regular_file(path: str | Path) -> Path:
     if not stat.S_ISREG(st.st_mode):
         raise RigInputError(f"{path}: is not a regular file (a device, pipe or socket); nothing was read.")
     return path
+
+
+def read_input_bytes(path: str | Path) -> bytes:
+    """The whole content of a regular file the user named; a missing, special, unreadable or empty file is one
+    RigInputError sentence."""
+    path = regular_file(path)
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise RigInputError(f"{path}: cannot be read ({exc.strerror or exc}).") from None
+    if not data:
+        raise RigInputError(f"{path}: the file is empty.")
+    return data

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError
+from .input_files import read_input_bytes
 from .take_data import MarkerTake, unique_labels, units_from_text
 
 BLOCK = 512
@@ -353,12 +354,7 @@ def _choose_layout(data: bytes, params: _Params, hdr: dict, path: Path, pblock: 
 def read_c3d(path: str | Path) -> MarkerTake:
     """Read the 3D points of a C3D file into a MarkerTake (NaN where the residual is negative)."""
     path = Path(path)
-    try:
-        data = path.read_bytes()
-    except OSError as exc:
-        raise RigInputError(f"{path}: cannot be read ({exc.strerror}).") from None
-    if not data:
-        raise RigInputError(f"{path}: the file is empty.")
+    data = read_input_bytes(path)
     if len(data) < BLOCK or data[1] != 0x50:
         raise RigInputError(f"{path}: is not a C3D file (no C3D header).")
     warnings: list[str] = []
