@@ -57,6 +57,11 @@ def _clock(seconds: float | None) -> str:
     return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
 
 
+def progress_text(p) -> str:
+    """'5/12 takes, 840 frames/s, ETA 0:42' of a ``model.batch.BatchProgress`` (the terminal and the GUI)."""
+    return f"{p.done}/{p.total} takes, {p.frames_per_second:.0f} frames/s, ETA {_clock(p.eta)}"
+
+
 class ProgressPrinter:
     """Takes done, frames/s and ETA: one redrawn line with a bar on a terminal, a plain line per take otherwise."""
 
@@ -71,7 +76,7 @@ class ProgressPrinter:
         if p.dashboard and not self._shown_dashboard:
             print(f"dashboard: {p.dashboard}", file=out, flush=True)
             self._shown_dashboard = True
-        status = f"{p.done}/{p.total} takes, {p.frames_per_second:.0f} frames/s, ETA {_clock(p.eta)}"
+        status = progress_text(p)
         if self.tty:
             filled = int(self.width * p.done / max(p.total, 1))
             out.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {status}\033[K")

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from app import corrective_controller, mocap_controller
+from app import batch_controller, corrective_controller, mocap_controller
 from app import settings as app_settings
 from app.autosave import AutosaveController
 from app.commands import SetWeightsCommand
@@ -76,6 +76,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.keyframes = KeyframeController(self)
         self.correctives = corrective_controller.install(self)
         self.mocap = mocap_controller.install(self)
+        self.batch = batch_controller.install(self)
         self.autosave = AutosaveController(self)
         self._arrange_docks()
         self._restore_layout()
@@ -615,3 +616,4 @@ class MainWindow(QtWidgets.QMainWindow):
             self._worker.wait()
         self.segmentation.runner.shutdown()
         self.mocap.shutdown()
+        self.batch.shutdown()
