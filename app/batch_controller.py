@@ -77,7 +77,7 @@ class BatchController(QtCore.QObject):
                 raise RigInputError("Add the takes to solve first.")
             if not d.output():
                 raise RigInputError("Choose the output folder first.")
-            takes = find_takes(d.takes())
+            takes = find_takes(d.takes(), exclude=d.output())
         except RigInputError as exc:
             d.set_status(str(exc))
             self.window.show_status(str(exc))

@@ -95,7 +95,7 @@ def cmd_batch(args) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
-    takes = find_takes(args.takes)
+    takes = find_takes(args.takes, exclude=args.output)
     rig = load_solve_rig(args)
     job = prepare_job(rig, args)
     names = take_names(takes)

@@ -49,9 +49,10 @@ _TMP_PREFIX = ".bs-batch-"
 
 
 # --- which takes, under which names ------------------------------------------------------------------
-def find_takes(items: list[str]) -> list[Path]:
+def find_takes(items: list[str], exclude: str | Path | None = None) -> list[Path]:
     """Take files from files, folders (their .c3d, .trc and .csv files) and glob patterns, in the order given,
-    each once. RigInputError when an item names nothing."""
+    each once, leaving out files under ``exclude`` (a batch's own output folder). RigInputError when an item
+    names nothing."""
     found: list[Path] = []
     for item in items:
         p = Path(item)
@@ -70,8 +71,11 @@ def find_takes(items: list[str]) -> list[Path]:
             raise RigInputError(f"{item}: does not exist.")
         found.extend(hits)
     seen, out = set(), []
+    skip = Path(exclude).resolve() if exclude is not None else None
     for p in found:
         key = p.resolve()
+        if skip is not None and key.is_relative_to(skip):
+            continue
         if key not in seen:
             seen.add(key)
             out.append(key)
@@ -261,16 +265,20 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
                  OUTPUTS["report"]: lambda p: export_report(ws, p)}
         if job.cache:
             files[OUTPUTS["cache"]] = lambda p: export_pc2(ws, p)
-        frame = preview_frame(sol.weights)
-        if job.preview is not None:
-            files[OUTPUTS["preview"]] = lambda p: job.preview(sol.dense(frame), job.rig.face_counts,
-                                                              job.rig.face_indices, p, focus=job.focus)
         for fname, write in files.items():
             write(tmp / fname)
+        frame, preview_error = preview_frame(sol.weights), None
+        if job.preview is not None:
+            try:          # a preview that cannot be drawn (no display, no EGL) costs the take its picture only
+                job.preview(sol.dense(frame), job.rig.face_counts, job.rig.face_indices, tmp / OUTPUTS["preview"],
+                            focus=job.focus)
+                files[OUTPUTS["preview"]] = None
+            except Exception as exc:
+                preview_error = f"the preview could not be rendered ({type(exc).__name__}: {exc})"
         report = json.loads((tmp / OUTPUTS["report"]).read_text())
         row = _row(name, take_path, out_dir, "solved", frames=int(report["frames"]), rate=float(report["rate"]),
                    frames_per_second=float(report["frames_per_second"]), marker_rmse=float(report["marker_rmse"]),
-                   motion_explained=report.get("motion_explained"), preview_frame=frame)
+                   motion_explained=report.get("motion_explained"), preview_frame=frame, preview_error=preview_error)
         row["seconds"] = time.perf_counter() - start
         done = {"take_file": identity, "signature": job.signature, "outputs": list(files), "row": row}
 

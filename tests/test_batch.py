@@ -113,6 +113,11 @@ def test_take_names_tell_takes_apart(tmp_path):
     assert take_names([tmp_path / "x.c3d"]) == ["x"]
     # folders, globs and files, each take once, in the order given
     assert find_takes([str(a.parent), str(tmp_path / "day1" / "*" / "*.c3d")]) == [a, c, b]
+    # a batch's own outputs are never taken for takes
+    (tmp_path / "day1" / "out" / "take").mkdir(parents=True)
+    (tmp_path / "day1" / "out" / "take" / "weights.csv").write_text("frame,time\n")
+    assert find_takes([str(tmp_path / "day1" / "**" / "*.c3d"), str(tmp_path / "day1" / "**" / "*.csv")],
+                      exclude=tmp_path / "day1" / "out") == [a, b]
     from model.errors import RigInputError
     with pytest.raises(RigInputError, match="matches no take"):
         find_takes([str(tmp_path / "*.nothing")])
@@ -143,6 +148,10 @@ def test_batch_on_a_local_cluster_matches_solve_resumes_and_survives_a_killed_wo
         assert r["error"] is None and r["motion_explained"] == report.get("motion_explained")
         assert (out / name / "preview.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert not list((out / name).glob(".*")), "temporaries left behind"
+    from tests.image_compare import load_png
+    img = load_png(out / "ict_turned" / "preview.png")
+    assert img.shape[:2] == (360, 480)
+    assert (np.abs(img.astype(int) - img[:, :1].astype(int)).max(axis=2) > 30).mean() > 0.2   # a face on it
     assert rows["ict_half_rate"]["rate"] == 30.0 and rows["ict_half_rate"]["frames"] == 90
     assert names[0] == "take" and rows["take"]["frames"] == 358
     assert rows["ict_cm"]["marker_rmse"] == pytest.approx(rows["ict_trim"]["marker_rmse"], rel=0.5)
