@@ -33,6 +33,9 @@ def cmd_info(args) -> int:
         "presets": sorted(rig.presets),
         "bounds": [rig.neutral.min(axis=0).round(6).tolist(), rig.neutral.max(axis=0).round(6).tolist()],
     }
+    if Path(args.rig).suffix.lower() in (".gltf", ".glb"):  # which mesh was read, and the others (--mesh NAME)
+        from model.gltf import gltf_meshes
+        info["meshes"] = gltf_meshes(args.rig)
     if args.json:
         print(json.dumps(info, indent=2))
     else:
@@ -44,6 +47,9 @@ def cmd_info(args) -> int:
             print(f"  correctives: {', '.join(names)}")
         if info["presets"]:
             print(f"  presets: {', '.join(info['presets'])}")
+        if len(info.get("meshes", [])) > 1:
+            print("  meshes (--mesh NAME): " + ", ".join(f"{m['name']} ({m['targets']} targets, {m['vertices']} vertices)"
+                                                      for m in info["meshes"]))
     return 0
 
 
@@ -54,7 +60,9 @@ def cmd_render(args) -> int:
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
     size = parse_size(args.size)
-    view = build_view(rig, weights, args.view, threshold=args.threshold, level=args.level)
+    from model.segmentation import SegmentationSettings
+    t = SegmentationSettings().t if args.threshold is None else args.threshold
+    view = build_view(rig, weights, args.view, threshold=t, level=args.level)
     from widgets.scene import render_png
     render_png(view.points, rig.face_counts, rig.face_indices, args.output, focus=view.focus,
                colormap=view.colormap, camera=args.camera, size=size, wireframe=args.wireframe,
@@ -64,14 +72,14 @@ def cmd_render(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from model.obj_io import write_obj
-    from model.pose import PoseEvaluator
+    from model.export import export_rig, load_animation
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
-    points = PoseEvaluator(rig, dtype=np.float64).evaluate(weights)
-    header = f"Blendshape Studio export of {rig.name}\nweights: " + json.dumps(rig.weights_to_dict(weights))
-    write_obj(args.output, points, rig.face_counts, rig.face_indices, header=header)
-    print(f"wrote {args.output} ({rig.n_vertices} vertices, {rig.n_faces} faces)")
+    animation = load_animation(args.animation, rig) if args.animation else None
+    export_rig(rig, args.output, weights, animation, units=args.out_units, up=args.up)
+    frames = f", {animation.n_frames} frames" if animation is not None else ""
+    print(f"wrote {args.output} ({rig.n_vertices} vertices, {rig.n_faces} faces, {rig.n_shapes} shapes, "
+          f"{len(rig.correctives)} correctives{frames})")
     return 0
 
 
@@ -79,8 +87,12 @@ def cmd_segment(args) -> int:
     from model.atomic import atomic_write
     from model.segmentation import SegmentationSettings, segment_rig, segmentation_to_json
     rig = load_rig_arg(args)
-    settings = SegmentationSettings(t=args.threshold, levels=args.levels, map_kind=args.map,
-                                    min_region_size=args.min_size, overlap_rings=args.overlap, method=args.method)
+    chosen = {"t": args.threshold, "map_kind": args.map, "smoothing": args.smoothing,
+              "separate_meshes": args.separate_meshes,
+              "normalise": None if args.normalise is None else args.normalise == "per-shape",
+              "split_by_shapes": None if args.split is None else args.split == "shapes"}
+    settings = SegmentationSettings(levels=args.levels, min_region_size=args.min_size, overlap_rings=args.overlap,
+                                    method=args.method, **{k: v for k, v in chosen.items() if v is not None})
     seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, settings)
     atomic_write(args.output, json.dumps(segmentation_to_json(seg)).encode("utf-8"))
     counts = ", ".join(str(lvl.n_regions) for lvl in seg.levels)
@@ -114,6 +126,24 @@ def cmd_corrective(args) -> int:
     return 0
 
 
+def cmd_take_info(args) -> int:
+    from model.takes import load_take, take_summary
+    info = take_summary(load_take(args.take))
+    if args.json:
+        print(json.dumps(info, indent=2))
+        return 0
+    gaps = sum(info["missing"].values())
+    print(f"{Path(args.take).name}: {info['kind']} take, {info['frames']} frames at {info['rate']:g} fps, "
+          f"{len(info['labels'])} {'markers' if info['kind'] == 'markers' else 'weight columns'}"
+          + (f" ({info['units']}), {gaps} missing samples" if info["kind"] == "markers" else ""))
+    if info["bounds"]:
+        print(f"  bounds: {info['bounds']['min']} .. {info['bounds']['max']}")
+    print(f"  labels: {', '.join(info['labels'])}")
+    for w in info["warnings"]:
+        print(f"warning: {w}", file=sys.stderr)
+    return 0
+
+
 def cmd_sample(args) -> int:
     from resources.sample_rig import write_sample
     out = write_sample(args.output)
@@ -130,6 +160,7 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("rig", metavar="RIG", help="an OBJ folder, a .gltf/.glb file or a .bsproj project")
         sp.add_argument("--neutral", help="file name of the neutral OBJ in a folder (default: the one named *neutral*)")
         sp.add_argument("--units", choices=["cm", "mm", "m"], help="units of the rig files (default: cm for OBJ)")
+        sp.add_argument("--mesh", help="glTF: the mesh to read (default: the most morph targets, then vertices)")
 
     def pose_args(sp):
         sp.add_argument("--weights", help="NAME=V,... shape weights of the pose (default: neutral)")
@@ -140,12 +171,18 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--json", action="store_true", help="machine-readable output")
     sp.set_defaults(func=cmd_info)
 
+    sp = sub.add_parser("take-info", help="print what a take (C3D, TRC, marker CSV, Live Link Face CSV) holds")
+    sp.add_argument("take", metavar="TAKE", help="a .c3d, .trc or .csv take")
+    sp.add_argument("--json", action="store_true", help="machine-readable output")
+    sp.set_defaults(func=cmd_take_info)
+
     sp = sub.add_parser("render", help="render a pose or a map to a PNG, off screen")
     rig_arg(sp)
     pose_args(sp)
     sp.add_argument("-o", "--output", required=True, help="PNG file to write")
     sp.add_argument("--view", default="shaded", choices=["shaded", "deformation", "deformation-rgb", "segmentation"])
-    sp.add_argument("--threshold", type=float, default=0.75, help="segmentation quantile t in [0, 1] (default 0.75)")
+    sp.add_argument("--threshold", type=float, default=None,
+                    help="segmentation quantile t in [0, 1] of the moving skin (default 0.5)")
     sp.add_argument("--level", type=int, default=0, help="hierarchy level to show (0 = finest)")
     sp.add_argument("--size", default="1024,768", help="W,H in pixels (default 1024,768)")
     sp.add_argument("--camera", default="front", choices=["front", "left", "right", "three-quarter"])
@@ -153,17 +190,32 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--label", action="store_true", help="write the view's name in the corner")
     sp.set_defaults(func=cmd_render)
 
-    sp = sub.add_parser("export", help="write the posed surface as an OBJ, vertex order kept")
+    sp = sub.add_parser("export", help="write the rig for other tools: glTF/USD blend shapes and animation, or a posed OBJ")
     rig_arg(sp)
     pose_args(sp)
-    sp.add_argument("-o", "--output", required=True, help="OBJ file to write")
+    sp.add_argument("-o", "--output", required=True, help=".glb, .gltf, .usd, .usda, .usdc or .obj file to write")
+    sp.add_argument("--animation", help="weights CSV (as solve writes) or Live Link Face CSV to animate (glTF, USD)")
+    sp.add_argument("--out-units", choices=["m", "cm", "mm"],
+                    help="units of the file written (default: m for glTF and USD, the rig's for OBJ)")
+    sp.add_argument("--up", choices=["y", "z"], default="y", help="up axis of the file written (default y)")
     sp.set_defaults(func=cmd_export)
 
     sp = sub.add_parser("segment", help="segment the face into regions and a hierarchy (JSON)")
     rig_arg(sp)
-    sp.add_argument("--threshold", type=float, default=0.75, help="quantile t in [0, 1] of the map (default 0.75)")
+    sp.add_argument("--threshold", type=float, default=None,
+                    help="quantile t in [0, 1] of the map over the skin that moves (default 0.5)")
     sp.add_argument("--levels", type=int, default=None, help="hierarchy levels (default: until one region)")
-    sp.add_argument("--map", default="laplacian", choices=["laplacian", "displacement"])
+    sp.add_argument("--map", default=None, choices=["laplacian", "displacement", "laplacian+displacement"],
+                    help="where the skin bends (Joshi), moves (Acosta), or either (default laplacian+displacement)")
+    sp.add_argument("--normalise", default=None, choices=["per-shape", "none"],
+                    help="per-shape: each shape's map over its own 99%% quantile before the maximum (default); "
+                         "none: the raw maximum (Joshi)")
+    sp.add_argument("--smoothing", type=int, default=None, help="rounds of 1-ring smoothing of the map (default 1)")
+    sp.add_argument("--split", default=None, choices=["shapes", "none"],
+                    help="shapes: cut regions where the group of shapes moving the skin changes (default)")
+    sp.add_argument("--separate-meshes", default=None, choices=["follow", "background"],
+                    help="separate meshes (eyeballs, teeth): follow the region that moves them (default) or stay "
+                         "in the background")
     sp.add_argument("--method", default="threshold", choices=["threshold", "region-growing"])
     sp.add_argument("--min-size", type=int, default=30, help="smallest region in vertices (default 30)")
     sp.add_argument("--overlap", type=int, default=1, help="overlap rings between regions (default 1)")
@@ -223,7 +275,8 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_UNEXPECTED
 
 
-_COMMANDS = {"info", "render", "export", "sample", "segment", "solve", "corrective", "pairs", "batch"}
+_COMMANDS = {"info", "take-info", "render", "export", "sample", "segment", "solve", "corrective", "pairs",
+             "batch"}
 
 if __name__ == "__main__":
     sys.exit(main())

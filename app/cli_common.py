@@ -46,7 +46,8 @@ def parse_size(text: str) -> tuple[int, int]:
 def load_rig_arg(args):
     """The rig named by the command's RIG argument (with --neutral and --units where the command has them)."""
     from model.readers import load_rig
-    return load_rig(args.rig, neutral=getattr(args, "neutral", None), units=getattr(args, "units", None))
+    return load_rig(args.rig, neutral=getattr(args, "neutral", None), units=getattr(args, "units", None),
+                    mesh=getattr(args, "mesh", None))
 
 
 def pose_weights(rig, args) -> np.ndarray:

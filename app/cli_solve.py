@@ -68,7 +68,7 @@ def solve_settings(args, rig) -> tuple[dict, object]:
 
 
 def cmd_solve(args) -> int:
-    from model.take_exports import export_pc2, export_report, export_weights_csv
+    from model.take_exports import export_solve_outputs
     from model.take_workspace import TakeWorkspace
 
     rig = load_solve_rig(args)
@@ -83,10 +83,7 @@ def cmd_solve(args) -> int:
         ws.auto_map(args.calibration_frames)
     settings, segmentation = solve_settings(args, rig)
     sol = ws.solve(settings, segmentation=segmentation)
-    export_weights_csv(ws, args.output)
-    if args.cache:
-        export_pc2(ws, args.cache)
-    report = ws.report() if not args.report else export_report(ws, args.report)
+    report = export_solve_outputs(ws, args.output, args.cache, args.report)
     with_c = f" with {len(report['correctives'])} corrective(s)" if report["correctives"] else ""
     print(f"solved {sol.n_frames} frames{with_c} in {sol.solve_seconds:.2f} s ({sol.frames_per_second:.0f} fps); "
           f"marker RMSE {report['marker_rmse']:.4f} {rig.units}; wrote {args.output}"

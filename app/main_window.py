@@ -14,6 +14,7 @@ from app import settings as app_settings
 from app.autosave import AutosaveController
 from app.commands import SetWeightsCommand
 from app.document import Document
+from app.export_controller import ExportController
 from app.keyframe_controller import KeyframeController
 from app.loading import LoadWorker
 from app.marker_controller import MarkerController
@@ -76,6 +77,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.keyframes = KeyframeController(self)
         self.correctives = corrective_controller.install(self)
         self.mocap = mocap_controller.install(self)
+        self.exports = ExportController(self)
         self.batch = batch_controller.install(self)
         self.autosave = AutosaveController(self)
         self._arrange_docks()
@@ -413,7 +415,11 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def _on_worker_finished(self) -> None:
         if self._progress is not None:
+            # reset() stops the dialog's own show-after-300-ms timer: close() alone left it to pop up, modal and
+            # without a Cancel button, after every fast open
+            self._progress.reset()
             self._progress.close()
+            self._progress.deleteLater()
             self._progress = None
         self._worker = None
 
@@ -616,4 +622,5 @@ class MainWindow(QtWidgets.QMainWindow):
             self._worker.wait()
         self.segmentation.runner.shutdown()
         self.mocap.shutdown()
+        self.exports.shutdown()
         self.batch.shutdown()

@@ -75,13 +75,13 @@ def segmentation_colormap(seg: Segmentation, level: int, highlight: int | None =
     return ColorMap(scalars=segmentation_colors(seg, level, highlight), rgb=True, title=title, legend=legend)
 
 
-def map_colormap(rig: Rig, view: str, *, threshold: float = 0.75, level: int = 0,
+def map_colormap(rig: Rig, view: str, *, threshold: float | None = None, level: int = 0,
                  settings: SegmentationSettings | None = None) -> ColorMap:
     """The colour map of a view for the command line (computes what it needs once)."""
     cache = SegmentationCache()
     cache.bind(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas)
     if view in ("deformation", "deformation-rgb"):
         return deformation_colormap(cache, rig, view)
-    s = settings or SegmentationSettings(t=threshold)
+    s = settings or (SegmentationSettings() if threshold is None else SegmentationSettings(t=threshold))
     seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, s, cache=cache)
     return segmentation_colormap(seg, level)

@@ -24,7 +24,7 @@ class View:
     title: str
 
 
-def build_view(rig: Rig, weights: np.ndarray, view: str = "shaded", *, threshold: float = 0.75,
+def build_view(rig: Rig, weights: np.ndarray, view: str = "shaded", *, threshold: float | None = None,
                level: int = 0) -> View:
     if view not in VIEWS:
         raise RigInputError(f"Unknown view '{view}': use one of {', '.join(VIEWS)}.")

@@ -1,13 +1,29 @@
 """Atomic file writes: write a temporary file in the same folder, fsync, then os.replace.
 
-A crash mid-save leaves the previous file intact (DESIGN.md, Project).
+A crash mid-save leaves the previous file intact (DESIGN.md, Project). The file gets the permissions a
+plain ``open(path, "w")`` would give (0666 minus the user's umask), so a team on a shared drive can read
+it; ``mkstemp`` alone would leave it readable by its owner only (0600).
 """
 from __future__ import annotations
 
 import os
-import tempfile
+import secrets
 from pathlib import Path
 from typing import Callable, IO
+
+
+def current_umask() -> int:
+    """The process's umask, read without changing it where Linux tells it (/proc), else set-and-restore."""
+    try:
+        with open("/proc/self/status", "rb") as f:
+            for line in f:
+                if line.startswith(b"Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def atomic_write(path: str | Path, data: bytes) -> None:
@@ -18,7 +34,9 @@ def atomic_write_with(path: str | Path, writer: Callable[[IO[bytes]], object]) -
     """Call writer(file) on a temporary file beside path and move it into place when complete."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    remove_stale_temporaries(path.parent)
+    tmp = temp_path(path)
+    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 & ~current_umask())
     try:
         with os.fdopen(fd, "wb") as f:
             writer(f)
@@ -31,3 +49,47 @@ def atomic_write_with(path: str | Path, writer: Callable[[IO[bytes]], object]) -
         except OSError:
             pass
         raise
+
+
+# --- temporaries -----------------------------------------------------------------------------------------
+TEMP_MARK = ".bs-tmp-"   # every temporary this application writes: .<target>.bs-tmp-<pid>.<random><suffix>
+
+
+def temp_path(path: str | Path, suffix: str = ".tmp") -> Path:
+    """A new temporary name beside ``path`` that says it is ours and which process writes it."""
+    path = Path(path)
+    return path.with_name(f".{path.name}{TEMP_MARK}{os.getpid()}.{secrets.token_hex(4)}{suffix}")
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError):
+        return True
+    return True
+
+
+def remove_stale_temporaries(folder: str | Path) -> int:
+    """Remove this application's temporaries in ``folder`` whose writing process is gone (a kill or a crash
+    mid-write); other files, and temporaries a live process is still writing, are left alone."""
+    n = 0
+    try:
+        candidates = list(Path(folder).glob(f".*{TEMP_MARK}*"))
+    except OSError:
+        return 0
+    for tmp in candidates:
+        try:
+            pid = int(tmp.name.rsplit(TEMP_MARK, 1)[1].split(".")[0])
+        except (IndexError, ValueError):
+            continue
+        if not _alive(pid):
+            try:
+                tmp.unlink()
+                n += 1
+            except OSError:
+                pass
+    return n

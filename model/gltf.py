@@ -1,34 +1,51 @@
 """glTF 2.0 / GLB morph targets as a Rig (DESIGN.md, Readers), and a small writer.
 
-Reads the first mesh that has morph targets (else the first mesh): all its primitives with POSITION,
-concatenated in primitive order (vertex order kept, no welding), triangle indices as faces, each morph
-target's POSITION as a shape delta. Target names come from ``mesh.extras.targetNames`` (else
-``target_0``, ...). Buffers may be embedded (base64 data URIs), external files, or the GLB BIN chunk;
-interleaved buffer views (byteStride), normalised integer components and sparse accessors are handled.
-Node transforms are not applied: coordinates are taken as they are in the mesh, labelled ``units``
-(glTF's own convention is metres).
+Reads the mesh the user means: the one named by ``mesh`` (``--mesh NAME``), else the mesh with the most
+morph targets and then the most vertices (a Ready Player Me avatar opens its head, not an eyeball). All its
+primitives with POSITION are concatenated in primitive order (vertex order kept, no welding), triangle
+indices as faces, each morph target's POSITION as a shape delta (zero on primitives without targets).
+Target names come from ``mesh.extras.targetNames`` (else ``target_0``, ...).
+
+The node hierarchy's world matrix of the first node (in scene order) that instances the mesh is applied:
+``M p`` to positions and its linear part (no translation) to morph deltas, which is exact because a
+morph target moves the mesh before the node transform does; a mirroring transform flips the winding so
+faces keep facing out. Buffers may be embedded (base64 data URIs), external files inside the glTF's folder,
+or the GLB BIN chunk; interleaved buffer views (byteStride), normalised and plain integer components
+(``KHR_mesh_quantization``) and sparse accessors are read. Extensions that only concern materials,
+textures, lights or metadata (webp, basisu, ...) never block the geometry; meshopt- and Draco-compressed
+geometry is refused in one sentence. Every offset, length, stride and count is checked against the
+buffers before reading. Coordinates are labelled ``units`` (glTF's own convention is metres).
 """
 from __future__ import annotations
 
 import base64
-import json
 import struct
 from pathlib import Path
 from urllib.parse import unquote
 
 import numpy as np
 
-from .atomic import atomic_write
-from .errors import RigInputError
+from .errors import RigInputError, shown
+from .input_files import regular_file
+from .json_file import parse_json_text
 from .rig import Rig
 
-_GLB_MAGIC = b"glTF"
-_CHUNK_JSON = 0x4E4F534A
-_CHUNK_BIN = 0x004E4942
+from .export_gltf import CHUNK_BIN as _CHUNK_BIN, CHUNK_JSON as _CHUNK_JSON, GLB_MAGIC as _GLB_MAGIC
 _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _NORMALISE = {5120: 127.0, 5121: 255.0, 5122: 32767.0, 5123: 65535.0}
 _NCOMP = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
-_SUPPORTED_REQUIRED = {"KHR_mesh_quantization"}
+_SUPPORTED_REQUIRED = {"KHR_mesh_quantization", "EXT_mesh_gpu_instancing"}
+# Extensions that change only how the surface looks, never its geometry: a reader of shapes ignores them.
+_LOOKS_ONLY = ("KHR_texture_", "EXT_texture_", "KHR_materials_", "KHR_lights_", "KHR_xmp", "EXT_lights_",
+               "MSFT_texture_", "KHR_animation_pointer")
+_GEOMETRY_CODECS = {
+    "EXT_meshopt_compression": "meshopt-compressed geometry (EXT_meshopt_compression), which this reader "
+                               "does not decode; re-export it without meshopt compression (gltfpack without -c)",
+    "KHR_meshopt_compression": "meshopt-compressed geometry (KHR_meshopt_compression), which this reader "
+                               "does not decode; re-export it without meshopt compression (gltfpack without -c)",
+    "KHR_draco_mesh_compression": "Draco-compressed geometry (KHR_draco_mesh_compression), an unsupported glTF "
+                                  "extension; re-export it without Draco compression",
+}
 
 
 class _Doc:
@@ -62,29 +79,56 @@ class _Doc:
             except (ValueError, TypeError):
                 raise self.fail(f"buffer {i} has invalid base64 data.") from None
         else:
-            ext = self.path.parent / unquote(uri)
-            if not ext.is_file():
-                raise self.fail(f"its buffer file '{uri}' was not found beside it.")
-            data = ext.read_bytes()
-        need = int(b.get("byteLength", len(data)))
+            data = self._external(i, uri)
+        need = _int(b.get("byteLength", len(data)), -1)
+        if need < 0:
+            raise self.fail(f"buffer {i} has an invalid byteLength {b.get('byteLength')!r}.")
         if len(data) < need:
             raise self.fail(f"buffer {i} is truncated ({len(data)} of {need} bytes).")
         self._buffers[i] = data
         return data
+
+    def _external(self, i: int, uri: str) -> bytes:
+        """The bytes of an external buffer file, only from inside the glTF's own folder."""
+        name = unquote(uri)
+        folder = self.path.parent.resolve()
+        target = (folder / name).resolve()
+        if ("://" in uri or name.startswith(("/", "\\")) or Path(name).is_absolute() or ":" in name.split("/")[0]
+                or ".." in Path(name.replace("\\", "/")).parts or not target.is_relative_to(folder)):
+            raise self.fail(f"buffer {i} points outside the glTF's folder ('{uri}'); only files beside it are read.")
+        if not target.is_file():
+            raise self.fail(f"its buffer file '{uri}' was not found beside it.")
+        try:
+            return target.read_bytes()
+        except OSError as e:
+            raise self.fail(f"its buffer file '{uri}' cannot be read ({e.strerror or e}).") from None
 
     def _read_view(self, view_index: int, offset: int, ctype: int, ncomp: int, count: int) -> np.ndarray:
         views = self.gltf.get("bufferViews", [])
         if not 0 <= view_index < len(views):
             raise self.fail(f"refers to buffer view {view_index}, which does not exist.")
         view = views[view_index]
-        data = self.buffer(int(view.get("buffer", 0)))
+        codec = next((e for e in (view.get("extensions") or {}) if e in _GEOMETRY_CODECS), None)
+        if codec:
+            raise self.fail(f"holds {_GEOMETRY_CODECS[codec]}.")
+        data = self.buffer(_int(view.get("buffer", 0)))
         dtype = np.dtype(_COMPONENT[ctype]).newbyteorder("<")
         elem = dtype.itemsize * ncomp
-        stride = int(view.get("byteStride", 0)) or elem
-        start = int(view.get("byteOffset", 0)) + offset
-        view_end = int(view.get("byteOffset", 0)) + int(view.get("byteLength", 0))
+        stride = _int(view.get("byteStride", 0), -1)
+        if stride < 0 or (stride and stride < elem):
+            raise self.fail(f"buffer view {view_index} has byteStride {view.get('byteStride')!r}, "
+                            f"less than the {elem}-byte elements it holds.")
+        stride = stride or elem
+        view_start, view_len = _int(view.get("byteOffset", 0), -1), _int(view.get("byteLength", -1), -1)
+        if view_start < 0 or view_len < 0 or offset < 0:
+            raise self.fail(f"buffer view {view_index} has a negative or missing byteOffset/byteLength.")
+        view_end = view_start + view_len
+        if view_end > len(data):
+            raise self.fail(f"buffer view {view_index} ends at byte {view_end}, past the end of its "
+                            f"{len(data)}-byte buffer (truncated file?).")
+        start = view_start + offset
         end = start + (stride * (count - 1) + elem if count else 0)
-        if end > view_end or view_end > len(data):
+        if end > view_end:
             raise self.fail(f"an accessor reads past the end of buffer view {view_index} (truncated file?).")
         if stride == elem:
             arr = np.frombuffer(data, dtype=dtype, count=count * ncomp, offset=start).reshape(count, ncomp)
@@ -100,14 +144,14 @@ class _Doc:
         if not isinstance(index, int) or not 0 <= index < len(accs):
             raise self.fail(f"refers to accessor {index}, which does not exist.")
         a = accs[index]
-        ctype, typ, count = a.get("componentType"), a.get("type"), int(a.get("count", -1))
+        ctype, typ, count = a.get("componentType"), a.get("type"), _int(a.get("count", -1), -1)
         if ctype not in _COMPONENT:
             raise self.fail(f"accessor {index} has an unsupported component type {ctype}.")
         if typ not in _NCOMP or count < 0:
             raise self.fail(f"accessor {index} has an invalid type or count.")
         ncomp = _NCOMP[typ]
         if "bufferView" in a:
-            arr = self._read_view(int(a["bufferView"]), int(a.get("byteOffset", 0)), ctype, ncomp, count)
+            arr = self._read_view(_int(a["bufferView"], -1), _int(a.get("byteOffset", 0), -1), ctype, ncomp, count)
         else:
             arr = np.zeros((count, ncomp), dtype=_COMPONENT[ctype])
         if ctype == 5126:
@@ -118,13 +162,15 @@ class _Doc:
             out = arr.astype(np.int64) if typ == "SCALAR" else arr.astype(np.float64)
         sparse = a.get("sparse")
         if sparse:
-            n = int(sparse.get("count", 0))
+            n = _int(sparse.get("count", -1), -1)
+            if not 0 <= n <= count:
+                raise self.fail(f"accessor {index} has a sparse count {sparse.get('count')!r} outside 0..{count}.")
             si, sv = sparse.get("indices", {}), sparse.get("values", {})
             ictype = si.get("componentType")
             if ictype not in (5121, 5123, 5125):
                 raise self.fail(f"accessor {index} has sparse indices of unsupported type {ictype}.")
-            idx = self._read_view(int(si["bufferView"]), int(si.get("byteOffset", 0)), ictype, 1, n)[:, 0]
-            vals = self._read_view(int(sv["bufferView"]), int(sv.get("byteOffset", 0)), ctype, ncomp, n)
+            idx = self._read_view(_int(si.get("bufferView"), -1), _int(si.get("byteOffset", 0), -1), ictype, 1, n)[:, 0]
+            vals = self._read_view(_int(sv.get("bufferView"), -1), _int(sv.get("byteOffset", 0), -1), ctype, ncomp, n)
             if n and idx.max() >= count:
                 raise self.fail(f"accessor {index} has a sparse index beyond its count.")
             out = out.copy()
@@ -132,6 +178,79 @@ class _Doc:
                 vals = np.maximum(vals.astype(np.float64) / _NORMALISE[ctype], -1.0)
             out[idx.astype(np.int64)] = vals
         return out
+
+
+def _int(value, bad: int = -1) -> int:
+    """A glTF integer property, or ``bad`` when it is not a whole number (checked by the caller)."""
+    return value if isinstance(value, int) and not isinstance(value, bool) else bad
+
+
+def _is_int(v) -> bool:
+    return isinstance(v, int) and not isinstance(v, bool)
+
+
+def _is_num(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+# What this reader uses of a glTF document and the JSON type each must have (glTF 2.0 §5): anything else there
+# is refused in one sentence before it is used, never met as a Python error half-way through reading.
+_ARRAY_FIELDS = ("accessors", "bufferViews", "buffers", "meshes", "nodes", "scenes")
+_FIELD_TYPES = {
+    "accessors": {"bufferView": _is_int, "byteOffset": _is_int, "componentType": _is_int, "count": _is_int,
+                  "type": lambda v: isinstance(v, str), "normalized": lambda v: isinstance(v, bool),
+                  "sparse": lambda v: isinstance(v, dict)},
+    "bufferViews": {"buffer": _is_int, "byteOffset": _is_int, "byteLength": _is_int, "byteStride": _is_int},
+    "buffers": {"byteLength": _is_int, "uri": lambda v: isinstance(v, str)},
+    "meshes": {"primitives": lambda v: isinstance(v, list) and all(isinstance(p, dict) for p in v),
+               "extras": lambda v: isinstance(v, dict), "name": lambda v: isinstance(v, str)},
+    "nodes": {"mesh": _is_int, "children": lambda v: isinstance(v, list) and all(_is_int(c) for c in v),
+              "matrix": lambda v: isinstance(v, list) and len(v) == 16 and all(_is_num(c) for c in v),
+              "translation": lambda v: isinstance(v, list) and len(v) == 3 and all(_is_num(c) for c in v),
+              "rotation": lambda v: isinstance(v, list) and len(v) == 4 and all(_is_num(c) for c in v),
+              "scale": lambda v: isinstance(v, list) and len(v) == 3 and all(_is_num(c) for c in v)},
+    "scenes": {"nodes": lambda v: isinstance(v, list) and all(_is_int(c) for c in v)},
+}
+
+
+def _index_map(v) -> bool:
+    return isinstance(v, dict) and all(isinstance(k, str) and _is_int(i) for k, i in v.items())
+
+
+_PRIMITIVE_TYPES = {"attributes": _index_map, "indices": _is_int, "mode": _is_int,
+                    "targets": lambda v: isinstance(v, list) and all(_index_map(t) for t in v),
+                    "extras": lambda v: isinstance(v, dict)}
+
+
+def _check_structure(path: Path, gltf: dict) -> None:
+    """Raise RigInputError naming the first property of the wrong JSON type among those this reader uses."""
+    def bad(where: str) -> RigInputError:
+        return RigInputError(f"{path}: {where} has a value of the wrong type; the file is damaged.")
+    for key in ("asset", "extras"):
+        if key in gltf and not isinstance(gltf[key], dict):
+            raise bad(f"'{key}'")
+    for key in ("extensionsRequired", "extensionsUsed"):
+        if key in gltf and not (isinstance(gltf[key], list) and all(isinstance(e, str) for e in gltf[key])):
+            raise bad(f"'{key}'")
+    if "scene" in gltf and not _is_int(gltf["scene"]):
+        raise bad("'scene'")
+    for key in _ARRAY_FIELDS:
+        items = gltf.get(key, [])
+        if not isinstance(items, list) or not all(isinstance(it, dict) for it in items):
+            raise bad(f"'{key}'")
+        checks = _FIELD_TYPES[key]
+        for i, it in enumerate(items):
+            for field, ok in checks.items():
+                if field in it and not ok(it[field]):
+                    raise bad(f"{key}[{i}].{field}")
+            if key == "meshes":
+                for j, prim in enumerate(it.get("primitives", [])):
+                    for field, ok in _PRIMITIVE_TYPES.items():
+                        if field in prim and not ok(prim[field]):
+                            raise bad(f"meshes[{i}].primitives[{j}].{field}")
+                names = it.get("extras", {}).get("targetNames")
+                if names is not None and not (isinstance(names, list) and all(isinstance(n, str) for n in names)):
+                    raise bad(f"meshes[{i}].extras.targetNames")
 
 
 def _parse(path: Path) -> _Doc:
@@ -166,15 +285,23 @@ def _parse(path: Path) -> _Doc:
     else:
         json_bytes = raw
     try:
-        gltf = json.loads(json_bytes.decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError):
-        raise RigInputError(f"{path}: is neither valid glTF JSON nor a GLB file.") from None
+        text = json_bytes.decode("utf-8")
+    except UnicodeDecodeError:
+        text = ""
+    if not text.lstrip().startswith("{"):
+        raise RigInputError(f"{path}: is neither valid glTF JSON nor a GLB file.")
+    gltf = parse_json_text(text, str(path))
     if not isinstance(gltf, dict):
         raise RigInputError(f"{path}: is not a glTF document (the JSON is not an object).")
+    _check_structure(path, gltf)
     version = str(gltf.get("asset", {}).get("version", ""))
     if not version.startswith("2"):
         raise RigInputError(f"{path}: glTF version '{version}' is not supported (glTF 2.0 only).")
-    unsupported = set(gltf.get("extensionsRequired", [])) - _SUPPORTED_REQUIRED
+    required = set(gltf.get("extensionsRequired") or [])
+    codec = next((e for e in sorted(required) if e in _GEOMETRY_CODECS), None)
+    if codec:
+        raise RigInputError(f"{path}: holds {_GEOMETRY_CODECS[codec]}.")
+    unsupported = {e for e in required - _SUPPORTED_REQUIRED if not e.startswith(_LOOKS_ONLY)}
     if unsupported:
         raise RigInputError(f"{path}: needs the unsupported glTF extension(s) {', '.join(sorted(unsupported))}.")
     return _Doc(path, gltf, bin_chunk)
@@ -200,26 +327,129 @@ def _primitive_triangles(doc: _Doc, prim: dict, n: int) -> np.ndarray:
     return tris.astype(np.int64)
 
 
-def load_gltf(path: str | Path, units: str = "m") -> Rig:
-    """Read a .gltf or .glb file's morph targets as a Rig (see the module docstring)."""
-    path = Path(path)
-    if not path.is_file():
-        raise RigInputError(f"{path}: does not exist.")
-    doc = _parse(path)
+def _mesh_sizes(doc: _Doc, mesh: dict) -> tuple[int, int]:
+    """(morph targets, vertices) of a mesh, from the accessor counts (nothing decoded)."""
+    accs = doc.gltf.get("accessors", [])
+    prims = [p for p in mesh.get("primitives", []) if "POSITION" in (p.get("attributes") or {})]
+    n_targets = max((len(p.get("targets") or []) for p in prims), default=0)
+    n_vertices = 0
+    for p in prims:
+        i = p["attributes"]["POSITION"]
+        if isinstance(i, int) and 0 <= i < len(accs):
+            n_vertices += max(_int(accs[i].get("count", 0), 0), 0)
+    return n_targets, n_vertices
+
+
+def _mesh_label(mesh: dict, index: int) -> str:
+    return mesh.get("name") or f"mesh_{index}"
+
+
+def gltf_meshes(path: str | Path) -> list[dict]:
+    """The meshes of a glTF file as ``{"name", "targets", "vertices"}`` (for ``info`` and a mesh choice)."""
+    doc = _parse(Path(path))
+    return [dict(zip(("name", "targets", "vertices"), (_mesh_label(m, i),) + _mesh_sizes(doc, m)))
+            for i, m in enumerate(doc.gltf.get("meshes", []))]
+
+
+def _choose_mesh(doc: _Doc, mesh: str | None) -> int:
     meshes = doc.gltf.get("meshes", [])
     if not meshes:
         raise doc.fail("has no meshes.")
-    with_targets = [m for m in meshes if any(p.get("targets") for p in m.get("primitives", []))]
-    mesh = with_targets[0] if with_targets else meshes[0]
-    prims = [p for p in mesh.get("primitives", []) if "POSITION" in p.get("attributes", {})]
+    labels = [_mesh_label(m, i) for i, m in enumerate(meshes)]
+    if mesh is not None:
+        if mesh in labels:
+            return labels.index(mesh)
+        raise doc.fail(f"has no mesh named '{mesh}' (it has: {', '.join(labels)}).")
+    sizes = [_mesh_sizes(doc, m) for m in meshes]
+    return max(range(len(meshes)), key=lambda i: (sizes[i], -i))
+
+
+def _quaternion_matrix(q) -> np.ndarray:
+    x, y, z, w = (float(c) for c in q)
+    n = x * x + y * y + z * z + w * w
+    s = 2.0 / n if n > 0 else 0.0
+    return np.array([[1 - s * (y * y + z * z), s * (x * y - z * w), s * (x * z + y * w)],
+                     [s * (x * y + z * w), 1 - s * (x * x + z * z), s * (y * z - x * w)],
+                     [s * (x * z - y * w), s * (y * z + x * w), 1 - s * (x * x + y * y)]])
+
+
+def node_matrix(node: dict) -> np.ndarray:
+    """A node's local 4x4 matrix: ``matrix`` (column-major) or T * R * S."""
+    if "matrix" in node:
+        m = np.asarray(node["matrix"], dtype=np.float64)
+        if m.size != 16:
+            raise ValueError("a node matrix does not have 16 numbers")
+        return m.reshape(4, 4).T
+    out = np.eye(4)
+    out[:3, :3] = _quaternion_matrix(node.get("rotation", (0, 0, 0, 1))) * np.asarray(node.get("scale", (1, 1, 1)),
+                                                                                       dtype=np.float64)
+    out[:3, 3] = np.asarray(node.get("translation", (0, 0, 0)), dtype=np.float64)
+    return out
+
+
+def _world_matrix(doc: _Doc, mesh_index: int) -> np.ndarray:
+    """World matrix of the first node (depth first from the scene's roots) that instances the mesh."""
+    nodes = doc.gltf.get("nodes", [])
+    parent: dict[int, int] = {}
+    for i, n in enumerate(nodes):
+        for c in n.get("children", []) or []:
+            if isinstance(c, int) and 0 <= c < len(nodes):
+                parent.setdefault(c, i)
+    scenes = doc.gltf.get("scenes", [])
+    scene = doc.gltf.get("scene", 0)
+    roots = list(scenes[scene].get("nodes", [])) if isinstance(scene, int) and 0 <= scene < len(scenes) else []
+    roots += [i for i in range(len(nodes)) if i not in parent and i not in roots]
+    order, stack, seen = [], list(reversed(roots)), set()
+    while stack:
+        i = stack.pop()
+        if not isinstance(i, int) or not 0 <= i < len(nodes) or i in seen:
+            continue
+        seen.add(i)
+        order.append(i)
+        stack.extend(reversed(nodes[i].get("children", []) or []))
+    hit = next((i for i in order if nodes[i].get("mesh") == mesh_index), None)
+    M = np.eye(4)
+    chain = set()
+    while hit is not None:
+        if hit in chain:
+            raise doc.fail("its node hierarchy has a cycle.")
+        chain.add(hit)
+        try:
+            M = node_matrix(nodes[hit]) @ M
+        except (ValueError, TypeError):
+            raise doc.fail(f"node {hit} has an invalid transform.") from None
+        hit = parent.get(hit)
+    if not np.isfinite(M).all():
+        raise doc.fail("a node transform has NaN or infinite values.")
+    return M
+
+
+def load_gltf(path: str | Path, units: str = "m", mesh: str | None = None) -> Rig:
+    """Read a .gltf or .glb file's morph targets as a Rig (see the module docstring).
+
+    ``mesh`` names the mesh to read (default: the most morph targets, then the most vertices).
+    """
+    path = regular_file(path)
+    try:
+        return _load(path, units, mesh)
+    except (TypeError, AttributeError, KeyError, IndexError, ValueError, OverflowError) as exc:
+        # the structure check covers what this reader uses; this is the last line for what it missed
+        raise RigInputError(f"{path}: the glTF is damaged ({type(exc).__name__}: {shown(exc, 80)}).") from None
+
+
+def _load(path: Path, units: str, mesh: str | None) -> Rig:
+    doc = _parse(path)
+    mesh_index = _choose_mesh(doc, mesh)
+    mesh = doc.gltf["meshes"][mesh_index]
+    label = _mesh_label(mesh, mesh_index)
+    prims = [p for p in mesh.get("primitives", []) if "POSITION" in (p.get("attributes") or {})]
     if not prims:
-        raise doc.fail("its first mesh has no primitive with vertex positions.")
-    n_targets = {len(p.get("targets", [])) for p in prims}
-    if len(n_targets) > 1:
-        raise doc.fail("the primitives of its mesh have different numbers of morph targets.")
-    K = n_targets.pop()
+        raise doc.fail(f"its mesh '{label}' has no primitive with vertex positions.")
+    K = max(len(p.get("targets") or []) for p in prims)
+    if any(len(p.get("targets") or []) not in (0, K) for p in prims):
+        raise doc.fail(f"the primitives of its mesh '{label}' have different numbers of morph targets.")
     if K == 0:
-        raise doc.fail("has no morph targets (blendshapes) on its first mesh.")
+        raise doc.fail(f"has no morph targets (blendshapes) on its mesh '{label}'.")
     positions, deltas, tris, offset = [], [], [], 0
     for p in prims:
         pos = doc.accessor(p["attributes"]["POSITION"])
@@ -227,7 +457,7 @@ def load_gltf(path: str | Path, units: str = "m") -> Rig:
             raise doc.fail("a POSITION accessor is not VEC3.")
         n = pos.shape[0]
         d = np.zeros((K, n, 3))
-        for k, t in enumerate(p["targets"]):
+        for k, t in enumerate(p.get("targets") or []):
             if "POSITION" in t:
                 dk = doc.accessor(t["POSITION"])
                 if dk.shape != (n, 3):
@@ -237,9 +467,13 @@ def load_gltf(path: str | Path, units: str = "m") -> Rig:
         deltas.append(d)
         tris.append(_primitive_triangles(doc, p, n) + offset)
         offset += n
-    neutral = np.concatenate(positions)
-    D = np.concatenate(deltas, axis=1)
+    M = _world_matrix(doc, mesh_index)
+    A = M[:3, :3]
+    neutral = np.concatenate(positions) @ A.T + M[:3, 3]
+    D = np.concatenate(deltas, axis=1) @ A.T
     T = np.concatenate(tris).astype(np.int32)
+    if np.linalg.det(A) < 0:  # a mirroring node: keep the faces facing out
+        T = T[:, [0, 2, 1]]
     if not np.isfinite(neutral).all() or not np.isfinite(D).all():
         raise doc.fail("has NaN or infinite coordinates.")
     names = (mesh.get("extras") or {}).get("targetNames") or (prims[0].get("extras") or {}).get("targetNames")
@@ -256,66 +490,14 @@ def load_gltf(path: str | Path, units: str = "m") -> Rig:
 
 
 # --- writer -------------------------------------------------------------------------------------
-def _pad4(b: bytes, fill: bytes = b"\x00") -> bytes:
-    return b + fill * (-len(b) % 4)
-
-
-def _document(rig: Rig, scale: float) -> tuple[dict, bytes]:
-    pos = (rig.neutral * scale).astype("<f4")
-    deltas = (rig.deltas * scale).astype("<f4")
-    tris = rig.triangles().astype("<u4")
-    blobs, views, accessors = [], [], []
-    offset = 0
-
-    def add(arr: np.ndarray, target: int | None, acc: dict) -> int:
-        nonlocal offset
-        data = _pad4(arr.tobytes())
-        view = {"buffer": 0, "byteOffset": offset, "byteLength": arr.nbytes}
-        if target:
-            view["target"] = target
-        views.append(view)
-        blobs.append(data)
-        offset += len(data)
-        acc["bufferView"] = len(views) - 1
-        accessors.append(acc)
-        return len(accessors) - 1
-
-    def vec3(arr: np.ndarray) -> int:
-        return add(arr, 34962, {"componentType": 5126, "count": int(arr.shape[0]), "type": "VEC3",
-                                "min": arr.min(axis=0).astype(float).tolist() if arr.size else [0, 0, 0],
-                                "max": arr.max(axis=0).astype(float).tolist() if arr.size else [0, 0, 0]})
-
-    i_pos = vec3(pos)
-    i_idx = add(tris.reshape(-1), 34963, {"componentType": 5125, "count": int(tris.size), "type": "SCALAR"})
-    targets = [{"POSITION": vec3(d)} for d in deltas]
-    mesh = {"name": rig.name, "primitives": [{"attributes": {"POSITION": i_pos}, "indices": i_idx, "mode": 4,
-                                               "targets": targets}],
-            "weights": [0.0] * rig.n_shapes, "extras": {"targetNames": list(rig.shape_names)}}
-    gltf = {"asset": {"version": "2.0", "generator": "Blendshape Studio"},
-            "scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0, "name": rig.name}],
-            "meshes": [mesh], "accessors": accessors, "bufferViews": views,
-            "buffers": [{"byteLength": offset}]}
-    return gltf, b"".join(blobs)
-
-
 def write_gltf(rig: Rig, path: str | Path, units: str | None = None) -> None:
-    """Write the rig as .gltf (one JSON file, buffer embedded as base64) or .glb (binary), atomically.
+    """Write the rig as .gltf (buffer embedded as base64) or .glb, atomically, in ``units`` (default: as is).
 
-    The polygons are fan-triangulated; positions and deltas are stored as float32. With ``units`` the
-    coordinates are converted from ``rig.units`` (e.g. ``units='m'`` for other glTF tools); by default they
-    are written as they are.
+    The rest pose and the shapes only (correctives become extra morph targets); ``model.export.export_rig``
+    writes a pose and an animation too, in metres by default.
     """
-    from .rig import unit_scale
-    path = Path(path)
-    scale = 1.0 if units is None else unit_scale(rig.units, units)
-    gltf, blob = _document(rig, scale)
-    suffix = path.suffix.lower()
-    if suffix == ".gltf":
-        gltf["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
-        atomic_write(path, json.dumps(gltf).encode("utf-8"))
-    elif suffix == ".glb":
-        js = _pad4(json.dumps(gltf).encode("utf-8"), b" ")
-        body = (struct.pack("<II", len(js), _CHUNK_JSON) + js + struct.pack("<II", len(blob), _CHUNK_BIN) + blob)
-        atomic_write(path, struct.pack("<4sII", _GLB_MAGIC, 2, 12 + len(body)) + body)
-    else:
+    from .export import export_content
+    from .export_gltf import write_gltf_content
+    if Path(path).suffix.lower() not in (".gltf", ".glb"):
         raise RigInputError(f"{path}: write glTF to a .gltf or .glb file.")
+    write_gltf_content(export_content(rig, units=units or rig.units), path)

@@ -14,8 +14,9 @@ import os
 from pathlib import Path
 from typing import IO, Callable
 
+from .atomic import current_umask, remove_stale_temporaries, temp_path
+
 JOURNAL_SUFFIX = ".bs-set.json"
-TEMP_MARK = ".bs-set-"
 
 
 def _fsync_dir(folder: Path) -> None:
@@ -31,12 +32,6 @@ def _fsync_dir(folder: Path) -> None:
         os.close(fd)
 
 
-def _mode() -> int:
-    mask = os.umask(0o022)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
 def write_set(writers: dict[str | Path, Callable[[IO[bytes]], object]]) -> None:
     """Write every ``path: writer(file)`` as one set (all in their own folders; one journal beside the first)."""
     items = [(Path(p), w) for p, w in writers.items()]
@@ -48,8 +43,8 @@ def write_set(writers: dict[str | Path, Callable[[IO[bytes]], object]]) -> None:
     temps: list[tuple[Path, Path]] = []
     try:
         for path, writer in items:
-            tmp = path.with_name(f".{path.name}{TEMP_MARK}{os.getpid()}.tmp")
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, _mode())
+            tmp = temp_path(path)
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 & ~current_umask())
             temps.append((tmp, path))
             with os.fdopen(fd, "wb") as f:
                 writer(f)
@@ -58,7 +53,7 @@ def write_set(writers: dict[str | Path, Callable[[IO[bytes]], object]]) -> None:
         first = items[0][0]
         journal = first.with_name(f".{first.name}{JOURNAL_SUFFIX}")
         data = json.dumps({"moves": [[str(t), str(p)] for t, p in temps]}).encode()
-        jtmp = journal.with_name(f".{first.name}{TEMP_MARK}{os.getpid()}.journal.tmp")
+        jtmp = temp_path(journal)
         with open(jtmp, "wb") as f:
             f.write(data)
             f.flush()
@@ -89,18 +84,6 @@ def _complete(journal: Path) -> None:
     journal.unlink(missing_ok=True)
 
 
-def _pid_alive(pid: int) -> bool:
-    if pid == os.getpid():
-        return True
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def finish_interrupted_sets(folder: str | Path) -> int:
     """Complete the sets whose journal was written (the new files win), then remove this application's
     temporaries left by writers that are gone. Returns the number of files finished or removed."""
@@ -111,12 +94,4 @@ def finish_interrupted_sets(folder: str | Path) -> int:
     for journal in folder.glob(f".*{JOURNAL_SUFFIX}"):
         _complete(journal)
         n += 1
-    for tmp in folder.glob(f".*{TEMP_MARK}*.tmp"):
-        try:
-            pid = int(tmp.name.rsplit(TEMP_MARK, 1)[1].split(".")[0])
-        except (IndexError, ValueError):
-            continue
-        if not _pid_alive(pid):
-            tmp.unlink(missing_ok=True)
-            n += 1
-    return n
+    return n + remove_stale_temporaries(folder)

@@ -24,6 +24,15 @@ def write_pc2(path: str | Path, frames: np.ndarray | Iterable[np.ndarray], *, n_
     """Write frames (F, N, 3) — an array, or any iterable of (N, 3) arrays for long takes, streamed one frame
     at a time — to a PC2 file atomically (a crash mid-write leaves any previous file intact).
     Returns the number of samples written."""
+    writer, count = pc2_writer(path, frames, n_points=n_points, start_frame=start_frame, sample_rate=sample_rate)
+    atomic_write_with(path, writer)
+    return count[0]
+
+
+def pc2_writer(path: str | Path, frames, *, n_points: int | None = None, start_frame: float = 0.0,
+               sample_rate: float = 1.0):
+    """(writer(file), count): what ``write_pc2`` writes, for ``model.output_set.write_set``; ``count[0]`` is the
+    number of samples once the writer has run."""
     if isinstance(frames, np.ndarray):
         if frames.ndim != 3 or frames.shape[2] != 3:
             raise RigInputError(f"{path}: a point cache needs frames of shape (F, N, 3), not {frames.shape}.")
@@ -49,8 +58,7 @@ def write_pc2(path: str | Path, frames: np.ndarray | Iterable[np.ndarray], *, n_
         f.write(HEADER.pack(MAGIC, 1, int(npts), float(start_frame), float(sample_rate), count[0]))
         f.seek(0, 2)
 
-    atomic_write_with(path, writer)
-    return count[0]
+    return writer, count
 
 
 def read_pc2_header(path: str | Path) -> dict:

@@ -60,7 +60,8 @@ def load_obj_folder(folder: str | Path, neutral: str | None = None, units: str =
     if progress:
         progress(total, total, "done")
     rig = Rig(neutral=base.vertices, face_counts=base.face_counts, face_indices=base.face_indices,
-              shape_names=stems, deltas=deltas, units=units, name=folder.name, source=str(folder))
+              shape_names=stems, deltas=deltas, units=units, name=folder.name, source=str(folder),
+              corners=base.corners)
     rig.presets = read_presets(folder / PRESETS_FILE, stems)
     return rig
 
@@ -78,8 +79,8 @@ def read_presets(path: Path, shape_names: list[str]) -> dict[str, dict[str, floa
 
 
 def load_rig(path: str | Path, neutral: str | None = None, units: str | None = None,
-             progress: Progress = None) -> Rig:
-    """Open an OBJ folder, a glTF/GLB file or a .bsproj project as a Rig."""
+             progress: Progress = None, mesh: str | None = None) -> Rig:
+    """Open an OBJ folder, a glTF/GLB file or a .bsproj project as a Rig (``mesh``: which glTF mesh)."""
     path = Path(path)
     if not path.exists():
         raise RigInputError(f"{path}: does not exist.")
@@ -91,7 +92,7 @@ def load_rig(path: str | Path, neutral: str | None = None, units: str | None = N
         return load_project(path).rig
     if suffix in (".gltf", ".glb"):
         from .gltf import load_gltf
-        return load_gltf(path, units=units or "m")
+        return load_gltf(path, units=units or "m", mesh=mesh)
     if suffix == ".obj":
         return load_obj_folder(path.parent, neutral=neutral or path.name, units=units or "cm", progress=progress)
     raise RigInputError(f"{path}: unknown rig format '{path.suffix}'; open an OBJ folder, a .gltf/.glb or a .bsproj.")

@@ -75,6 +75,23 @@ def unit_scale(from_units: str, to_units: str) -> float:
 
 
 @dataclass
+class CornerAttributes:
+    """What an OBJ holds besides ``v`` and ``f``, kept so UVs, normals and groups survive a round trip.
+
+    uvs, normals    the file's own ``vt`` (T, 2|3) and ``vn`` (N, 3) lists, or None.
+    corner_uv/_normal  per polygon corner (parallel to ``Rig.face_indices``), an index into them, -1 for none.
+    records         (face number, line): ``g``/``o``/``usemtl``/``s`` lines before that face, ``mtllib`` at 0.
+    Vertices are never split at UV seams: the corner indices carry the seams.
+    """
+
+    uvs: np.ndarray | None = None
+    corner_uv: np.ndarray | None = None
+    normals: np.ndarray | None = None
+    corner_normal: np.ndarray | None = None
+    records: list[tuple[int, str]] = field(default_factory=list)
+
+
+@dataclass
 class Rig:
     """A blendshape rig.
 
@@ -98,6 +115,7 @@ class Rig:
     source: str = ""
     correctives: list = field(default_factory=list)
     presets: dict[str, dict[str, float]] = field(default_factory=dict)
+    corners: CornerAttributes | None = None  # the source OBJ's UVs, normals and groups (export only)
 
     def __post_init__(self) -> None:
         where = self.source or self.name
@@ -159,6 +177,11 @@ class Rig:
         if not isinstance(self.units, str) or self.units not in UNITS:
             raise RigInputError(f"{where}: unknown units '{shown(self.units, 20)}'.")
         self.presets = checked_presets(self.presets, self.shape_names, where)
+        c = self.corners
+        for table, idx in ((None, None),) if c is None else ((c.uvs, c.corner_uv), (c.normals, c.corner_normal)):
+            if idx is not None and (idx.shape != self.face_indices.shape or table is None
+                                    or (idx.size and (idx.min() < -1 or idx.max() >= len(table)))):
+                raise RigInputError(f"{where}: the UV or normal indices of the faces do not fit the rig.")
 
     # --- names and weights -----------------------------------------------------------------------
     def shape_index(self, name: str) -> int:

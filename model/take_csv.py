@@ -1,6 +1,31 @@
-"""Generic CSV of marker trajectories: a frame column, then ``name_X, name_Y, name_Z`` per marker.
+"""Marker trajectories in CSV: three layouts, told apart by their first rows.
 
-Empty cells are missing samples (NaN). Units and frame rate are not in the file; pass them.
+- Plain (this application's own export): ``frame, A_X, A_Y, A_Z, B_X, ...``. Units and frame rate are not
+  in the file; pass them.
+- Vicon Nexus export, its ``Trajectories`` section::
+
+      Trajectories
+      100                                    (frame rate)
+      ,,Subject:LASI,,,Subject:RASI,,,
+      Frame,Sub Frame,X,Y,Z,X,Y,Z
+      ,,mm,mm,mm,mm,mm,mm
+      1,0,-391.9,-6180.0,1734.4,...
+
+  (other sections, such as Devices or Model Outputs, may come before or after it, each ended by a blank line).
+- OptiTrack Motive export (format 1.2x)::
+
+      Format Version,1.23,...,Export Frame Rate,120.000000,...,Length Units,Millimeters,...
+      ,Type,Marker,Marker,Marker,Rigid Body,...
+      ,Name,Set:M1,Set:M1,Set:M1,...
+      ,ID,1,1,1,...                            (and a Parent row in newer versions)
+      ,,Position,Position,Position,Rotation,...
+      Frame,Time (Seconds),X,Y,Z,...
+
+  Only ``Marker`` columns' positions are read (rigid bodies, bones and their expected markers are not
+  measurements).
+
+Empty cells are missing samples (NaN). A marker named ``Subject:NAME`` keeps ``NAME`` when all markers share
+the subject; repeated names are made unique with a warning.
 """
 from __future__ import annotations
 
@@ -9,43 +34,160 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import RigInputError
-from .takes import MarkerTake
+from .errors import RigInputError, shown
+from .take_data import MarkerTake, unique_labels, units_from_text
 
 
-def read_marker_csv(path: str | Path, *, rate: float = 60.0, units: str = "mm") -> MarkerTake:
-    """Read ``frame, A_X, A_Y, A_Z, B_X, ...`` into a MarkerTake (``rate`` fps, ``units``)."""
-    path = Path(path)
-    with open(path, newline="", encoding="utf-8", errors="replace") as f:
-        rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
-    if not rows:
-        raise RigInputError(f"{path}: the file is empty.")
-    head = [c.strip() for c in rows[0]]
+def _rows(path: Path) -> list[list[str]]:
+    try:
+        with open(path, newline="", encoding="utf-8-sig", errors="replace") as f:
+            sample = f.read(4096)
+            f.seek(0)
+            delimiter = ";" if sample.count(";") > sample.count(",") else ","
+            return [[c.strip() for c in r] for r in csv.reader(f, delimiter=delimiter)]
+    except OSError as exc:
+        raise RigInputError(f"{path}: cannot be read ({exc.strerror}).") from None
+    except csv.Error as exc:   # a cell over the csv module's 131,072 characters, a NUL byte, ...
+        raise RigInputError(f"{path}: is not a readable CSV ({shown(exc, 80)}).") from None
+
+
+def _table(path: Path, rows: list[tuple[int, list[str]]], columns: list[int]) -> np.ndarray:
+    """Numbers from the given columns of the given (line number, cells) rows; empty or absent cells NaN."""
+    out = np.full((len(rows), len(columns)), np.nan)
+    for i, (line_no, r) in enumerate(rows):
+        try:
+            out[i] = [float(r[c]) if c < len(r) and r[c] else np.nan for c in columns]
+        except ValueError:
+            raise RigInputError(f"{path}: line {line_no} has a cell that is not a number.") from None
+    return out
+
+
+def _names(raw: list[str], path: Path, warnings: list[str]) -> list[str]:
+    """Subject prefixes dropped when all markers share one; repeated names made unique (with a warning)."""
+    prefixes = {n.rsplit(":", 1)[0] for n in raw if ":" in n}
+    if len(prefixes) == 1 and all(":" in n for n in raw):
+        raw = [n.rsplit(":", 1)[1] for n in raw]
+    labels, renamed = unique_labels(raw, str(path))
+    if renamed:
+        warnings.append(renamed)
+    return labels
+
+
+def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings) -> MarkerTake:
+    if not data_rows:
+        raise RigInputError(f"{path}: holds no frames.")
+    if not xyz_columns:
+        raise RigInputError(f"{path}: names no marker positions.")
+    labels = _names(raw_names, path, warnings)
+    table = _table(path, data_rows, [c for trip in xyz_columns for c in trip])
+    pos = table.reshape(len(data_rows), len(labels), 3)
+    pos[~np.isfinite(pos).all(axis=2)] = np.nan
+    first = _table(path, data_rows[:1], [0])[0, 0]
+    return MarkerTake(positions=pos, labels=labels, rate=rate, units=units, source=str(path),
+                      first_frame=int(first) if np.isfinite(first) else 1, warnings=warnings)
+
+
+def _units(text: str, path: Path, what: str) -> str:
+    units = units_from_text(text)
+    if units is None:
+        raise RigInputError(f"{path}: unknown units '{shown(text, 20)}' in {what} (use mm, cm or m).")
+    return units
+
+
+def _read_vicon(path: Path, rows: list[list[str]], start: int) -> MarkerTake:
+    """The Trajectories section starting at row ``start``."""
+    warnings: list[str] = []
+    try:
+        rate = float(rows[start + 1][0])
+        names, axes, unit_row = rows[start + 2], rows[start + 3], rows[start + 4]
+    except (IndexError, ValueError):
+        raise RigInputError(f"{path}: the Trajectories section needs its frame rate, names, axes and units rows.") from None
+    if not (rate > 0) or axes[:2] != ["Frame", "Sub Frame"]:
+        raise RigInputError(f"{path}: the Trajectories section needs a positive frame rate and a 'Frame, Sub Frame' row.")
+    xyz, raw = [], []
+    for c, name in enumerate(names):
+        if name:
+            if axes[c:c + 3] != ["X", "Y", "Z"]:
+                raise RigInputError(f"{path}: marker {shown(name, 40)} has no X, Y, Z columns under it.")
+            xyz.append((c, c + 1, c + 2))
+            raw.append(name)
+    units = {u for trip in xyz for u in (unit_row[k] if k < len(unit_row) else "" for k in trip)}
+    if len(units) != 1:
+        raise RigInputError(f"{path}: the Trajectories section mixes units ({', '.join(sorted(units))}).")
+    data = []
+    for i in range(start + 5, len(rows)):
+        if not any(rows[i]):
+            break   # a blank line ends the section
+        data.append((i + 1, rows[i]))
+    return _take(path, data, xyz, raw, rate, _units(units.pop(), path, "the Trajectories units row"), warnings)
+
+
+def _read_motive(path: Path, rows: list[list[str]]) -> MarkerTake:
+    warnings: list[str] = []
+    head = rows[0]
+    meta = {head[i]: head[i + 1] for i in range(0, len(head) - 1, 2)}
+    try:
+        rate = float(meta.get("Export Frame Rate") or meta.get("Capture Frame Rate") or "nan")
+    except ValueError:
+        rate = float("nan")
+    if not rate > 0:
+        raise RigInputError(f"{path}: the Motive header gives no positive Export Frame Rate.")
+    units = _units(meta.get("Length Units", "Meters"), path, "Length Units")
+    axis_at = next((i for i, r in enumerate(rows) if r[:2] == ["Frame", "Time (Seconds)"]), None)
+    if axis_at is None:
+        raise RigInputError(f"{path}: the Motive export has no 'Frame, Time (Seconds)' row.")
+    labelled = {r[1]: r for r in rows[1:axis_at] if len(r) > 1 and r[1] in ("Type", "Name")}
+    kinds = labelled.get("Type") or next((r for r in rows[1:axis_at] if "Marker" in r), None)
+    names = labelled.get("Name") or (rows[rows.index(kinds) + 1] if kinds else None)
+    component = rows[axis_at - 1]
+    axes = rows[axis_at]
+    if kinds is None or names is None:
+        raise RigInputError(f"{path}: the Motive export has no Type and Name rows.")
+    xyz, raw = [], []
+    for c in range(2, len(axes) - 2):
+        if (c < len(kinds) and kinds[c] == "Marker" and c < len(component) and component[c] == "Position"
+                and axes[c:c + 3] == ["X", "Y", "Z"]):
+            xyz.append((c, c + 1, c + 2))
+            raw.append(names[c] if c < len(names) else "")
+    data = [(i + 1, r) for i, r in enumerate(rows[axis_at + 1:], start=axis_at + 1) if any(r)]
+    return _take(path, data, xyz, raw, rate, units, warnings)
+
+
+def _read_plain(path: Path, rows: list[list[str]], rate: float, units: str) -> MarkerTake:
+    rows = [(i + 1, r) for i, r in enumerate(rows) if any(r)]
+    head = rows[0][1]
     cols = head[1:]
     if not cols or len(cols) % 3:
         raise RigInputError(f"{path}: after the frame column the header needs X, Y and Z columns per marker.")
-    labels = []
+    raw = []
     for i in range(0, len(cols), 3):
         trip = cols[i:i + 3]
         stems = {c.rsplit("_", 1)[0] for c in trip}
         axes = [c.rsplit("_", 1)[-1].upper() if "_" in c else "" for c in trip]
         if len(stems) != 1 or axes != ["X", "Y", "Z"]:
-            raise RigInputError(f"{path}: columns {', '.join(trip)} are not one marker's name_X, name_Y, name_Z.")
-        labels.append(stems.pop())
-    body = rows[1:]
-    if not body:
-        raise RigInputError(f"{path}: holds no frames.")
-    table = np.full((len(body), len(head)), np.nan)
-    for i, r in enumerate(body):
-        if len(r) > len(head):
-            raise RigInputError(f"{path}: row {i + 2} has more columns than the header.")
-        try:
-            table[i, :len(r)] = [float(c) if c.strip() else np.nan for c in r]
-        except ValueError:
-            raise RigInputError(f"{path}: row {i + 2} has a cell that is not a number.") from None
-    pos = table[:, 1:].reshape(len(body), len(labels), 3)
-    pos[~np.isfinite(pos).all(axis=2)] = np.nan
-    return MarkerTake(positions=pos, labels=labels, rate=rate, units=units, source=str(path))
+            raise RigInputError(f"{path}: columns {shown(', '.join(trip), 80)} are not one marker's name_X, name_Y, "
+                                  "name_Z.")
+        raw.append(stems.pop())
+    for line_no, r in rows[1:]:
+        if len(r) > len(head) and any(r[len(head):]):
+            raise RigInputError(f"{path}: line {line_no} has more columns than the header.")
+    xyz = [(1 + 3 * k, 2 + 3 * k, 3 + 3 * k) for k in range(len(raw))]
+    return _take(path, rows[1:], xyz, raw, rate, units, [])
+
+
+def read_marker_csv(path: str | Path, *, rate: float = 60.0, units: str = "mm") -> MarkerTake:
+    """Read a marker CSV: a Vicon Nexus or OptiTrack Motive export (rate and units from the file), or the
+    plain ``frame, A_X, A_Y, A_Z, ...`` layout (``rate`` fps, ``units``)."""
+    path = Path(path)
+    rows = _rows(path)
+    if not any(any(r) for r in rows):
+        raise RigInputError(f"{path}: the file is empty.")
+    if rows[0][:1] == ["Format Version"]:
+        return _read_motive(path, rows)
+    section = next((i for i, r in enumerate(rows) if r[:1] == ["Trajectories"] and not any(r[1:])), None)
+    if section is not None:
+        return _read_vicon(path, rows, section)
+    return _read_plain(path, rows, rate, units)
 
 
 def write_marker_csv(path: str | Path, take: MarkerTake) -> None:

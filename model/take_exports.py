@@ -49,3 +49,27 @@ def export_report(workspace, path: str | Path) -> dict:
     report = workspace.report()
     atomic_write(path, (json.dumps(report, indent=1) + "\n").encode("utf-8"))
     return report
+
+
+def export_solve_outputs(workspace, weights_path: str | Path, cache_path: str | Path | None = None,
+                         report_path: str | Path | None = None) -> dict:
+    """The weights CSV, and optionally the PC2 cache and the report, written as one set
+    (``model.output_set``): a solve killed while writing leaves either all the old files or all the new ones.
+    Returns the report."""
+    from .output_set import write_set
+    from .pc2 import pc2_writer
+    from .weights_csv import weights_csv_bytes
+    W = workspace.playing_weights()
+    if W is None:
+        raise RigInputError("Nothing to export: solve a marker take or load a Live Link Face take first.")
+    report = workspace.report()
+    csv_bytes = weights_csv_bytes(weights_path, W, list(workspace.rig.shape_names), rate=workspace.rate)
+    writers = {weights_path: lambda f: f.write(csv_bytes)}
+    if cache_path:
+        writers[cache_path] = pc2_writer(cache_path, take_surfaces(workspace), n_points=workspace.rig.n_vertices,
+                                         start_frame=0, sample_rate=1.0)[0]
+    if report_path:
+        text = (json.dumps(report, indent=1) + "\n").encode("utf-8")
+        writers[report_path] = lambda f: f.write(text)
+    write_set(writers)
+    return report

@@ -21,12 +21,13 @@ from .errors import RigInputError
 from .marker_map import MarkerMap, auto_marker_map, load_marker_map
 from .pose import PoseEvaluator
 from .rig import Rig, unit_scale
+from .segmentation import SegmentationSettings
 from .takes import MarkerTake, WeightTake
 
 # Defaults of a solve, chosen by measurement (see README, Motion capture). On the ICT Live Link take a global
 # solve measured 0.205 mm dense RMS against the actor's true surface and a two-region solve 0.212 mm: per-region
 # solves are offered, the global solve is the default.
-SOLVE_DEFAULTS = {"regional": False, "threshold": 0.75, "level": 2}
+SOLVE_DEFAULTS = {"regional": False, "threshold": SegmentationSettings().t, "level": 2}
 
 # The solver options a settings dict may carry (the rest of it says how the solve is set up).
 SOLVER_OPTIONS = ("residual", "lam_sparsity", "lam_temporal", "rbf_scale", "rbf_lambda")

@@ -3,96 +3,19 @@
 A ``MarkerTake`` holds positions (F, M, 3) float64 with NaN where a marker is missing, its labels,
 frame rate and units. A ``WeightTake`` holds per-frame weights (F, K) for named shapes.
 ``load_take(path)`` picks the reader from the file's extension (and, for CSV, its header).
+
+Both carry ``warnings``: one sentence each about what a reader had to decide for a file that bends its
+format (labels renamed, a short file read to its last whole frame, units guessed); ``take-info`` prints
+them, and any caller can show them beside the take.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from .errors import RigInputError
-from .rig import UNIT_IN_METRES, unit_scale
+from .take_data import MarkerTake, WeightTake, take_summary, unique_labels, units_from_text
 
-
-@dataclass
-class MarkerTake:
-    """Marker trajectories: ``positions`` (F, M, 3) float64, NaN where a marker is missing."""
-
-    positions: np.ndarray
-    labels: list[str]
-    rate: float
-    units: str = "mm"
-    source: str = ""
-    first_frame: int = 1
-
-    def __post_init__(self) -> None:
-        self.positions = np.ascontiguousarray(self.positions, dtype=np.float64)
-        self.labels = [str(s) for s in self.labels]
-        where = self.source or "take"
-        if self.positions.ndim != 3 or self.positions.shape[2] != 3:
-            raise RigInputError(f"{where}: marker positions must be frames x markers x 3.")
-        if self.positions.shape[1] != len(self.labels):
-            raise RigInputError(f"{where}: {len(self.labels)} labels but {self.positions.shape[1]} markers.")
-        dup = sorted({s for s in self.labels if self.labels.count(s) > 1})
-        if dup:
-            raise RigInputError(f"{where}: duplicate marker labels: {', '.join(dup)}.")
-        if self.units not in UNIT_IN_METRES:
-            raise RigInputError(f"{where}: unknown units '{self.units}' (use mm, cm or m).")
-        if not (np.isfinite(self.rate) and self.rate > 0):
-            raise RigInputError(f"{where}: the frame rate must be a positive number, not {self.rate}.")
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.positions.shape[0])
-
-    @property
-    def n_markers(self) -> int:
-        return int(self.positions.shape[1])
-
-    @property
-    def missing(self) -> np.ndarray:
-        """(F, M) bool, True where a marker has no sample."""
-        return ~np.isfinite(self.positions).all(axis=2)
-
-    def times(self) -> np.ndarray:
-        return np.arange(self.n_frames) / self.rate
-
-    def in_units(self, units: str) -> np.ndarray:
-        """Positions converted to ``units``."""
-        return self.positions * unit_scale(self.units, units)
-
-    def marker_index(self, label: str) -> int:
-        try:
-            return self.labels.index(label)
-        except ValueError:
-            raise RigInputError(f"{self.source or 'take'}: has no marker labelled '{label}'.") from None
-
-
-@dataclass
-class WeightTake:
-    """Per-frame shape weights (F, K) for ``names``; e.g. a Live Link Face recording mapped to a rig.
-
-    ``unmapped`` lists source columns that drive no shape of the rig; ``channels`` keeps the other
-    per-frame columns (head and eye rotations) by name.
-    """
-
-    weights: np.ndarray
-    names: list[str]
-    rate: float
-    timecodes: list[str] = field(default_factory=list)
-    unmapped: list[str] = field(default_factory=list)
-    channels: dict[str, np.ndarray] = field(default_factory=dict)
-    source: str = ""
-
-    def __post_init__(self) -> None:
-        self.weights = np.ascontiguousarray(self.weights, dtype=np.float64)
-        if self.weights.ndim != 2 or self.weights.shape[1] != len(self.names):
-            raise RigInputError(f"{self.source or 'take'}: weights do not match the {len(self.names)} shape names.")
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.weights.shape[0])
+__all__ = ["MarkerTake", "WeightTake", "load_take", "take_summary", "unique_labels", "units_from_text"]
 
 
 def load_take(path: str | Path, **kwargs) -> MarkerTake | WeightTake:

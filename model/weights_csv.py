@@ -14,6 +14,12 @@ from .errors import RigInputError
 def write_weights_csv(path: str | Path, weights: np.ndarray, names: list[str], *, rate: float | None = None,
                       times: np.ndarray | None = None, frames: np.ndarray | None = None) -> None:
     """Write weights (F, K) with ``names`` (K); times from ``times`` or ``frame / rate`` (rate in fps)."""
+    atomic_write(path, weights_csv_bytes(path, weights, names, rate=rate, times=times, frames=frames))
+
+
+def weights_csv_bytes(path: str | Path, weights: np.ndarray, names: list[str], *, rate: float | None = None,
+                      times: np.ndarray | None = None, frames: np.ndarray | None = None) -> bytes:
+    """The weights CSV's content (``path`` names it in messages); see ``write_weights_csv``."""
     W = np.asarray(weights, dtype=np.float64)
     if W.ndim != 2 or W.shape[1] != len(names):
         raise RigInputError(f"{path}: {len(names)} shape names but weights of shape {W.shape}.")
@@ -33,7 +39,7 @@ def write_weights_csv(path: str | Path, weights: np.ndarray, names: list[str], *
     w.writerow(["frame", "time", *names])
     for i in range(F):
         w.writerow([int(fr[i]), repr(float(times[i])), *(repr(float(x)) for x in W[i])])
-    atomic_write(path, buf.getvalue().encode("utf-8"))
+    return buf.getvalue().encode("utf-8")
 
 
 def read_weights_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray]:

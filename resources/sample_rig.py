@@ -241,10 +241,9 @@ def build_sample_rig() -> Rig:
     return _build()[0].copy()
 
 
-# The sample is a face mask (no skull or neck), so most of its vertices deform; the quantile that
-# separates brows, eyes, nose and mouth is higher than ICT FaceKit's 0.75 (which keeps whole-head rigs'
-# static skull out). Opening the sample starts with these saved settings, like any project would.
-SAMPLE_SEGMENTATION_T = 0.9
+# The threshold quantile is taken over the skin that moves, so the sample face mask and ICT FaceKit's
+# whole head share the default (0.5); opening the sample starts with these saved settings, like any project.
+SAMPLE_SEGMENTATION_T = 0.5
 
 
 def sample_project_sections() -> dict:

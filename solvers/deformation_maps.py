@@ -2,7 +2,12 @@
 
 Per-shape Laplacian magnitude ``m_k(v) = ‖L d_k(v)‖``, combined map ``M(v) = max_k m_k(v)``, the arg-max
 shape and its Laplacian vector (the RGB view), and the plain displacement map ``max_k ‖d_k(v)‖``.
-All K shapes go through the Laplacian as ONE sparse product.
+The shapes go through the Laplacian one (V, 3) sparse product each, on the (K, V, 3) deltas as stored (no
+transposed copy), so the cost is linear in vertices and shapes.
+
+Per-shape normalisation (``normalised_map``): Joshi's maximum lets shapes with sharp local bending (lips,
+lids) outvote shapes that move a broad area smoothly (a brow raise). Dividing each shape's map by a high
+quantile of itself, taken over the vertices that shape moves, gives every shape its say before the maximum.
 """
 from __future__ import annotations
 
@@ -13,7 +18,9 @@ import scipy.sparse as sp
 
 from .errors import RigInputError
 
-MAP_KINDS = ("laplacian", "displacement")
+MAP_KINDS = ("laplacian", "displacement", "laplacian+displacement")
+NORMALISE_QUANTILE = 0.99   # each shape's map is divided by this quantile of itself over the vertices it moves
+MOVING_FRACTION = 0.01      # a shape moves a vertex when it displaces it by > 1% of its largest displacement
 
 
 @dataclass
@@ -25,6 +32,7 @@ class DeformationMaps:
     argmax_shape  (V,)   int, the k reaching the maximum (0 where every shape is still).
     vector        (V, 3) ``L d_k(v)`` of the arg-max shape (x, y, z → R, G, B in the vector view).
     displacement  (V,)   ``max_k ‖d_k(v)‖``.
+    per_shape_displacement (V, K) ``‖d_k(v)‖``.
     """
 
     per_shape: np.ndarray
@@ -32,14 +40,26 @@ class DeformationMaps:
     argmax_shape: np.ndarray
     vector: np.ndarray
     displacement: np.ndarray
+    per_shape_displacement: np.ndarray | None = None
+
+    def per_shape_values(self, kind: str) -> np.ndarray:
+        """(V, K) per-shape maps of a kind: 'laplacian' ``‖L d_k‖`` or 'displacement' ``‖d_k‖``."""
+        if kind == "laplacian":
+            return self.per_shape
+        if kind == "displacement":
+            return self.per_shape_displacement
+        raise RigInputError(f"Unknown per-shape map '{kind}': use 'laplacian' or 'displacement'.")
 
     def values(self, kind: str) -> np.ndarray:
-        """The scalar map a segmentation thresholds: 'laplacian' (M) or 'displacement'."""
+        """The raw scalar map a segmentation thresholds: 'laplacian' (M), 'displacement', or
+        'laplacian+displacement' (the larger of the two; in raw units the displacement mostly)."""
         if kind == "laplacian":
             return self.combined
         if kind == "displacement":
             return self.displacement
-        raise RigInputError(f"Unknown map '{kind}': use 'laplacian' or 'displacement'.")
+        if kind == "laplacian+displacement":
+            return np.maximum(self.combined, self.displacement)
+        raise RigInputError(f"Unknown map '{kind}': use one of {', '.join(MAP_KINDS)}.")
 
 
 def _check_deltas(deltas: np.ndarray, n_vertices: int) -> np.ndarray:
@@ -51,22 +71,31 @@ def _check_deltas(deltas: np.ndarray, n_vertices: int) -> np.ndarray:
 
 
 def laplacian_vectors(laplacian: sp.spmatrix, deltas: np.ndarray) -> np.ndarray:
-    """(V, K, 3) Laplacian vectors ``L d_k(v)`` of all K shapes as one sparse product (Joshi et al. 2003, §2).
+    """(V, K, 3) Laplacian vectors ``L d_k(v)`` of all K shapes (Joshi et al. 2003, §2).
 
     ``(L d_k)(v) = (1/|N(v)|) Σ_{u∈N(v)} (d_k(u) − d_k(v))`` for the umbrella operator.
     """
     L = sp.csr_matrix(laplacian)
     V = L.shape[0]
     d = _check_deltas(deltas, V)
-    K = d.shape[0]
-    X = np.ascontiguousarray(d.transpose(1, 0, 2)).reshape(V, 3 * K)  # (V, 3K): one product for all shapes
-    return np.asarray(L @ X).reshape(V, K, 3)
+    out = np.empty((V, d.shape[0], 3))
+    for k in range(d.shape[0]):
+        out[:, k] = L @ d[k]
+    return out
+
+
+def _norm3(x: np.ndarray) -> np.ndarray:
+    return np.sqrt(np.einsum("vc,vc->v", x, x))
 
 
 def laplacian_magnitudes(laplacian: sp.spmatrix, deltas: np.ndarray) -> np.ndarray:
     """(V, K) per-shape deformation maps ``m_k(v) = ‖L d_k(v)‖`` (Joshi et al. 2003, §2)."""
-    Y = laplacian_vectors(laplacian, deltas)
-    return np.sqrt(np.einsum("vkc,vkc->vk", Y, Y))
+    L = sp.csr_matrix(laplacian)
+    d = _check_deltas(deltas, L.shape[0])
+    out = np.empty((L.shape[0], d.shape[0]))
+    for k in range(d.shape[0]):
+        out[:, k] = _norm3(L @ d[k])
+    return out
 
 
 def displacement_map(deltas: np.ndarray) -> np.ndarray:
@@ -85,16 +114,68 @@ def deformation_maps(laplacian: sp.spmatrix, deltas: np.ndarray) -> DeformationM
     L = sp.csr_matrix(laplacian)
     V = L.shape[0]
     d = _check_deltas(deltas, V)
-    if d.shape[0] == 0:
+    K = d.shape[0]
+    if K == 0:
         raise RigInputError("The rig has no blendshapes, so there is no deformation map to compute.")
-    Y = laplacian_vectors(L, d)
-    per_shape = np.sqrt(np.einsum("vkc,vkc->vk", Y, Y))
-    arg = per_shape.argmax(axis=1)
-    rows = np.arange(V)
-    combined = per_shape[rows, arg]
-    vector = Y[rows, arg]
-    return DeformationMaps(per_shape=per_shape, combined=combined, argmax_shape=arg, vector=vector,
-                           displacement=displacement_map(d))
+    # (K, V) rows written contiguously; handed out as their (V, K) transposes (column-major views)
+    per_shape = np.empty((K, V))
+    disp = np.empty((K, V))
+    combined = np.full(V, -1.0)
+    arg = np.zeros(V, dtype=np.int64)
+    vector = np.zeros((V, 3))
+    for k in range(K):  # one (V, 3) product per shape, the running arg-max kept as it goes
+        y = L @ d[k]
+        m = per_shape[k]
+        m[:] = _norm3(y)
+        disp[k] = _norm3(d[k])
+        better = m > combined
+        combined[better] = m[better]
+        arg[better] = k
+        vector[better] = y[better]
+    return DeformationMaps(per_shape=per_shape.T, combined=combined, argmax_shape=arg, vector=vector,
+                           displacement=disp.max(axis=0), per_shape_displacement=disp.T)
+
+
+def shape_moves(per_shape_displacement: np.ndarray, fraction: float = MOVING_FRACTION) -> np.ndarray:
+    """(V, K) bool: shape k moves vertex v, ``‖d_k(v)‖ > fraction · max_u ‖d_k(u)‖`` (a shape that moves
+    nothing moves no vertex)."""
+    D = np.asarray(per_shape_displacement)
+    top = D.max(axis=0)
+    return (D > fraction * top) & (top > 0)
+
+
+def shape_scales(per_shape: np.ndarray, moves: np.ndarray, quantile: float = NORMALISE_QUANTILE) -> np.ndarray:
+    """(K,) the ``quantile`` of each shape's map over the vertices that shape moves (1 where it moves none
+    or its map is zero there): the scale ``normalised_map`` divides by."""
+    P = np.asarray(per_shape)
+    K = P.shape[1]
+    out = np.ones(K)
+    for k in range(K):
+        vals = P[:, k][moves[:, k]]
+        if vals.size:
+            q = float(np.quantile(vals, quantile))
+            if q > 0:
+                out[k] = q
+    return out
+
+
+def normalised_map(per_shape: np.ndarray, scales: np.ndarray) -> np.ndarray:
+    """(V,) ``max_k m_k(v) / s_k``: every shape's map on its own scale before the maximum (see module doc)."""
+    return (np.asarray(per_shape) / np.asarray(scales)[None, :]).max(axis=1)
+
+
+def smooth_map(values: np.ndarray, adjacency: sp.spmatrix, iterations: int) -> np.ndarray:
+    """A light smoothing of a per-vertex map: ``iterations`` rounds of the average over each vertex and its
+    1-ring, ``x(v) ← (x(v) + Σ_{u∈N(v)} x(u)) / (1 + |N(v)|)``. Constant maps are unchanged."""
+    x = np.asarray(values, dtype=np.float64)
+    if iterations <= 0:
+        return x.copy()
+    A = sp.csr_matrix(adjacency)
+    inv = 1.0 / (1.0 + np.diff(A.indptr))
+    inv = inv.reshape((-1,) + (1,) * (x.ndim - 1))
+    for _ in range(int(iterations)):
+        x = (x + A @ x) * inv
+    return x
 
 
 def vector_colors(vector: np.ndarray, scale: float | None = None) -> np.ndarray:

@@ -84,10 +84,71 @@ def region_contacts(labels: np.ndarray, adjacency: sp.spmatrix) -> tuple[np.ndar
     return gap, bnd
 
 
+def mirror_partners(positions: np.ndarray, per_shape_displacement: np.ndarray,
+                    tolerance: float = 0.05) -> np.ndarray:
+    """(K,) each shape's mirror partner across x = 0 (itself if none): the shape whose displacement-weighted
+    centre ``Σ_v ‖d_k(v)‖ x_v / Σ_v ‖d_k(v)‖`` is the reflection of this one's, within ``tolerance`` of the
+    rig's size, found both ways. From the geometry alone, so it needs no naming convention."""
+    X = np.asarray(positions, dtype=np.float64)
+    D = np.asarray(per_shape_displacement, dtype=np.float64)
+    K = D.shape[1]
+    w = D.sum(axis=0)
+    c = (D.T @ X) / np.where(w > 0, w, 1.0)[:, None]
+    size = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0))) or 1.0
+    refl = c * np.array([-1.0, 1.0, 1.0])
+    dist = np.linalg.norm(refl[:, None, :] - c[None, :, :], axis=2)
+    dist[w == 0, :] = np.inf
+    dist[:, w == 0] = np.inf
+    best = np.argmin(dist, axis=1)
+    ok = (dist[np.arange(K), best] < tolerance * size) & (best[best] == np.arange(K))
+    return np.where(ok, best, np.arange(K))
+
+
+def region_activity(labels: np.ndarray, support: np.ndarray, partners: np.ndarray | None = None) -> np.ndarray:
+    """(R, K) how much each shape moves each region, ``Σ_{v∈core r} support(v, k)``; with ``partners`` a shape
+    and its mirror partner count as one (they fire together in symmetric expressions), so the two brows,
+    moved by browInnerUp_L and browInnerUp_R, move together."""
+    lab = np.asarray(labels, dtype=np.int64)
+    S = np.asarray(support, dtype=np.float64)
+    R = int(lab.max()) + 1 if (lab >= 0).any() else 0
+    fg = np.flatnonzero(lab >= 0)
+    act = np.zeros((R, S.shape[1]))
+    np.add.at(act, lab[fg], S[fg])
+    if partners is not None:
+        act = act + act[:, partners]
+    return act
+
+
+def region_mirrors(labels: np.ndarray, mirror: np.ndarray) -> np.ndarray:
+    """(R,) each region's mirror-image region (itself for a region on the midline), -1 if it has none: the
+    region holding most of the mirror vertices (``solvers.symmetry.mirror_map``) of its core, both ways."""
+    lab = np.asarray(labels, dtype=np.int64)
+    R = int(lab.max()) + 1 if (lab >= 0).any() else 0
+    fg = np.flatnonzero(lab >= 0)
+    other = lab[np.asarray(mirror)[fg]]
+    ok = other >= 0
+    votes = np.zeros((R, R + 1))
+    np.add.at(votes, (lab[fg][ok], other[ok]), 1.0)
+    sizes = np.bincount(lab[fg], minlength=R)
+    best = votes[:, :R].argmax(axis=1) if R else np.zeros(0, dtype=np.int64)
+    good = votes[np.arange(R), best] >= 0.5 * sizes
+    out = np.where(good, best, -1)
+    mutual = (out >= 0) & (out[np.maximum(out, 0)] == np.arange(R))
+    return np.where(mutual, out, -1)
+
+
 def merge_clusters(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.ndarray,
-                   levels: int | None = None) -> list[np.ndarray]:
+                   levels: int | None = None, activity: np.ndarray | None = None,
+                   mirrors: np.ndarray | None = None) -> list[np.ndarray]:
     """Cluster id of each level-0 region for every level (Joshi et al. 2003, §4; rule in the module doc).
 
+    With ``activity`` (R, K) (``region_activity``), contiguous clusters that move together merge first: pairs
+    whose cores come within the smaller cluster's radius (``sqrt(size/π)`` rings) of each other go first, by
+    the cosine similarity of their summed activity (shape co-activation), then the rule above.
+    With ``mirrors`` (R,) (``region_mirrors``) and the default halving levels, a merge and its mirror image
+    are made together, so a symmetric face keeps a symmetric hierarchy; a level may then hold one region
+    fewer than half of the level below (⌈n/2⌉ − 1), and a merge that has no mirror image partner left is
+    made alone only when nothing else can merge.
     Returns a list of (R,) int arrays, level 0 first (the identity), the last all zeros (one region).
     """
     labels = np.asarray(labels, dtype=np.int64)
@@ -95,6 +156,7 @@ def merge_clusters(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.nda
     targets = level_targets(R, levels)
     if not targets:
         return []
+    paired = mirrors is not None and levels is None
     gap, bnd = region_contacts(labels, adjacency)
     P = np.asarray(positions, dtype=np.float64)
     fg = labels >= 0
@@ -103,7 +165,18 @@ def merge_clusters(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.nda
     cluster = np.arange(R)
     out = [cluster.copy()]
     ii, jj = np.triu_indices(R, 1)
-    for target in targets[1:]:
+    level_index = 1
+    while True:
+        n_now = np.unique(cluster).size
+        if n_now <= 1:
+            break
+        if paired:
+            target, floor = int(math.ceil(n_now / 2)), max(int(math.ceil(n_now / 2)) - 1, 1)
+        else:
+            if level_index >= len(targets):
+                break
+            target = floor = targets[level_index]
+        level_index += 1
         while True:
             uniq, cluster = np.unique(cluster, return_inverse=True)
             n = uniq.size
@@ -122,7 +195,17 @@ def merge_clusters(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.nda
             finite = np.isfinite(g)
             if finite.any():
                 pa, pb, g, b = pa[finite], pb[finite], g[finite], cb[pa[finite], pb[finite]]
-                order = np.lexsort((pb, pa, -b, g))
+                if activity is None:
+                    order = np.lexsort((pb, pa, -b, g))
+                else:
+                    ca = np.zeros((n, activity.shape[1]))
+                    np.add.at(ca, cluster, activity)
+                    ca /= np.maximum(np.linalg.norm(ca, axis=1, keepdims=True), 1e-300)
+                    sim = np.round(np.einsum("ij,ij->i", ca[pa], ca[pb]), 2)  # ties go to the rule above
+                    # near: the cores come within the smaller cluster's radius (in rings) of each other
+                    csz = np.bincount(cluster, weights=sizes, minlength=n)
+                    near = g <= np.sqrt(np.minimum(csz[pa], csz[pb]) / np.pi)
+                    order = np.lexsort((pb, pa, -b, g, -sim, ~near))
                 pairs = list(zip(pa[order], pb[order]))
             else:  # no contiguous pair left: closest centroids (separate mesh pieces)
                 csum = np.zeros((n, 3))
@@ -132,6 +215,7 @@ def merge_clusters(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.nda
                 dd = np.linalg.norm(cen[pa] - cen[pb], axis=1)
                 k = int(np.argmin(dd))
                 pairs = [(pa[k], pb[k])]
+            cmirror = _cluster_mirrors(cluster, mirrors, n) if paired else None
             used = np.zeros(n, dtype=bool)
             merge_to = np.arange(n)
             count = n
@@ -140,17 +224,53 @@ def merge_clusters(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.nda
                     break
                 if used[a] or used[b]:
                     continue
-                used[a] = used[b] = True
-                merge_to[b] = a
-                count -= 1
+                groups = [{int(a), int(b)}]
+                if cmirror is not None:
+                    ma, mb = int(cmirror[a]), int(cmirror[b])
+                    if ma >= 0 and mb >= 0:
+                        # the merge and its mirror image together: two merges, or one of three clusters
+                        # when they share one (a region on the midline between two mirror images)
+                        if ma != mb and not np.isfinite(cg[min(ma, mb), max(ma, mb)]):
+                            continue
+                        if {ma, mb} & groups[0]:
+                            groups[0] |= {ma, mb}
+                        else:
+                            groups.append({ma, mb})
+                members = set().union(*groups)
+                merges = sum(len(gr) - 1 for gr in groups)
+                if any(used[c] for c in members) or count - merges < floor:
+                    continue  # its mirror image cannot merge with it now: leave it for later
+                for gr in groups:
+                    root = min(gr)
+                    for c in gr:
+                        used[c] = True
+                        merge_to[c] = root
+                count -= merges
+            if count == n:  # nothing could merge in mirror pairs: the best pair alone
+                a, b = pairs[0]
+                merge_to[max(a, b)] = min(a, b)
             cluster = merge_to[cluster]
         _, cluster = np.unique(cluster, return_inverse=True)
         out.append(cluster.copy())
     return out
 
 
+def _cluster_mirrors(cluster: np.ndarray, mirrors: np.ndarray, n: int) -> np.ndarray:
+    """(n,) the mirror-image cluster of each cluster (the clusters of its regions' mirrors, if one), else -1."""
+    out = np.full(n, -1, dtype=np.int64)
+    for c in range(n):
+        members = np.flatnonzero(cluster == c)
+        m = mirrors[members]
+        if (m >= 0).all():
+            targets = np.unique(cluster[m])
+            if targets.size == 1:
+                out[c] = targets[0]
+    return out
+
+
 def hierarchy_labels(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.ndarray,
-                     levels: int | None = None) -> list[np.ndarray]:
+                     levels: int | None = None, activity: np.ndarray | None = None,
+                     mirrors: np.ndarray | None = None) -> list[np.ndarray]:
     """Per-vertex core labels of every level (level 0 = ``labels``); background (-1) is kept at every level.
 
     Joshi et al. 2003, §4: each level merges contiguous regions of the level below; the top has one region.
@@ -158,7 +278,7 @@ def hierarchy_labels(labels: np.ndarray, adjacency: sp.spmatrix, positions: np.n
     labels = np.asarray(labels, dtype=np.int64)
     fg = labels >= 0
     out = []
-    for cl in merge_clusters(labels, adjacency, positions, levels):
+    for cl in merge_clusters(labels, adjacency, positions, levels, activity, mirrors):
         lab = np.full(labels.size, -1, dtype=np.int64)
         lab[fg] = cl[labels[fg]]
         out.append(lab)

@@ -199,13 +199,103 @@ def clean_up(labels: np.ndarray, adjacency: sp.spmatrix, *, min_size: int, conca
 
 
 def threshold_labels(values: np.ndarray, adjacency: sp.spmatrix, t: float, *,
-                     sorted_values: np.ndarray | None = None) -> tuple[np.ndarray, float]:
+                     sorted_values: np.ndarray | None = None, domain: np.ndarray | None = None,
+                     split: sp.spmatrix | None = None) -> tuple[np.ndarray, float]:
     """Raw threshold segmentation (Joshi et al. 2003, §2): ``threshold = D[⌊n·t⌋]``, deforming = M > threshold,
-    regions = connected components of the deforming set. Returns (labels, threshold)."""
+    regions = connected components of the deforming set. Returns (labels, threshold).
+
+    ``domain`` (V,) bool: the quantile is taken over these vertices only (the skin that moves) and only they
+    can deform; ``sorted_values`` must then be the sorted values on the domain. ``split``: the graph the
+    components are taken on (``split_graph``: the mesh cut where the dominant shape group changes)."""
     values = np.asarray(values, dtype=np.float64)
-    D = np.sort(values) if sorted_values is None else sorted_values
+    if sorted_values is not None:
+        D = sorted_values
+    else:
+        D = np.sort(values if domain is None else values[domain])
     thr = quantile_threshold(D, t)
-    return connected_regions(values > thr, adjacency), thr
+    deforming = values > thr
+    if domain is not None:
+        deforming &= domain
+    return connected_regions(deforming, adjacency if split is None else split), thr
+
+
+# --- the surface, its separate meshes, and the shapes that move it ------------------------------------
+
+def mesh_pieces(adjacency: sp.spmatrix, main_fraction: float = 0.5) -> tuple[np.ndarray, np.ndarray]:
+    """(piece, main): the connected component of every vertex, and which vertices lie on the main surface
+    (the largest piece and any piece at least ``main_fraction`` of its size). The other pieces are the rig's
+    separate meshes (eyeballs, teeth, tongue, eyelashes in ICT FaceKit)."""
+    _, piece = csgraph.connected_components(sp.csr_matrix(adjacency), directed=False)
+    sizes = np.bincount(piece)
+    main = sizes[piece] >= main_fraction * sizes.max()
+    return piece.astype(np.int64), main
+
+
+def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
+    """(K,) group of every shape: shapes that act on the same part of the face (average-linkage clustering
+    of the cosine distance between their (V,) support maps, cut at ``cut``), e.g. a brow's three shapes, an
+    eye's lid and gaze shapes, one side of the mouth. Shapes that move nothing form one group each."""
+    from scipy.cluster.hierarchy import fcluster, linkage
+    S = np.asarray(support, dtype=np.float64)
+    K = S.shape[1]
+    if K == 1:
+        return np.zeros(1, dtype=np.int64)
+    n = np.linalg.norm(S, axis=0)
+    Sn = S / np.where(n > 0, n, 1.0)
+    D = np.clip(1.0 - Sn.T @ Sn, 0.0, 2.0)
+    D[n == 0, :] = D[:, n == 0] = 1.0
+    np.fill_diagonal(D, 0.0)
+    Z = linkage(D[np.triu_indices(K, 1)], method="average")
+    return (fcluster(Z, cut, criterion="distance") - 1).astype(np.int64)
+
+
+def dominant_group(support: np.ndarray, groups: np.ndarray) -> np.ndarray:
+    """(V,) the shape group with the largest support at each vertex (``max_{k∈g} support(v, k)``)."""
+    S = np.asarray(support)
+    G = int(groups.max()) + 1
+    best = np.full(S.shape[0], -1.0)
+    out = np.zeros(S.shape[0], dtype=np.int64)
+    for g in range(G):
+        m = S[:, groups == g].max(axis=1)
+        better = m > best
+        best[better] = m[better]
+        out[better] = g
+    return out
+
+
+def split_graph(adjacency: sp.spmatrix, dominant: np.ndarray) -> sp.csr_matrix:
+    """The mesh graph without the edges whose ends are dominated by different shape groups: its components
+    within the deforming set are regions that one group of shapes moves (a brow, an eye, a mouth side)."""
+    A = sp.csr_matrix(adjacency).tocoo()
+    keep = dominant[A.row] == dominant[A.col]
+    return sp.csr_matrix((A.data[keep], (A.row[keep], A.col[keep])), shape=A.shape)
+
+
+def attach_separate_meshes(labels: np.ndarray, piece: np.ndarray, main: np.ndarray, support: np.ndarray,
+                           min_similarity: float = 0.3) -> np.ndarray:
+    """Give every separate mesh (a piece off the main surface) to the region of the skin that carries it.
+
+    A piece follows the region whose shape activity (``Σ_{v∈core} support(v, k)``, per shape) is most like
+    its own (cosine ≥ ``min_similarity``): the lower teeth follow the jaw, an eyeball its eye. A piece no
+    shape moves, or none like any region, stays in the background. Nothing is joined by proximity."""
+    lab = np.asarray(labels, dtype=np.int64).copy()
+    S = np.asarray(support)
+    off = np.flatnonzero(~main)
+    lab[off] = BACKGROUND
+    R = int(lab.max()) + 1 if (lab >= 0).any() else 0
+    if R == 0 or off.size == 0:
+        return lab
+    fg = np.flatnonzero(lab >= 0)
+    act = sp.csr_matrix((np.ones(fg.size), (lab[fg], fg)), shape=(R, lab.size)) @ S  # (R, K) per region
+    act /= np.maximum(np.linalg.norm(act, axis=1, keepdims=True), 1e-300)
+    ids, pid = np.unique(piece[off], return_inverse=True)
+    pact = sp.csr_matrix((np.ones(off.size), (pid, off)), shape=(ids.size, lab.size)) @ S  # (P, K) per piece
+    norm = np.linalg.norm(pact, axis=1)
+    sim = (pact / np.maximum(norm, 1e-300)[:, None]) @ act.T
+    best = sim.argmax(axis=1)
+    ok = (norm > 0) & (sim[np.arange(ids.size), best] >= min_similarity)
+    lab[off] = np.where(ok, best, BACKGROUND)[pid]
+    return lab
 
 
 # --- overlap and blending -----------------------------------------------------------------------------

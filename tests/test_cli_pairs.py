@@ -6,9 +6,50 @@ import subprocess
 
 import numpy as np
 
-from model.interference import PairRow, pair_scores, ranked_pairs, rig_vertex_areas
-from solvers.correctives import overshoot_heat
+from model.interference import PairRow, ranked_pairs
 from tests.cli_runner import command, run_cli
+
+
+def _vertex_areas(rig) -> np.ndarray:
+    """A third of the area of every triangle at each of its corners, polygons fanned from their first vertex."""
+    X, areas, start = rig.neutral.astype(np.float64), np.zeros(rig.n_vertices), 0
+    tris = []
+    for n in rig.face_counts:
+        f = rig.face_indices[start:start + n]
+        tris += [(f[0], f[k], f[k + 1]) for k in range(1, n - 1)]
+        start += n
+    T = np.array(tris)
+    third = np.linalg.norm(np.cross(X[T[:, 1]] - X[T[:, 0]], X[T[:, 2]] - X[T[:, 0]]), axis=1) / 6
+    for c in range(3):
+        np.add.at(areas, T[:, c], third)
+    return areas
+
+
+def _overshoot_scores(rig, areas) -> np.ndarray:
+    """The finder's overshoot measure for every pair, straight from its definition (README, ALGORITHMS §6):
+    Σ w e / (Σ w + 10) over the vertices both shapes move (more than 1e-3 of their peak), e the sum's excess
+    over the larger displacement relative to it, w the smaller relative displacement times the vertex area
+    relative to the median area of the moving vertices."""
+    D = rig.deltas.astype(np.float64)
+    n = np.linalg.norm(D, axis=2)
+    rel = n / n.max(axis=1, keepdims=True)
+    acts = rel > 1e-3
+    moving = acts.any(axis=0) & (areas > 0)
+    a = areas / np.median(areas[moving])
+    K = len(D)
+    S = np.eye(K)
+    for i in range(K):
+        for j in range(i + 1, K):
+            both = acts[i] & acts[j]
+            m = np.maximum(n[i, both], n[j, both])
+            e = (np.linalg.norm(D[i, both] + D[j, both], axis=1) - m) / m
+            w = np.minimum(rel[i, both], rel[j, both]) * a[both]
+            S[i, j] = S[j, i] = (w * e).sum() / (w.sum() + 10.0)
+    return S
+
+
+def _mirror(name: str) -> str:
+    return name[:-2] + {"_L": "_R", "_R": "_L"}[name[-2:]] if name[-2:] in ("_L", "_R") else name
 
 
 def test_pairs_on_ict_rank_smiths_brow_pair_and_say_where(ict_dir, ict_rig):
@@ -19,17 +60,32 @@ def test_pairs_on_ict_rank_smiths_brow_pair_and_say_where(ict_dir, ict_rig):
     assert brows["rank"] <= 10 and brows["mirror"] is None
     lids = out["pairs"][0]
     assert lids["shapes"] == ["eyeLookUp_L", "eyeWide_L"] and lids["mirror"] == ["eyeLookUp_R", "eyeWide_R"]
-    # the same numbers as the GUI's finder: score from the area-weighted matrix, peak and area from the heat
+    # the numbers, computed here from their definitions: score, and the peak and area of the overshoot heat
     names = ict_rig.shape_names
+    areas = _vertex_areas(ict_rig)
+    S = _overshoot_scores(ict_rig, areas)
     i, j = names.index("browInnerUp_L"), names.index("browInnerUp_R")
-    areas = rig_vertex_areas(ict_rig)
-    assert brows["score"] == round(pair_scores(ict_rig, "overshoot", areas)[i, j], 6)
-    heat = overshoot_heat(ict_rig.deltas[i], ict_rig.deltas[j])
-    assert brows["peak"] == round(float(heat.max()), 6)
-    assert brows["area"] == round(float(areas[heat > 0.1 * heat.max()].sum()), 6)
+    assert abs(brows["score"] - S[i, j]) < 1e-5
+    di, dj = ict_rig.deltas[i].astype(np.float64), ict_rig.deltas[j].astype(np.float64)
+    heat = np.maximum(np.linalg.norm(di + dj, axis=1)
+                      - np.maximum(np.linalg.norm(di, axis=1), np.linalg.norm(dj, axis=1)), 0.0)
+    assert abs(brows["peak"] - heat.max()) < 2e-6
+    assert abs(brows["area"] - areas[heat > 0.1 * heat.max()].sum()) < 1e-4
     assert 0.2 < brows["peak"] < 0.3 and 40 < brows["area"] < 70      # cm, cm²: the brow midline
-    assert [r["shapes"] for r in out["pairs"]] == [[names[r.i], names[r.j]] for r in
-                                                   ranked_pairs(pair_scores(ict_rig), names, 12)]
+    # the ranking: a pair and its mirror image are one row, scored by the better side, best first
+    best = {}
+    for a in range(len(names)):
+        for b in range(a + 1, len(names)):
+            pair = frozenset((names[a], names[b]))
+            row = frozenset((pair, frozenset(map(_mirror, pair))))
+            best[row] = max(best.get(row, -np.inf), S[a, b])
+    ranked = sorted(best, key=best.get, reverse=True)
+    assert best[ranked[11]] - best[ranked[12]] > 1e-4             # no near-tie at the cut
+    got = [frozenset((frozenset(r["shapes"]), frozenset(r["mirror"] or r["shapes"]))) for r in out["pairs"]]
+    assert set(got) == set(ranked[:12])
+    scores = [r["score"] for r in out["pairs"]]
+    assert scores == sorted(scores, reverse=True)
+    np.testing.assert_allclose(scores, [best[g] for g in got], atol=1e-5)
 
 
 def test_pairs_options_and_text(ict_dir):

@@ -516,7 +516,6 @@ def test_heat_map_of_a_pair(ict_rig):
 # --- the bundled sample rig -----------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def sample():
-    pytest.importorskip("resources.sample_rig", reason="resources/sample_rig.py is not written yet")
     from resources.sample_rig import build_sample_rig
     return build_sample_rig()
 

@@ -12,6 +12,7 @@ from model.errors import RigInputError
 from model.gltf import load_gltf, write_gltf
 from model.readers import load_rig
 from model.rig import Rig
+from tests.gltf_reference import reference_mesh
 
 
 @pytest.fixture
@@ -54,7 +55,6 @@ def test_ict_round_trip_as_glb_keeps_vertex_order(tmp_path, ict_rig):
 
 
 def test_sample_rig_round_trip(tmp_path):
-    pytest.importorskip("resources.sample_rig", reason="resources/sample_rig.py is not written yet")
     from resources.sample_rig import build_sample_rig
     rig = build_sample_rig()
     for suffix in (".gltf", ".glb"):
@@ -189,3 +189,214 @@ def test_primitives_of_the_mesh_are_concatenated_in_order(tmp_path, cube):
     assert np.array_equal(back.deltas, np.concatenate([cube.deltas, cube.deltas], axis=1))
     tris = cube.triangles()
     assert np.array_equal(back.triangles(), np.concatenate([tris, tris + 8]))
+
+
+# --- files other tools wrote, against an independent reading (pygltflib + numpy) ------------------
+THIRDPARTY = ["MorphStressTest.gltf", "SimpleMorph.gltf", "singleBlendshapeCube_sparse.glb"]
+def assert_matches_reference(path, **kwargs):
+    rig = load_gltf(path, **kwargs)
+    ref_v, ref_t, ref_names, ref_d = reference_mesh(path)
+    assert rig.shape_names == ref_names
+    assert rig.n_vertices == len(ref_v)
+    assert np.allclose(rig.neutral, ref_v, rtol=0, atol=1e-12 + 1e-9 * np.abs(ref_v).max())
+    assert np.allclose(rig.deltas, ref_d, rtol=0, atol=1e-12 + 1e-9 * max(np.abs(ref_d).max(), 1e-30))
+    assert np.array_equal(rig.triangles(), ref_t)
+    return rig
+
+
+@pytest.mark.parametrize("name", THIRDPARTY)
+def test_thirdparty_files_read_as_pygltflib_reads_them(name):
+    from tests.conftest import DATA, require_data
+    rig = assert_matches_reference(require_data(DATA / "thirdparty" / "gltf" / name))
+    assert rig.n_shapes >= 1 and np.abs(rig.deltas).max() > 0  # the morph targets really move something
+
+
+def _gltf(tmp_path, doc, name="x.gltf"):
+    return _write(tmp_path, doc, name)
+
+
+def test_node_hierarchy_is_applied_to_positions_and_deltas(tmp_path, cube):
+    doc, _ = _doc(tmp_path, cube)
+    q = [np.sin(0.3) * v for v in (0.6, 0.0, 0.8)] + [np.cos(0.3)]  # 0.6 rad about (0.6, 0, 0.8)
+    doc["nodes"] = [{"name": "root", "translation": [1.0, -2.0, 0.5], "scale": [2.0, 2.0, 2.0], "children": [1]},
+                    {"name": "mid", "matrix": [1, 0, 0, 0, 0, 0, 1, 0, 0, -1, 0, 0, 0, 0.25, 0, 1], "children": [2]},
+                    {"name": "face", "rotation": q, "scale": [0.5, 1.0, 1.5], "mesh": 0}]
+    doc["scenes"] = [{"nodes": [0]}]
+    path = _gltf(tmp_path, doc)
+    rig = assert_matches_reference(path)
+    # The same by hand: S, then R, then the parent's matrix (a quarter turn about x plus a shift), then root.
+    from scipy.spatial.transform import Rotation
+    R = Rotation.from_quat(q).as_matrix()
+    local = cube.neutral * [0.5, 1.0, 1.5] @ R.T
+    mid = local @ np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]]).T + [0, 0.25, 0]
+    assert np.allclose(rig.neutral, 2 * mid + [1.0, -2.0, 0.5], atol=1e-6)
+    d_local = cube.deltas[0] * [0.5, 1.0, 1.5] @ R.T
+    assert np.allclose(rig.deltas[0], 2 * d_local @ np.array([[1, 0, 0], [0, 0, -1], [0, 1, 0]]).T, atol=1e-6)
+
+
+def test_mirroring_node_keeps_faces_facing_out(tmp_path, cube):
+    doc, _ = _doc(tmp_path, cube)
+    doc["nodes"][0]["scale"] = [-1.0, 1.0, 1.0]
+    rig = assert_matches_reference(_gltf(tmp_path, doc))
+    tri = rig.triangles()
+    n = np.cross(rig.neutral[tri[:, 1]] - rig.neutral[tri[:, 0]], rig.neutral[tri[:, 2]] - rig.neutral[tri[:, 0]])
+    centre = rig.neutral[tri].mean(axis=1)
+    straight = load_gltf(_gltf(tmp_path, _doc(tmp_path, cube)[0], "plain.gltf"))
+    t0 = straight.triangles()
+    n0 = np.cross(straight.neutral[t0[:, 1]] - straight.neutral[t0[:, 0]], straight.neutral[t0[:, 2]] - straight.neutral[t0[:, 0]])
+    # the cube's own winding decides in or out; mirrored, it stays the same way round
+    assert np.array_equal(np.sign((n * centre).sum(1)), np.sign((n0 * straight.neutral[t0].mean(axis=1)).sum(1)))
+
+
+def test_ict_with_node_scale_and_rotation_reads_back_as_the_obj_rig_in_cm(tmp_path, ict_rig):
+    from scipy.spatial.transform import Rotation
+    rot = Rotation.from_euler("xyz", [-90, 20, 35], degrees=True)
+    R = rot.as_matrix()
+    stored = Rig(neutral=ict_rig.neutral @ R, face_counts=ict_rig.face_counts, face_indices=ict_rig.face_indices,
+                 shape_names=ict_rig.shape_names, deltas=ict_rig.deltas @ R, units="cm")  # R^T p, in cm
+    write_gltf(stored, tmp_path / "ict.gltf")
+    doc = json.loads((tmp_path / "ict.gltf").read_text())
+    doc["nodes"][0].update(rotation=rot.as_quat().tolist(), scale=[0.01, 0.01, 0.01])
+    path = _write(tmp_path, doc, "ict_node.gltf")
+    back = load_rig(path)
+    assert back.units == "m" and back.n_vertices == ict_rig.n_vertices and back.shape_names == ict_rig.shape_names
+    assert np.abs(back.neutral * 100 - ict_rig.neutral).max() < 1e-4  # float32 storage of ~20 cm coordinates
+    assert np.abs(back.deltas * 100 - ict_rig.deltas).max() < 1e-5
+    assert np.array_equal(back.triangles(), ict_rig.triangles())
+    assert np.abs(load_gltf(tmp_path / "ict.gltf").neutral - ict_rig.neutral).max() > 1.0  # without the node: wrong
+
+
+def test_quantized_positions_and_deltas(tmp_path, cube):
+    """KHR_mesh_quantization as gltfpack writes it: normalised int16 positions and int8/int16 deltas, dequantised
+    by the node's scale and translation."""
+    centre = cube.neutral.mean(axis=0)
+    scale = float(np.abs(np.concatenate([cube.neutral - centre, cube.deltas.reshape(-1, 3)])).max())
+    qp = np.round((cube.neutral - centre) / scale * 32767).astype("<i2")
+    qd = [np.round(cube.deltas[0] / scale * 32767).astype("<i2"), np.round(cube.deltas[1] / scale * 127).astype("<i1")]
+    tris = cube.triangles().astype("<u2").reshape(-1)
+    blobs = [np.concatenate([qp, np.zeros((8, 1), "<i2")], axis=1).tobytes(),  # VEC3 int16 padded to 8 bytes
+             tris.tobytes() + b"\0" * (-tris.nbytes % 4),
+             np.concatenate([qd[0], np.zeros((8, 1), "<i2")], axis=1).tobytes(),
+             np.concatenate([qd[1], np.zeros((8, 1), "<i1")], axis=1).tobytes()]
+    offs = np.cumsum([0] + [len(b) for b in blobs])
+    blob = b"".join(blobs)
+    doc = {"asset": {"version": "2.0"}, "extensionsUsed": ["KHR_mesh_quantization"],
+           "extensionsRequired": ["KHR_mesh_quantization"],
+           "buffers": [{"byteLength": len(blob), "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()}],
+           "bufferViews": [{"buffer": 0, "byteOffset": int(offs[0]), "byteLength": len(blobs[0]), "byteStride": 8},
+                           {"buffer": 0, "byteOffset": int(offs[1]), "byteLength": tris.nbytes},
+                           {"buffer": 0, "byteOffset": int(offs[2]), "byteLength": len(blobs[2]), "byteStride": 8},
+                           {"buffer": 0, "byteOffset": int(offs[3]), "byteLength": len(blobs[3]), "byteStride": 4}],
+           "accessors": [{"bufferView": 0, "componentType": 5122, "normalized": True, "count": 8, "type": "VEC3"},
+                         {"bufferView": 1, "componentType": 5123, "count": int(tris.size), "type": "SCALAR"},
+                         {"bufferView": 2, "componentType": 5122, "normalized": True, "count": 8, "type": "VEC3"},
+                         {"bufferView": 3, "componentType": 5120, "normalized": True, "count": 8, "type": "VEC3"}],
+           "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "indices": 1, "targets": [{"POSITION": 2}, {"POSITION": 3}]}],
+                       "extras": {"targetNames": ["up", "pinch"]}}],
+           "nodes": [{"mesh": 0, "translation": centre.tolist(), "scale": [scale] * 3}], "scenes": [{"nodes": [0]}], "scene": 0}
+    path = _write(tmp_path, doc, "quantized.gltf")
+    rig = assert_matches_reference(path)
+    assert np.allclose(rig.neutral, qp / 32767 * scale + centre, atol=1e-12)
+    assert np.abs(rig.neutral - cube.neutral).max() < scale / 32767  # not half size, not shifted
+    assert np.abs(rig.deltas[1] - cube.deltas[1]).max() < scale / 127
+
+
+def _two_meshes(tmp_path, cube):
+    """An 'Eye' mesh first (one target) and the 'Head' (two targets), as avatars are laid out."""
+    doc, _ = _doc(tmp_path, cube)
+    prim = doc["meshes"][0]["primitives"][0]
+    eye = {"name": "Eye", "primitives": [dict(prim, targets=prim["targets"][:1])], "extras": {"targetNames": ["blink"]}}
+    doc["meshes"] = [eye, dict(doc["meshes"][0], name="Head")]
+    doc["nodes"] = [{"mesh": 0, "translation": [5, 0, 0]}, {"mesh": 1}]
+    doc["scenes"] = [{"nodes": [0, 1]}]
+    return _write(tmp_path, doc, "avatar.gltf")
+
+
+def test_the_mesh_with_most_targets_is_read_and_mesh_names_another(tmp_path, cube):
+    path = _two_meshes(tmp_path, cube)
+    head = load_gltf(path)
+    assert head.name == "Head" and head.shape_names == ["up", "pinch"]
+    eye = load_rig(path, mesh="Eye")
+    assert eye.shape_names == ["blink"] and np.allclose(eye.neutral, cube.neutral + [5, 0, 0])
+    with pytest.raises(RigInputError, match=r"no mesh named 'Nose' \(it has: Eye, Head\)"):
+        load_gltf(path, mesh="Nose")
+
+
+def test_cli_mesh_option(tmp_path, cube):
+    from tests.cli_runner import run_cli
+    path = _two_meshes(tmp_path, cube)
+    info = json.loads(run_cli("info", path, "--json").stdout)
+    assert info["shapes"] == ["up", "pinch"]
+    assert info["meshes"] == [{"name": "Eye", "targets": 1, "vertices": 8}, {"name": "Head", "targets": 2, "vertices": 8}]
+    assert "meshes (--mesh NAME): Eye (1 targets, 8 vertices), Head" in run_cli("info", path).stdout
+    info = json.loads(run_cli("info", path, "--json", "--mesh", "Eye").stdout)
+    assert info["shapes"] == ["blink"] and info["bounds"][0][0] == pytest.approx(4.5)
+    bad = run_cli("info", path, "--mesh", "Nose", check=False)
+    assert bad.returncode == 2 and "no mesh named 'Nose'" in bad.stderr and "Traceback" not in bad.stderr
+    run_cli("export", path, "--mesh", "Eye", "-o", tmp_path / "eye.glb")
+    assert load_gltf(tmp_path / "eye.glb").shape_names == ["blink"]
+
+
+def test_texture_extensions_never_block_the_geometry(tmp_path, cube):
+    doc, _ = _doc(tmp_path, cube)
+    doc["extensionsUsed"] = doc["extensionsRequired"] = ["EXT_texture_webp", "KHR_texture_basisu",
+                                                         "KHR_materials_variants"]
+    doc["images"] = [{"uri": "skin.webp"}, {"uri": "skin.ktx2"}]
+    doc["textures"] = [{"extensions": {"EXT_texture_webp": {"source": 0}, "KHR_texture_basisu": {"source": 1}}}]
+    back = load_gltf(_write(tmp_path, doc))
+    assert np.array_equal(back.neutral, cube.neutral)
+
+
+def test_meshopt_compression_is_refused_in_one_sentence(tmp_path, cube):
+    doc, _ = _doc(tmp_path, cube)
+    doc["extensionsUsed"] = doc["extensionsRequired"] = ["EXT_meshopt_compression"]
+    with pytest.raises(RigInputError, match=r"^[^\n]*x\.gltf: holds meshopt-compressed geometry .*re-export"):
+        load_gltf(_write(tmp_path, doc))
+    # only "used" (with a fallback buffer without data): refused when a compressed view is read
+    doc["extensionsRequired"] = []
+    doc["bufferViews"][0]["extensions"] = {"EXT_meshopt_compression": {"buffer": 0, "byteLength": 4, "count": 8,
+                                                                       "byteStride": 12, "mode": "ATTRIBUTES"}}
+    with pytest.raises(RigInputError, match="meshopt-compressed geometry"):
+        load_gltf(_write(tmp_path, doc, "used.gltf"))
+
+
+@pytest.mark.parametrize("uri", ["../outside.bin", "/etc/passwd", "sub/../../outside.bin", "file:///etc/passwd",
+                                 "%2E%2E/outside.bin", "link.bin"])
+def test_buffer_uris_outside_the_folder_are_refused(tmp_path, cube, uri):
+    doc, blob = _doc(tmp_path, cube)
+    inside = tmp_path / "model"
+    inside.mkdir()
+    (tmp_path / "outside.bin").write_bytes(blob)
+    (inside / "link.bin").symlink_to(tmp_path / "outside.bin")
+    doc["buffers"][0]["uri"] = uri
+    path = _write(inside, doc)
+    with pytest.raises(RigInputError, match=r"x\.gltf: buffer 0 points outside the glTF's folder"):
+        load_gltf(path)
+    (inside / "data").mkdir()
+    (inside / "data" / "in.bin").write_bytes(blob)
+    doc["buffers"][0]["uri"] = "data/in.bin"  # a subfolder is inside
+    assert np.array_equal(load_gltf(_write(inside, doc)).neutral, cube.neutral)
+
+
+def test_offsets_strides_and_counts_are_checked_against_the_buffers(tmp_path, cube):
+    doc, blob = _doc(tmp_path, cube)
+    pos = doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
+    view = doc["accessors"][pos]["bufferView"]
+
+    def fails(edit, match):
+        d = json.loads(json.dumps(doc))
+        edit(d)
+        with pytest.raises(RigInputError, match=match) as e:
+            load_gltf(_write(tmp_path, d))
+        assert "Traceback" not in str(e.value) and str(tmp_path / "x.gltf") in str(e.value)
+
+    fails(lambda d: d["bufferViews"][view].update(byteStride=8), r"byteStride 8, less than the 12-byte elements")
+    fails(lambda d: d["bufferViews"][view].update(byteStride=-12), r"byteStride -12")
+    fails(lambda d: d["bufferViews"][view].update(byteOffset=-4), "negative or missing byteOffset")
+    fails(lambda d: d["bufferViews"][view].update(byteLength=len(blob) + 4), "past the end of its")
+    fails(lambda d: d["accessors"][pos].update(count=9), "reads past the end of buffer view")
+    fails(lambda d: d["accessors"][pos].update(byteOffset=-12), "negative or missing")
+    fails(lambda d: d["accessors"][pos].update(count=10 ** 12), "reads past the end")
+    fails(lambda d: d["buffers"][0].update(byteLength=len(blob) + 1), "truncated")
+    fails(lambda d: d["accessors"][pos].update(sparse={"count": 99, "indices": {"bufferView": 0, "componentType": 5123},
+                                                       "values": {"bufferView": 0}}), "sparse count 99 outside 0..8")

@@ -43,6 +43,22 @@ def _screen(w, points):
     return [w.viewport.display_to_qt(x, y) for x, y, _ in d]
 
 
+def _assert_picture_changed_at_the_corner(w, before, P0, corner, nose):
+    """The viewport's picture during the drag differs from the one before it at the mouth, around the dragged
+    corner, and not at the pinned nose tip: the pixels a user sees change are where the edit is."""
+    from tests.image_compare import LEVELS, pixel_difference
+    changed = pixel_difference(w.viewport.grab_image(), before) > LEVELS
+    rows, cols = np.nonzero(changed)
+    d = w.viewport.world_to_display(P0)
+    x, row = d[:, 0], changed.shape[0] - 1 - d[:, 1]             # image column and row of each marker
+    reach = np.hypot(x[nose] - x[corner], row[nose] - row[corner])
+    assert changed.sum() > 500                                  # measured: 1,800 pixels
+    assert (np.hypot(cols - x[corner], rows - row[corner]) < reach).mean() > 0.7   # around the corner (81 %)
+    assert (rows > row[nose]).all()                             # at the mouth, nothing above the nose tip
+    r, c = int(round(row[nose])), int(round(x[nose]))
+    assert not changed[r - 3:r + 4, c - 3:c + 4].any()          # the pinned nose tip stays where it was
+
+
 def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, tmp_path, geometry, nose_tip):
     w = _window(qtbot, tmp_path)
     c = _pins(w, geometry, nose_tip)
@@ -63,6 +79,7 @@ def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, 
     q_cm = _screen(w, P0[corner:corner + 1] + np.array([[1.0, 0.0, 0.0]]))[0]
     px_per_cm = np.hypot(q_cm.x() - q.x(), q_cm.y() - q.y())
     drag = QtCore.QPoint(-round(1.5 * px_per_cm), -round(1.0 * px_per_cm))
+    before_img = w.viewport.grab_image()
     mouse(widget, "press", start)
     assert c.drag is not None and c.drag.index == corner
     cam_before = w.viewport.camera_frame().position
@@ -72,7 +89,7 @@ def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, 
     assert doc.is_regional and doc.region_level == c.level
     np.testing.assert_array_equal(w.viewport.points(), doc.surface())  # the face updated during the drag
     targets = c.drag.targets.copy()
-    w.grab().save(str(tmp_path / "drag.png"))
+    _assert_picture_changed_at_the_corner(w, before_img, P0, corner, nose=2)
     mouse(widget, "release", start + drag)
     np.testing.assert_array_equal(w.viewport.camera_frame().position, cam_before)  # camera stayed
     assert doc.undo_stack.count() == 5  # 4 markers + one drag
@@ -230,8 +247,10 @@ def test_shapes_panel_edits_the_selected_region_of_a_regional_pose(qtbot, tmp_pa
     doc = w.document
     assert doc.is_regional and "background row" in w.shapes_panel.target.text()
     seg = w.segmentation
-    w.segmentation_panel.level.setValue(c.level)
-    assert seg.level == c.level
+    slider = w.segmentation_panel.level                 # the user steps the level slider with the arrow keys
+    for _ in range(abs(c.level - slider.value())):
+        qtbot.keyClick(slider, QtCore.Qt.Key_Right if slider.value() < c.level else QtCore.Qt.Key_Left)
+    assert slider.value() == c.level and seg.level == c.level
     w.segmentation_panel.region_selected.emit(0)
     qtbot.waitUntil(lambda: doc.edit_region == 0)
     assert "region 0" in w.shapes_panel.target.text()

@@ -9,7 +9,7 @@ from PySide6 import QtWidgets
 
 from tests.cli_runner import run_cli
 from tests.gui_helpers import make_window, open_and_wait
-from tests.image_compare import assert_matches_reference
+from tests.image_compare import assert_matches_reference, assert_wrong_picture_fails
 
 
 def _install(qtbot, tmp_path, size=(1400, 1000)):
@@ -90,7 +90,12 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     img = mc.views.grab_image(size=(560, 440))  # a fixed size, whatever the dock layout
     half = img.shape[1] // 2
     assert _not_background(img[:, :half]) > 0.1 and _not_background(img[:, half:]) > 0.1
-    assert_matches_reference(img, "mocap_side_by_side")
+    assert_matches_reference(img, "mocap_side_by_side", unlike=["mocap_side_by_side_neutral"])
+    # its wrong-picture twin: the first (neutral calibration) frame is not frame 180
+    mc.set_frame(0)
+    neutral = mc.views.grab_image(size=(560, 440))
+    assert_matches_reference(neutral, "mocap_side_by_side_neutral", unlike=["mocap_side_by_side"])
+    assert_wrong_picture_fails(neutral, "mocap_side_by_side", unlike=["mocap_side_by_side_neutral"])
     # orbiting round to the back: culling goes off, so the mask's back is drawn instead of nothing
     assert mc.views.culling()
     mc.views.plotter.renderers[0].GetActiveCamera().Azimuth(180)

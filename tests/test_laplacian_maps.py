@@ -126,3 +126,50 @@ def test_bad_input_messages(ict_rig, ict_graph):
         adjacency_matrix(3, np.array([[0, 5]]))
     with pytest.raises(RigInputError, match="Unknown Laplacian"):
         mesh_laplacian(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, "harmonic")
+
+
+def test_per_shape_displacement_and_moving_vertices(ict_rig, ict_maps):
+    from solvers.deformation_maps import shape_moves
+    D = ict_maps.per_shape_displacement
+    assert D.shape == (ict_rig.n_vertices, ict_rig.n_shapes)
+    assert np.allclose(D[:, 7], np.linalg.norm(ict_rig.deltas[7], axis=1))
+    assert np.array_equal(ict_maps.displacement, D.max(axis=1))
+    moves = shape_moves(D, 0.01)
+    k = ict_rig.shape_index("browInnerUp_L")
+    assert np.array_equal(moves[:, k], D[:, k] > 0.01 * D[:, k].max())
+    assert 0 < moves[:, k].sum() < 0.5 * ict_rig.n_vertices   # a brow shape moves a part of the head
+    still = np.zeros((5, 2))
+    assert not shape_moves(still).any()
+
+
+def test_per_shape_normalisation_over_the_moving_vertices(ict_rig, ict_maps):
+    from solvers.deformation_maps import normalised_map, shape_moves, shape_scales
+    P = ict_maps.per_shape
+    moves = shape_moves(ict_maps.per_shape_displacement)
+    s = shape_scales(P, moves, 0.99)
+    for name in ("browInnerUp_L", "mouthSmile_R", "jawOpen"):
+        k = ict_rig.shape_index(name)
+        assert s[k] == np.quantile(P[moves[:, k], k], 0.99)
+        assert s[k] > np.quantile(P[:, k], 0.99)  # not over the whole head, where most vertices are still
+    N = normalised_map(P, s)
+    assert np.allclose(N, (P / s).max(axis=1))
+    # every shape has its say: on its own scale each shape reaches 1 on 1% of the vertices it moves
+    for k in range(P.shape[1]):
+        if moves[:, k].any():
+            assert np.isclose(np.mean(P[moves[:, k], k] / s[k] > 1.0), 0.01, atol=0.002)
+    # a shape that moves nothing keeps scale 1 (no division by zero)
+    assert shape_scales(np.zeros((4, 1)), np.zeros((4, 1), dtype=bool))[0] == 1.0
+
+
+def test_light_smoothing_of_a_map(ict_rig, ict_graph):
+    from solvers.deformation_maps import smooth_map
+    A, _ = ict_graph
+    assert np.allclose(smooth_map(np.full(ict_rig.n_vertices, 2.5), A, 3), 2.5)
+    x = np.zeros(ict_rig.n_vertices)
+    x[1234] = 1.0
+    y = smooth_map(x, A, 1)
+    nbrs = A[1234].indices
+    assert np.isclose(y[1234], 1.0 / (1 + nbrs.size))
+    assert np.allclose(y[nbrs], 1.0 / (1 + np.diff(A.indptr)[nbrs]))
+    assert np.count_nonzero(y) == 1 + nbrs.size
+    assert np.array_equal(smooth_map(x, A, 0), x)

@@ -146,3 +146,39 @@ def test_damaged_projects(small_project, tmp_path):
     with pytest.raises(RigInputError) as info:
         load_project(path)
     assert str(info.value).startswith(str(path))
+
+
+def test_arrays_are_deflated_and_reopen_exactly(ict_rig, tmp_path):
+    path = tmp_path / "ict.bsproj"
+    save_project(Project(rig=ict_rig), path)
+    with zipfile.ZipFile(path) as z:
+        deltas = z.getinfo("rig/deltas.npy")
+        assert deltas.compress_type == zipfile.ZIP_DEFLATED
+        assert deltas.compress_size < deltas.file_size / 3  # 36 MB of float64 deltas, mostly zeros
+    assert path.stat().st_size < 12e6
+    assert np.array_equal(load_project(path).rig.deltas, ict_rig.deltas)
+
+
+def test_an_uncompressed_project_still_opens(small_project, tmp_path):
+    path = tmp_path / "p.bsproj"
+    save_project(small_project, path)
+    old = tmp_path / "stored.bsproj"
+    with zipfile.ZipFile(path) as src, zipfile.ZipFile(old, "w", compression=zipfile.ZIP_STORED) as dst:
+        for info in src.infolist():
+            dst.writestr(info.filename, src.read(info.filename))
+    assert np.array_equal(load_project(old).rig.deltas, small_project.rig.deltas)
+
+
+def test_the_source_uvs_and_groups_survive_a_project(ict_rig, tmp_path):
+    """A rig opened from OBJs, saved as a project and exported again still has the OBJ's UVs and materials."""
+    from model.export import write_posed_obj
+    from model.obj_io import read_obj
+    path = tmp_path / "ict.bsproj"
+    save_project(Project(rig=ict_rig), path)
+    rig = load_project(path).rig
+    for key in ("uvs", "corner_uv"):
+        assert np.array_equal(getattr(rig.corners, key), getattr(ict_rig.corners, key)), key
+    assert rig.corners.records == ict_rig.corners.records and rig.corners.normals is None
+    write_posed_obj(rig, tmp_path / "out.obj")
+    back = read_obj(tmp_path / "out.obj")
+    assert len(back.vertices) == 26719 and np.array_equal(back.corners.corner_uv, ict_rig.corners.corner_uv)

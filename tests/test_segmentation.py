@@ -98,21 +98,33 @@ def test_quantile_threshold_rule():
             S.quantile_threshold(D, bad)
 
 
-def test_split_sits_at_the_requested_quantile(ict_rig, ict_cache, ict_seg):
-    M = ict_cache.maps().combined
-    n = M.size
-    D = np.sort(M)
-    assert ict_seg.threshold_value == D[math.floor(n * 0.75)]
+def test_split_sits_at_the_requested_quantile_of_the_moving_skin(ict_rig, ict_cache, ict_seg):
+    s = SegmentationSettings()
+    M, D = ict_cache.values(s.map_kind, s.laplacian, s.normalise, s.smoothing)
+    domain = ict_cache.domain()
+    # the quantile is over the skin that moves: the main surface, not the skull's still back or the teeth
+    _, main = ict_cache.pieces()
+    assert domain.sum() < main.sum() < ict_rig.n_vertices
+    assert not domain[ict_rig.neutral[:, 2] < -8].any()   # the back of the head does not move
+    n = int(domain.sum())
+    assert np.array_equal(D, np.sort(M[domain]))
+    assert ict_seg.threshold_value == D[math.floor(n * s.t)]
+    split = ict_cache.split_graph()
     for t in (0.25, 0.5, 0.75, 0.9):
-        labels, thr = S.threshold_labels(M, ict_cache.adjacency, t)
+        labels, thr = S.threshold_labels(M, ict_cache.adjacency, t, sorted_values=D, domain=domain, split=split)
         deforming = labels >= 0
-        assert np.array_equal(deforming, M > thr)
-        assert (~deforming).sum() >= math.floor(n * t) + 1  # at least the values up to D[⌊n·t⌋]
-        assert (M < thr).sum() <= math.floor(n * t)
-        # regions are the connected components: no mesh edge joins two different regions
-        r, c = ict_cache.adjacency.nonzero()
+        assert np.array_equal(deforming, (M > thr) & domain)
+        assert (~deforming[domain]).sum() >= math.floor(n * t) + 1  # at least the values up to D[⌊n·t⌋]
+        assert (M[domain] < thr).sum() <= math.floor(n * t)
+        # regions are the connected components of the split graph: no kept edge joins two regions ...
+        r, c = split.nonzero()
         both = deforming[r] & deforming[c]
         assert np.all(labels[r[both]] == labels[c[both]])
+        # ... and the split only cuts edges between vertices that different shape groups dominate
+        cut = (ict_cache.adjacency - split)
+        cr, cc = cut.nonzero()
+        dom = S.dominant_group(ict_cache.support(), ict_cache.shape_groups())
+        assert np.all(dom[cr] != dom[cc])
 
 
 def test_higher_t_gives_fewer_deforming_vertices(ict_cache):
@@ -147,7 +159,8 @@ def test_hierarchy_merges_down_to_one_region(ict_rig, ict_seg):
     assert counts[0] > 5
     assert all(a > b for a, b in zip(counts, counts[1:]))
     assert counts[-1] == 1
-    assert counts == level_targets(counts[0])  # default: halve per level
+    for a, b in zip(counts, counts[1:]):  # default: about halve per level (mirror-image merges go in pairs)
+        assert math.ceil(a / 2) - 1 <= b <= math.ceil(a / 2)
     V = ict_rig.n_vertices
     for lo, hi in zip(ict_seg.levels, ict_seg.levels[1:]):
         assert np.array_equal(lo.background, hi.background)
@@ -201,20 +214,9 @@ def test_clean_up_fills_holes_and_closes_concavities():
     assert small[0] == -1 and (small >= 0).sum() == (lab >= 0).sum()
 
 
-def test_brows_and_mouth_in_different_regions_background_is_the_skull(ict_rig, ict_cache, ict_seg, landmarks):
-    lab = ict_seg.levels[0].core_labels(ict_rig.n_vertices)
-    maps = ict_cache.maps()
-    names = ict_rig.shape_names
-    mouth = {int(lab[landmarks[i]]) for i in MOUTH_CORNERS}
-    assert -1 not in mouth
-    for side in ("L", "R"):
-        # a brow vertex: on the face skin, where that side's brow shapes bend the skin most
-        ks = [names.index(f"{s}_{side}") for s in ("browInnerUp", "browOuterUp", "browDown")]
-        brow = int(np.argmax(maps.per_shape[:ICT_FACE, ks].sum(axis=1)))
-        assert (ict_rig.neutral[brow, 0] > 0) == (side == "L")
-        assert ict_rig.neutral[brow, 1] > ict_rig.neutral[landmarks[27], 1]  # above the nose bridge
-        assert lab[brow] >= 0 and lab[brow] not in mouth
+def test_background_is_the_skull(ict_rig, ict_seg):
     x = ict_rig.neutral
+    lab = ict_seg.levels[0].core_labels(ict_rig.n_vertices)
     top, back, neck = int(np.argmax(x[:, 1])), int(np.argmin(x[:, 2])), int(np.argmin(x[:, 1]))
     assert x[back, 2] < -8 and x[top, 1] > 14 and x[neck, 1] < -18
     for v in (top, back, neck):
@@ -222,6 +224,159 @@ def test_brows_and_mouth_in_different_regions_background_is_the_skull(ict_rig, i
     bg = set(ict_seg.levels[0].background.tolist())
     skull = np.flatnonzero(x[:, 1] > 10)  # the crown of the head
     assert np.mean([v in bg for v in skull]) > 0.99
+
+
+# --- the face's parts on the landmarks (ICT FaceKit's Multi-PIE 68 points, and the sample's) ------------
+
+def ict_parts(landmarks) -> dict[str, np.ndarray]:
+    """Multi-PIE 68-point landmarks of ICT FaceKit (vertex_indices.json): brows 17–26 (17–21 on the face's
+    right, x < 0), eyes 36–47, mouth 48–67."""
+    lm = np.asarray(landmarks)
+    return {"brow_a": lm[17:22], "brow_b": lm[22:27], "eyes": lm[36:48], "mouth": lm[48:68]}
+
+
+def sample_parts(rig) -> dict[str, np.ndarray]:
+    """Landmarks of the bundled sample face, picked from its geometry and shapes (not from any map):
+    each brow is 5 skin vertices evenly along the segment from where browInnerUp moves the skin most to
+    where browOuterUp does; each eye its two slit corners and two upper and two lower lid-margin vertices
+    evenly along the slit; the mouth its two corners and nine upper and nine lower lip-margin vertices."""
+    from resources.sample_rig import sample_geometry
+    g = sample_geometry()
+    x = rig.neutral
+    skin = np.flatnonzero(g.skin)
+
+    def spread(a, n):
+        a = np.asarray(a)
+        return a[np.round(np.linspace(0, len(a) - 1, n)).astype(int)]
+
+    def peak(name):
+        return int(np.argmax(np.linalg.norm(rig.deltas[rig.shape_index(name)], axis=1)))
+
+    def brow(side):
+        a, b = x[peak(f"browInnerUp_{side}")], x[peak(f"browOuterUp_{side}")]
+        pts = a + np.linspace(0, 1, 5)[:, None] * (b - a)
+        return np.array([skin[np.argmin(np.linalg.norm(x[skin] - p, axis=1))] for p in pts])
+
+    def slit(s, n):
+        return np.concatenate([[s.upper[0], s.upper[-1]], spread(s.upper[1:-1], n), spread(s.lower[1:-1], n)])
+    return {"brow_a": brow("R"), "brow_b": brow("L"),
+            "eyes": np.concatenate([slit(g.eyes["L"], 2), slit(g.eyes["R"], 2)]), "mouth": slit(g.mouth, 9)}
+
+
+@pytest.fixture(scope="module", params=["ict", "sample"])
+def face(request):
+    """(rig, segmentation at the default settings, landmark parts) of ICT FaceKit and the sample face."""
+    if request.param == "ict":
+        rig = request.getfixturevalue("ict_rig")
+        parts = ict_parts(request.getfixturevalue("landmarks"))
+    else:
+        rig = request.getfixturevalue("sample_rig")
+        parts = sample_parts(rig)
+    seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, SegmentationSettings())
+    return rig, seg, parts
+
+
+def regions_of(seg, level, vertices) -> set[int]:
+    lab = seg.levels[level].core_labels()
+    return set(int(r) for r in lab[vertices] if r >= 0)
+
+
+def test_landmarks_lie_in_level0_regions(face):
+    """At the default threshold: ≥ 8 of 10 brow, ≥ 10 of 12 eye and ≥ 18 of 20 mouth landmarks in regions."""
+    _, seg, parts = face
+    lab = seg.levels[0].core_labels()
+    brows = np.concatenate([parts["brow_a"], parts["brow_b"]])
+    assert len(brows) == 10 and len(parts["eyes"]) == 12 and len(parts["mouth"]) == 20
+    assert (lab[brows] >= 0).sum() >= 8
+    assert (lab[parts["eyes"]] >= 0).sum() >= 10
+    assert (lab[parts["mouth"]] >= 0).sum() >= 18
+
+
+def test_brows_eyes_and_mouth_in_different_level0_regions(face):
+    _, seg, parts = face
+    brows = regions_of(seg, 0, np.concatenate([parts["brow_a"], parts["brow_b"]]))
+    eyes, mouth = regions_of(seg, 0, parts["eyes"]), regions_of(seg, 0, parts["mouth"])
+    assert brows and eyes and mouth
+    assert not brows & eyes and not brows & mouth and not eyes & mouth
+
+
+def test_left_and_right_brows_in_different_level0_regions(face):
+    _, seg, parts = face
+    a, b = regions_of(seg, 0, parts["brow_a"]), regions_of(seg, 0, parts["brow_b"])
+    assert a and b and not a & b
+
+
+def test_brows_join_each_other_before_they_join_the_mouth(face):
+    """Some level holds both brows in one region that has no mouth landmark; the brows meet the mouth only
+    higher up (the hierarchy merges what is contiguous and moves together first)."""
+    _, seg, parts = face
+    brows = np.concatenate([parts["brow_a"], parts["brow_b"]])
+    joined = [lv for lv in range(len(seg.levels)) if len(regions_of(seg, lv, brows)) == 1]
+    assert joined, "the brows never share a region"
+    first = joined[0]
+    assert 0 < first < len(seg.levels) - 1
+    assert not regions_of(seg, first, brows) & regions_of(seg, first, parts["mouth"])
+
+
+def test_separate_meshes_follow_the_region_that_moves_them(ict_rig, ict_cache, ict_seg, landmarks):
+    piece, main = ict_cache.pieces()
+    assert main.sum() == np.bincount(piece).max()  # ICT: one skin piece; eyes, teeth, lashes are separate
+    lab = ict_seg.levels[0].core_labels(ict_rig.n_vertices)
+    moved = np.linalg.norm(ict_rig.deltas, axis=2).max(axis=0) > 0
+    followed = 0
+    for p in np.unique(piece[~main]):
+        members = np.flatnonzero(piece == p)
+        assert np.unique(lab[members]).size == 1, "a separate mesh is never split between regions"
+        if not moved[members].any():
+            assert lab[members[0]] == -1, "a mesh no shape moves stays in the background"
+        followed += lab[members[0]] >= 0
+    assert followed >= 20
+    # the left eyelashes (the piece eyeBlink_L moves most) follow the left eye's region, the lower teeth
+    # (the piece jawOpen moves most) the region jawOpen moves most, and neither takes a region by proximity
+    k_blink, k_jaw = ict_rig.shape_index("eyeBlink_L"), ict_rig.shape_index("jawOpen")
+    off = np.flatnonzero(~main)
+    for k, expect in ((k_blink, regions_of(ict_seg, 0, np.asarray(landmarks[42:48]))), (k_jaw, None)):
+        v = off[np.argmax(np.linalg.norm(ict_rig.deltas[k][off], axis=1))]
+        r = int(lab[v])
+        assert r >= 0
+        if expect is not None:
+            assert r in expect
+        else:
+            core = ict_seg.levels[0].regions[r].core
+            on_skin = core[main[core]]
+            act = np.linalg.norm(ict_rig.deltas[:, on_skin], axis=2).sum(axis=1)
+            assert int(np.argmax(act)) == k_jaw
+    # the choice 'background' keeps every separate mesh out of the regions
+    seg = run(ict_rig, ict_cache, separate_meshes="background", levels=2)
+    for lvl in seg.levels:
+        assert (lvl.core_labels(ict_rig.n_vertices)[~main] == -1).all()
+
+
+def test_hierarchy_pairs_mirror_shapes_and_merges_by_co_activation(ict_rig, ict_cache, ict_seg):
+    from model.sides import mirror_name
+    from solvers.hierarchy import merge_clusters, region_activity
+    names = ict_rig.shape_names
+    partners = ict_cache.mirror_partners()
+    for k, name in enumerate(names):
+        want = mirror_name(name) if mirror_name(name) in names else name
+        assert names[partners[k]] == want, name
+    # the two brows and the left eye: the left eye lies closer to the left brow than the right brow does,
+    # so by contiguity alone it merges first; by co-activation the brows (mirror shapes) merge first
+    x = ict_rig.neutral
+    V = ict_rig.n_vertices
+    support = ict_cache.support()
+    _, main = ict_cache.pieces()
+    lab = np.full(V, -1)
+    lab[main & (support[:, names.index("browOuterUp_L")] > 0.9)] = 0
+    lab[main & (support[:, names.index("browOuterUp_R")] > 0.9)] = 1
+    lab[main & (support[:, names.index("eyeBlink_L")] > 0.3)] = 2
+    assert np.bincount(lab[lab >= 0]).min() > 10
+    act = region_activity(lab, support, partners)
+    by_contact = merge_clusters(lab, ict_cache.adjacency, x, 3)
+    assert by_contact[1][0] == by_contact[1][2] != by_contact[1][1]
+    with_act = merge_clusters(lab, ict_cache.adjacency, x, 3, act)
+    assert with_act[1][0] == with_act[1][1] != with_act[1][2]
+    assert np.allclose(act[0] / act[0].sum(), act[1] / act[1].sum(), atol=0.05)
 
 
 def test_region_statistics_name_the_right_shapes(ict_rig, ict_cache, ict_seg, landmarks):
@@ -237,7 +392,7 @@ def test_region_statistics_name_the_right_shapes(ict_rig, ict_cache, ict_seg, la
 
 def test_cache_reuses_maps_and_rethresholds(ict_rig, ict_cache, ict_seg):
     maps = ict_cache.maps()
-    seg = run(ict_rig, ict_cache, t=0.5)
+    seg = run(ict_rig, ict_cache, t=0.3)
     assert ict_cache.maps() is maps
     assert seg.seconds["maps"] < 0.05
     assert seg.threshold_value < ict_seg.threshold_value
@@ -249,17 +404,33 @@ def test_cache_reuses_maps_and_rethresholds(ict_rig, ict_cache, ict_seg):
 
 
 def test_displacement_map_segmentation(ict_rig, ict_cache):
-    seg = run(ict_rig, ict_cache, map_kind="displacement")
+    seg = run(ict_rig, ict_cache, map_kind="displacement", t=0.75)
     D = ict_cache.maps().displacement
-    assert seg.threshold_value == np.sort(D)[math.floor(D.size * 0.75)]
+    assert np.allclose(D, np.linalg.norm(ict_rig.deltas, axis=2).max(axis=0))
+    vals, srt = ict_cache.values("displacement", "uniform", True, 1)
+    assert seg.threshold_value == srt[math.floor(srt.size * 0.75)]
     assert seg.levels[-1].n_regions == 1
     check_partition(seg, ict_rig.n_vertices)
+
+
+def test_raw_map_is_kept_for_comparison(ict_rig, ict_cache, landmarks):
+    """Joshi's raw maximum (no per-shape normalisation) is still there: its threshold is a quantile of the
+    raw map over the moving skin, and at the old t = 0.75 it leaves the brows in the background (the
+    measurement that chose the normalised default)."""
+    seg = run(ict_rig, ict_cache, map_kind="laplacian", normalise=False, split_by_shapes=False, t=0.75)
+    raw, srt = ict_cache.values("laplacian", "uniform", False, 0)
+    assert raw is ict_cache.maps().combined
+    assert seg.threshold_value == srt[math.floor(srt.size * 0.75)]
+    lab = seg.levels[0].core_labels(ict_rig.n_vertices)
+    assert (lab[np.asarray(landmarks[17:27])] >= 0).sum() == 0
+    norm, _ = ict_cache.values("laplacian", "uniform", True, 0)
+    assert not np.allclose(norm / norm.max(), raw / raw.max())
 
 
 def test_segment_json_format(ict_rig, ict_seg):
     doc = segmentation_to_json(ict_seg)
     assert set(doc) == {"threshold", "levels", "seconds"}
-    assert doc["threshold"] == 0.75
+    assert doc["threshold"] == SegmentationSettings().t == ict_seg.threshold_t
     text = json.dumps(doc)
     back = json.loads(text)
     assert [lvl["level"] for lvl in back["levels"]] == list(range(len(ict_seg.levels)))
@@ -331,7 +502,12 @@ def test_region_growing_follows_acosta(ict_rig, ict_cache):
     seg = run(ict_rig, ict_cache, method="region-growing", map_kind="displacement", min_region_size=1,
               concavity_rings=0)
     assert seg.threshold_value is None and seg.levels[-1].n_regions == 1
-    assert seg.levels[0].n_regions == 5
+    # on the normalised map, the groups on the skin are the regions; the separate meshes (teeth, lashes)
+    # follow them and never make their own (on the raw map four of the five groups are teeth and gums)
+    _, main = ict_cache.pieces()
+    vals, _ = ict_cache.values("displacement", "uniform", True, 1)
+    on_skin = grow_regions(vals, A, ratio=0.75, max_groups=5)[main]
+    assert seg.levels[0].n_regions == np.unique(on_skin[on_skin >= 0]).size >= 3
     check_partition(seg, ict_rig.n_vertices)
 
 
@@ -378,8 +554,9 @@ def test_sample_rig_segmentation(sample_rig):
     check_partition(seg, V)
     check_overlap(seg, cache.adjacency, 1)
     check_blend(seg, 1)
-    M = cache.maps().combined
-    assert seg.threshold_value == np.sort(M)[math.floor(V * 0.75)]
+    s = SegmentationSettings()
+    M, D = cache.values(s.map_kind, s.laplacian, s.normalise, s.smoothing)
+    assert seg.threshold_value == D[math.floor(D.size * s.t)]
     # the region statistics cover every level-0 region and name real shapes
     stats = region_statistics(seg, cache.maps(), sample_rig.shape_names)
     assert len(stats) == counts[0]
@@ -387,23 +564,28 @@ def test_sample_rig_segmentation(sample_rig):
     assert all(share >= 0.005 for st in stats for _, share in st["shapes"][1:])   # no "0%" entries
 
 
-def test_sample_rig_regions_are_sensible(sample_rig):
-    """At the sample's own threshold its brows, eyes and mouth fall in different regions, cores disjoint."""
-    from resources.sample_rig import SAMPLE_SEGMENTATION_T
-    r = sample_rig
-    cache = SegmentationCache()
-    seg = segment_rig(r.neutral, r.face_counts, r.face_indices, r.deltas, SegmentationSettings(t=SAMPLE_SEGMENTATION_T),
-                      cache=cache)
-    labels = seg.levels[0].core_labels()
-    per_shape = cache.maps().per_shape
+# --- the command line ----------------------------------------------------------------------------------
 
-    def strongest(name):  # where the shape deforms the surface most (largest ‖L d_k‖)
-        return int(np.argmax(per_shape[:, r.shape_index(name)]))
-    brow_l, brow_r = strongest("browInnerUp_L"), strongest("browInnerUp_R")
-    mouth_l, mouth_r = strongest("mouthSmile_L"), strongest("mouthSmile_R")
-    eye_l, nose = strongest("eyeBlink_L"), strongest("noseSneer_L")
-    for v in (brow_l, brow_r, mouth_l, mouth_r, eye_l, nose):
-        assert labels[v] >= 0, "the strongest point of a shape must be in a region, not the background"
-    assert labels[brow_l] != labels[mouth_l] and labels[brow_r] != labels[mouth_r]
-    assert len({labels[brow_l], labels[eye_l], labels[nose], labels[mouth_l]}) == 4
-    assert 4 <= seg.levels[0].n_regions <= 40 and seg.levels[-1].n_regions == 1
+def test_segment_command_options(tmp_path):
+    """`segment` writes the JSON; --map/--normalise/--split/--separate-meshes reach the settings (the raw
+    Joshi map differs from the default), and a bad value is one sentence and exit 2."""
+    from resources.sample_rig import write_sample
+    from tests.cli_runner import run_cli
+    folder = write_sample(tmp_path / "sample")
+    out_default, out_raw = tmp_path / "default.json", tmp_path / "raw.json"
+    run_cli("segment", folder, "-o", out_default, "--levels", "3")
+    run_cli("segment", folder, "-o", out_raw, "--levels", "3", "--map", "laplacian", "--normalise", "none",
+            "--split", "none", "--smoothing", "0", "--separate-meshes", "background", "--threshold", "0.75")
+    default, raw = json.loads(out_default.read_text()), json.loads(out_raw.read_text())
+    assert default["threshold"] == SegmentationSettings().t and raw["threshold"] == 0.75
+    from model.readers import load_rig
+    r = load_rig(folder)  # as the command reads it (the OBJ text rounds the coordinates)
+    ref = segment_rig(r.neutral, r.face_counts, r.face_indices, r.deltas, SegmentationSettings(levels=3))
+    assert [reg["core"] for reg in default["levels"][0]["regions"]] == [reg.core.tolist() for reg in ref.levels[0].regions]
+    ref_raw = segment_rig(r.neutral, r.face_counts, r.face_indices, r.deltas, SegmentationSettings(
+        levels=3, map_kind="laplacian", normalise=False, split_by_shapes=False, smoothing=0,
+        separate_meshes="background", t=0.75))
+    assert [reg["core"] for reg in raw["levels"][0]["regions"]] == [reg.core.tolist() for reg in ref_raw.levels[0].regions]
+    assert default["levels"][0]["background"] != raw["levels"][0]["background"]
+    bad = run_cli("segment", folder, "-o", tmp_path / "x.json", "--smoothing", "-1", check=False)
+    assert bad.returncode == 2 and "smoothing" in bad.stderr and bad.stderr.strip().count("\n") == 0

@@ -229,3 +229,230 @@ def test_umeyama_recovers_similarity_batched_and_weighted():
     assert np.allclose(s2, 0.1) and np.allclose(R2, R) and np.allclose(t2, t)
     R3, t3 = kabsch(X[0, 5:], np.einsum("ij,nj->ni", R[0], X[0, 5:]) + t[0])
     assert np.allclose(R3, R[0]) and np.allclose(t3, t[0]) and np.isclose(np.linalg.det(R3), 1.0)
+
+
+# --- marker CSV layouts of the common exporters ---------------------------------------------------
+VICON_NEXUS_CSV = """Devices
+1000
+,,Force Plate::Force,,
+Frame,Sub Frame,Fx,Fy,Fz
+,,N,N,N
+1,0,0.1,0.2,0.3
+
+Trajectories
+100
+,,Actor:LASI,,,Actor:RASI,,,Actor:LASI,,
+Frame,Sub Frame,X,Y,Z,X,Y,Z,X,Y,Z
+,,mm,mm,mm,mm,mm,mm,mm,mm,mm
+1,0,-391.888,-6180.01,1734.43,-378.647,-6190.14,1713.82,1,2,3
+2,0,-391.978,-6180.03,1734.43,,,,4,5,6
+3,0,-392.012,-6180.04,1734.48,-378.718,-6189.96,1714.06,7,8,9
+
+Model Outputs
+100
+"""
+
+MOTIVE_CSV = """Format Version,1.23,Take Name,Take 2024-03-01 10.00.00 AM,Capture Frame Rate,240.000000,Export Frame Rate,120.000000,Capture Start Time,2024-03-01 10.00.00.000 AM,Total Frames in Take,3,Total Exported Frames,3,Rotation Type,Quaternion,Length Units,Meters,Coordinate Space,Global
+
+,Type,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Rigid Body,Marker,Marker,Marker,Marker,Marker,Marker
+,Name,Head,Head,Head,Head,Head,Head,Head,Face:Brow_L,Face:Brow_L,Face:Brow_L,Face:Chin,Face:Chin,Face:Chin
+,ID,1,1,1,1,1,1,1,2,2,2,3,3,3
+,,Rotation,Rotation,Rotation,Rotation,Position,Position,Position,Position,Position,Position,Position,Position,Position
+Frame,Time (Seconds),X,Y,Z,W,X,Y,Z,X,Y,Z,X,Y,Z
+0,0.000000,0,0,0,1,0.1,1.6,0.2,0.031,1.702,0.090,0.002,1.581,0.101
+1,0.008333,0,0,0,1,0.1,1.6,0.2,0.032,1.703,0.091,,,
+2,0.016667,0,0,0,1,0.1,1.6,0.2,0.033,1.704,0.092,0.004,1.583,0.103
+"""
+
+
+def test_vicon_nexus_marker_csv(tmp_path):
+    path = tmp_path / "nexus.csv"
+    path.write_text(VICON_NEXUS_CSV)
+    take = load_take(path)
+    assert take.rate == 100.0 and take.units == "mm" and take.first_frame == 1
+    # the subject prefix goes, the repeated LASI is kept apart and said aloud; the Devices section is not markers
+    assert take.labels == ["LASI", "RASI", "LASI_2"]
+    assert any("LASI -> LASI_2" in w for w in take.warnings)
+    assert take.positions.shape == (3, 3, 3)
+    np.testing.assert_allclose(take.positions[0, 0], [-391.888, -6180.01, 1734.43])
+    np.testing.assert_allclose(take.positions[2, 2], [7, 8, 9])
+    assert np.isnan(take.positions[1, 1]).all() and take.missing.sum() == 1
+
+
+def test_optitrack_motive_marker_csv(tmp_path):
+    path = tmp_path / "motive.csv"
+    path.write_text(MOTIVE_CSV)
+    take = load_take(path)
+    # the export rate, metres, and only the measured markers (the rigid body's pose is not a marker)
+    assert take.rate == 120.0 and take.units == "m" and take.first_frame == 0
+    assert take.labels == ["Brow_L", "Chin"] and take.warnings == []
+    np.testing.assert_allclose(take.positions[:, 0, 1], [1.702, 1.703, 1.704])
+    np.testing.assert_allclose(take.positions[2, 1], [0.004, 1.583, 0.103])
+    assert np.isnan(take.positions[1, 1]).all() and take.missing.sum() == 1
+    bad = tmp_path / "motive_bad.csv"
+    bad.write_text(MOTIVE_CSV.replace("Length Units,Meters", "Length Units,Furlongs"))
+    with pytest.raises(RigInputError, match="motive_bad.csv.*unknown units 'Furlongs'"):
+        load_take(bad)
+    cut = tmp_path / "motive_cut.csv"
+    cut.write_text("\n".join(MOTIVE_CSV.splitlines()[:6]))
+    with pytest.raises(RigInputError, match="motive_cut.csv.*'Frame, Time \\(Seconds\\)'"):
+        load_take(cut)
+
+
+# --- Live Link Face timing -----------------------------------------------------------------------
+def _llf_file(path, codes, jaw):
+    lines = ["Timecode,BlendShapeCount,JawOpen,EyeBlinkLeft,HeadYaw"]
+    lines += [f"{c},2,{j:.4f},0.1,0.0" for c, j in zip(codes, jaw)]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _codes(frames, tc_rate, start=(14, 2, 59), sub=0.0):
+    h, m, s = start
+    out = []
+    for f in frames:   # f counts timecode frames from the start
+        sec, ff = divmod(f, tc_rate)
+        total = h * 3600 + m * 60 + s + sec
+        out.append(f"{total // 3600:02d}:{total // 60 % 60:02d}:{total % 60:02d}:{int(ff):02d}.{int(sub * 1000):03d}")
+    return out
+
+
+def test_livelink_30_fps_plays_in_real_time(tmp_path):
+    """A recording at 30 fps (FF 00..29) is 30 fps: 90 rows last 3 s, not 1.5 s as at a fixed 60."""
+    jaw = np.linspace(0, 1, 90)
+    take = read_livelink_csv(_llf_file(tmp_path / "llf30.csv", _codes(range(90), 30), jaw))
+    assert take.rate == 30.0 and take.n_frames == 90 and take.warnings == []
+    assert take.times()[-1] == pytest.approx(89 / 30)
+    np.testing.assert_allclose(take.weights[:, take.names.index("JawOpen")], np.round(jaw, 4))
+    take60 = read_livelink_csv(_llf_file(tmp_path / "llf60.csv", _codes(range(150), 60, sub=0.867), np.zeros(150)))
+    assert take60.rate == 60.0 and take60.n_frames == 150
+
+
+def test_livelink_dropped_frames_keep_time(tmp_path):
+    """Rows 10-12 and 40 were dropped by the phone: the take still has a frame every 1/30 s, the frames after
+    a gap sit at their timecodes' times, and the dropped ones are interpolated (and said to be)."""
+    kept = [f for f in range(60) if f not in (10, 11, 12, 40)]
+    jaw = np.array(kept) / 100.0   # a ramp: interpolation across a gap gives the ramp back
+    take = read_livelink_csv(_llf_file(tmp_path / "drop.csv", _codes(kept, 30), jaw), ["jawOpen", "eyeBlink_L"])
+    assert take.rate == 30.0 and take.n_frames == 60
+    np.testing.assert_allclose(take.weights[:, 0], np.arange(60) / 100.0, atol=1e-12)
+    assert take.filled.tolist() == [f in (10, 11, 12, 40) for f in range(60)]
+    assert take.timecodes[13] == _codes([13], 30)[0] and take.timecodes[11] == ""
+    assert len(take.warnings) == 1 and "4 dropped frames" in take.warnings[0] and "drop.csv" in take.warnings[0]
+    # 60 fps recorded under a 30 fps timecode: half-frame steps
+    half = [c.replace(".000", f".{500 * (k % 2):03d}") for k, c in enumerate(_codes([k // 2 for k in range(130)], 30))]
+    take = read_livelink_csv(_llf_file(tmp_path / "half.csv", half, np.zeros(130)))
+    assert take.rate == 60.0 and take.n_frames == 130 and take.warnings == []
+
+
+def test_livelink_timecodes_that_go_back_or_are_not_timecodes(tmp_path):
+    codes = _codes(range(10), 30)
+    codes[5] = codes[3]
+    with pytest.raises(RigInputError, match="back.csv.*row 7.*does not come after row 6"):
+        read_livelink_csv(_llf_file(tmp_path / "back.csv", codes, np.zeros(10)))
+    codes = _codes(range(10), 30)
+    codes[2] = "soon"
+    with pytest.raises(RigInputError, match="words.csv.*row 4.*'soon'"):
+        read_livelink_csv(_llf_file(tmp_path / "words.csv", codes, np.zeros(10)))
+
+
+# --- C3D files that bend the standard (built here, one bend at a time) ----------------------------
+def _bent_c3d(path, pos, labels, *, units=(b"mm", (2,)), scale_dims=(), rate_dims=(), analog_used=0,
+              analog_ratio=1, header_analog=None, cut=0):
+    """A float C3D of ``pos`` with the given parameter shapes; analog channels hold noise."""
+    import struct
+    from model.take_c3d import BLOCK, _group, _param
+    F, M, _ = pos.shape
+    width = max(len(s) for s in labels)
+    plist = [_group(1, "POINT"), _param(1, "USED", 2, (), struct.pack("<h", M)),
+             _param(1, "FRAMES", 2, (), struct.pack("<H", F)),
+             _param(1, "SCALE", 4, scale_dims, struct.pack("<f", -0.1)),
+             _param(1, "RATE", 4, rate_dims, struct.pack("<f", 60.0)),
+             _param(1, "UNITS", -1, units[1], units[0]),
+             _param(1, "LABELS", -1, (width, M), b"".join(s.encode().ljust(width) for s in labels)),
+             _group(2, "ANALOG"), _param(2, "USED", 2, (), struct.pack("<h", analog_used)),
+             _param(2, "RATE", 4, (), struct.pack("<f", 60.0 * analog_ratio))]
+    body = b"".join(plist)
+    n_blocks = (4 + len(body) + 16 + BLOCK - 1) // BLOCK
+    body += _param(1, "DATA_START", 2, (), struct.pack("<h", 2 + n_blocks)) + b"\x00\x00"
+    psec = (bytes([1, 80, n_blocks, 84]) + body).ljust(n_blocks * BLOCK, b"\x00")
+    words = analog_used * analog_ratio
+    header = np.zeros(256, dtype="<u2")
+    header[0], header[1], header[2], header[3], header[4] = 0x5002, M, words if header_analog is None else header_analog, 1, F
+    header[8] = 2 + n_blocks
+    hb = bytearray(header.tobytes())
+    hb[12:16], hb[20:24] = struct.pack("<f", -0.1), struct.pack("<f", 60.0)
+    frames = np.zeros((F, 4 * M + words), dtype="<f4")
+    frames[:, :4 * M] = np.concatenate([np.nan_to_num(pos), np.where(np.isnan(pos).any(2), -1.0, 0.0)[..., None]],
+                                       axis=2).reshape(F, 4 * M)
+    frames[:, 4 * M:] = np.random.default_rng(0).uniform(-5, 5, size=(F, words))
+    data = bytes(hb) + psec + frames.tobytes()
+    path.write_bytes(data[:len(data) - cut])
+    return path
+
+
+@pytest.fixture(scope="module")
+def bent_positions():
+    rng = np.random.default_rng(7)
+    F, M = 50, 4
+    pos = np.cumsum(rng.normal(scale=0.5, size=(F, M, 3)), axis=0) + rng.uniform(-500, 500, size=(1, M, 3))
+    pos[10:14, 2] = np.nan
+    return pos
+
+
+def test_c3d_analog_samples_only_in_the_analog_group(bent_positions, tmp_path):
+    """The header says no analog samples follow a frame; ANALOG:USED 3 at twice the frame rate says 6 do."""
+    path = _bent_c3d(tmp_path / "analog.c3d", bent_positions, ["A", "B", "C", "D"], analog_used=3, analog_ratio=2,
+                     header_analog=0)
+    take = read_c3d(path)
+    assert take.n_frames == 50 and take.warnings == []
+    np.testing.assert_allclose(take.positions, bent_positions.astype(np.float32), equal_nan=True)
+
+
+def test_c3d_parameters_as_arrays_nul_padded_and_abbreviated(bent_positions, tmp_path):
+    path = _bent_c3d(tmp_path / "arrays.c3d", bent_positions, ["A", "B", "C", "D"], scale_dims=(1,), rate_dims=(1,),
+                     units=(b"mete\x00\x00", (6, 1)))
+    take = read_c3d(path)
+    assert take.units == "m" and take.rate == 60.0 and take.warnings == []
+    np.testing.assert_allclose(take.positions, bent_positions.astype(np.float32), equal_nan=True)
+    bad = _bent_c3d(tmp_path / "inches.c3d", bent_positions, ["A", "B", "C", "D"], units=(b"in", (2,)))
+    with pytest.raises(RigInputError, match="inches.c3d.*unknown units 'in' in POINT:UNITS"):
+        read_c3d(bad)
+
+
+def test_c3d_duplicate_labels_and_a_short_file(bent_positions, tmp_path):
+    path = _bent_c3d(tmp_path / "dup.c3d", bent_positions, ["A", "B", "A", "D"], cut=10)
+    take = read_c3d(path)
+    assert take.labels == ["A", "B", "A_2", "D"] and take.n_frames == 49
+    said = " ".join(take.warnings)
+    assert len(take.warnings) == 2 and "1 repeated marker label was made unique (A -> A_2)" in said
+    assert "50 frames declared but 49 whole frames present" in said
+    np.testing.assert_allclose(take.positions, bent_positions[:49].astype(np.float32), equal_nan=True)
+    with pytest.raises(RigInputError, match="half.c3d.*truncated: 50 frames declared but only 19 complete"):
+        read_c3d(_bent_c3d(tmp_path / "half.c3d", bent_positions, ["A", "B", "C", "D"], cut=30 * 4 * 4 * 4 + 8))
+
+
+def test_c3d_damaged_parameters_never_crash_or_loop(take_dir, tmp_path):
+    """A next-entry offset pointing backwards ends the walk (with a warning); random damage to the header
+    and the parameter section gives a reading or one sentence, never a traceback or a hang."""
+    import struct
+    data = bytearray((take_dir / "take.c3d").read_bytes())
+    start = (data[0] - 1) * 512 + 4
+    name_len = abs(struct.unpack_from("b", data, start)[0])
+    struct.pack_into("<h", data, start + 2 + name_len, -6)   # the first entry points back before itself
+    back = tmp_path / "back.c3d"
+    back.write_bytes(bytes(data))
+    take = read_c3d(back)   # the header still tells the layout
+    assert take.n_frames == 358 and any("points backwards" in w for w in take.warnings)
+    rng = np.random.default_rng(16)
+    clean = (take_dir / "take.c3d").read_bytes()
+    for trial in range(150):
+        damaged = bytearray(clean)
+        for at in rng.integers(0, 3 * 512, size=rng.integers(1, 12)):
+            damaged[at] = rng.integers(0, 256)
+        path = tmp_path / f"damaged{trial}.c3d"
+        path.write_bytes(bytes(damaged))
+        try:
+            read_c3d(path)
+        except RigInputError as exc:
+            assert path.name in str(exc) and "\n" not in str(exc)

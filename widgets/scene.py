@@ -220,7 +220,8 @@ def focus_vertices(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
 
 def render_png(points, face_counts, face_indices, out_path, *, focus=None, colormap: ColorMap | None = None,
                camera: str = "front", size=(1024, 768), wireframe=False, overlays=None, title: str = "") -> None:
-    """Render the surface off screen to a PNG file."""
+    """Render the surface off screen to a PNG file, atomically (a temporary beside it, then moved into place:
+    a killed render never leaves a truncated PNG under the final name)."""
     use_offscreen_backend_if_headless()
     import pyvista as pv
     plotter = pv.Plotter(off_screen=True, window_size=list(size))
@@ -233,6 +234,23 @@ def render_png(points, face_counts, face_indices, out_path, *, focus=None, color
         if title:
             plotter.add_text(title, position="upper_left", font_size=11, color="white")
         set_camera(plotter, camera, points if focus is None else focus)
-        plotter.screenshot(str(out_path))
+        write_image_atomically(plotter, out_path)
     finally:
         plotter.close()
+
+
+def write_image_atomically(plotter, out_path) -> None:
+    """``plotter.screenshot`` to a temporary of the same extension beside ``out_path``, then ``os.replace``."""
+    import os
+    from pathlib import Path
+
+    from model.atomic import remove_stale_temporaries, temp_path
+    out = Path(out_path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temporaries(out.parent)
+    tmp = temp_path(out, suffix=out.suffix or ".png")
+    try:
+        plotter.screenshot(str(tmp))
+        os.replace(tmp, out)
+    finally:
+        tmp.unlink(missing_ok=True)

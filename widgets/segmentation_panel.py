@@ -6,6 +6,12 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 VIEW_LABELS = [("shaded", "Shaded"), ("deformation", "Deformation map"),
                ("deformation-rgb", "Deformation vector (RGB)"), ("segmentation", "Segmentation")]
+# (map kind, per-shape normalisation, label) of the map choice
+MAP_CHOICES = [("laplacian+displacement", True, "Bends or moves, each shape (default)"),
+               ("laplacian", True, "Laplacian ‖L d‖, each shape"),
+               ("laplacian", False, "Laplacian ‖L d‖, raw maximum (Joshi)"),
+               ("displacement", True, "Displacement ‖d‖, each shape"),
+               ("displacement", False, "Displacement ‖d‖, raw maximum (Acosta)")]
 
 
 class SegmentationPanel(QtWidgets.QWidget):
@@ -32,9 +38,11 @@ class SegmentationPanel(QtWidgets.QWidget):
         self.view.currentIndexChanged.connect(lambda _: self.view_changed.emit(self.view.currentData()))
         form.addRow("View", self.view)
         self.map_kind = QtWidgets.QComboBox()
-        self.map_kind.addItem("Laplacian ‖L d‖ (Joshi)", "laplacian")
-        self.map_kind.addItem("Displacement ‖d‖ (Acosta)", "displacement")
-        self.map_kind.setToolTip("The map that is shown and thresholded")
+        for key, normalise, label in MAP_CHOICES:
+            self.map_kind.addItem(label, (key, normalise))
+        self.map_kind.setToolTip("The map that is thresholded. 'Each shape' divides every shape's map by its own "
+                                 "high quantile before the maximum, so broad smooth shapes (a brow raise) count "
+                                 "as much as sharp ones (lips, lids); 'raw maximum' is Joshi's map as published")
         self.map_kind.currentIndexChanged.connect(self._commit)
         form.addRow("Map", self.map_kind)
         self.shape = QtWidgets.QComboBox()
@@ -47,6 +55,13 @@ class SegmentationPanel(QtWidgets.QWidget):
         self.method.setToolTip("How regions are found")
         self.method.currentIndexChanged.connect(self._commit)
         form.addRow("Method", self.method)
+        self.separate = QtWidgets.QComboBox()
+        self.separate.addItem("Follow the region that moves them", "follow")
+        self.separate.addItem("Stay in the background", "background")
+        self.separate.setToolTip("Separate meshes of the rig (eyeballs, teeth, tongue, eyelashes): join the skin "
+                                 "region whose shapes move them, or stay out of every region")
+        self.separate.currentIndexChanged.connect(self._commit)
+        form.addRow("Separate meshes", self.separate)
 
         t_row = QtWidgets.QHBoxLayout()
         self.t_slider = QtWidgets.QSlider(QtCore.Qt.Horizontal)
@@ -152,7 +167,9 @@ class SegmentationPanel(QtWidgets.QWidget):
         self._settings = dict(settings)
         self._updating = True
         try:
-            self.map_kind.setCurrentIndex(max(0, self.map_kind.findData(settings["map_kind"])))
+            choice = (settings["map_kind"], bool(settings.get("normalise", True)))
+            self.map_kind.setCurrentIndex(next((i for i, (k, n, _) in enumerate(MAP_CHOICES) if (k, n) == choice), 0))
+            self.separate.setCurrentIndex(max(0, self.separate.findData(settings.get("separate_meshes", "follow"))))
             self.method.setCurrentIndex(max(0, self.method.findData(settings["method"])))
             self.t_slider.setValue(int(round(settings["t"] * 1000)))
             self.t_box.setValue(settings["t"])
@@ -214,7 +231,9 @@ class SegmentationPanel(QtWidgets.QWidget):
     # --- gestures out ------------------------------------------------------------------------------
     def _current(self) -> dict:
         s = dict(self._settings)
-        s.update(t=round(self.t_slider.value() / 1000, 3), map_kind=self.map_kind.currentData(),
+        map_kind, normalise = self.map_kind.currentData()
+        s.update(t=round(self.t_slider.value() / 1000, 3), map_kind=map_kind, normalise=normalise,
+                 separate_meshes=self.separate.currentData(),
                  method=self.method.currentData(), min_region_size=self.min_size.value(),
                  overlap_rings=self.overlap.value())
         return s

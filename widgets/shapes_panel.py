@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 SLIDER_STEPS = 1000
 
@@ -24,6 +24,43 @@ class PoseEdit:
     preset: str = ""
 
 
+class _WheelOnlyWhenFocused:
+    """A slider or number box inside a scrolling list: the mouse wheel scrolls the list unless the user clicked
+    the control first (a wheel notch over a row changed its weight, one undo step each)."""
+
+    def wheelEvent(self, event) -> None:
+        if self.hasFocus():
+            super().wheelEvent(event)
+        else:
+            event.ignore()          # unaccepted: Qt hands it to the scroll area
+
+
+class _Slider(_WheelOnlyWhenFocused, QtWidgets.QSlider):
+    pass
+
+
+class _UndoShortcutFilter(QtCore.QObject):
+    """Lets Edit ▸ Undo/Redo (Ctrl+Z, Ctrl+Shift+Z) reach the window while a number box has focus: its line
+    edit would otherwise claim them for its own text undo."""
+
+    def eventFilter(self, obj, event) -> bool:
+        if event.type() == QtCore.QEvent.ShortcutOverride and (
+                event.matches(QtGui.QKeySequence.Undo) or event.matches(QtGui.QKeySequence.Redo)):
+            return True             # not accepted: the shortcut fires
+        return False
+
+
+class _NumberBox(_WheelOnlyWhenFocused, QtWidgets.QDoubleSpinBox):
+    _undo_filter: _UndoShortcutFilter | None = None
+
+    def __init__(self) -> None:
+        super().__init__()
+        if _NumberBox._undo_filter is None:
+            _NumberBox._undo_filter = _UndoShortcutFilter()
+        self.installEventFilter(_NumberBox._undo_filter)            # the box has the focus, or
+        self.lineEdit().installEventFilter(_NumberBox._undo_filter)  # its line edit does
+
+
 class _ShapeRow(QtWidgets.QWidget):
     def __init__(self, index: int, name: str, panel: "ShapesPanel") -> None:
         super().__init__(panel)
@@ -34,11 +71,13 @@ class _ShapeRow(QtWidgets.QWidget):
         self.label.setMinimumWidth(120)
         self.label.setMaximumWidth(170)
         self.label.setToolTip(f"{name} (right-click: mirror it to the other side)")
-        self.slider = QtWidgets.QSlider(QtCore.Qt.Horizontal)
+        self.slider = _Slider(QtCore.Qt.Horizontal)
+        self.slider.setFocusPolicy(QtCore.Qt.StrongFocus)
         self.slider.setRange(0, SLIDER_STEPS)
         self.slider.setToolTip(f"Weight of {name}: drag to pose (one drag is one undo step)")
         self.slider.setObjectName(f"slider_{name}")
-        self.box = QtWidgets.QDoubleSpinBox()
+        self.box = _NumberBox()
+        self.box.setFocusPolicy(QtCore.Qt.StrongFocus)
         self.box.setRange(0.0, 1.0)
         self.box.setDecimals(3)
         self.box.setSingleStep(0.05)
@@ -188,7 +227,7 @@ class ShapesPanel(QtWidgets.QWidget):
         only_active = self.active_only.isChecked()
         for r in self.rows:
             visible = text in r.name.lower() and (not only_active or self._weights[r.index] > 0)
-            r.setVisible(visible)
+            r.setVisible(bool(visible))
 
     def _preset_clicked(self) -> None:
         if self.presets.currentText():

@@ -53,6 +53,13 @@ def test_evaluate_pose_with_20_correctives(benchmark, rig20):
     assert x.shape == (26719, 3)
 
 
+def test_evaluate_pose_with_20_correctives_cold(benchmark, rig20):
+    """A fresh evaluator for one pose, as the command line's ``export`` and ``render`` pose a rig."""
+    w = np.random.default_rng(1).uniform(0, 1, rig20.n_shapes)
+    x = benchmark(lambda: PoseEvaluator(rig20).evaluate(w))
+    assert x.shape == (26719, 3)
+
+
 @pytest.fixture(scope="module")
 def areas(ict_rig):
     """The neutral's vertex areas: the finder weights every measure by them, as the Correctives panel does."""

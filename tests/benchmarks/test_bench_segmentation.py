@@ -30,7 +30,7 @@ def test_maps_57_shapes(benchmark, ict_rig):
 def test_rethreshold_cached(benchmark, ict_rig):
     cache = SegmentationCache()
     segment_rig(*_args(ict_rig), cache=cache)
-    ts = iter([0.7, 0.75, 0.8] * 100)
+    ts = iter([0.45, 0.5, 0.55] * 100)  # around the default t
     seg = benchmark(lambda: segment_rig(*_args(ict_rig), SegmentationSettings(t=next(ts)), cache=cache,
                                         finest_only=True))
     assert len(seg.levels) == 1 and seg.levels[0].n_regions > 1

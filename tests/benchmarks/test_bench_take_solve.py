@@ -1,10 +1,13 @@
 """Take solve speed and accuracy on the real ICT Live Link take (358 frames, 60 markers).
 
 Target (issue "Motion capture: solve takes onto the rig"): ≥ 500 frames/s for the solve including the
-residual coefficients, and dense RMS < 0.22 mm against truth_dense_face.npz. Figures go into
+residual coefficients. Accuracy: the dense RMS against truth_dense_face.npz that the README quotes.
+Warm figures reuse one solver; cold ones build a fresh solver per solve, as the command line and the GUI do. Figures go into
 ``benchmark.extra_info`` (see ``--benchmark-json``) and are printed with ``-s``.
 """
 from __future__ import annotations
+
+import json
 
 import numpy as np
 import pytest
@@ -13,15 +16,48 @@ import scipy.sparse as sp
 from model.marker_map import load_marker_map
 from model.pose import PoseEvaluator
 from model.take_c3d import read_c3d
+from model.take_workspace import solve_take
 from solvers.take_solve import TakeSolver
 
 
+# The README's accuracy figures (dense RMS in mm over the moving face, README "Benchmarks"): each benchmark
+# asserts its figure to the README's three decimals, so the README stays true.
+README_DENSE_RMS_MM = {"default": 0.205, "correctives": 0.204, "none": 0.210, "joshi": 0.205, "gaussian": 0.205,
+                       "multiquadric": 0.214, "regional": 0.212}
+
+
+def assert_readme_accuracy(err: float, key: str) -> None:
+    quoted = README_DENSE_RMS_MM[key]
+    assert abs(err - quoted) < 0.0005, f"dense RMS {err:.4f} mm, the README quotes {quoted:.3f} mm ({key})"
+
+
 @pytest.fixture(scope="module")
-def setup(ict_rig, take_dir):
-    take = read_c3d(take_dir / "take.c3d")
-    mm = load_marker_map(take_dir / "marker_map.json")
+def take_and_map(take_dir):
+    return read_c3d(take_dir / "take.c3d"), load_marker_map(take_dir / "marker_map.json")
+
+
+@pytest.fixture(scope="module")
+def setup(ict_rig, take_and_map, take_dir):
+    take, mm = take_and_map
     labels, cols = mm.match(take)
     return mm.binding(ict_rig, labels), take.positions[:, cols], np.load(take_dir / "truth_dense_face.npz")
+
+
+@pytest.fixture(scope="module")
+def rig4(ict_rig):
+    """ICT with four correctives (Smith's brow pair and three other top pairs of the finder, each taking back
+    20% of the pair's summed motion where both act)."""
+    from model.correctives import Corrective, set_correctives
+    from solvers.correctives import driver_region
+    rig = ict_rig.copy()
+    pairs = [["browInnerUp_L", "browInnerUp_R"], ["mouthFunnel", "mouthPucker"], ["eyeLookUp_L", "eyeWide_L"],
+             ["cheekRaiser_L", "cheekSquint_L"]]
+    cs = []
+    for drivers in pairs:
+        d = rig.deltas[[rig.shape_index(n) for n in drivers]]
+        cs.append(Corrective(drivers=drivers, delta=-0.2 * driver_region(d)[:, None] * d.sum(axis=0)))
+    set_correctives(rig, cs)
+    return rig
 
 
 def dense_rms_mm(sol, truth) -> float:
@@ -31,43 +67,72 @@ def dense_rms_mm(sol, truth) -> float:
     return float(np.mean(errs)) * 10.0
 
 
+def _report(benchmark, what, frames, err):
+    fps = frames / benchmark.stats.stats.min
+    benchmark.extra_info.update(frames=frames, dense_rms_mm=err, frames_per_second_best=fps)
+    print(f"\n{what}: {frames} frames, best {benchmark.stats.stats.min:.3f} s, median "
+          f"{benchmark.stats.stats.median:.3f} s = {fps:.0f} fps best, dense RMS {err:.4f} mm")
+
+
 def test_bench_take_solve(benchmark, ict_rig, setup):
+    """Warm: the solver (everything rig/marker-set dependent) built once, the take solved again and again."""
     B, X, truth = setup
     solver = TakeSolver(ict_rig.neutral, ict_rig.deltas, B,
                         surface=PoseEvaluator(ict_rig, dtype=np.float64).evaluate)  # everything rig/marker-set dependent, once
     sol = benchmark.pedantic(solver.solve, args=(X,), kwargs={"unit_factor": 0.1}, rounds=5, iterations=1)
     err = dense_rms_mm(sol, truth)
-    fps = X.shape[0] / benchmark.stats.stats.min
-    benchmark.extra_info.update(frames=X.shape[0], dense_rms_mm=err, frames_per_second_best=fps,
-                                marker_rmse_cm=float(np.nanmean(sol.marker_rmse)))
-    print(f"\ntake solve: {X.shape[0]} frames, best {benchmark.stats.stats.min:.3f} s = {fps:.0f} fps, "
-          f"dense RMS {err:.4f} mm")
-    assert err < 0.22
+    benchmark.extra_info.update(marker_rmse_cm=float(np.nanmean(sol.marker_rmse)))
+    _report(benchmark, "take solve, warm", X.shape[0], err)
+    assert_readme_accuracy(err, "default")
 
 
-def test_bench_take_solve_with_correctives(benchmark, ict_rig, setup):
-    """The same take on ICT with four correctives (Smith's brow pair and three other top pairs of the finder,
-    each taking back 20% of the pair's summed motion where both act): Gauss–Newton weight steps."""
-    from model.correctives import Corrective, set_correctives, solver_correctives
-    from solvers.correctives import driver_region
+def test_bench_take_solve_cold(benchmark, ict_rig, take_and_map, setup):
+    """Cold: a fresh solver for the take, as `blendshape-studio solve` and the Mocap panel's Solve run it
+    (``solve_take``: binding, solver set-up, calibration, solve)."""
+    take, mm = take_and_map
+    sol = benchmark.pedantic(solve_take, args=(ict_rig, take, mm), rounds=3, iterations=1)
+    err = dense_rms_mm(sol, setup[2])
+    _report(benchmark, "take solve, cold", sol.n_frames, err)
+    assert_readme_accuracy(err, "default")
+
+
+def test_bench_take_solve_with_correctives(benchmark, rig4, setup):
+    """Warm, on ICT with four correctives: Gauss–Newton weight steps."""
+    from model.correctives import solver_correctives
     B, X, truth = setup
-    rig = ict_rig.copy()
-    pairs = [["browInnerUp_L", "browInnerUp_R"], ["mouthFunnel", "mouthPucker"], ["eyeLookUp_L", "eyeWide_L"],
-             ["cheekRaiser_L", "cheekSquint_L"]]
-    cs = []
-    for drivers in pairs:
-        d = rig.deltas[[rig.shape_index(n) for n in drivers]]
-        cs.append(Corrective(drivers=drivers, delta=-0.2 * driver_region(d)[:, None] * d.sum(axis=0)))
-    set_correctives(rig, cs)
-    solver = TakeSolver(rig.neutral, rig.deltas, B, correctives=solver_correctives(rig),
-                        surface=PoseEvaluator(rig, dtype=np.float64).evaluate)
+    solver = TakeSolver(rig4.neutral, rig4.deltas, B, correctives=solver_correctives(rig4),
+                        surface=PoseEvaluator(rig4, dtype=np.float64).evaluate)
     sol = benchmark.pedantic(solver.solve, args=(X,), kwargs={"unit_factor": 0.1}, rounds=3, iterations=1)
-    fps = X.shape[0] / benchmark.stats.stats.min
     err = dense_rms_mm(sol, truth)
-    benchmark.extra_info.update(frames_per_second_best=fps, dense_rms_mm=err)
-    print(f"\ntake solve with 4 correctives: best {benchmark.stats.stats.min:.3f} s = {fps:.0f} fps, "
-          f"dense RMS {err:.4f} mm")
-    assert err < 0.22
+    _report(benchmark, "take solve with 4 correctives, warm", X.shape[0], err)
+    assert_readme_accuracy(err, "correctives")
+
+
+def test_bench_take_solve_with_correctives_cold(benchmark, rig4, take_and_map, setup):
+    """Cold, on ICT with four correctives: a fresh solver each time, as the command line and the GUI run it."""
+    take, mm = take_and_map
+    sol = benchmark.pedantic(solve_take, args=(rig4, take, mm), rounds=2, iterations=1)
+    err = dense_rms_mm(sol, setup[2])
+    _report(benchmark, "take solve with 4 correctives, cold", sol.n_frames, err)
+    assert_readme_accuracy(err, "correctives")
+
+
+def test_bench_take_solve_cli_fresh_process(benchmark, ict_dir, take_dir, tmp_path):
+    """`blendshape-studio solve` in a fresh process, as a user runs it: start-up, imports, loading ICT and the
+    take, the solve and writing the weights CSV and the report."""
+    from tests.cli_runner import run_cli
+    report = tmp_path / "report.json"
+
+    def solve():
+        run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json",
+                "-o", tmp_path / "weights.csv", "--report", report)
+        return json.loads(report.read_text())
+
+    out = benchmark.pedantic(solve, rounds=2, iterations=1)
+    assert out["frames"] == 358 and out["mode"] == "global" and out["marker_rmse"] < 0.05
+    benchmark.extra_info.update(solve_seconds_in_process=out["solve_seconds"])
+    print(f"\nsolve in a fresh process: best {benchmark.stats.stats.min:.2f} s wall, of which the solve "
+          f"{out['solve_seconds']:.2f} s ({out['frames_per_second']:.0f} fps)")
 
 
 def test_bench_take_dense_all_frames(benchmark, ict_rig, setup):
@@ -95,6 +160,7 @@ def test_bench_take_solve_residual_kernels(benchmark, ict_rig, setup, residual):
     err = dense_rms_mm(sol, truth)
     benchmark.extra_info.update(residual=residual, dense_rms_mm=err)
     print(f"\nresidual {residual}: dense RMS {err:.4f} mm")
+    assert_readme_accuracy(err, residual)
 
 
 def test_bench_take_solve_regional(benchmark, ict_rig, setup):
@@ -114,3 +180,4 @@ def test_bench_take_solve_regional(benchmark, ict_rig, setup):
     err = dense_rms_mm(sol, truth)
     benchmark.extra_info.update(dense_rms_mm=err)
     print(f"\nregional (2 regions): dense RMS {err:.4f} mm")
+    assert_readme_accuracy(err, "regional")

@@ -3,6 +3,7 @@ writes), how a mutated input is laid out on disk, and what a valid result must s
 from __future__ import annotations
 
 import io
+import json
 import os
 import random
 import shutil
@@ -120,6 +121,10 @@ def build_targets(work: Path) -> dict[str, Target]:
             ("jawOpen.obj", "mouthSmile_L.obj", "presets.json")]
     for p in keep:
         shutil.copy(p, small / p.name)
+    presets = json.loads((small / "presets.json").read_text())     # only the shapes this small folder has
+    have = {p.stem for p in small.glob("*.obj")}
+    (small / "presets.json").write_text(json.dumps({k: {s: w for s, w in v.items() if s in have}
+                                                    for k, v in presets.items()}))
 
     def obj_layout(seed: Path, data: bytes, folder: Path) -> Path:
         rig_dir = folder / "rig"

@@ -1,0 +1,218 @@
+"""Exports other tools play: one entry point, ``export_rig``, and the content every format shares.
+
+``export_rig(rig, path, weights=None, animation=None, units=None, up="y")`` dispatches on the extension:
+``.glb``/``.gltf`` (model.export_gltf), ``.usd``/``.usda``/``.usdc`` (model.export_usd) and ``.obj`` (the
+posed surface, with the source's UVs, normals and groups). glTF and USD carry the same content
+(``ExportContent``): the rig's shapes plus each corrective as an extra blend shape whose weight is its
+activation ``a_c(w)`` (0 when muted), so a player that only sums blend shapes reproduces the application's
+pose exactly at every frame; the current pose as the default weights; and the animation sampled per frame.
+Coordinates are converted to ``units`` (default metres for glTF and USD, the rig's own for OBJ) and to the
+``up`` axis (the rig is taken as Y-up, glTF's convention; ``up="z"`` turns it Z-up for Z-up pipelines).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .errors import RigInputError
+from .rig import Rig, unit_scale
+
+UP_AXES = ("y", "z")
+# Y-up to Z-up: +Y becomes +Z and the face's front (+Z) becomes -Y, Blender's front view.
+_Y_TO_Z = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+
+
+@dataclass
+class WeightAnimation:
+    """Per-frame weights of the rig's shapes: ``times`` (F,) seconds, strictly increasing; ``weights`` (F, K)."""
+
+    times: np.ndarray
+    weights: np.ndarray
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        self.times = np.asarray(self.times, dtype=np.float64).reshape(-1)
+        self.weights = np.asarray(self.weights, dtype=np.float64)
+        where = self.source or "the animation"
+        if self.weights.ndim != 2 or self.weights.shape[0] != self.times.size or self.times.size == 0:
+            raise RigInputError(f"{where}: needs one row of weights per frame time (and at least one frame).")
+        if not (np.isfinite(self.times).all() and np.isfinite(self.weights).all()):
+            raise RigInputError(f"{where}: has NaN or infinite times or weights.")
+        if np.any(np.diff(self.times) <= 0):
+            raise RigInputError(f"{where}: its frame times do not increase (frame "
+                                f"{int(np.argmax(np.diff(self.times) <= 0)) + 1}).")
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.times.size)
+
+
+def animation_for_rig(rig: Rig, names: list[str], weights: np.ndarray, times: np.ndarray,
+                      source: str = "") -> WeightAnimation:
+    """Per-frame weights given for ``names`` placed in the rig's shape order (shapes not named stay 0)."""
+    unknown = [n for n in names if n not in rig.shape_names]
+    if unknown:
+        raise RigInputError(f"{source or 'the animation'}: names shapes the rig does not have: "
+                            f"{', '.join(unknown[:5])}{' ...' if len(unknown) > 5 else ''}.")
+    W = np.zeros((np.asarray(weights).shape[0], rig.n_shapes))
+    W[:, [rig.shape_index(n) for n in names]] = weights
+    return WeightAnimation(times=times, weights=W, source=source)
+
+
+def animation_from_timeline(timeline, rate: float = 30.0, *, deltas=None, blend=None) -> WeightAnimation:
+    """Keyframes (model.keyframes.Timeline) sampled at every frame from the first key to the last. A timeline of
+    regional poses (per-region weights blended by ``blend``) becomes, frame by frame, the global weights whose
+    surface is closest to it (``solvers.surface_fit``; pass the rig's ``deltas`` and the keys' ``blend``)."""
+    if not len(timeline):
+        raise RigInputError("The timeline has no keys to export.")
+    if not rate > 0:
+        raise RigInputError(f"The frame rate must be positive, not {rate}.")
+    T = timeline.times
+    frames = np.arange(int(np.floor((T[-1] - T[0]) * rate + 1e-9)) + 1)
+    times = T[0] + frames / rate
+    W = np.stack([timeline.evaluate(t) for t in times])
+    if W.ndim == 3:
+        if deltas is None or blend is None:
+            raise RigInputError("A timeline of regional poses needs the rig's shapes and the keys' blend to export.")
+        from solvers.surface_fit import global_weights_of_regional
+        W = global_weights_of_regional(deltas, blend, W, lower=timeline.lower, upper=timeline.upper)
+    return WeightAnimation(times=times - T[0], weights=W, source="keyframes")
+
+
+def load_animation(path: str | Path, rig: Rig) -> WeightAnimation:
+    """A weights CSV (``frame,time,<shapes>``, as ``solve`` writes) or a Live Link Face CSV, for ``rig``."""
+    path = Path(path)
+    if not path.is_file():
+        raise RigInputError(f"{path}: does not exist.")
+    if path.suffix.lower() != ".csv":
+        raise RigInputError(f"{path}: an animation is a weights CSV or a Live Link Face CSV.")
+    from .livelink import is_livelink_csv
+    if is_livelink_csv(path):
+        from .livelink import read_livelink_csv
+        take = read_livelink_csv(path, rig.shape_names)
+        times = getattr(take, "times", None)  # the frame times from the timecodes, where the take has them
+        times = times() if callable(times) else times
+        times = np.arange(take.n_frames) / take.rate if times is None else np.asarray(times, dtype=np.float64)
+        return WeightAnimation(times=times - times[0], weights=take.weights, source=str(path))
+    from .weights_csv import read_weights_csv
+    _frames, times, names, W = read_weights_csv(path)
+    return animation_for_rig(rig, names, W, times - times[0], source=str(path))
+
+
+@dataclass
+class ExportContent:
+    """What glTF and USD exports hold, in the export's units and axes.
+
+    names    K shape names then C corrective names (unique).
+    neutral  (V, 3) rest surface.
+    deltas   (K + C, V, 3) blend shape offsets (shapes, then correctives).
+    pose     (K + C,) default weights: the current pose and its corrective activations.
+    times    (F,) seconds and ``frames`` (F, K + C) weights per frame, or None without an animation.
+    """
+
+    names: list[str]
+    neutral: np.ndarray
+    deltas: np.ndarray
+    pose: np.ndarray
+    face_counts: np.ndarray
+    face_indices: np.ndarray
+    units: str
+    up: str
+    name: str
+    times: np.ndarray | None = None
+    frames: np.ndarray | None = None
+
+
+def full_weights(rig: Rig, weights: np.ndarray) -> np.ndarray:
+    """(K + C,) blend shape weights of one pose: the shape weights, then each corrective's activation."""
+    w = np.asarray(weights, dtype=np.float64).reshape(-1)
+    if not rig.correctives:
+        return w.copy()
+    from .correctives import corrective_activations
+    live = np.array([0.0 if c.muted else 1.0 for c in rig.correctives])
+    return np.concatenate([w, corrective_activations(rig.correctives, rig.shape_names, w) * live])
+
+
+def export_content(rig: Rig, weights: np.ndarray | None = None, animation: WeightAnimation | None = None,
+                   units: str = "m", up: str = "y") -> ExportContent:
+    """The shapes, correctives, pose and animation of ``rig`` in ``units`` and ``up`` axis (module docstring)."""
+    if up not in UP_AXES:
+        raise RigInputError(f"Unknown up axis '{up}': use one of {', '.join(UP_AXES)}.")
+    s = unit_scale(rig.units, units)
+    A = s * (_Y_TO_Z if up == "z" else np.eye(3))
+    names = list(rig.shape_names)
+    taken = set(names)
+    for c in rig.correctives:
+        n, i = c.name or "+".join(c.drivers), 2
+        while n in taken:
+            n, i = f"{c.name}_{i}", i + 1
+        names.append(n)
+        taken.add(n)
+    blocks = [rig.deltas] + ([np.stack([c.delta for c in rig.correctives])] if rig.correctives else [])
+    deltas = np.concatenate(blocks) @ A.T
+    w = np.zeros(rig.n_shapes) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
+    if w.shape != (rig.n_shapes,):
+        raise RigInputError(f"{w.size} weights given for a rig of {rig.n_shapes} shapes.")
+    content = ExportContent(names=names, neutral=rig.neutral @ A.T, deltas=deltas, pose=full_weights(rig, w),
+                            face_counts=rig.face_counts, face_indices=rig.face_indices, units=units, up=up,
+                            name=rig.name or "rig")
+    if animation is not None:
+        if animation.weights.shape[1] != rig.n_shapes:
+            raise RigInputError(f"{animation.source or 'the animation'}: has {animation.weights.shape[1]} "
+                                f"weights per frame for a rig of {rig.n_shapes} shapes.")
+        content.times = animation.times.copy()
+        content.frames = np.stack([full_weights(rig, wf) for wf in animation.weights])
+    return content
+
+
+def write_posed_obj(rig: Rig, path: str | Path, weights: np.ndarray | None = None, *, units: str | None = None,
+                    up: str = "y") -> None:
+    """The posed surface (the application's pose evaluation) as an OBJ with the source's UVs and groups.
+
+    The source's normals are kept for the rest pose only: a posed surface gets none (clients compute them).
+    """
+    import dataclasses
+    from .obj_io import write_obj
+    from .pose import PoseEvaluator
+    if up not in UP_AXES:
+        raise RigInputError(f"Unknown up axis '{up}': use one of {', '.join(UP_AXES)}.")
+    w = np.zeros(rig.n_shapes) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
+    R = _Y_TO_Z if up == "z" else np.eye(3)
+    points = PoseEvaluator(rig, dtype=np.float64).evaluate(w) @ (unit_scale(rig.units, units or rig.units) * R.T)
+    corners = rig.corners
+    if corners is not None and up != "y" and corners.normals is not None:
+        corners = dataclasses.replace(corners, normals=corners.normals @ R.T)
+    header = f"Blendshape Studio export of {rig.name}\nweights: " + ", ".join(
+        f"{n}={v:g}" for n, v in zip(rig.shape_names, w) if v != 0)
+    write_obj(path, points, rig.face_counts, rig.face_indices, header=header, corners=corners,
+              normals=not np.any(w != 0))
+
+
+EXPORT_SUFFIXES = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".obj")
+
+
+def export_rig(rig: Rig, path: str | Path, weights: np.ndarray | None = None,
+               animation: WeightAnimation | None = None, *, units: str | None = None, up: str = "y") -> Path:
+    """Write ``rig`` to ``path`` as glTF, USD or OBJ, chosen by the extension; returns the path.
+
+    ``weights`` (K,) is the current pose (default neutral), ``animation`` per-frame weights (glTF and USD;
+    an OBJ is one posed surface). ``units`` defaults to metres for glTF and USD, the rig's units for OBJ.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix in (".glb", ".gltf"):
+        from .export_gltf import write_gltf_content
+        write_gltf_content(export_content(rig, weights, animation, units or "m", up), path)
+    elif suffix in (".usd", ".usda", ".usdc"):
+        from .export_usd import write_usd_content
+        write_usd_content(export_content(rig, weights, animation, units or "m", up), path, corners=rig.corners)
+    elif suffix == ".obj":
+        if animation is not None:
+            raise RigInputError(f"{path}: an OBJ holds one surface, not an animation; export .glb, .gltf or .usd.")
+        write_posed_obj(rig, path, weights, units=units or rig.units, up=up)
+    else:
+        raise RigInputError(f"{path}: unknown export format '{path.suffix}'; write one of "
+                            f"{', '.join(EXPORT_SUFFIXES)}.")
+    return path

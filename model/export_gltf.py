@@ -1,0 +1,115 @@
+"""glTF 2.0 writer (``.glb`` binary or ``.gltf`` with the buffer embedded), numpy + json, Qt-free.
+
+One mesh, one node, one primitive: POSITION (float32, with min/max), fan-triangulated uint32 indices and
+one morph target per blend shape of ``model.export.ExportContent`` (the rig's shapes, then its correctives),
+named in ``mesh.extras.targetNames`` (the de facto convention of Blender, three.js, Babylon.js and Unreal).
+The current pose is the mesh's default ``weights``; an animation is one LINEAR sampler on the node's
+``weights`` path with one key per frame, so every frame plays exactly the weights (and corrective
+activations) the application computed. Written atomically (model.atomic).
+"""
+from __future__ import annotations
+
+import base64
+import json
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from .atomic import atomic_write
+from .errors import RigInputError
+
+GLB_MAGIC = b"glTF"
+CHUNK_JSON = 0x4E4F534A
+CHUNK_BIN = 0x004E4942
+ARRAY_BUFFER, ELEMENT_ARRAY_BUFFER = 34962, 34963
+FLOAT, UNSIGNED_INT = 5126, 5125
+
+
+def _pad4(b: bytes, fill: bytes = b"\x00") -> bytes:
+    return b + fill * (-len(b) % 4)
+
+
+class _Buffer:
+    """Accumulates 4-byte aligned buffer views and their accessors."""
+
+    def __init__(self) -> None:
+        self.blobs: list[bytes] = []
+        self.views: list[dict] = []
+        self.accessors: list[dict] = []
+        self.length = 0
+
+    def add(self, arr: np.ndarray, accessor: dict, target: int | None = None) -> int:
+        data = np.ascontiguousarray(arr).tobytes()
+        view = {"buffer": 0, "byteOffset": self.length, "byteLength": len(data)}
+        if target:
+            view["target"] = target
+        self.views.append(view)
+        padded = _pad4(data)
+        self.blobs.append(padded)
+        self.length += len(padded)
+        accessor["bufferView"] = len(self.views) - 1
+        self.accessors.append(accessor)
+        return len(self.accessors) - 1
+
+    def floats(self, arr: np.ndarray, typ: str, *, bounds: bool, target: int | None = None) -> int:
+        a = np.asarray(arr, dtype="<f4")
+        n = {"SCALAR": 1, "VEC3": 3}[typ]
+        a2 = a.reshape(-1, n)
+        acc = {"componentType": FLOAT, "count": int(a2.shape[0]), "type": typ}
+        if bounds:  # glTF requires min/max of POSITION, morph target POSITION and animation inputs
+            acc["min"] = a2.min(axis=0).astype(float).tolist() if a2.size else [0.0] * n
+            acc["max"] = a2.max(axis=0).astype(float).tolist() if a2.size else [0.0] * n
+        return self.add(a2, acc, target)
+
+    def blob(self) -> bytes:
+        return b"".join(self.blobs)
+
+
+def gltf_document(content) -> tuple[dict, bytes]:
+    """The glTF JSON document and its one binary buffer for an ``ExportContent``."""
+    from .rig import fan_triangulate
+    buf = _Buffer()
+    i_pos = buf.floats(content.neutral, "VEC3", bounds=True, target=ARRAY_BUFFER)
+    tris = fan_triangulate(content.face_counts, content.face_indices).astype("<u4").reshape(-1)
+    i_idx = buf.add(tris, {"componentType": UNSIGNED_INT, "count": int(tris.size), "type": "SCALAR"},
+                    ELEMENT_ARRAY_BUFFER)
+    targets = [{"POSITION": buf.floats(d, "VEC3", bounds=True, target=ARRAY_BUFFER)} for d in content.deltas]
+    primitive = {"attributes": {"POSITION": i_pos}, "indices": i_idx, "mode": 4}
+    if targets:
+        primitive["targets"] = targets
+    mesh = {"name": content.name, "primitives": [primitive]}
+    if targets:
+        mesh["weights"] = [float(w) for w in np.asarray(content.pose, dtype=np.float32)]
+        mesh["extras"] = {"targetNames": list(content.names)}
+    gltf: dict = {
+        "asset": {"version": "2.0", "generator": "Blendshape Studio"},
+        "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"mesh": 0, "name": content.name}],
+        "meshes": [mesh],
+    }
+    if content.times is not None and targets:
+        i_in = buf.floats(content.times, "SCALAR", bounds=True)
+        i_out = buf.floats(content.frames.reshape(-1), "SCALAR", bounds=False)
+        gltf["animations"] = [{"name": "weights",
+                               "samplers": [{"input": i_in, "output": i_out, "interpolation": "LINEAR"}],
+                               "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}]
+    gltf.update({"accessors": buf.accessors, "bufferViews": buf.views, "buffers": [{"byteLength": buf.length}]})
+    gltf["extras"] = {"units": content.units, "up": content.up}
+    return gltf, buf.blob()
+
+
+def write_gltf_content(content, path: str | Path) -> None:
+    """Write an ``ExportContent`` as ``.glb`` or ``.gltf`` (buffer embedded as base64), atomically."""
+    path = Path(path)
+    gltf, blob = gltf_document(content)
+    suffix = path.suffix.lower()
+    if suffix == ".gltf":
+        gltf["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
+        atomic_write(path, json.dumps(gltf).encode("utf-8"))
+    elif suffix == ".glb":
+        js = _pad4(json.dumps(gltf).encode("utf-8"), b" ")
+        body = struct.pack("<II", len(js), CHUNK_JSON) + js + struct.pack("<II", len(blob), CHUNK_BIN) + blob
+        atomic_write(path, struct.pack("<4sII", GLB_MAGIC, 2, 12 + len(body)) + body)
+    else:
+        raise RigInputError(f"{path}: write glTF to a .gltf or .glb file.")

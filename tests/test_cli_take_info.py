@@ -1,0 +1,49 @@
+"""`blendshape-studio take-info TAKE [--json]`: what a take holds, as the readers see it."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from model.take_c3d import read_c3d
+from tests.cli_runner import run_cli
+from tests.conftest import DATA, require_data
+
+
+def test_take_info_json_on_the_shared_take(take_dir):
+    info = json.loads(run_cli("take-info", take_dir / "take.c3d", "--json").stdout)
+    take = read_c3d(take_dir / "take.c3d")
+    assert info["kind"] == "markers" and info["frames"] == 358 and info["rate"] == 60.0 and info["units"] == "mm"
+    assert info["labels"] == take.labels and info["warnings"] == []
+    missing = take.missing.sum(axis=0)
+    assert info["missing"] == {label: int(n) for label, n in zip(take.labels, missing)} and sum(missing) > 0
+    seen = take.positions[~take.missing]
+    np.testing.assert_allclose(info["bounds"]["min"], seen.min(axis=0), atol=1e-6)
+    np.testing.assert_allclose(info["bounds"]["max"], seen.max(axis=0), atol=1e-6)
+
+
+def test_take_info_says_what_the_reader_decided():
+    """A C3D whose parameters disagree with its data: the reading and the warnings reach the user."""
+    path = require_data(DATA / "thirdparty" / "c3d" / "Sample13__Dance1.c3d")
+    proc = run_cli("take-info", path)
+    assert "498 frames at 65.0364 fps, 40 markers (mm)" in proc.stdout
+    assert "warning:" in proc.stderr and "POINT:FRAMES says 499" in proc.stderr
+    info = json.loads(run_cli("take-info", path, "--json").stdout)
+    assert info["frames"] == 498 and any("POINT:DATA_START says 1" in w for w in info["warnings"])
+
+
+def test_take_info_on_a_live_link_face_csv(llf_csv):
+    info = json.loads(run_cli("take-info", llf_csv, "--json").stdout)
+    assert info["kind"] == "weights" and info["frames"] == 328 and info["rate"] == 60.0
+    assert "JawOpen" in info["labels"] and "HeadYaw" not in info["labels"] and info["dropped_frames"] == 0
+
+
+def test_take_info_bad_input_is_one_sentence(tmp_path):
+    junk = tmp_path / "junk.c3d"
+    junk.write_bytes(b"hello" * 200)
+    proc = run_cli("take-info", junk, check=False)
+    assert proc.returncode == 2 and proc.stdout == ""
+    assert proc.stderr.strip() == f"error: {junk}: is not a C3D file (no C3D header)."
+    scale = require_data(DATA / "thirdparty" / "c3d" / "Sample06__MACsample.c3d")
+    proc = run_cli("take-info", scale, "--json", check=False)
+    assert proc.returncode == 2 and "POINT:SCALE" in proc.stderr and proc.stderr.count("\n") == 1

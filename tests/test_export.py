@@ -1,0 +1,450 @@
+"""Exports other tools play (model/export.py): glTF and USD with named blend shapes, the pose, an animation
+and correctives as extra shapes; OBJ keeping the source's UVs and groups; files with the user's umask."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import stat
+import subprocess
+
+
+import numpy as np
+import pytest
+
+from model.correctives import Corrective, add_corrective, corrective_activations
+from model.errors import RigInputError
+from model.export import WeightAnimation, export_rig, load_animation
+from model.obj_io import read_obj
+from model.pose import PoseEvaluator
+from model.readers import load_rig
+from tests.cli_runner import run_cli
+from tests.gltf_reference import reference_animation, reference_mesh
+from tests.gltf_rules import read_gltf_file, violations
+
+DRIVERS = ["jawOpen", "mouthSmile_L"]
+
+
+@pytest.fixture(scope="module")
+def rig_with_corrective(ict_rig):
+    """ICT plus a corrective on jawOpen x mouthSmile_L: a smooth 3 mm bump between the drivers' peaks."""
+    rig = ict_rig.copy()
+    centre = np.mean([rig.neutral[np.argmax(np.linalg.norm(rig.deltas[rig.shape_index(d)], axis=1))]
+                      for d in DRIVERS], axis=0)
+    r2 = ((rig.neutral - centre) ** 2).sum(axis=1)
+    delta = 0.3 * np.exp(-r2 / 2.0 ** 2)[:, None] * np.array([0.0, 0.6, 0.8])
+    delta[np.abs(delta).max(axis=1) < 1e-9] = 0.0
+    add_corrective(rig, Corrective(drivers=DRIVERS, delta=delta, rule="product"))
+    return rig
+
+
+@pytest.fixture(scope="module")
+def performance(rig_with_corrective, llf_csv):
+    return load_animation(llf_csv, rig_with_corrective)
+
+
+@pytest.fixture(scope="module")
+def exported(rig_with_corrective, performance, tmp_path_factory):
+    """ICT with the corrective, the Live Link Face performance and a pose, as .glb, .gltf, .usda and .usdc."""
+    out = tmp_path_factory.mktemp("export")
+    pose = rig_with_corrective.weights_from_dict({"jawOpen": 0.7, "mouthSmile_L": 0.5})
+    paths = {}
+    for suffix in (".glb", ".gltf", ".usda", ".usdc"):
+        paths[suffix] = export_rig(rig_with_corrective, out / f"ict{suffix}", pose, performance)
+    return paths, pose
+
+
+_EVALUATORS: dict = {}
+
+
+def dense(rig, weights) -> np.ndarray:
+    """The application's pose evaluation (model.pose), float64 (one evaluator per rig)."""
+    if id(rig) not in _EVALUATORS:
+        _EVALUATORS[id(rig)] = (rig, PoseEvaluator(rig, dtype=np.float64))
+    return _EVALUATORS[id(rig)][1].evaluate(weights)
+
+
+def test_the_performance_really_drives_the_corrective(rig_with_corrective, performance):
+    a = np.array([corrective_activations(rig_with_corrective.correctives, rig_with_corrective.shape_names, w)[0]
+                  for w in performance.weights])
+    assert performance.n_frames == 328 and a.max() > 0.05 and (a > 0).sum() > 20
+
+
+def test_glb_plays_the_applications_pose_at_every_frame(exported, rig_with_corrective, performance):
+    path = exported[0][".glb"]
+    rig = rig_with_corrective
+    verts, tris, names, deltas = reference_mesh(path)  # pygltflib + numpy
+    assert names == rig.shape_names + [rig.correctives[0].name]
+    assert len(verts) == rig.n_vertices == 26719
+    assert np.array_equal(tris, rig.triangles())
+    # metres by default: the rest surface is the OBJ's in cm / 100
+    assert np.abs(verts * 100 - rig.neutral).max() < 1e-4
+    times, W = reference_animation(path)
+    assert np.allclose(times, performance.times, atol=1e-6)
+    assert W.shape == (328, rig.n_shapes + 1)
+    D = deltas.reshape(len(names), -1)
+    worst = worst_without = 0.0
+    for start in range(0, len(W), 64):
+        block = slice(start, start + 64)
+        played = (verts.reshape(-1) + W[block] @ D) * 100  # in cm, as the rig
+        without = (verts.reshape(-1) + W[block, :-1] @ D[:-1]) * 100
+        for f, w in enumerate(performance.weights[block]):
+            expected = dense(rig, w).reshape(-1)
+            worst = max(worst, np.abs(played[f] - expected).max())
+            worst_without = max(worst_without, np.abs(without[f] - expected).max())
+    assert worst < 1e-5
+    # the corrective's animated weight is its activation: without it the frames would be off by the bump
+    assert worst_without > 0.01
+
+
+def test_gltf_holds_what_the_glb_holds(exported):
+    glb, gltf = exported[0][".glb"], exported[0][".gltf"]
+    for a, b in zip(reference_mesh(glb) + reference_animation(glb), reference_mesh(gltf) + reference_animation(gltf)):
+        assert a == b if isinstance(a, list) else np.array_equal(a, b)
+
+
+def test_gltf_default_weights_are_the_current_pose(exported, rig_with_corrective):
+    paths, pose = exported
+    doc, _, _ = read_gltf_file(paths[".glb"])
+    w = np.array(doc["meshes"][0]["weights"])
+    expected = np.append(pose, 0.7 * 0.5)  # product rule: the corrective at jawOpen 0.7 x smile 0.5
+    assert np.allclose(w, expected, atol=1e-7)
+
+
+def test_glb_reads_back_in_trimesh_with_the_same_vertices(exported, rig_with_corrective):
+    trimesh = pytest.importorskip("trimesh")
+    scene = trimesh.load(exported[0][".glb"], process=False)
+    (mesh,) = scene.geometry.values()
+    assert np.abs(np.asarray(mesh.vertices) * 100 - rig_with_corrective.neutral).max() < 1e-4
+    assert np.array_equal(np.asarray(mesh.faces), rig_with_corrective.triangles())
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_gltf_follows_the_validators_rules(exported, suffix):
+    doc, blob, container = read_gltf_file(exported[0][suffix])
+    assert container == [] and violations(doc, blob) == []
+
+
+def test_the_rules_check_catches_broken_files(exported):
+    """The Python rules are worth something: each of these edits is an error for the Khronos validator too."""
+    doc, blob, _ = read_gltf_file(exported[0][".glb"])
+    pos = doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]
+    anim_in = doc["animations"][0]["samplers"][0]["input"]
+    edits = [lambda d: d["accessors"][pos].pop("max"),
+             lambda d: d["accessors"][pos].update(max=[1.0, 1.0, 1.0]),
+             lambda d: d["meshes"][0]["weights"].pop(),
+             lambda d: d["meshes"][0]["extras"]["targetNames"].pop(),
+             lambda d: d["accessors"][d["animations"][0]["samplers"][0]["output"]].update(count=5),
+             lambda d: d["bufferViews"][0].update(byteStride=10),
+             lambda d: d["buffers"][0].update(byteLength=len(blob) + 8)]
+    for edit in edits:
+        d = json.loads(json.dumps(doc))
+        edit(d)
+        assert violations(d, blob), edit
+    times = np.frombuffer(blob, "<f4", doc["accessors"][anim_in]["count"],
+                          doc["bufferViews"][doc["accessors"][anim_in]["bufferView"]]["byteOffset"]).copy()
+    assert violations(doc, blob) == []
+    reversed_blob = bytearray(blob)
+    off = doc["bufferViews"][doc["accessors"][anim_in]["bufferView"]]["byteOffset"]
+    reversed_blob[off:off + times.nbytes] = times[::-1].tobytes()
+    assert violations(doc, bytes(reversed_blob))
+
+
+def _validator():
+    """A command running the Khronos glTF validator (npm gltf-validator) on a file, or None."""
+    node = shutil.which("node")
+    if not node:
+        return None
+    paths = [p for p in os.environ.get("NODE_PATH", "").split(os.pathsep) if p]
+    npm = shutil.which("npm")
+    if npm:
+        try:
+            paths.append(subprocess.run([npm, "root", "-g"], capture_output=True, text=True, timeout=60).stdout.strip())
+        except (OSError, subprocess.SubprocessError):
+            pass
+    env = dict(os.environ, NODE_PATH=os.pathsep.join(paths))
+    probe = subprocess.run([node, "-e", "require('gltf-validator')"], capture_output=True, env=env, timeout=60)
+    if probe.returncode != 0:
+        return None
+    script = ("const fs=require('fs'),v=require('gltf-validator');"
+              "v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[1])),{maxIssues:0,writeTimestamp:false})"
+              ".then(r=>console.log(JSON.stringify(r))).catch(e=>{console.error(String(e));process.exit(3)});")
+    return lambda path: json.loads(subprocess.run([node, "-e", script, str(path)], capture_output=True, text=True,
+                                                  env=env, timeout=600, check=True).stdout)
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_khronos_validator_reports_no_errors(exported, suffix, tmp_path):
+    validate = _validator()
+    if validate is None:
+        pytest.skip("node or the gltf-validator npm module is not available "
+                    "(npm install gltf-validator in a folder on NODE_PATH)")
+    report = validate(exported[0][suffix])
+    assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:10]
+    assert report["info"]["animationCount"] == 1 and report["info"]["hasMorphTargets"]
+    assert report["info"]["totalVertexCount"] == 26719
+    # and it does fail a broken file (the positions' max removed), as the Python rules do
+    doc, blob, _ = read_gltf_file(exported[0][".glb"])
+    doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]].pop("max")
+    from model.export_gltf import CHUNK_BIN, CHUNK_JSON, _pad4
+    import struct
+    js = _pad4(json.dumps(doc).encode(), b" ")
+    body = struct.pack("<II", len(js), CHUNK_JSON) + js + struct.pack("<II", len(blob), CHUNK_BIN) + blob
+    (tmp_path / "broken.glb").write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body)
+    assert validate(tmp_path / "broken.glb")["issues"]["numErrors"] > 0
+
+
+# --- USD ------------------------------------------------------------------------------------------
+def _usd_frames(path):
+    """(names, rest points, {time code: deformed points}) as usd-core's UsdSkel evaluates the file."""
+    pxr = pytest.importorskip("pxr")
+    from pxr import Usd, UsdGeom, UsdSkel
+    stage = Usd.Stage.Open(str(path))
+    assert stage is not None
+    mesh_prim = next(p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh))
+    cache = UsdSkel.Cache()
+    cache.Populate(UsdSkel.Root(stage.GetDefaultPrim()), Usd.TraverseInstanceProxies())
+    skinning = cache.GetSkinningQuery(mesh_prim)
+    skel = UsdSkel.Skeleton(skinning.GetSkeleton() if hasattr(skinning, "GetSkeleton") else
+                            stage.GetPrimAtPath("/Root/Skeleton"))
+    anim = cache.GetSkelQuery(skel).GetAnimQuery()
+    shapes = UsdSkel.BlendShapeQuery(UsdSkel.BindingAPI(mesh_prim))
+    rest = UsdGeom.Mesh(mesh_prim).GetPointsAttr().Get()
+    names = [shapes.GetBlendShape(i).GetPrim().GetCustomDataByKey("name") or shapes.GetBlendShape(i).GetPrim().GetName()
+             for i in range(shapes.GetNumBlendShapes())]
+
+    def posed(code):
+        w = anim.ComputeBlendShapeWeights(code)
+        mapper = skinning.GetBlendShapeMapper()
+        w = mapper.Remap(w) if mapper is not None else w
+        sub, shape_idx, sub_idx = shapes.ComputeSubShapeWeights(w)
+        pts = UsdGeom.Mesh(mesh_prim).GetPointsAttr().Get()
+        assert shapes.ComputeDeformedPoints(sub, shape_idx, sub_idx, shapes.ComputeBlendShapePointIndices(),
+                                            shapes.ComputeSubShapePointOffsets(), pts)
+        return np.array(pts, dtype=np.float64)
+
+    return stage, names, np.array(rest, dtype=np.float64), anim, posed, UsdGeom.Mesh(mesh_prim)
+
+
+@pytest.mark.parametrize("suffix", [".usda", ".usdc"])
+def test_usd_holds_the_same_content_and_plays_the_same_pose(exported, rig_with_corrective, performance, suffix):
+    from pxr import Usd, UsdGeom
+    rig = rig_with_corrective
+    stage, names, rest, anim, posed, mesh = _usd_frames(exported[0][suffix])
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
+    assert names == rig.shape_names + [rig.correctives[0].name]
+    assert np.abs(rest * 100 - rig.neutral).max() < 1e-4
+    assert np.array_equal(np.array(mesh.GetFaceVertexCountsAttr().Get()), rig.face_counts)  # polygons as in the file
+    assert np.array_equal(np.array(mesh.GetFaceVertexIndicesAttr().Get()), rig.face_indices)
+    codes = anim.GetBlendShapeWeightTimeSamples()
+    assert len(codes) == 328 and stage.GetTimeCodesPerSecond() == 60.0
+    assert np.allclose(np.array(codes) / 60.0, performance.times, atol=1e-9)
+    for f in (0, 60, 150, int(np.argmax(performance.weights[:, rig.shape_index("jawOpen")])), 327):
+        got = posed(Usd.TimeCode(codes[f])) * 100
+        assert np.abs(got - dense(rig, performance.weights[f])).max() < 1e-5, f
+    pose = exported[1]
+    assert np.abs(posed(Usd.TimeCode.Default()) * 100 - dense(rig, pose)).max() < 1e-5
+    st = mesh.GetPrim().GetAttribute("primvars:st")
+    assert st and len(st.Get()) == 28911  # the OBJ's UVs, face-varying through its own indices
+
+
+def _usd_errors(path):
+    """Errors of usd-core's compliance checker (UsdUtils.ComplianceChecker, replaced by the validation
+    framework in usd-core 26; whichever this usd-core has)."""
+    from pxr import Usd, UsdUtils
+    if hasattr(UsdUtils, "ComplianceChecker"):
+        checker = UsdUtils.ComplianceChecker(arkit=False, skipARKitRootLayerCheck=False, rootPackageOnly=False,
+                                             skipVariants=False, verbose=False)
+        checker.CheckCompliance(str(path))
+        return list(checker.GetErrors()) + list(checker.GetFailedChecks())
+    from pxr import UsdValidation
+    context = UsdValidation.ValidationContext(UsdValidation.ValidationRegistry().GetOrLoadAllValidators())
+    return [e.GetMessage() for e in context.Validate(Usd.Stage.Open(str(path)))
+            if e.GetType() == UsdValidation.ValidationErrorType.Error]
+
+
+@pytest.mark.parametrize("suffix", [".usda", ".usdc"])
+def test_usd_passes_the_compliance_checker(exported, suffix, tmp_path):
+    pytest.importorskip("pxr")
+    assert _usd_errors(exported[0][suffix]) == []
+    # and the checker does fail a stage that is not well formed (no metersPerUnit, no default prim)
+    from pxr import Usd
+    stage = Usd.Stage.Open(str(exported[0][".usda"]))  # kept alive: the layer dies with its stage
+    text = stage.GetRootLayer().ExportToString()
+    broken = tmp_path / "broken.usda"
+    broken.write_text(text.replace("metersPerUnit = 1", "").replace('defaultPrim = "Root"', ""))
+    assert _usd_errors(broken)
+
+
+def test_usd_units_and_up_axis_options(tmp_path, rig_with_corrective):
+    from pxr import UsdGeom
+    export_rig(rig_with_corrective, tmp_path / "cm_z.usda", units="cm", up="z")
+    stage, names, rest, *_ = _usd_frames(tmp_path / "cm_z.usda")
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z and UsdGeom.GetStageMetersPerUnit(stage) == 0.01
+    n = rig_with_corrective.neutral
+    assert np.allclose(rest, np.stack([n[:, 0], -n[:, 2], n[:, 1]], axis=1), atol=1e-4)  # Y-up turned Z-up
+
+
+# --- glTF options and the command line --------------------------------------------------------------
+def test_gltf_units_and_up_options(tmp_path, sample_rig):
+    export_rig(sample_rig, tmp_path / "mm_z.glb", units="mm", up="z")
+    verts, *_ = reference_mesh(tmp_path / "mm_z.glb")
+    n = sample_rig.neutral * 10  # sample rig: cm -> mm
+    assert np.allclose(verts, np.stack([n[:, 0], -n[:, 2], n[:, 1]], axis=1), atol=1e-3)
+    with pytest.raises(RigInputError, match="up axis 'x'"):
+        export_rig(sample_rig, tmp_path / "x.glb", up="x")
+    with pytest.raises(RigInputError, match=r"unknown export format '\.fbx'"):
+        export_rig(sample_rig, tmp_path / "x.fbx")
+    with pytest.raises(RigInputError, match="an OBJ holds one surface"):
+        export_rig(sample_rig, tmp_path / "x.obj", animation=WeightAnimation([0.0], np.zeros((1, sample_rig.n_shapes))))
+
+
+def test_cli_export_glb_with_animation_from_a_weights_csv(tmp_path, sample_rig):
+    from model.weights_csv import write_weights_csv
+    from resources.sample_rig import write_sample
+    folder = write_sample(tmp_path / "rig")
+    rig = load_rig(folder)
+    W = np.clip(np.sin(np.arange(12)[:, None] * 0.4 + np.arange(rig.n_shapes)), 0, 1)
+    write_weights_csv(tmp_path / "take.csv", W[:, ::-1], rig.shape_names[::-1], rate=24)  # any column order
+    out = tmp_path / "anim.glb"
+    proc = run_cli("export", folder, "-o", out, "--animation", tmp_path / "take.csv", "--weights",
+                   f"{rig.shape_names[0]}=0.5", "--out-units", "cm")
+    assert "12 frames" in proc.stdout
+    verts, _, names, deltas = reference_mesh(out)
+    times, played = reference_animation(out)
+    assert names == rig.shape_names and np.allclose(times, np.arange(12) / 24)
+    for f in range(12):
+        assert np.abs(verts + played[f] @ deltas.reshape(len(names), -1).reshape(len(names), -1, 3).transpose(1, 0, 2)
+                      - dense(rig, W[f])).max() < 1e-5
+    doc, _, _ = read_gltf_file(out)
+    assert doc["meshes"][0]["weights"][0] == 0.5
+    bad = run_cli("export", folder, "-o", tmp_path / "x.glb", "--animation", tmp_path / "nope.csv", check=False)
+    assert bad.returncode == 2 and "nope.csv: does not exist" in bad.stderr
+
+
+# --- OBJ: the source's UVs, normals and groups ------------------------------------------------------
+def test_ict_obj_export_keeps_uvs_and_materials(ict_dir, tmp_path):
+    src = read_obj(ict_dir / "generic_neutral_mesh.obj")
+    run_cli("export", ict_dir, "-o", tmp_path / "neutral.obj")
+    back = read_obj(tmp_path / "neutral.obj")
+    assert len(back.vertices) == 26719  # not re-indexed at UV seams
+    assert np.allclose(back.vertices, src.vertices, atol=1e-6)
+    assert np.array_equal(back.face_indices, src.face_indices) and np.array_equal(back.face_counts, src.face_counts)
+    assert np.allclose(back.corners.uvs, src.corners.uvs, atol=1e-6)
+    assert np.array_equal(back.corners.corner_uv, src.corners.corner_uv)
+    assert back.corners.records == src.corners.records
+    assert [r for r in src.corners.records if r[1].startswith("usemtl")][2] == (14034, "usemtl M_GumsTongue")
+
+
+def test_obj_round_trip_of_normals_groups_and_mixed_corners(tmp_path):
+    from model.readers import load_obj_folder
+    from model.export import write_posed_obj
+    text = ("mtllib m.mtl\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\n"
+            "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nvn 0 0 1\nvn 0 0 -1\n"
+            "o body\ng front\nusemtl a\ns 1\nf 1/1/1 2/2/1 3/3/1 4/4/1\n"
+            "g back\nusemtl b\ns off\nf 2//2 5//2 3//2\nf -3/-1/-1 -2/-2/-1 -1/-3/-1\n")
+    folder = tmp_path / "rig"
+    folder.mkdir()
+    (folder / "neutral.obj").write_text(text)
+    (folder / "lift.obj").write_text(text.replace("v 2 0 0", "v 2 0 0.5"))
+    rig = load_obj_folder(folder)
+    c = rig.corners
+    assert c.corner_uv.tolist() == [0, 1, 2, 3, -1, -1, -1, 3, 2, 1]
+    assert c.corner_normal.tolist() == [0, 0, 0, 0, 1, 1, 1, 1, 1, 1]
+    assert [r[0] for r in c.records] == [0, 0, 0, 0, 0, 1, 1, 1] and c.records[-1] == (1, "s off")
+    write_posed_obj(rig, tmp_path / "rest.obj")
+    back = read_obj(tmp_path / "rest.obj").corners
+    for key in ("uvs", "corner_uv", "normals", "corner_normal"):
+        assert np.array_equal(getattr(back, key), getattr(c, key)), key
+    assert back.records == c.records
+    write_posed_obj(rig, tmp_path / "posed.obj", np.array([1.0]))
+    posed = read_obj(tmp_path / "posed.obj")
+    assert posed.vertices[4].tolist() == [2, 0, 0.5] and posed.corners.normals is None  # rest normals dropped
+    assert np.array_equal(posed.corners.corner_uv, c.corner_uv)
+
+
+def test_bad_vt_index_is_one_sentence(tmp_path):
+    p = tmp_path / "bad.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n")
+    with pytest.raises(RigInputError, match=r"bad\.obj: a face refers to texture coordinate 2, but the file has 1"):
+        read_obj(p)
+
+
+# --- permissions: the user's umask ------------------------------------------------------------------
+@pytest.mark.parametrize("mask", [0o022, 0o002])
+def test_files_get_the_users_umask(tmp_path, sample_rig, mask):
+    from model.project import Project, save_project
+    old = os.umask(mask)
+    try:
+        written = [export_rig(sample_rig, tmp_path / "a.glb"), export_rig(sample_rig, tmp_path / "a.usda"),
+                   export_rig(sample_rig, tmp_path / "a.obj")]
+        save_project(Project(rig=sample_rig), tmp_path / "a.bsproj")
+        written.append(tmp_path / "a.bsproj")
+        run_cli("export", tmp_path / "a.bsproj", "-o", tmp_path / "cli.gltf")  # the CLI inherits the umask
+        written.append(tmp_path / "cli.gltf")
+    finally:
+        os.umask(old)
+    for p in written:
+        assert stat.S_IMODE(p.stat().st_mode) == 0o666 & ~mask, p
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporary files left behind
+
+
+# --- a real client: Blender (optional) ----------------------------------------------------------------
+BLENDER_SCRIPT = r"""
+import bpy, json, sys
+out = {}
+for kind, path in (("glb", sys.argv[-2]), ("obj", sys.argv[-1])):
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    if kind == "glb":
+        bpy.ops.import_scene.gltf(filepath=path)
+    elif hasattr(bpy.ops.wm, "obj_import"):
+        bpy.ops.wm.obj_import(filepath=path)
+    else:
+        bpy.ops.import_scene.obj(filepath=path, split_mode="OFF")
+    meshes = [o for o in bpy.data.objects if o.type == "MESH"]
+    o = max(meshes, key=lambda o: len(o.data.vertices))
+    keys = o.data.shape_keys
+    action = keys.animation_data.action if keys and keys.animation_data else None
+    out[kind] = {"vertices": len(o.data.vertices), "polygons": len(o.data.polygons),
+                 "shape_keys": [k.name for k in keys.key_blocks] if keys else [],
+                 "frame_range": list(action.frame_range) if action else None,
+                 "uv_layers": len(o.data.uv_layers), "materials": len(o.data.materials),
+                 "fps": bpy.context.scene.render.fps / bpy.context.scene.render.fps_base}
+print("BLENDER_RESULT " + json.dumps(out))
+"""
+
+
+def test_blender_imports_the_glb_and_the_obj(exported, rig_with_corrective, ict_dir, tmp_path):
+    blender = shutil.which("blender")
+    if not blender:
+        pytest.skip("blender is not installed")
+    (tmp_path / "script.py").write_text(BLENDER_SCRIPT)
+    run_cli("export", ict_dir, "-o", tmp_path / "neutral.obj")
+    proc = subprocess.run([blender, "-b", "--factory-startup", "--python", str(tmp_path / "script.py"), "--",
+                           str(exported[0][".glb"]), str(tmp_path / "neutral.obj")],
+                          capture_output=True, text=True, timeout=900)
+    line = next((l for l in proc.stdout.splitlines() if l.startswith("BLENDER_RESULT ")), None)
+    assert line, proc.stdout[-2000:] + proc.stderr[-2000:]
+    seen = json.loads(line[len("BLENDER_RESULT "):])
+    print(seen)
+    glb = seen["glb"]
+    assert glb["shape_keys"][1:] == rig_with_corrective.shape_names + [rig_with_corrective.correctives[0].name]
+    # Blender keys the animation in its scene's frames (24 fps by default): 327 / 60 s of performance
+    span = (glb["frame_range"][1] - glb["frame_range"][0]) / glb["fps"]
+    assert span == pytest.approx(327 / 60, abs=1.5 / glb["fps"])
+    assert glb["polygons"] == len(rig_with_corrective.triangles())
+    assert seen["obj"]["vertices"] == 26719 and seen["obj"]["uv_layers"] == 1 and seen["obj"]["materials"] == 12
+
+
+def test_keyframes_are_sampled_at_every_frame(tmp_path, sample_rig):
+    from model.export import animation_from_timeline
+    from model.keyframes import Keyframe, Timeline
+    K = sample_rig.n_shapes
+    timeline = Timeline([Keyframe(0.5, np.zeros(K)), Keyframe(1.0, np.full(K, 0.8)), Keyframe(1.5, np.zeros(K))],
+                        interpolation="smooth")
+    anim = animation_from_timeline(timeline, rate=24)
+    assert anim.n_frames == 25 and np.allclose(anim.times, np.arange(25) / 24)
+    assert np.allclose(anim.weights[12], 0.8) and np.allclose(anim.weights[6], timeline.evaluate(0.75))
+    export_rig(sample_rig, tmp_path / "keys.glb", animation=anim)
+    times, W = reference_animation(tmp_path / "keys.glb")
+    assert np.allclose(times, anim.times, atol=1e-6) and np.allclose(W[:, :K], anim.weights, atol=1e-6)

@@ -1,0 +1,56 @@
+"""File ▸ Export Rig from the window: the pose shown and the keyed animation leave as a glTF that reads back
+with the same shapes, default weights and frames (issue 16), written in the background."""
+from __future__ import annotations
+
+import json
+import struct
+
+import numpy as np
+import pytest
+
+from model.gltf import load_gltf
+from tests.gui_helpers import make_window
+
+pytestmark = pytest.mark.gui
+
+
+def _gltf_json(path):
+    raw = path.read_bytes()
+    n = struct.unpack_from("<I", raw, 12)[0]
+    return json.loads(raw[20:20 + n])
+
+
+def test_export_the_pose_and_the_keyframes_as_glb(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    doc = w.document
+    i = doc.rig.shape_index("jawOpen")
+    weights = doc.weights
+    weights[i] = 0.7
+    w.set_pose(weights, "jaw")
+    w.keyframes.set_key(0.0)
+    weights[i] = 0.2
+    w.set_pose(weights, "jaw")
+    w.keyframes.set_key(1.0)
+    names = list(w.exports.animations())
+    assert len(names) == 1 and names[0].startswith("Keyframes (2 keys")
+    out = tmp_path / "face.glb"
+    with qtbot.waitSignal(w.exports.exported, timeout=60000):
+        w.exports.export_to(out, names[0])
+    rig = load_gltf(out)
+    assert rig.shape_names == doc.rig.shape_names
+    np.testing.assert_allclose(rig.deltas, doc.rig.deltas * 0.01, atol=1e-6)     # cm -> m
+    g = _gltf_json(out)
+    assert g["meshes"][0]["weights"][i] == pytest.approx(0.2)                    # the pose shown
+    [anim] = g["animations"]
+    times = g["accessors"][anim["samplers"][0]["input"]]
+    assert times["count"] == int(w.keyframes.fps) + 1 and times["max"][0] == pytest.approx(1.0)
+
+
+def test_a_failed_export_is_one_sentence_and_keeps_the_window(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    blocker = tmp_path / "a_file"
+    blocker.write_text("x")
+    with qtbot.waitSignal(w.exports.failed, timeout=60000) as sig:
+        w.exports.export_to(blocker / "face.glb")                   # a folder that is a file
+    assert "\n" not in sig.args[0]
+    assert w.document.project is not None
