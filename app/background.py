@@ -82,3 +82,52 @@ class BackgroundRunner(QtCore.QObject):
         self._closed = True
         self._queued = None
         self.pool.waitForDone()
+
+
+class JobQueue(QtCore.QObject):
+    """Runs every submitted job in turn off the GUI thread (none replaces another, unlike BackgroundRunner: each
+    export or save must happen). ``changed(n, text)``: n jobs waiting or running, ``text`` the latest one's."""
+
+    changed = QtCore.Signal(int, str)
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        self.pool = QtCore.QThreadPool(self)
+        self.pool.setMaxThreadCount(1)
+        self._live: set = set()   # the tasks' signal objects, alive until delivery
+        self._closed = False
+
+    @property
+    def pending(self) -> int:
+        return len(self._live)
+
+    def submit(self, text: str, fn: Callable[[], Any], on_done: Callable[[Any], None],
+               on_failed: Callable[[str], None]) -> None:
+        if self._closed:
+            return
+        task = _Task(fn)
+        signals = task.signals
+        self._live.add(signals)
+        signals.done.connect(lambda r: self._finish(signals, text, on_done, r))
+        signals.failed.connect(lambda m: self._finish(signals, text, on_failed, m))
+        self.changed.emit(len(self._live), text)
+        self.pool.start(task)
+
+    def _finish(self, signals, text: str, callback, value) -> None:
+        self._live.discard(signals)
+        if self._closed:
+            return
+        self.changed.emit(len(self._live), text)
+        callback(value)
+
+    def wait(self, msecs: int = 120000) -> None:
+        """Wait for every job and deliver its result (tests, benchmarks)."""
+        deadline = QtCore.QDeadlineTimer(msecs)
+        while self._live and not deadline.hasExpired():
+            self.pool.waitForDone(50)
+            QtCore.QCoreApplication.processEvents()
+
+    def shutdown(self) -> None:
+        """Let the running and queued jobs finish (a file being written is completed) and deliver nothing more."""
+        self._closed = True
+        self.pool.waitForDone()

@@ -6,6 +6,8 @@ report (``model.take_workspace.solve_report``; README, "Solve report"), through 
 """
 from __future__ import annotations
 
+import sys
+
 from app.cli_common import load_rig_arg
 from model.errors import RigInputError
 
@@ -33,6 +35,12 @@ def add_solve_options(sp) -> None:
     sp.add_argument("--residual", choices=["none", "joshi", "gaussian", "multiquadric"], default=None,
                     help="RBF residual kernel added to the blendshape fit (default: the best measured)")
     sp.add_argument("--calibration-frames", type=int, default=30, help="neutral frames at the start of the take that settle scale and pose (0: none)")
+    sp.add_argument("--neutral-frames", default=None, metavar="A:B|auto",
+                    help="the actor's neutral: frames A to B (inclusive), or 'auto' for the most neutral stretch "
+                         "(default: the first --calibration-frames)")
+    sp.add_argument("--stable", default=None, metavar="M1,M2,...|PATTERN",
+                    help="markers the head motion is taken from (names or patterns such as 'root-*'; head-band "
+                         "markers need not be in the map; default: all markers)")
     sp.add_argument("--fixed-head", action="store_true",
                     help="the markers are already head-stabilised in rig space: no calibration, no head motion "
                          "(always so for a one-frame take)")
@@ -46,6 +54,11 @@ def load_solve_rig(args):
     return rig
 
 
+def auto_map_options(args) -> dict:
+    """The keyword arguments of ``TakeWorkspace.auto_map`` from the solve options (when there is no --map)."""
+    return {"neutral_frames": args.neutral_frames, "stable": args.stable}
+
+
 def solve_settings(args, rig) -> tuple[dict, object]:
     """(solve settings of ``model.take_workspace``, segmentation or None) from the solve options; a per-region
     solve segments ``rig`` here, once for every take solved with these settings."""
@@ -55,7 +68,8 @@ def solve_settings(args, rig) -> tuple[dict, object]:
     if args.threshold is not None or args.level is not None:
         regional = not args.global_solve
     settings = {"mode": "region" if regional else "global", "residual": args.residual,
-                "calibration_frames": args.calibration_frames, "fixed_head": args.fixed_head}
+                "calibration_frames": args.calibration_frames, "fixed_head": args.fixed_head,
+                "neutral_frames": args.neutral_frames, "stable": args.stable}
     segmentation = None
     if regional:
         from model.segmentation import SegmentationSettings, segment_rig
@@ -80,12 +94,16 @@ def cmd_solve(args) -> int:
     if args.map:
         ws.load_map(args.map, strict=False)
     else:
-        ws.auto_map(args.calibration_frames)
+        ws.auto_map(args.calibration_frames, **auto_map_options(args))
     settings, segmentation = solve_settings(args, rig)
     sol = ws.solve(settings, segmentation=segmentation)
     report = export_solve_outputs(ws, args.output, args.cache, args.report)
+    for lab in report["markers_left_out"]:
+        print(f"warning: marker {lab} left out ({report['markers_left_out_why'][lab]})", file=sys.stderr)
     with_c = f" with {len(report['correctives'])} corrective(s)" if report["correctives"] else ""
     print(f"solved {sol.n_frames} frames{with_c} in {sol.solve_seconds:.2f} s ({sol.frames_per_second:.0f} fps); "
-          f"marker RMSE {report['marker_rmse']:.4f} {rig.units}; wrote {args.output}"
+          f"marker RMSE {report['marker_rmse']:.4f} {rig.units}; motion explained "
+          f"{report['motion_explained'] if report['motion_explained'] is not None else float('nan'):.3f}; "
+          f"neutral frames {report['neutral_frames']}; wrote {args.output}"
           + (f", {args.cache}" if args.cache else "") + (f", {args.report}" if args.report else ""))
     return 0

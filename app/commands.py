@@ -60,28 +60,37 @@ class AddShapeCommand(QUndoCommand):
     """Add a new shape (e.g. from a nudged region) with weight 0, taking the pending offset with it."""
 
     def __init__(self, document, name: str, delta: np.ndarray, text: str | None = None,
-                 takes_offset: bool = True) -> None:
+                 takes_offset: bool = True, weight: float = 0.0, evaluator=None) -> None:
         super().__init__(text or f"Add shape {name}")
         self.document, self.name = document, name
         self.delta = np.array(delta, dtype=np.float64)
         self.takes_offset = takes_offset   # the pending nudge became the shape; a mirrored shape leaves it
+        self.weight = float(weight)        # the new shape's weight (in every region of a regional pose)
+        self.evaluator = evaluator         # a PoseEvaluator of the rig with the shape, built in the background
         self.offset = None if document.edit_offset is None else document.edit_offset.copy()
 
     def redo(self) -> None:
-        rig, project = self.document.rig, self.document.project
+        doc = self.document
+        rig, project = doc.rig, doc.project
         rig.shape_names = rig.shape_names + [self.name]
         rig.deltas = np.concatenate([rig.deltas, self.delta[None]], axis=0)
-        project.weights = np.append(project.weights, 0.0)
+        project.weights = np.append(project.weights, self.weight)
+        if doc.region_weights is not None:   # a regional pose keeps its regions, the new shape a column
+            doc.region_weights = np.column_stack([doc.region_weights, np.full(len(doc.region_weights), self.weight)])
         if self.takes_offset:
-            self.document.edit_offset = None
-        self.document.rig_edited()
+            doc.edit_offset = None
+        evaluator, self.evaluator = self.evaluator, None   # only for the first redo: later ones rebuild
+        doc.rig_edited(evaluator)
 
     def undo(self) -> None:
-        rig, project = self.document.rig, self.document.project
+        doc = self.document
+        rig, project = doc.rig, doc.project
         k = rig.shape_names.index(self.name)
         rig.shape_names = rig.shape_names[:k] + rig.shape_names[k + 1:]
         rig.deltas = np.delete(rig.deltas, k, axis=0)
         project.weights = np.delete(project.weights, k)
+        if doc.region_weights is not None and doc.region_weights.shape[1] == rig.n_shapes + 1:
+            doc.region_weights = np.delete(doc.region_weights, k, axis=1)
         if self.takes_offset:
             self.document.edit_offset = self.offset
         self.document.rig_edited()

@@ -24,6 +24,7 @@ from model.correctives import (Corrective, activation_for, corrective_activation
 from model.corrective_authoring import authoring_surface, corrective_from_scan, driver_pose
 from model.errors import RigInputError
 from model.sides import mirror_drivers
+from model.wording import count
 from solvers.correctives import corrective_delta
 from widgets.correctives_panel import CORRECTIVES_TAB, INTERFERENCE_TAB, CorrectivesPanel
 
@@ -436,9 +437,9 @@ class CorrectiveController(QtCore.QObject):
                 self.window.statusBar().showMessage("Every corrective already has its other side.", 5000)
             return 0
         names = ", ".join(c.name for c in made)
-        if not self._push_correctives(rig.correctives + made, f"Mirror {len(made)} corrective(s)"):
+        if not self._push_correctives(rig.correctives + made, f"Mirror {count(len(made), 'corrective')}"):
             return 0
-        self.window.statusBar().showMessage(f"Made {len(made)} mirrored corrective(s): {names}.", 8000)
+        self.window.statusBar().showMessage(f"Made {count(len(made), 'mirrored corrective')}: {names}.", 8000)
         return len(made)
 
     def set_muted(self, name: str, muted: bool) -> bool:

@@ -246,13 +246,14 @@ class Document(QtCore.QObject):
             self.project.sections[name] = copy.deepcopy(value)
         self.section_changed.emit(name)
 
-    def rig_edited(self) -> None:
-        """Shapes or correctives changed in place (same topology): rebuild the evaluator."""
+    def rig_edited(self, evaluator: PoseEvaluator | None = None) -> None:
+        """Shapes or correctives changed in place (same topology): rebuild the evaluator (or take ``evaluator``,
+        one built off the GUI thread for the edited arrays)."""
         if self.region_weights is not None and self.region_weights.shape[1] != self.project.rig.n_shapes:
             self.region_weights = self.region_blend = self.region_level = None  # the shape set changed
             self.edit_region = None
         self._collapsed = None
-        self.evaluator = PoseEvaluator(self.project.rig)
+        self.evaluator = evaluator if evaluator is not None else PoseEvaluator(self.project.rig)
         self.rig_version += 1
         self._surface = None
         self.shapes_changed.emit()

@@ -17,10 +17,12 @@ import scipy.sparse as sp
 from PySide6 import QtCore
 
 from app.document import PoseState
+from app.mocap_playback import TakePlayback
 from app.marker_commands import SetSectionArraysCommand
 from app.marker_controller import pose_at_level, same_blend
 from model.errors import RigInputError
-from model.keyframes import Keyframe, Timeline
+from model.keyframes import Keyframe, Timeline, keyed_frames, keyed_global_weights
+from model.pose import PoseEvaluator
 from model.pc2 import write_pc2
 from model.weights_csv import write_weights_csv
 from widgets.timeline import TimelinePanel
@@ -48,8 +50,13 @@ class KeyframeController(QtCore.QObject):
                                              "Play or pause the keyed animation")
         window.add_action("animation", "&Remove Key", lambda: self.remove_key(), None,
                           "Remove the key at the current time")
-        window.add_action("file", "Export Keyed &Weights as CSV…", self.export_csv_dialog, None,
-                          "Write the keyed animation's weights per frame as CSV")
+        window.add_action("file", "Export Keyed &Weights as CSV…", lambda: self.export_csv_dialog(), None,
+                          "Write the keyed animation's weights per frame as CSV: one column per shape, the global "
+                          "rig's weights that best reproduce each frame's surface")
+        window.add_action("file", "Export Keyed Weights per Re&gion as CSV…",
+                          lambda: self.export_csv_dialog(per_region=True), None,
+                          "Write a marker-keyed (regional) animation's weights per frame as CSV, one column per "
+                          "shape per region (<shape>@region<r>)")
         window.add_action("file", "Export Keyed Animation as P&C2…", self.export_pc2_dialog, None,
                           "Write the keyed animation as a PC2 point cache")
         self.timeline = Timeline()
@@ -58,8 +65,12 @@ class KeyframeController(QtCore.QObject):
         self.fps = DEFAULTS["fps"]
         self.duration = DEFAULTS["duration"]
         self.time = 0.0
-        self.timer = QtCore.QTimer(self)
-        self.timer.timeout.connect(self._tick)
+        # real-time playback on the take player's clock: the frame the clock is at is shown, frames whose time
+        # passed while drawing are skipped (a slow frame never slows the animation down)
+        self.playback = TakePlayback(self)
+        self.playback.frame_changed.connect(lambda f: self.scrub(f / self.fps))
+        self.playback.ticked.connect(lambda _f: window.redraw_now())
+        self.playback.playing_changed.connect(panel.set_playing)
         d = self.document
         d.rig_changed.connect(self._load)
         d.section_changed.connect(lambda name: self._load() if name == SECTION else None)
@@ -71,7 +82,7 @@ class KeyframeController(QtCore.QObject):
         p.interpolation_changed.connect(lambda v: self.set_settings(interpolation=v))
         p.fps_changed.connect(lambda v: self.set_settings(fps=v))
         p.duration_changed.connect(lambda v: self.set_settings(duration=v))
-        p.export_csv_requested.connect(self.export_csv_dialog)
+        p.export_csv_requested.connect(lambda: self.export_csv_dialog())
         p.export_pc2_requested.connect(self.export_pc2_dialog)
         if d.project is not None:
             self._load()
@@ -136,11 +147,20 @@ class KeyframeController(QtCore.QObject):
             blend, level = state.blend, state.level
             for k in tl.keys:  # the global keys become the same vector in every region
                 k.weights = np.tile(k.weights, (blend.shape[1], 1))
+        if blend is not None and state.is_regional and not same_blend(state.blend, blend) \
+                and state.level is not None and (level is None or state.level < level):
+            # a pose of a finer level than the keys': the keys follow it to that level (a coarse region is a
+            # union of fine ones, so the earlier keys keep their surface), and this key is stored exactly
+            background = self.document.project.weights
+            for k in tl.keys:
+                k.weights = pose_at_level(PoseState(background, k.weights, blend, level), state.blend)
+            note = f" (the keys moved to level {state.level}, finer than level {level})"
+            blend, level = state.blend, state.level
         if blend is None:
             w = state.weights
         else:
             if state.is_regional and not same_blend(state.blend, blend):
-                note = f" (averaged onto the keys' level {level})"
+                note = f" (on the keys' finer level {level})"
             w = pose_at_level(state, blend)
         tl.set_key(t, w)
         if t > self.duration:
@@ -187,22 +207,21 @@ class KeyframeController(QtCore.QObject):
         if on and not self.timeline.keys:
             self.window.show_status("Set a key first (S) to play an animation.", 4000)
             on = False
+        pb = self.playback
         if on:
-            self.timer.start(max(1, int(round(1000.0 / self.fps))))
+            pb.set_length(len(self.frame_times()), self.fps)
+            pb.frame = int(round(self.time * self.fps))   # from where the time is (the end: from the start)
+            pb.play()
         else:
-            self.timer.stop()
+            pb.pause()
         self.panel.set_playing(on)
 
     def toggle_play(self) -> None:
-        self.set_playing(not self.timer.isActive())
+        self.set_playing(not self.playing)
 
     @property
     def playing(self) -> bool:
-        return self.timer.isActive()
-
-    def _tick(self) -> None:
-        t = self.time + 1.0 / self.fps
-        self.scrub(0.0 if t > self.duration + 1e-9 else t)
+        return self.playback.playing
 
     def _show(self) -> None:
         self.panel.set_state(self.time, self.duration, self.fps, [k.time for k in self.timeline.keys],
@@ -216,43 +235,72 @@ class KeyframeController(QtCore.QObject):
         if not self.timeline.keys:
             raise RigInputError("There are no keys to export: set a key first (S).")
 
-    def export_csv(self, path: str | Path) -> int:
-        """Write the keyed animation's weights per frame (frame, time, weights). A regional timeline writes
-        the background row under the shape names and each region's row as ``<shape>@region<r>``.
-        Returns the number of frames."""
+    def _csv_job(self, path: str | Path, per_region: bool):
+        """The CSV export as a job (a closure over a snapshot of the animation, run on any thread)."""
         self._require_keys()
-        rig = self.document.rig
-        times = self.frame_times()
-        W = np.stack([self.timeline.evaluate(t) for t in times])
-        names = list(rig.shape_names)
-        if W.ndim == 3:
-            R = W.shape[1] - 1
-            names = [f"{n}@region{r}" for r in range(R) for n in rig.shape_names] + names
-            W = W.reshape(W.shape[0], -1)
-        write_weights_csv(path, W, names, times=times)
-        return len(times)
+        rig, timeline, blend, times = self.document.rig, self.timeline, self.blend, self.frame_times()
+        names, deltas = list(rig.shape_names), rig.deltas
+
+        def job() -> int:
+            if per_region and blend is not None:
+                W = keyed_frames(timeline, times)
+                R = W.shape[1] - 1
+                cols = [f"{n}@region{r}" for r in range(R) for n in names] + names
+                W = W.reshape(W.shape[0], -1)
+            else:
+                W, cols = keyed_global_weights(timeline, times, deltas, blend), names
+            _written(path, lambda: write_weights_csv(path, W, cols, times=times))
+            return len(times)
+        return job
+
+    def _pc2_job(self, path: str | Path):
+        self._require_keys()
+        rig, times = self.document.rig, self.frame_times()
+        states = [self.pose_at(t) for t in times]
+
+        def job() -> int:
+            ev = PoseEvaluator(rig, dtype=np.float64)   # its own: the GUI thread's evaluator keeps drawing
+            frames = (ev.pose(s.weights if s.region_weights is None else s.region_weights, s.blend) for s in states)
+            return _written(path, lambda: write_pc2(path, frames, n_points=rig.n_vertices, start_frame=0.0,
+                                                    sample_rate=1.0))
+        return job
+
+    def export_csv(self, path: str | Path, per_region: bool = False) -> int:
+        """Write the keyed animation's weights per frame (frame, time, one column per shape): the global rig's
+        weights that best reproduce each frame's surface (a regional timeline is fitted, ``keyed_global_weights``),
+        or with ``per_region`` each region's row as ``<shape>@region<r>`` then the background row under the
+        shape names. Returns the number of frames (runs here; the menu runs it in the background)."""
+        return self._csv_job(path, per_region)()
 
     def export_pc2(self, path: str | Path) -> int:
         """Write the keyed animation as a PC2 point cache (one sample per frame). Returns the frame count."""
-        self._require_keys()
-        times = self.frame_times()
-        doc = self.document
-        frames = (doc.evaluate_state(self.pose_at(t), dtype=np.float64) for t in times)
-        return write_pc2(path, frames, n_points=doc.rig.n_vertices, start_frame=0.0, sample_rate=1.0)
+        return self._pc2_job(path)()
 
-    def _export_dialog(self, title: str, suffix: str, filt: str, fn) -> None:
+    def _export_dialog(self, title: str, suffix: str, filt: str, make_job) -> None:
         def write(path: str) -> None:
             try:
-                n = fn(path)
-            except (RigInputError, OSError) as exc:
+                job = make_job(path)
+            except RigInputError as exc:
                 self.window.show_error("Could not export", str(exc))
                 return
-            self.window.show_status(f"Exported {n} frames to {path}", 5000)
+            self.window.run_in_background(f"{title}…", job,
+                                          lambda n: self.window.show_status(f"Exported {n} frames to {path}", 5000),
+                                          lambda message: self.window.show_error("Could not export", message))
         if self.document.project is not None:
             self.window.save_dialog(title, f"{self.document.rig.name}_keys{suffix}", filt, write)
 
-    def export_csv_dialog(self) -> None:
-        self._export_dialog("Export Keyed Weights as CSV", ".csv", "CSV (*.csv)", self.export_csv)
+    def export_csv_dialog(self, per_region: bool = False) -> None:
+        self._export_dialog("Export Keyed Weights per Region as CSV" if per_region else "Export Keyed Weights as CSV",
+                            "_regions.csv" if per_region else ".csv", "CSV (*.csv)",
+                            lambda path: self._csv_job(path, per_region))
 
     def export_pc2_dialog(self) -> None:
-        self._export_dialog("Export Keyed Animation as PC2", ".pc2", "Point cache (*.pc2)", self.export_pc2)
+        self._export_dialog("Export Keyed Animation as PC2", ".pc2", "Point cache (*.pc2)", self._pc2_job)
+
+
+def _written(path, write):
+    """Run ``write()``; an unwritable file is one sentence naming it."""
+    try:
+        return write()
+    except OSError as exc:
+        raise RigInputError(f"{path}: could not be written ({exc.strerror or exc}).") from exc

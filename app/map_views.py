@@ -9,6 +9,7 @@ import numpy as np
 from model.errors import RigInputError
 from model.rig import Rig
 from model.segmentation import Segmentation, SegmentationCache, SegmentationSettings, segment_rig
+from model.wording import count
 from solvers.deformation_maps import vector_colors
 from widgets.scene import ColorMap
 
@@ -70,7 +71,7 @@ def segmentation_colormap(seg: Segmentation, level: int, highlight: int | None =
     palette = region_palette(lvl.n_regions)
     legend = [(f"region {i}: {r.core.size} vertices", tuple(palette[i])) for i, r in enumerate(lvl.regions)]
     legend.append((f"background: {lvl.background.size} vertices", tuple(BACKGROUND_GREY)))
-    title = (f"level {level} of {len(seg.levels) - 1}: {lvl.n_regions} regions"
+    title = (f"level {level} of {len(seg.levels) - 1}: {count(lvl.n_regions, 'region')}"
              + (f", t = {seg.threshold_t:g}" if seg.method == "threshold" else ", region growing"))
     return ColorMap(scalars=segmentation_colors(seg, level, highlight), rgb=True, title=title, legend=legend)
 

@@ -22,6 +22,7 @@ from app.marker_commands import SetMarkersCommand, SetPoseCommand
 from model.correctives import solver_correctives
 from model.errors import RigInputError
 from model.markers import Marker, MarkerSet
+from model.wording import count
 from solvers.correctives import linearised_correctives
 from solvers.damping import damping_gains, point_mobility
 from solvers.regional_solve import RegionalSolver, shape_region_max
@@ -212,7 +213,12 @@ class MarkerController(QtCore.QObject):
         self._load_markers()
 
     def _on_shapes_change(self) -> None:
-        self._on_rig_change()
+        """Shapes edited, same topology: the damping gains and the markers' shape rows change, the triangles stay."""
+        rig = self.document.rig
+        self._gains = damping_gains(point_mobility(rig.deltas)) if rig.n_shapes else np.zeros(rig.n_vertices)
+        self._region_max.clear()
+        self.drag = None
+        self._load_markers()
 
     def _load_markers(self) -> None:
         data = self.document.section(SECTION)
@@ -242,7 +248,7 @@ class MarkerController(QtCore.QObject):
         self.sync_edit_region()
 
     def _on_level_change(self, level: int) -> None:
-        self.message(f"Drags solve the {self._level_obj(level).n_regions} regions of level {level}."
+        self.message(f"Drags solve the {count(self._level_obj(level).n_regions, 'region')} of level {level}."
                      if self._level_obj(level) is not None else "Drags solve one global pose.", 4000)
 
     def _on_lam_reg_change(self, value: float) -> None:
@@ -373,6 +379,14 @@ class MarkerController(QtCore.QObject):
             self._region_max[key] = hit
         return hit[1]
 
+    def _antagonists(self, rig) -> list[tuple[int, int]]:
+        """The rig's antagonist pairs (``model.antagonists``), found once per rig: a drag never leaves both on."""
+        from model.antagonists import pair_indices, rig_antagonists
+        hit = getattr(self, "_antagonist_cache", None)
+        if hit is None or hit[0] is not rig.deltas:
+            hit = self._antagonist_cache = (rig.deltas, pair_indices(rig, rig_antagonists(rig)))
+        return hit[1]
+
     def begin_drag(self, index: int) -> DragState:
         """Set up a drag of marker ``index``: the regional solver of the chosen level for the current markers,
         the pins (every marker where it is now) and the damping gain of the dragged marker."""
@@ -388,7 +402,7 @@ class MarkerController(QtCore.QObject):
         W0 = pose_at_level(old, blend)
         ms = self.markers
         solver = RegionalSolver(regions, ms.S, ms.delta_rows(rig.deltas), region_max=region_max,
-                                solve_background=True, lam_reg=self.lam_reg)
+                                solve_background=True, lam_reg=self.lam_reg, antagonists=self._antagonists(rig))
         if blend is not None and not (old.is_regional and same_blend(old.blend, blend)):
             doc.set_pose_state(PoseState(old.weights, W0, blend, level))  # same pose, now per region
         start = self.marker_positions()

@@ -19,6 +19,7 @@ from app.mocap_frames import FrameCache, captured_area_faces
 from app.mocap_playback import TakePlayback
 from model.errors import RigInputError
 from model.rig import unit_scale
+from model.wording import count
 from model.take_exports import export_pc2, export_report, export_weights_csv, take_surfaces
 from model.take_workspace import TakeWorkspace, solver_options
 from model.takes import MarkerTake, WeightTake
@@ -28,6 +29,18 @@ from widgets.mocap_panel import MocapPanel
 from widgets.side_by_side import SideBySideView
 
 TAKE_FILTER = "Takes (*.c3d *.trc *.csv);;C3D (*.c3d);;TRC (*.trc);;CSV / Live Link Face (*.csv)"
+
+
+def solve_progress_text(done: int, total: int, what: str, n_frames: int) -> str:
+    """The solve's progress in the take's frames: a two-pass solve reports 2 x frames steps ("frame 169/716" on a
+    358-frame take); it is said as the pass and the frame within it."""
+    if what != "solving" or n_frames <= 0 or total <= n_frames:
+        return f"{what} (frame {min(done, total)}/{total})" if what == "solving" else f"{what}…"
+    passes = max(1, round(total / n_frames))
+    k = min((max(done, 1) - 1) // n_frames, passes - 1)
+    frame = min(done - k * n_frames, n_frames)
+    name = ("forward", "backward")[k] if passes == 2 else f"{k + 1} of {passes}"
+    return f"{name} pass, frame {frame}/{n_frames}"
 
 
 class _ProgressRelay(QtCore.QObject):
@@ -56,6 +69,7 @@ class MocapController(QtCore.QObject):
         self._relay.progress.connect(self._on_progress)
         self._cancel = threading.Event()
         self._progress: QtWidgets.QProgressDialog | None = None
+        self._solve_frames = 0   # the frames of the take being solved (the progress is said in them)
         self._fill_stop = threading.Event()
         pb = self.playback
         pb.frame_changed.connect(self._show_frame)
@@ -149,7 +163,7 @@ class MocapController(QtCore.QObject):
                                           f"{int(take.missing.sum())} missing samples")
             if ws.marker_map is not None:
                 self._describe_map(ws.marker_map)
-            self.panel.set_status("Load or build a marker map, then Solve.")
+            self._say_next_step()
         else:
             self.panel.take_label.setText(self._weight_take_text(take, path))
             self._start_weight_playback()
@@ -178,7 +192,26 @@ class MocapController(QtCore.QObject):
             return False
         self._drop_solution()
         self._describe_map(mm)
+        self._say_next_step()
         return True
+
+    def use_map(self, marker_map) -> bool:
+        """Use a marker map already read (a saved project's); on failure keep what was loaded and say why."""
+        try:
+            self.workspace.set_map(marker_map)
+        except RigInputError as exc:
+            self._error("Could not use the marker map", str(exc))
+            return False
+        self._drop_solution()
+        self._describe_map(marker_map)
+        self._say_next_step()
+        return True
+
+    def _say_next_step(self) -> None:
+        """The hint under the panel: what a marker take still needs before Solve."""
+        if isinstance(self.take, MarkerTake):
+            self.panel.set_status("Ready: Solve the take." if self.marker_map is not None
+                                  else "Load or build a marker map, then Solve.")
 
     def _describe_map(self, mm) -> None:
         name = Path(mm.source).name if mm.source else "automatic map"
@@ -186,7 +219,9 @@ class MocapController(QtCore.QObject):
 
     def auto_map(self) -> bool:
         try:
-            rms = self.workspace.auto_map(self.panel.settings()["calibration_frames"])
+            st = self.panel.settings()
+            rms = self.workspace.auto_map(st["calibration_frames"], neutral_frames=st["neutral_frames"],
+                                          stable=st["stable"])
         except RigInputError as exc:
             self._error("Could not map markers", str(exc))
             return False
@@ -237,6 +272,7 @@ class MocapController(QtCore.QObject):
         dlg.setMinimumDuration(200)
         dlg.canceled.connect(cancel.set)
         self._progress = dlg
+        self._solve_frames = ws.take.n_frames
         self._solving = True
         self.panel.set_status("Solving…")
         self.runner.submit(job, self._on_solved, self._on_solve_failed)
@@ -244,7 +280,7 @@ class MocapController(QtCore.QObject):
     def _on_progress(self, done: int, total: int, what: str) -> None:
         dlg = self._progress
         if dlg is not None:
-            dlg.setLabelText(f"Solving the take: {what} (frame {min(done, total)}/{total})")
+            dlg.setLabelText(f"Solving the take: {solve_progress_text(done, total, what, self._solve_frames)}")
             dlg.setMaximum(total)
             dlg.setValue(min(done, total - 1))
 
@@ -290,10 +326,14 @@ class MocapController(QtCore.QObject):
         self.error_plot.set_curves([("projection", err), ("dense", solution.marker_rmse_residual * mm)])
         self._init_weight_curves(solution.weights)
         self.panel.set_frames(solution.n_frames, self.rate)
-        with_c = "" if not solution.solver.C else f" with the rig's {solution.solver.C} corrective(s)"
+        with_c = "" if not solution.solver.C else f" with the rig's {count(solution.solver.C, 'corrective')}"
         self.panel.set_status(f"Solved {solution.n_frames} frames{with_c} in {solution.solve_seconds:.1f} s "
                               f"({solution.frames_per_second:.0f} frames/s); marker RMS {np.nanmean(err):.2f} mm "
-                              f"mean, {np.nanmax(err):.2f} mm max.")
+                              f"mean, {np.nanmax(err):.2f} mm max; motion explained "
+                              f"{100 * solution.motion_explained:.1f}%" +
+                              (f"; neutral frames {solution.neutral_frames[0]}–{solution.neutral_frames[1]}"
+                               if solution.neutral_frames is not None else "") +
+                              (f"; left out {', '.join(solution.left_out)}" if solution.left_out else "") + ".")
         self._sync_panel()
         self.playback.set_length(solution.n_frames, self.rate)
         self.set_frame(0)
@@ -333,6 +373,8 @@ class MocapController(QtCore.QObject):
         self.pause()
         self._stop_fill()
         self.workspace.solution = None
+        if self.cache is not None:   # the views showed that solve: nothing of it stays on screen
+            self.views.clear()
         self.cache = None
         self.playback.set_length(self.n_frames, self.rate)
         self.weight_plot.set_curves([])

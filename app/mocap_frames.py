@@ -58,6 +58,8 @@ class FrameCache:
         m = take.positions[:, cols]                                       # take units, NaN where missing
         inv = np.linalg.inv(solution.head)                                # take space -> rig space
         self.markers = np.einsum("fij,fmj->fmi", inv[:, :3, :3], m) + inv[:, None, :3, 3]
+        if solution.markers_rig is not None:   # an actor's markers carried onto the rig (ALGORITHMS.md §12)
+            self.markers = np.where(np.isfinite(self.markers), solution.markers_rig, np.nan)
         if solution.region_weights is not None:
             self.fitted = np.stack([s.markers_regional(solution.region_weights[f]) for f in range(F)])
         else:

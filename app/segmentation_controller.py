@@ -5,6 +5,7 @@ SegmentationCache, so moving the threshold or the level redraws live (ALGORITHMS
 """
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
@@ -14,10 +15,22 @@ from app.background import BackgroundRunner
 from app.commands import AddShapeCommand, SetEditOffsetCommand, SetSectionCommand
 from app.map_views import deformation_colormap, region_palette, segmentation_colormap
 from model.errors import RigInputError
+from model.pose import PoseEvaluator
 from model.segmentation import SegmentationCache, SegmentationSettings, region_statistics, segment_rig
-from solvers.region_nudge import nudge_region
+from model.wording import count
+from solvers.laplacian import mesh_adjacency
+from solvers.region_nudge import nudge_region, ring_falloff
 
 SECTION = "segmentation"
+
+
+def _appended(rig, seen: tuple) -> bool:
+    """Whether ``rig`` differs from the (neutral, deltas, names) a segmentation was made of only by shapes added
+    at the end of either (the same neutral object and the same shapes before)."""
+    neutral, deltas, names = seen
+    k = min(len(names), rig.n_shapes)
+    return (rig.neutral is neutral and len(names) != rig.n_shapes and list(rig.shape_names[:k]) == names[:k]
+            and np.array_equal(rig.deltas[:k], deltas[:k]))
 
 
 class SegmentationController(QtCore.QObject):
@@ -35,6 +48,7 @@ class SegmentationController(QtCore.QObject):
         self.view = "shaded"
         self.shape_map = -1
         self.highlight: int | None = None
+        self._last_nudge: tuple[int, str] | None = None   # (region, direction): names a saved nudge
         self.last_seconds = 0.0
         self._segmented: tuple | None = None  # (neutral, deltas, shape names) the segmentation is of
         d = self.document
@@ -82,6 +96,12 @@ class SegmentationController(QtCore.QObject):
         if (rig is not None and seen is not None and self.segmentation is not None and rig.neutral is seen[0]
                 and rig.deltas is seen[1] and list(rig.shape_names) == seen[2]):
             return
+        if rig is not None and seen is not None and self.segmentation is not None and _appended(rig, seen):
+            # a shape added at the end (Save as new shape, Mirror to a new side) or its undo: the regions stay,
+            # with the selection (re-segmenting changed 39 regions to 29 and dropped the region being nudged)
+            self._segmented = (rig.neutral, rig.deltas, list(rig.shape_names))
+            self.panel.set_shapes(rig.shape_names)
+            return
         self._on_rig_change()
 
     def _on_rig_change(self) -> None:
@@ -124,8 +144,6 @@ class SegmentationController(QtCore.QObject):
         self.panel.set_levels(counts, self.level)
         self.highlight = None
         self._show_regions()
-        self.panel.set_status(f"{counts[0]} regions at level 0 · {len(counts)} levels · "
-                              f"{self.last_seconds * 1000:.0f} ms")
         self.refresh_view()
         self.segmentation_ready.emit()
 
@@ -143,6 +161,9 @@ class SegmentationController(QtCore.QObject):
             return
         rows = self.stats[self.level]
         self.panel.set_regions(rows, region_palette(len(rows)))
+        levels = self.segmentation.levels
+        self.panel.set_status(f"{count(levels[self.level].n_regions, 'region')} at level {self.level} · "
+                              f"{count(len(levels), 'level')} · {self.last_seconds * 1000:.0f} ms")
 
     def _on_view_change(self, view: str) -> None:
         self.view = view
@@ -151,6 +172,14 @@ class SegmentationController(QtCore.QObject):
     def _on_shape_map_change(self, k: int) -> None:
         self.shape_map = k
         self.refresh_view()
+
+    def set_level(self, level: int) -> None:
+        """Show hierarchy level ``level`` (clamped to the segmentation's levels when it is ready)."""
+        if self.segmentation is None:
+            self.level = level      # taken when the segmentation in progress arrives
+            return
+        self.panel.set_levels([lvl.n_regions for lvl in self.segmentation.levels], level)
+        self._on_level_change(self.panel.level.value())
 
     def _on_level_change(self, level: int) -> None:
         self.level = level
@@ -197,7 +226,10 @@ class SegmentationController(QtCore.QObject):
         rig, doc = self.document.rig, self.document
         lvl = self.segmentation.levels[self.level]
         region = lvl.regions[self.highlight]
-        phi = np.asarray(lvl.blend[region.vertices, self.highlight].todense()).ravel()
+        adjacency = self.cache.adjacency
+        if adjacency is None:
+            adjacency = mesh_adjacency(rig.n_vertices, rig.face_counts, rig.face_indices)
+        phi = ring_falloff(adjacency, region.core, region.vertices)   # smooth over the overlap rings
         if direction in ("out", "in"):
             vec = direction
         else:
@@ -209,8 +241,21 @@ class SegmentationController(QtCore.QObject):
         old = doc.edit_offset
         new = (np.zeros_like(current) if old is None else old) + (moved - current)
         doc.undo_stack.push(SetEditOffsetCommand(doc, old, new, f"Nudge region {self.highlight} {direction}"))
+        self._last_nudge = (self.highlight, direction)
+
+    def nudge_shape_name(self) -> str:
+        """The name Save as New Shape suggests: the region and direction of the last nudge (``region12_out``),
+        made unique (``region12_out_2``)."""
+        region, direction = self._last_nudge or (self.highlight, "nudge")
+        base = f"region{region}_{direction}"
+        names, name, i = set(self.document.rig.shape_names), base, 2
+        while name in names:
+            name, i = f"{base}_{i}", i + 1
+        return name
 
     def save_nudge_as_shape(self, name: str | None = None) -> None:
+        """Store the pending nudge as a new shape, set to 1 so the face stays as it is; one undo step. The
+        shape is the nudge alone (the pose stays in the other weights)."""
         doc = self.document
         if doc.edit_offset is None:
             self.window.show_status("Nothing to save: nudge a region first.")
@@ -218,12 +263,24 @@ class SegmentationController(QtCore.QObject):
         rig = doc.rig
         if name is None:
             name, ok = QtWidgets.QInputDialog.getText(self.window, "Save as New Shape", "Shape name:",
-                                                      text=f"nudge{len(rig.shape_names)}")
+                                                      text=self.nudge_shape_name())
             if not ok or not name.strip():
                 return
         name = name.strip()
         if name in rig.shape_names:
             self.window.show_error("Could not add the shape", f"A shape named '{name}' already exists.")
             return
-        delta = doc.surface().astype(np.float64) - rig.neutral
-        doc.undo_stack.push(AddShapeCommand(doc, name, delta))
+        delta = np.asarray(doc.edit_offset, dtype=np.float64)
+        rig_with = copy.copy(rig)
+        rig_with.shape_names, rig_with.deltas = rig.shape_names + [name], np.concatenate([rig.deltas, delta[None]])
+        version, offset = doc.rig_version, doc.edit_offset
+
+        def add(evaluator) -> None:   # back on the GUI thread
+            if doc.rig_version != version or doc.edit_offset is not offset or name in doc.rig.shape_names:
+                self.window.show_status(f"The rig or the nudge changed meanwhile: {name} was not added.")
+                return
+            doc.undo_stack.push(AddShapeCommand(doc, name, delta, f"Save nudge as shape {name}", weight=1.0,
+                                                evaluator=evaluator))
+            self.window.show_status(f"Added shape {name}, set to 1.")
+        # the new rig's evaluator (~0.3 s on ICT) is built off the GUI thread; the edit is applied when it is ready
+        self.window.run_in_background(f"Adding shape {name}…", lambda: PoseEvaluator(rig_with), add)

@@ -252,7 +252,8 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
         if job.marker_map is not None:
             ws.set_map(job.marker_map, strict=False)
         else:
-            ws.auto_map(job.settings.get("calibration_frames", 30))
+            ws.auto_map(job.settings.get("calibration_frames", 30), neutral_frames=job.settings.get("neutral_frames"),
+                        stable=job.settings.get("stable"))
         identity = _take_identity(take_path)
         sol = ws.solve(job.settings, segmentation=job.segmentation, evaluator=job.evaluator)
     except RigInputError as exc:

@@ -432,6 +432,8 @@ def load_gltf(path: str | Path, units: str = "m", mesh: str | None = None) -> Ri
     path = regular_file(path)
     try:
         return _load(path, units, mesh)
+    except RigInputError:
+        raise
     except (TypeError, AttributeError, KeyError, IndexError, ValueError, OverflowError) as exc:
         # the structure check covers what this reader uses; this is the last line for what it missed
         raise RigInputError(f"{path}: the glTF is damaged ({type(exc).__name__}: {shown(exc, 80)}).") from None

@@ -157,3 +157,21 @@ def _project_capped_simplex(w: np.ndarray, lower: float) -> np.ndarray:
     rho = np.flatnonzero(u - css / np.arange(1, u.size + 1) > 0)[-1]
     tau = css[rho] / (rho + 1.0)
     return np.maximum(y - tau, 0.0) + lower
+
+
+def keyed_frames(timeline: Timeline, times: np.ndarray) -> np.ndarray:
+    """The timeline's pose at each time: (F, K) or (F, R+1, K)."""
+    return np.stack([timeline.evaluate(float(t)) for t in times])
+
+
+def keyed_global_weights(timeline: Timeline, times: np.ndarray, deltas: np.ndarray, blend=None) -> np.ndarray:
+    """(F, K) global weights per frame, what a DCC plays: a global timeline's own, a regional timeline's (its keys
+    per region of ``blend`` (V, R+1)) the bounded least-squares fit of each frame's surface by the global rig
+    (``solvers.surface_fit.global_weights_of_regional``)."""
+    from solvers.surface_fit import global_weights_of_regional
+    W = keyed_frames(timeline, times)
+    if W.ndim == 2:
+        return W
+    if blend is None:
+        raise RigInputError("A regional timeline needs the partition of unity of its level to export global weights.")
+    return global_weights_of_regional(deltas, blend, W, lower=timeline.lower, upper=timeline.upper)

@@ -136,7 +136,8 @@ class MarkerSet:
     @classmethod
     def for_rig(cls, rig: Rig, markers: list[Marker], source: str = "") -> "MarkerSet":
         """A marker set on ``rig`` (triangles from ``rig.triangles()``, background from the shapes)."""
-        moving = np.flatnonzero(np.abs(rig.deltas).max(axis=(0, 2)) > 0) if rig.n_shapes else np.zeros(0, int)
+        moving = (np.flatnonzero((rig.deltas.reshape(rig.n_shapes, -1) != 0).any(axis=0).reshape(-1, 3).any(axis=1))
+                  if rig.n_shapes else np.zeros(0, int))
         return cls(markers, rig.n_vertices, rig.triangles(), moving=moving, source=source)
 
     # --- sizes and lookups -----------------------------------------------------------------------

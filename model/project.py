@@ -201,7 +201,8 @@ def load_project(path: str | Path) -> Project:
 
         def array(key: str) -> np.ndarray:
             a = read_npy_member(z, f"{key}.npy", path, key)
-            shape = declared.get(key, [None])[0] if isinstance(declared, dict) else None
+            entry = declared.get(key) if isinstance(declared, dict) else None
+            shape = entry[0] if isinstance(entry, list) and entry else None
             if shape is not None and list(a.shape) != list(shape):
                 raise RigInputError(f"{path}: the array '{key}' has shape {list(a.shape)}, "
                                     f"the manifest says {shown(shape, 40)}.")
@@ -237,6 +238,8 @@ def load_project(path: str | Path) -> Project:
                 try:
                     blend = sp.csr_matrix((array("pose/blend_data"), array("pose/blend_indices"),
                                            array("pose/blend_indptr")), shape=tuple(pose["blend_shape"]))
+                except RigInputError:
+                    raise
                 except ValueError as exc:
                     raise RigInputError(f"{path}: the saved regional pose is damaged ({exc}).") from None
                 regional = dict(region_weights=array("pose/region_weights"), region_blend=blend,

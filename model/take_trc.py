@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import RigInputError
+from .errors import RigInputError, shown
 from .take_data import MarkerTake, unique_labels, units_from_text
 
 
@@ -41,13 +41,14 @@ def read_trc(path: str | Path) -> MarkerTake:
     header = {k: v for k, v in zip(_cells(lines[1]), _cells(lines[2])) if k}
     units = units_from_text(header.get("Units", ""))
     if units is None:
-        raise RigInputError(f"{path}: unknown units '{header.get('Units', '')}' (use mm, cm or m).")
+        raise RigInputError(f"{path}: unknown units '{shown(header.get('Units', ''), 20)}' (use mm, cm or m).")
 
     def number(key: str, kind=float):
         try:
             return kind(float(header[key])) if header.get(key) else None
-        except ValueError:
-            raise RigInputError(f"{path}: the header's {key} is not a number: '{header[key]}'.") from None
+        except (ValueError, OverflowError):
+            raise RigInputError(f"{path}: the header's {key} is not a usable number: "
+                                f"'{shown(header[key], 30)}'.") from None
 
     rate = number("DataRate") or number("CameraRate")
     if rate is None or not rate > 0:

@@ -4,8 +4,10 @@ command line's ``solve`` both work through ``TakeWorkspace``; the exports are in
 
 Solve settings are a plain dict, as the panel and the command line gather them:
 ``mode`` ('global' or 'region'), ``level`` (hierarchy level of a per-region solve), ``residual``,
-``lam_sparsity``, ``lam_temporal``, ``rbf_scale``, ``rbf_lambda`` (solver options, ``solvers.take_solve.DEFAULTS``
-for any left out), ``calibration_frames`` and ``fixed_head`` (markers already head-stabilised in rig space).
+``lam_sparsity``, ``lam_temporal``, ``rbf_scale``, ``rbf_lambda``, ``retarget`` (solver options,
+``solvers.take_solve.DEFAULTS`` for any left out), ``calibration_frames``, ``neutral_frames`` (None: the first
+``calibration_frames``; ``"auto"``; or ``"A:B"`` / (A, B), inclusive), ``stable`` (marker names or patterns such as
+``root-*``, comma-separated, for the head motion) and ``fixed_head`` (markers already head-stabilised in rig space).
 """
 from __future__ import annotations
 
@@ -30,7 +32,51 @@ from .takes import MarkerTake, WeightTake
 SOLVE_DEFAULTS = {"regional": False, "threshold": SegmentationSettings().t, "level": 2}
 
 # The solver options a settings dict may carry (the rest of it says how the solve is set up).
-SOLVER_OPTIONS = ("residual", "lam_sparsity", "lam_temporal", "rbf_scale", "rbf_lambda")
+SOLVER_OPTIONS = ("residual", "lam_sparsity", "lam_temporal", "rbf_scale", "rbf_lambda", "retarget", "lam_antagonist")
+
+# A marker missing in more than this fraction of the frames is left out of the solve with a warning.
+MOSTLY_MISSING = 0.5
+
+
+def parse_neutral_frames(value, where: str = "--neutral-frames"):
+    """None, 'auto' or (first, last) from a settings value: None, 'auto', 'A:B' (inclusive) or a pair.
+    RigInputError (one sentence) otherwise."""
+    if value is None or (isinstance(value, str) and value.strip().lower() == "auto"):
+        return None if value is None else "auto"
+    if isinstance(value, str):
+        parts = value.split(":")
+        try:
+            a, b = (int(parts[0]), int(parts[1])) if len(parts) == 2 else (None, None)
+        except ValueError:
+            a = b = None
+        if a is None:
+            raise RigInputError(f"{where}: '{value[:40]}' is not a frame range A:B or 'auto'.")
+        value = (a, b)
+    a, b = int(value[0]), int(value[1])
+    if a > b:
+        raise RigInputError(f"{where}: the neutral range {a}:{b} ends before it starts.")
+    return a, b
+
+
+def resolve_stable(labels: list[str], spec) -> list[str]:
+    """The take's marker labels named by ``spec`` (comma-separated names or fnmatch patterns such as ``root-*``, or a
+    list of them), in take order. RigInputError (one sentence) for a name the take does not have or fewer than 3."""
+    from fnmatch import fnmatchcase
+    items = [x.strip() for x in (spec.split(",") if isinstance(spec, str) else spec) if x.strip()]
+    chosen, absent = set(), []
+    for item in items:
+        hits = [lab for lab in labels if fnmatchcase(lab, item)]
+        if not hits:
+            absent.append(item)
+        chosen.update(hits)
+    if absent:
+        raise RigInputError(f"Stable markers {', '.join(absent[:6])} are not in the take "
+                            f"(it has {', '.join(labels[:6])}{'…' if len(labels) > 6 else ''}).")
+    found = [lab for lab in labels if lab in chosen]
+    if len(found) < 3:
+        raise RigInputError(f"Head motion needs at least 3 stable markers, but '{', '.join(items)}' names "
+                            f"{len(found)} ({', '.join(found) or 'none'}).")
+    return found
 
 
 def read_take(path: str | Path, rig: Rig | None = None) -> MarkerTake | WeightTake:
@@ -45,6 +91,8 @@ def read_take(path: str | Path, rig: Rig | None = None) -> MarkerTake | WeightTa
                 raise RigInputError(f"{path}: open a rig before playing a Live Link Face take on it.")
             return read_livelink_csv(path, rig.shape_names)
         return load_take(path)
+    except RigInputError:
+        raise
     except (OSError, ValueError) as exc:
         raise RigInputError(f"{path}: could not be read ({exc}).") from None
 
@@ -63,24 +111,62 @@ def regional_solve_options(segmentation, level: int) -> dict:
 
 def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: PoseEvaluator | None = None,
                progress: Progress = None, cancel=None, calibration_frames: int = DEFAULTS["calibration_frames"],
-               **options) -> TakeSolution:
+               neutral=None, stable=None, **options) -> TakeSolution:
     """Solve a marker take onto a rig with a marker map (``solvers.take_solve.TakeSolver``).
 
-    Uses the take's and rig's units; markers of the map missing from the take are dropped. The rig's live
-    (unmuted) correctives are solved with the shapes, and every dense frame is the rig's pose evaluation
-    (``evaluator``: a float64 ``PoseEvaluator`` of ``rig``, built here if not given) plus the residual.
-    ``options`` go to ``TakeSolver``. The solution's marker columns follow ``marker_map.match(take)``."""
+    Uses the take's and rig's units; markers of the map missing from the take are dropped, and so are markers
+    missing in most frames (``MOSTLY_MISSING``; listed in ``solution.left_out`` with the reason). ``neutral``: the
+    actor's neutral frames (None: the first ``calibration_frames``, 'auto', or (first, last)); ``stable``: names or
+    patterns of the markers the head motion is taken from (``resolve_stable``); those the map does not bind (a head
+    band) are used as rigid head markers. The rig's live (unmuted) correctives are solved with the shapes, and every
+    dense frame is the rig's pose evaluation (``evaluator``: a float64 ``PoseEvaluator`` of ``rig``, built here if
+    not given) plus the residual. ``options`` go to ``TakeSolver``. The solution's marker columns follow
+    ``marker_map.match(take)`` without the markers left out."""
     labels, cols = marker_map.match(take)
+    missing = np.isnan(take.positions).any(axis=2).mean(axis=0)               # (take markers,) fraction
+    keep = missing[cols] <= MOSTLY_MISSING
+    left_out = {lab: f"missing in {100 * missing[take.labels.index(lab)]:.0f}% of the frames"
+                for lab, k in zip(labels, keep) if not k}
+    labels, cols = [lab for lab, k in zip(labels, keep) if k], cols[keep]
+    if len(labels) < 3:
+        raise RigInputError(f"{take.source or 'The take'}: only {len(labels)} mapped markers are seen in most "
+                            "frames; a solve needs at least 3.")
+    stable_mask, head_cols = None, []
+    if stable:
+        names = resolve_stable(take.labels, stable)
+        stable_mask = np.array([lab in names for lab in labels])
+        head_cols = [take.labels.index(lab) for lab in names
+                     if lab not in marker_map.markers and missing[take.labels.index(lab)] <= MOSTLY_MISSING]
+        if int(stable_mask.sum()) + len(head_cols) < 3:
+            raise RigInputError(f"Head motion needs at least 3 stable markers seen in most frames, but "
+                                f"'{stable}' finds {int(stable_mask.sum()) + len(head_cols)}.")
+    for i, lab in enumerate(take.labels):
+        if lab not in marker_map.markers and i not in head_cols:
+            left_out.setdefault(lab, f"missing in {100 * missing[i]:.0f}% of the frames" if missing[i] > MOSTLY_MISSING
+                                else "not in the marker map")
     binding = marker_map.binding(rig, labels)
+    if options.get("lam_antagonist", DEFAULTS["lam_antagonist"]) and options.get("antagonists") is None:
+        from .antagonists import rig_antagonists
+        options["antagonists"] = rig_antagonists(rig)
+    if options.get("antagonists") is not None:
+        from .antagonists import pair_indices
+        options["antagonists"] = pair_indices(rig, options["antagonists"])
     if evaluator is None or evaluator.dtype != np.float64:
         evaluator = PoseEvaluator(rig, dtype=np.float64)
     surface = partial(evaluator.pose, blend=options.get("blend"))
     solver = TakeSolver(rig.neutral, rig.deltas, binding, correctives=solver_correctives(rig), surface=surface,
                         **options)
-    sol = solver.solve(take.positions[:, cols], unit_factor=unit_scale(take.units, rig.units),
-                       calibration_frames=calibration_frames, calibrate=calibration_frames > 0,
-                       progress=progress, cancel=cancel)
+    try:
+        sol = solver.solve(take.positions[:, cols], unit_factor=unit_scale(take.units, rig.units),
+                           calibration_frames=calibration_frames, calibrate=calibration_frames > 0,
+                           neutral=neutral, stable=stable_mask,
+                           head_markers=take.positions[:, head_cols] if head_cols else None,
+                           progress=progress, cancel=cancel)
+    except ValueError as exc:
+        raise RigInputError(f"{take.source or 'The take'}: {exc}") from None
     sol.labels = labels
+    sol.left_out = left_out
+    sol.head_labels = [take.labels[c] for c in head_cols]
     return sol
 
 
@@ -101,7 +187,10 @@ def _head_and_options(settings: dict, take: MarkerTake) -> tuple[bool, int, dict
 def solver_options(settings: dict, take: MarkerTake, segmentation=None) -> tuple[dict, int]:
     """(``TakeSolver`` options, calibration frames) for solve ``settings`` on ``take``: the GUI and the command
     line build a solve only here (``segmentation`` for a per-region solve)."""
-    _, calibration, options = _head_and_options(settings, take)
+    fixed_head, calibration, options = _head_and_options(settings, take)
+    if not fixed_head:
+        options["neutral"] = parse_neutral_frames(settings.get("neutral_frames"))
+        options["stable"] = settings.get("stable") or None
     if settings.get("mode", "global") == "region":
         options.update(regional_solve_options(segmentation, int(settings.get("level", 0))))
     return options, calibration
@@ -121,6 +210,8 @@ def solve_report(rig: Rig, take: MarkerTake, solution: TakeSolution, settings: d
         return [None if not np.isfinite(x) else float(x) for x in np.ravel(a)]
     labels = list(sol.labels or [])
     used = set(labels)
+    left_out = sol.left_out or {}
+    head = list(sol.head_labels or [])
     return {
         "rig": rig.name, "take": str(take_path) if take_path else take.source,
         "marker_map": map_source or "automatic",
@@ -134,8 +225,20 @@ def solve_report(rig: Rig, take: MarkerTake, solution: TakeSolution, settings: d
         "marker_rmse_per_marker": dict(zip(labels, clean(per_marker))),
         "worst_marker": labels[int(np.nanargmax(per_marker))] if np.isfinite(per_marker).any() else None,
         "missing_samples": {lab: int(np.isnan(d[:, i]).sum()) for i, lab in enumerate(labels)},
-        "markers_left_out": [lab for lab in take.labels if lab not in used],
-        "neutral_frames": [0, min(calibration, take.n_frames) - 1] if calibration > 0 else None,
+        "markers_left_out": [lab for lab in take.labels if lab not in used and lab not in head],
+        "markers_left_out_why": {lab: left_out.get(lab, "not in the marker map")
+                                 for lab in take.labels if lab not in used and lab not in head},
+        "head_markers": head,
+        "neutral_frames": [int(x) for x in sol.neutral_frames] if sol.neutral_frames is not None else None,
+        "neutral_frames_how": ("the most neutral stretch: nearest the rig's neutral after a similarity "
+                               f"({sol.neutral_reason['distance_to_rig_neutral']:.2f} of the take's median) and "
+                               f"still ({sol.neutral_reason['stillness']:.2f} of the median motion)"
+                               if sol.neutral_reason else
+                               "fixed head: none" if sol.neutral_frames is None else "as chosen"
+                               if settings.get("neutral_frames") else "the first calibration frames"),
+        "motion_explained": clean([sol.motion_explained])[0],
+        "motion_explained_per_marker": dict(zip(labels, clean(sol.motion_explained_per_marker)))
+        if sol.motion_explained_per_marker is not None else {},
         "mode": "regional" if settings.get("mode") == "region" else "global",
         "level": int(settings["level"]) if settings.get("mode") == "region" else None,
         "head": "fixed" if fixed_head else "solved",
@@ -209,12 +312,33 @@ class TakeWorkspace:
                                 f"({', '.join(absent[:6])}{'…' if len(absent) > 6 else ''}).".replace(" ()", " ("))
         return warnings
 
-    def auto_map(self, calibration_frames: int = DEFAULTS["calibration_frames"]) -> float:
-        """Map the take's markers onto the rig from its neutral calibration frames; returns the fit RMS (rig
-        units)."""
+    def auto_map(self, calibration_frames: int = DEFAULTS["calibration_frames"], *, neutral_frames=None,
+                 stable=None) -> float:
+        """Map the take's markers onto the rig from its neutral frames (the first ``calibration_frames``, a range
+        or 'auto': ``parse_neutral_frames``); returns the fit RMS (rig units). ``stable`` (``resolve_stable``) is
+        checked here so that a bad list is refused before any work; stable markers off the face (a head band) and
+        markers never seen in the neutral are not mapped."""
         if self.marker_take is None or self.rig is None:
             raise RigInputError("Load a marker take (and open a rig) before mapping its markers.")
-        mm, info = auto_marker_map(self.rig, self.take, calibration_frames=calibration_frames)
+        if stable:
+            resolve_stable(self.take.labels, stable)
+        take, n = self.take, max(1, int(calibration_frames))
+        neutral = parse_neutral_frames(neutral_frames)
+        frames: int | slice = n
+        if isinstance(neutral, tuple):
+            if not 0 <= neutral[0] <= neutral[1] < take.n_frames:
+                raise RigInputError(f"--neutral-frames: the neutral frames {neutral[0]}:{neutral[1]} are outside the "
+                                    f"take, which has frames 0 to {take.n_frames - 1}.")
+            frames = slice(neutral[0], neutral[1] + 1)
+        elif neutral == "auto":
+            # a first map from the whole take finds the most neutral stretch, which is then mapped again
+            from solvers.retarget import neutral_stretch
+            mm, _ = auto_marker_map(self.rig, take, calibration_frames=slice(None))
+            labels, cols = mm.match(take)
+            rest = mm.binding(self.rig, labels) @ self.rig.neutral
+            a, b, _ = neutral_stretch(take.positions[:, cols] * unit_scale(take.units, self.rig.units), rest, n)
+            frames = slice(a, b + 1)
+        mm, info = auto_marker_map(self.rig, take, calibration_frames=frames)
         self.marker_map, self.solution = mm, None
         return float(info.get("rms", float("nan")))
 

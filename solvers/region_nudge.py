@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from .errors import RigInputError
 from .mesh import fan_triangulate
@@ -49,3 +50,33 @@ def nudge_region(positions: np.ndarray, vertices: np.ndarray, amount: float, *,
     out = X.copy()
     out[idx] += float(amount) * w[:, None] * u
     return out
+
+
+def ring_falloff(adjacency: sp.spmatrix, core: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """(len(vertices),) nudge weights of a region: 1 on its ``core``, falling smoothly over the overlap rings
+    (the rest of ``vertices``) to 0 just outside the region, so a nudge moves the region, not a cliff.
+
+    A vertex ``d`` rings from the core (graph distance in ``adjacency`` (V, V), walking inside the region) of a
+    region ``n`` rings wide gets ``s(1 − d / (n + 1))``, s the smoothstep ``3x² − 2x³`` (zero slope at both ends).
+    A region vertex the core cannot reach inside the region gets 0.
+    """
+    A = sp.csr_matrix(adjacency)
+    idx = np.asarray(vertices, dtype=np.int64).ravel()
+    core = np.asarray(core, dtype=np.int64).ravel()
+    inside = np.zeros(A.shape[0], dtype=bool)
+    inside[idx] = True
+    if not inside[core].all():
+        raise RigInputError("The region's core must lie among its vertices.")
+    dist = np.full(A.shape[0], -1, dtype=np.int64)
+    dist[core] = 0
+    frontier, d = core, 0
+    while frontier.size:
+        d += 1
+        nb = np.unique(A[frontier].indices)
+        nb = nb[inside[nb] & (dist[nb] < 0)]
+        dist[nb] = d
+        frontier = nb
+    rings = dist[idx]
+    width = max(int(rings.max(initial=0)), 0) + 1
+    x = np.where(rings >= 0, 1.0 - rings / width, 0.0)
+    return x * x * (3.0 - 2.0 * x)

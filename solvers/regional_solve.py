@@ -73,6 +73,9 @@ class RegionalSolver:
     deltas         (K, V, 3) shape deltas, used only to find which shapes move in each region; or give
                    ``region_max`` (R, K) (``shape_region_max``) instead.
     solve_background  also solve the background row globally from all markers (default: keep it).
+    antagonists    shape index pairs that must not be both on (ALGORITHMS.md §13; ``model.antagonists``): when a
+                   region's solve leaves both above ``exclusion_level``, the weaker is held at 0 and the region
+                   solved again (an exclusion, the complementarity constraint w_i w_j = 0, by active set).
     Other keywords go to ``WeightSolver`` (mode, lam_sparsity, lam_temporal, lam_reg, lower, upper).
     """
 
@@ -80,7 +83,7 @@ class RegionalSolver:
                  deltas: np.ndarray | None = None, region_max: np.ndarray | None = None,
                  shape_threshold: float = 0.02, solve_background: bool = False, mode: str = "box",
                  lam_sparsity: float = 0.0, lam_temporal: float = 0.0, lam_reg: float = 1e-3,
-                 lower=0.0, upper=1.0) -> None:
+                 lower=0.0, upper=1.0, antagonists=None, exclusion_level: float = 0.1) -> None:
         A = np.asarray(marker_rows, dtype=np.float64)
         S = sp.csr_matrix(sampling)
         M = S.shape[0]
@@ -98,6 +101,8 @@ class RegionalSolver:
         if region_max.shape != (self.R, self.K):
             raise RigInputError(f"The per-region shape displacement must be ({self.R}, {self.K}), not {region_max.shape}.")
         self.shapes = region_shapes(region_max, shape_threshold)
+        self.antagonists = [(int(i), int(j)) for i, j in (antagonists or [])]
+        self.exclusion_level = float(exclusion_level)
         self.markers = markers_in_regions(S, regions)
         lo = np.broadcast_to(np.asarray(lower, dtype=np.float64), (self.K,))
         hi = np.broadcast_to(np.asarray(upper, dtype=np.float64), (self.K,))
@@ -152,12 +157,38 @@ class RegionalSolver:
                 br = br - A_others @ W[r, others]
             wr = W[r, sh]
             prev = None if w_prev is None else np.asarray(w_prev)[r, sh]
-            out[r, sh] = solver.solve(br, w_ref=wr, w_start=wr, w_prev=prev)
+            out[r, sh] = self._excluding(solver, br, sh, dict(w_ref=wr, w_start=wr, w_prev=prev))
         if self._background is not None:
             wr = W[self.R]
             prev = None if w_prev is None else np.asarray(w_prev)[self.R]
-            out[self.R] = self._background.solve(b, w_ref=wr, w_start=wr, w_prev=prev)
+            out[self.R] = self._excluding(self._background, b, np.arange(self.K), dict(w_ref=wr, w_start=wr,
+                                                                                     w_prev=prev))
         return out
+
+    def _excluding(self, solver: WeightSolver, b: np.ndarray, shapes: np.ndarray, kw: dict) -> np.ndarray:
+        """``solver.solve(b, **kw)`` for the region's ``shapes``, then, while an antagonist pair is both above the
+        exclusion level, the weaker held at 0 (a stiff diagonal term on it for this call) and solved again."""
+        w = solver.solve(b, **kw)
+        if not self.antagonists:
+            return w
+        pos = {int(k): n for n, k in enumerate(shapes)}
+        pairs = [(pos[i], pos[j]) for i, j in self.antagonists if i in pos and j in pos]
+        held: set[int] = set()
+        for _ in range(len(pairs)):
+            on = [(i, j) for i, j in pairs if w[i] > self.exclusion_level and w[j] > self.exclusion_level]
+            if not on:
+                break
+            held.update(i if w[i] < w[j] else j for i, j in on)
+            finite = np.isfinite(b)
+            A = solver.A
+            stiff = 1e6 * max(float(np.trace(solver.AtA)) / max(solver.K, 1), 1.0)
+            upd = np.zeros((solver.K, solver.K))
+            upd[list(held), list(held)] = stiff
+            if not finite.all():
+                upd -= A[~finite].T @ A[~finite]
+            w = solver.solve_gram(A[finite].T @ b[finite], gram_update=upd, **kw)
+            w[list(held)] = 0.0
+        return w
 
     def _solve_linearised(self, b, weights, w_prev, offset, J) -> np.ndarray:
         """``solve`` with ``linearised=(offset, J)``: one Gauss–Newton step per region (see ``solve``)."""

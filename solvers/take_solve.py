@@ -32,20 +32,34 @@ import numpy as np
 import scipy.linalg as la
 import scipy.sparse as sp
 
+from .antagonists import pair_penalty
 from .correctives import linearised_correctives
 from .rbf import KERNELS, RBFResidual, phantom_points
+from .retarget import SmoothWarp, neutral_stretch
 from .rigid import to_matrix, umeyama
 from .weight_solve import WeightSolver
 
 Progress = Optional[Callable[[int, int, str], None]]
 
+RETARGET = ("jacobian", "scale", "none")   # how the markers' motion is carried into the rig (ALGORITHMS.md §12)
+
+# James–Stein-like shrinkage of the actor's neutral offsets toward the rig (``TakeSolver.register``): an offset below
+# about √30 ≈ 5.5 standard errors of its neutral mean is taken as noise. Measured: 3 gave 0.2105 mm dense RMS on the
+# same-face take, 9 gave 0.2052, 30 gave 0.2042 (0.2049 fitting the rig's own neutral); the actor take's weights
+# (0.067 RMS) do not change.
+SHRINK = 30.0
 CORRECTIVE_STEPS = 6      # Gauss–Newton steps per weight solve on a rig with correctives (quadratic: 2–3 suffice)
 
 # Defaults chosen by measurement on the ICT Live Link take (see tests/benchmarks/test_bench_take_solve.py).
+# retarget 'scale' (the similarity's scale carries the motion) measured 0.067 weights RMS / 0.31 mm on the actor take
+# against 0.10 / 0.43 mm through the smooth warp's Jacobian ('jacobian'), whose per-marker maps the 60 markers do not
+# determine well (their local scale correlated 0.3 with the true one). lam_antagonist (rig units², per antagonist
+# pair w_i w_j, ALGORITHMS.md §13): 0 left up to 22 frames with both weights of a pair above 0.2; 0.15 none, and
+# the same-face take's dense RMS went from 0.2042 to 0.2025 mm (0.2 gave 0.2075, 0.3 gave 0.2216).
 DEFAULTS = dict(lam_sparsity=0.0, lam_temporal=1.0, iterations=3, two_pass=True, marker_smoothing=0.7,
                 residual="gaussian", rbf_scale=2.0, rbf_lambda=1.0, residual_smoothing=6.0, n_phantoms=48,
                 phantom_distance=2.0, calibration_frames=30, rigid_weighting=0.1, rigid_noise=0.05,
-                lam_region=0.1)
+                lam_region=0.1, retarget="scale", warp_scale=3.0, warp_lambda=0.1, lam_antagonist=0.15)
 
 
 def _mean_rigid(Ra: np.ndarray, ta: np.ndarray, Rb: np.ndarray, tb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -55,6 +69,32 @@ def _mean_rigid(Ra: np.ndarray, ta: np.ndarray, Rb: np.ndarray, tb: np.ndarray) 
     d = np.sign(np.linalg.det(U @ Vt))
     U[:, :, 2] *= d[:, None]
     return U @ Vt, 0.5 * (ta + tb)
+
+
+def _neutral_mean(Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(mean (M, 3), variance of the mean (M,)) of the neutral frames Y (F, M, 3), NaN where missing: each frame
+    rigidly aligned to the plain mean first (a Procrustes mean, Gower 1975), so a head that moves during the
+    neutral does not blur it. A marker never seen is NaN."""
+    mean = np.nanmean(Y, axis=0)
+    ok = np.isfinite(mean).all(axis=1)
+    if Y.shape[0] > 1 and ok.sum() >= 3:
+        seen = np.isfinite(Y).all(axis=2) & ok
+        good = seen.sum(axis=1) >= 3
+        if good.any():
+            R, t = kabsch_batch(Y[good], mean, seen[good])
+            Y = Y.copy()
+            Y[good] = np.einsum("fij,fmj->fmi", R, Y[good]) + t[:, None]
+            mean = np.nanmean(Y, axis=0)
+    n = np.isfinite(Y).all(axis=2).sum(axis=0)
+    var = np.nanmean(np.nanvar(Y, axis=0), axis=1) / np.maximum(n, 1) if Y.shape[0] > 1 else np.zeros(Y.shape[1])
+    return mean, np.nan_to_num(var, nan=0.0)
+
+
+def kabsch_batch(source: np.ndarray, target: np.ndarray, present: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame the rigid (R, t) with target ≈ R source + t over the present points (Umeyama 1991 without scale)."""
+    tgt = np.broadcast_to(np.nan_to_num(target), source.shape)
+    _, R, t = umeyama(np.nan_to_num(source), tgt, present.astype(np.float64), scale=False)
+    return R, t
 
 
 def _smooth_in_time(values: np.ndarray, sigma: float) -> np.ndarray:
@@ -203,6 +243,13 @@ class TakeSolution:
     coefficients: np.ndarray | None = None
     calibration: np.ndarray | None = None
     misfit: np.ndarray | None = None
+    markers_rig: np.ndarray | None = None
+    motion_explained: float = float("nan")
+    motion_explained_per_marker: np.ndarray | None = None
+    neutral_frames: tuple[int, int] | None = None
+    neutral_reason: dict | None = None
+    left_out: dict | None = None          # take markers not solved: label -> why (set by the caller)
+    head_labels: list | None = None       # unbound stable markers used for the head motion only
     labels: list | None = None
     solve_seconds: float = 0.0
     solver: "TakeSolver | None" = field(default=None, repr=False)
@@ -272,9 +319,15 @@ class TakeSolver:
                  rigid_weighting: float = DEFAULTS["rigid_weighting"],
                  rigid_noise: float = DEFAULTS["rigid_noise"],
                  lam_region: float = DEFAULTS["lam_region"], correctives=None,
-                 surface: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 surface: Callable[[np.ndarray], np.ndarray] | None = None,
+                 retarget: str = DEFAULTS["retarget"], warp_scale: float = DEFAULTS["warp_scale"],
+                 warp_lambda: float = DEFAULTS["warp_lambda"], antagonists=None,
+                 lam_antagonist: float = DEFAULTS["lam_antagonist"]) -> None:
         if residual not in KERNELS:
             raise ValueError(f"Unknown residual '{residual}': use one of {', '.join(KERNELS)}.")
+        if retarget not in RETARGET:
+            raise ValueError(f"Unknown retargeting '{retarget}': use one of {', '.join(RETARGET)}.")
+        self.retarget, self.warp_scale, self.warp_lambda = retarget, float(warp_scale), float(warp_lambda)
         self.neutral = np.asarray(neutral, dtype=np.float64)
         self.deltas = np.asarray(deltas, dtype=np.float64)
         K, V, _ = self.deltas.shape
@@ -293,14 +346,12 @@ class TakeSolver:
         self.rigid_weighting = float(rigid_weighting)
         self.rigid_noise = float(rigid_noise)
         self.rest = np.asarray(self.binding @ self.neutral)  # (M, 3) markers at rest
-        Dm = np.stack([self.binding @ self.deltas[k] for k in range(K)])  # (K, M, 3)
-        self.Dm = Dm.reshape(K, 3 * M)  # w @ Dm -> (3M,)
-        self.A = np.ascontiguousarray(self.Dm.T)  # (3M, K)
-        self.At = np.ascontiguousarray(self.Dm)   # (K, 3M) = Aᵀ, row-major for the per-frame Aᵀb
+        self._Dm_rig = np.stack([self.binding @ self.deltas[k] for k in range(K)])  # (K, M, 3)
         self.mode, self.lam_sparsity, self.lam_temporal = mode, float(lam_sparsity), float(lam_temporal)
         self.lower, self.upper = 0.0, 1.0
-        self._qps: dict[bytes, tuple] = {}
-        self.weight_solver = WeightSolver(self.A, mode=mode, lam_sparsity=lam_sparsity, lam_temporal=lam_temporal)
+        # Antagonist pairs (ALGORITHMS.md §13): λ_a w_i w_j added to the QP for each pair (i, j).
+        self.lam_antagonist = float(lam_antagonist)
+        self.pair_penalty = pair_penalty(antagonists if antagonists is not None else [], K, self.lam_antagonist)
         # Correctives: their activation rule and deltas, at the markers (C, 3M) and on the surface.
         self._activate, E, drivers = correctives if correctives is not None else (None, np.zeros((0, V, 3)), [])
         E = np.asarray(E, dtype=np.float64).reshape(-1, V, 3)
@@ -308,15 +359,15 @@ class TakeSolver:
             self._activate, E, drivers = None, np.zeros((0, V, 3)), []
         self._drivers = np.unique(np.asarray(drivers, dtype=np.intp))   # the shapes the activations depend on
         self.C = E.shape[0]
-        self.Em = np.stack([self.binding @ E[c] for c in range(self.C)]).reshape(self.C, 3 * M) if self.C else \
-            np.zeros((0, 3 * M))
+        self._Em_rig = np.stack([self.binding @ E[c] for c in range(self.C)]) if self.C else np.zeros((0, M, 3))
         # Dense pose: the rig's one pose evaluation, handed in (model.pose.PoseEvaluator.pose with the blend).
         self.surface = surface
         # Regions.
         self.lam_region = float(lam_region)
         self.regions = None
-        if regions is not None:
-            self._setup_regions(regions, blend, min_region_markers, mode, lam_sparsity, lam_temporal)
+        self._region_args = None if regions is None else (regions, blend, min_region_markers)
+        # The model the markers are fitted with: the rig's marker points until a take's neutral is known.
+        self._set_actor(self.rest, None)
         # Residual.
         self.residual = residual
         self.rbf: RBFResidual | None = None
@@ -331,6 +382,67 @@ class TakeSolver:
             self.rbf = RBFResidual(self.rest, self.neutral[ph] if len(ph) else None,
                                    self.neutral[self.residual_vertices], kernel=residual, scale=rbf_scale,
                                    lam=rbf_lambda)
+
+    # --- the actor's model at the markers (ALGORITHMS.md §12) -------------------------------------
+    def _set_actor(self, anchor: np.ndarray, jac: np.ndarray | None) -> None:
+        """Fit the markers with the actor's neutral ``anchor`` (M, 3) (rig frame) and the rig's displacements
+        carried into the actor's face by the warp's Jacobian ``jac`` (M, 3, 3) (None: the identity):
+        marker j at weights w sits at anchor_j + J_j Σ_k w_k d_kj (+ correctives). Rebuilds what depends on it."""
+        K, M = self.K, self.M
+        self.anchor = np.asarray(anchor, dtype=np.float64)
+        if jac is None and getattr(self, "jac", 0) is None:
+            return          # the model's displacements did not change: keep the cached QP factors (warm solves)
+        self.jac = jac
+        Dm = self._Dm_rig if jac is None else np.einsum("mab,kmb->kma", jac, self._Dm_rig)
+        self.Dm = np.ascontiguousarray(Dm.reshape(K, 3 * M))  # w @ Dm -> (3M,)
+        self.A = np.ascontiguousarray(self.Dm.T)  # (3M, K)
+        self.At = self.Dm                          # (K, 3M) = Aᵀ, row-major for the per-frame Aᵀb
+        Em = self._Em_rig if (jac is None or not self.C) else np.einsum("mab,cmb->cma", jac, self._Em_rig)
+        self.Em = Em.reshape(self.C, 3 * M)
+        self._qps: dict[bytes, tuple] = {}
+        self.weight_solver = WeightSolver(self.A, mode=self.mode, lam_sparsity=self.lam_sparsity,
+                                          lam_temporal=self.lam_temporal)
+        if self._region_args is not None:
+            regions, blend, min_markers = self._region_args
+            self._setup_regions(regions, blend, min_markers, self.mode, self.lam_sparsity, self.lam_temporal)
+
+    def to_rig(self, z: np.ndarray) -> np.ndarray:
+        """(…, M, 3) head-stabilised actor markers carried into the rig's frame: rest + J⁻¹ (z − anchor)
+        (ALGORITHMS.md §12 (c)); the identity for the rig's own face."""
+        d = np.asarray(z, dtype=np.float64) - self.anchor
+        if self.jac is not None:
+            d = np.einsum("mab,...mb->...ma", self._jac_inv, d)
+        return self.rest + d
+
+    def register(self, neutral: np.ndarray, variance: np.ndarray | None = None) -> None:
+        """Register the actor's neutral markers (M, 3) (rig frame after the similarity, NaN where never seen)
+        to the rig (ALGORITHMS.md §12 (b)): a smooth warp (``solvers.retarget.SmoothWarp``) from the rig's
+        marker points to them; the markers never seen take the warp's image of their rig point.
+        ``variance`` (M,): the variance of each neutral mean (noise² / frames). Each marker's offset from the
+        rig is shrunk toward 0 by a James–Stein factor max(0, 1 − 30σ²/‖o‖²) (James & Stein 1961; ``SHRINK``): an offset
+        as small as the noise (the rig's own face) is noise, and fitting it would bend the residual. With
+        ``retarget`` 'jacobian' the motion is carried through the warp's Jacobian at each marker, with 'scale'
+        through the similarity alone, with 'none' the rig's own neutral is fitted (a take of the rig's face)."""
+        if self.retarget == "none":
+            self._set_actor(self.rest, None)
+            return
+        seen = np.isfinite(neutral).all(axis=1)
+        anchor = np.array(neutral, dtype=np.float64)
+        if variance is not None:
+            off = anchor[seen] - self.rest[seen]
+            n2 = np.maximum(np.einsum("mc,mc->m", off, off), 1e-300)
+            shrink = np.clip(1.0 - SHRINK * np.asarray(variance)[seen] / n2, 0.0, 1.0)
+            anchor[seen] = self.rest[seen] + shrink[:, None] * off
+        jac = None
+        if seen.sum() >= 4 and (self.retarget == "jacobian" or not seen.all()):
+            warp = SmoothWarp(self.rest[seen], anchor[seen], scale=self.warp_scale, lam=self.warp_lambda)
+            anchor[~seen] = warp(self.rest[~seen])
+            if self.retarget == "jacobian":
+                jac = warp.jacobian(self.rest)
+                self._jac_inv = np.linalg.inv(jac)
+        elif not seen.all():
+            anchor[~seen] = self.rest[~seen]
+        self._set_actor(anchor, jac)
 
     # --- regions (Joshi §4) ----------------------------------------------------------------------
     def _setup_regions(self, regions, blend, min_markers, mode, lam_s, lam_t) -> None:
@@ -373,13 +485,20 @@ class TakeSolver:
         return np.einsum("mc,cmx->mx", self._activate(per_marker), self.Em.reshape(self.C, self.M, 3))
 
     def markers_at(self, w: np.ndarray) -> np.ndarray:
-        """(M, 3) rig markers for global weights w (correctives included)."""
-        return self.rest + (w @ self.Dm + self.corrective_markers(w)[0]).reshape(-1, 3)
+        """(M, 3) the rig's marker points for global weights w (correctives included), in the rig's frame."""
+        return self.to_rig(self._fit_at(w))
 
     def markers_regional(self, W: np.ndarray) -> np.ndarray:
-        """(M, 3) rig markers for region weights W (R+1, K): Joshi §4 blend at the markers."""
+        """(M, 3) the rig's marker points for region weights W (R+1, K): Joshi §4 blend at the markers."""
+        return self.to_rig(self._fit_regional(W))
+
+    def _fit_at(self, w: np.ndarray) -> np.ndarray:
+        """(M, 3) the fitted markers on the actor (anchor + J A w) for global weights w."""
+        return self.anchor + (w @ self.Dm + self.corrective_markers(w)[0]).reshape(-1, 3)
+
+    def _fit_regional(self, W: np.ndarray) -> np.ndarray:
         per_marker = self.marker_blend @ W  # (M, K)
-        return (self.rest + np.einsum("mk,kmc->mc", per_marker, self.Dm.reshape(self.K, self.M, 3))
+        return (self.anchor + np.einsum("mk,kmc->mc", per_marker, self.Dm.reshape(self.K, self.M, 3))
                 + self._corrective_per_marker(per_marker))
 
     def pose(self, w: np.ndarray) -> np.ndarray:
@@ -390,10 +509,11 @@ class TakeSolver:
         return np.array(self.surface(np.asarray(w, dtype=np.float64)), dtype=np.float64)
 
     # --- calibration (Ma §3.1; Umeyama 1991) -----------------------------------------------------
-    def calibrate(self, markers: np.ndarray, frames: int) -> np.ndarray:
-        """4×4 similarity taking the take (rig units) onto the rig at rest, from the mean of the first
-        ``frames`` (neutral) frames: Umeyama 1991, Eq. 40–42."""
-        pos = markers[:max(1, frames)]
+    def calibrate(self, markers: np.ndarray, frames) -> np.ndarray:
+        """4×4 similarity taking the take (rig units) onto the rig at rest, from the mean of the neutral frames
+        (``frames``: a count from the start, or (first, last) inclusive): Umeyama 1991, Eq. 40–42."""
+        a, b = (0, max(1, int(frames)) - 1) if np.isscalar(frames) else (int(frames[0]), int(frames[1]))
+        pos = markers[a:b + 1]
         with np.errstate(invalid="ignore"):
             cloud = np.nanmean(pos, axis=0)
         ok = np.isfinite(cloud).all(axis=1)
@@ -402,27 +522,73 @@ class TakeSolver:
         s, R, t = umeyama(cloud[ok], self.rest[ok], scale=True)
         return to_matrix(s, R, t)
 
+    def neutral_range(self, X: np.ndarray, neutral, calibration_frames: int) -> tuple[tuple[int, int], dict | None]:
+        """((first, last), why) of the actor's neutral in ``X`` (F, M, 3) rig units: ``neutral`` (first, last)
+        inclusive, 'auto' (``solvers.retarget.neutral_stretch``, ``calibration_frames`` long) or None (the first
+        ``calibration_frames``). ValueError (one sentence) for a range outside the take."""
+        F = X.shape[0]
+        if neutral is None:
+            return (0, max(1, min(int(calibration_frames), F)) - 1), None
+        if isinstance(neutral, str):
+            if neutral != "auto":
+                raise ValueError(f"The neutral frames must be 'auto' or a range A:B, not '{neutral}'.")
+            a, b, why = neutral_stretch(X, self.rest, max(1, min(int(calibration_frames), F)))
+            return (a, b), why
+        a, b = int(neutral[0]), int(neutral[1])
+        if not 0 <= a <= b < F:
+            raise ValueError(f"The neutral frames {a}:{b} are outside the take, which has frames 0 to {F - 1}.")
+        return (a, b), None
+
     # --- the solve -------------------------------------------------------------------------------
     def solve(self, markers: np.ndarray, *, unit_factor: float = 1.0,
               calibration_frames: int = DEFAULTS["calibration_frames"], calibrate: bool = True,
+              neutral=None, stable: np.ndarray | None = None, head_markers: np.ndarray | None = None,
               progress: Progress = None, cancel: Callable[[], bool] | None = None) -> TakeSolution:
         """Solve every frame of ``markers`` (F, M, 3) (take units, NaN where missing; columns in the order
         of the binding rows). Ma et al. 2016 §3.1 alternation of Kabsch and the QP of Joshi Eq. 2 /
         Ma Eq. 3–4 frame by frame (forward, and with ``two_pass`` also backward, averaged), optional
-        per-region QPs (Joshi §4), then the RBF residual (Joshi Eq. 3; Fidaleo Eq. 1–5)."""
+        per-region QPs (Joshi §4), then the RBF residual (Joshi Eq. 3; Fidaleo Eq. 1–5).
+
+        Retargeting (ALGORITHMS.md §12): the actor's neutral is the mean of the neutral frames (``neutral``:
+        (first, last), 'auto', or None for the first ``calibration_frames``); the markers' motion from it is
+        fitted, carried into the rig by ``register``, never their absolute positions. Head motion comes from
+        the ``stable`` face markers ((M,) bool, default all) and the ``head_markers`` (F, H, 3) take units, markers
+        on the head that no expression moves (a head band), which need no binding."""
         t0 = time.perf_counter()
         X = np.asarray(markers, dtype=np.float64) * float(unit_factor)
         if X.ndim != 3 or X.shape[2] != 3:
             raise ValueError(f"Marker positions must be frames x markers x 3, not {X.shape}.")
         F, M, _ = X.shape
-        if self.marker_smoothing and F > 1:  # optical noise is white in time: a light low-pass
-            X = _smooth_in_time(X, self.marker_smoothing)
         if M != self.M:
             raise ValueError(f"The take has {M} marker columns but the solver was built for {self.M}.")
         if F == 0:
             raise ValueError("The take has no frames.")
-        cal = self.calibrate(X, calibration_frames) if calibrate else np.eye(4)
+        H = np.zeros((F, 0, 3)) if head_markers is None else np.asarray(head_markers, dtype=np.float64) * float(unit_factor)
+        if H.shape[:1] != (F,) or H.ndim != 3:
+            raise ValueError(f"The head markers must be {F} frames x markers x 3, not {H.shape}.")
+        stable = np.ones(M, dtype=bool) if stable is None else np.asarray(stable, dtype=bool)
+        neutral_frames, why = None, None
+        if calibrate:   # found on the raw markers: the stillness score is measured against their noise
+            neutral_frames, why = self.neutral_range(X, neutral, calibration_frames)
+        if self.marker_smoothing and F > 1:  # optical noise is white in time: a light low-pass
+            X = _smooth_in_time(X, self.marker_smoothing)
+            if H.shape[1]:
+                H = _smooth_in_time(H, self.marker_smoothing)
+        if calibrate:
+            cal = self.calibrate(X, neutral_frames)
+        else:
+            cal = np.eye(4)
         Y = X @ cal[:3, :3].T + cal[:3, 3]  # calibrated take, rig space up to head motion
+        Yh = H @ cal[:3, :3].T + cal[:3, 3]
+        a, b = neutral_frames if neutral_frames is not None else (0, -1)
+        with np.errstate(invalid="ignore"):
+            if calibrate:
+                self.register(*_neutral_mean(Y[a:b + 1]))
+            else:
+                self._set_actor(self.rest, None)
+            head_anchor = np.nanmean(Yh[a:b + 1], axis=0) if (calibrate and Yh.shape[1]) else np.zeros((0, 3))
+        head_ok = np.isfinite(head_anchor).all(axis=1)
+        self._head = (Yh[:, head_ok], head_anchor[head_ok], stable)
         passes = 2 if self.two_pass else 1
         step = max(1, F // 50)
 
@@ -449,17 +615,25 @@ class TakeSolver:
                     raise SolveCancelled(f"Take solve cancelled at frame {f} of {F}.")
                 RW[f] = self._solve_regions(Z[f], W[f], RW[f - 1] if f else None) if solved[f] else \
                     (RW[f - 1] if f else W[f])
-            fit = self.rest + np.einsum("mr,frk,kmc->fmc", self.marker_blend, RW,
-                                        self.Dm.reshape(self.K, self.M, 3))
+            fit = self.anchor + np.einsum("mr,frk,kmc->fmc", self.marker_blend, RW,
+                                          self.Dm.reshape(self.K, self.M, 3))
             if self._activate is not None:
                 fit += np.stack([self._corrective_per_marker(self.marker_blend @ RW[f]) for f in range(F)])
         else:
-            fit = self.rest + (W @ self.Dm + self.corrective_markers(W)).reshape(F, M, 3)
-        misfit = np.where(solved[:, None, None], Z - fit, np.nan)
+            fit = self.anchor + (W @ self.Dm + self.corrective_markers(W)).reshape(F, M, 3)
+        Zr = self.to_rig(Z)                                  # the markers' motion carried into the rig's frame
+        Zr[~solved] = np.nan
+        misfit = Zr - self.to_rig(fit)
+        motion = Zr - self.rest
+        with np.errstate(invalid="ignore", divide="ignore"):
+            r2 = np.einsum("fmc,fmc->fm", misfit, misfit)
+            d2 = np.einsum("fmc,fmc->fm", motion, motion)
+            explained = 1.0 - np.nansum(r2) / np.nansum(d2) if np.nansum(d2) > 0 else float("nan")
+            explained_m = 1.0 - np.nansum(r2, axis=0) / np.nansum(d2, axis=0)
         heads = np.einsum("ij,fjk->fik", np.linalg.inv(cal), to_matrix(np.ones(F), Rs, ts))
         heads[:, :3, :] /= float(unit_factor)  # to take units
         with np.errstate(invalid="ignore"):
-            rmse = np.sqrt(np.nanmean(np.einsum("fmc,fmc->fm", misfit, misfit), axis=1))
+            rmse = np.sqrt(np.nanmean(r2, axis=1))
         coeffs, rmse_res = None, rmse.copy()
         if self.rbf is not None:
             if progress is not None:
@@ -471,7 +645,9 @@ class TakeSolver:
                 rmse_res = np.sqrt(np.nanmean(np.einsum("fmc,fmc->fm", after, after), axis=1))
         return TakeSolution(weights=W, head=heads, marker_rmse=rmse, marker_rmse_residual=rmse_res,
                             region_weights=RW, coefficients=coeffs, calibration=cal, misfit=misfit,
-                            solve_seconds=time.perf_counter() - t0, solver=self)
+                            markers_rig=Zr, motion_explained=float(explained),
+                            motion_explained_per_marker=explained_m, neutral_frames=neutral_frames,
+                            neutral_reason=why, solve_seconds=time.perf_counter() - t0, solver=self)
 
     def _pass(self, Y, order, w, R, t, cancel, report):
         """One causal sweep over ``order``: per frame, ``iterations`` alternations of weighted Kabsch
@@ -482,16 +658,22 @@ class TakeSolver:
         Rs = np.zeros((F, 3, 3))
         ts = np.zeros((F, 3))
         solved = np.zeros(F, dtype=bool)
-        rest, Dm = self.rest, self.Dm
+        rest, Dm = self.anchor, self.Dm
         rw, rw0 = self.rigid_weighting ** 2, self.rigid_noise ** 2
+        Yh, head_anchor, stable = self._head
+        all_stable = bool(stable.all())
         w_prev = None
         for i, f in enumerate(order):
             if cancel is not None and cancel():
                 raise SolveCancelled(f"Take solve cancelled at frame {f} of {F}.")
             y = Y[f]
             valid = np.isfinite(y).all(axis=1)
-            if valid.sum() >= 3:
-                yv, rest_v = y[valid], rest[valid]
+            rigid = valid if all_stable else valid & stable
+            hv = np.isfinite(Yh[f]).all(axis=1) if head_anchor.shape[0] else np.zeros(0, dtype=bool)
+            if valid.sum() >= 3 and (not self.head_motion or rigid.sum() + hv.sum() >= 3):
+                yv, rest_v = y[rigid], rest[rigid]
+                if hv.any():   # head-band markers: rigid, no expression moves them
+                    yv = np.vstack([yv, Yh[f][hv]])
                 if not self.head_motion:  # the head is fixed: the weight QP is the whole solve
                     b = (y - rest).reshape(-1)
                     w = self._weights(valid, b, w if w_prev is None else w_prev, w, steps=CORRECTIVE_STEPS)
@@ -504,12 +686,16 @@ class TakeSolver:
                 for _ in range(self.iterations):
                     disp = (w @ Dm if self._activate is None else w @ Dm + self.corrective_markers(w)[0])
                     disp = disp.reshape(-1, 3)
+                    dv = disp[rigid]
+                    P = rest_v + dv
+                    if hv.any():
+                        P = np.vstack([P, head_anchor[hv]])
+                        dv = np.vstack([dv, np.zeros((int(hv.sum()), 3))])
                     if rw:  # trust markers the expression moves little: the rig's misfit grows with motion
-                        dv = disp[valid]
                         pw = 1.0 / (rw0 + rw * np.einsum("mc,mc->m", dv, dv))
-                        R, t = _kabsch(rest_v + dv, yv, pw / pw.sum())
+                        R, t = _kabsch(P, yv, pw / pw.sum())
                     else:
-                        R, t = _kabsch(rest_v + disp[valid], yv)
+                        R, t = _kabsch(P, yv)
                     z = (y - t) @ R  # Rᵀ (y − t): head-stabilised markers
                     w = self._weights(valid, (z - rest).reshape(-1), w if w_prev is None else w_prev, w)
                 w_prev = w
@@ -582,6 +768,15 @@ class TakeSolver:
             rows = np.repeat(valid, 3)
             A = self.A[rows]
             H = A.T @ A + self.lam_sparsity + (self.lam_temporal + 1e-10) * np.eye(self.K)
+            if self.lam_antagonist:
+                # λ_a w_i w_j is not convex by itself: the temporal term keeps H positive definite along a take;
+                # where it cannot (a one-frame keyframe, λ_t = 0), the penalty is left out of this solve
+                Hp = H + self.pair_penalty
+                try:
+                    la.cho_factor(Hp)
+                    H = Hp
+                except la.LinAlgError:
+                    pass
             # Aᵀ of the present rows, contiguous (one gemv a call), and None for all rows (no row selection)
             qp = self._qps[key] = (rows, None if rows.all() else np.ascontiguousarray(A.T),
                                    _CachedBoxQP(H, self.lower, self.upper))
@@ -600,7 +795,7 @@ class TakeSolver:
     def _solve_regions(self, z: np.ndarray, w: np.ndarray, prev: np.ndarray | None) -> np.ndarray:
         """Per-region QPs (Joshi et al. 2003, Eq. 2 per region; Ma Eq. 3–4 terms) with the head fixed."""
         out = np.repeat(w[None], len(self.regions) + 1, axis=0)
-        b_all = (z - self.rest).reshape(-1) - self.corrective_markers(w)[0]   # correctives frozen at w
+        b_all = (z - self.anchor).reshape(-1) - self.corrective_markers(w)[0]   # correctives frozen at w
         for r, reg in enumerate(self.regions):
             if reg is None:
                 continue

@@ -126,3 +126,27 @@ def test_solve_a_project_with_a_corrective(ict_dir, tmp_path):
     err = np.linalg.norm(frames[0] - posed, axis=1)
     # mm; measured 5e-6 where the corrective acts (1.6 mm when the solve ignores it)
     assert err[fixed].max() * 10 < 0.05 and np.sqrt(np.mean(err[moving] ** 2)) * 10 < 0.05
+
+
+@pytest.mark.parametrize("option, words", [
+    (["--neutral-frames", "400:420"], "outside the take"),
+    (["--stable", "root-*"], "not in the take"),
+    (["--stable", "M00,M01"], "at least 3 stable markers"),
+])
+def test_solve_bad_calibration_input(ict_dir, take_dir, tmp_path, option, words):
+    proc = run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json", *option,
+                   "-o", tmp_path / "w.csv", check=False)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.startswith("error: ") and words in proc.stderr and proc.stderr.count("\n") == 1, proc.stderr
+    assert not (tmp_path / "w.csv").exists()
+
+
+def test_solve_reports_the_neutral_it_found(ict_dir, take_dir, tmp_path):
+    proc = run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json",
+                   "--neutral-frames", "auto", "--global", "--residual", "none",
+                   "-o", tmp_path / "w.csv", "--report", tmp_path / "r.json")
+    rep = json.loads((tmp_path / "r.json").read_text())
+    a, b = rep["neutral_frames"]
+    assert b - a == 29 and b <= 31, rep["neutral_frames"]        # the take's neutral lead-in is frames 0–29
+    assert "most neutral" in rep["neutral_frames_how"] and 0.9 < rep["motion_explained"] < 1.0
+    assert "motion explained" in proc.stdout

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from PySide6 import QtCore, QtTest
+from PySide6 import QtCore, QtTest, QtWidgets
 
 from model.correctives import Corrective, add_corrective
 from model.project import Project, load_project, save_project
@@ -24,7 +24,7 @@ CORRECTIVE = "browInnerUp_L+browInnerUp_R"
 
 DRIVER = r"""
 import sys
-from PySide6 import QtCore, QtTest
+from PySide6 import QtCore, QtTest, QtWidgets
 QtCore.QSettings.setPath(QtCore.QSettings.IniFormat, QtCore.QSettings.UserScope, sys.argv[2])
 from app import settings as app_settings
 s = app_settings.settings()

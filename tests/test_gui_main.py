@@ -203,6 +203,7 @@ def test_save_viewport_image(qtbot, tmp_path, monkeypatch):
     monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", lambda *a, **k: next(answers))
     w.save_image_dialog()
     w.export_pose()
+    w.jobs.wait()                                        # the export runs in the background
     assert (tmp_path / "menu.png").stat().st_size > 0 and (tmp_path / "menu.obj").stat().st_size > 0
     assert not w.save_image("/proc/no/such/dir/x.png")
     assert w.last_error.startswith("/proc/no/such/dir/x.png: could not be written")

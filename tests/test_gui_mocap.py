@@ -45,6 +45,9 @@ def test_solve_take_scrub_views_export_and_bad_input(qtbot, tmp_path, ict_dir, t
     assert sol.n_frames == 358 and sol.weights.shape == (358, rig.n_shapes)
     assert mc.views.has_residual_bar()
     assert mc.views_dock.isVisible()
+    assert f"motion explained {100 * sol.motion_explained:.1f}%" in mc.panel.status_label.text()
+    assert "neutral frames 0–29" in mc.panel.status_label.text() and sol.motion_explained > 0.9
+    assert mc.panel.settings()["neutral_frames"] is None and mc.panel.settings()["stable"] is None
     # with every panel and the Mocap Views open the window still fits its 1400x900 default (a 1080p screen);
     # the faces and the curves share the dock's width
     assert w.minimumSizeHint().height() <= 900

@@ -62,14 +62,14 @@ def test_pick_region_nudge_and_save_as_shape(qtbot, tmp_path):
     assert moved[lvl.regions[region].core].max() > 0.19 and moved[~inside].max() == 0
     after = w.document.surface().astype(np.float64)
     ctrl.save_nudge_as_shape("nudged")
+    w.jobs.wait()                         # added when its evaluator, built in the background, is ready
     assert w.document.rig.n_shapes == n_shapes + 1 and w.document.rig.shape_names[-1] == "nudged"
     k = w.document.rig.shape_index("nudged")
     np.testing.assert_allclose(w.document.rig.deltas[k], after - w.document.rig.neutral, atol=1e-5)
-    w.shapes_panel.row("nudged").box.setValue(1.0)  # the new shape at 1 reproduces the nudged surface
+    # the new shape is a slider set to 1: it reproduces the nudged surface
+    assert w.shapes_panel.rows[-1].name == "nudged" and w.document.weights[k] == 1.0
     np.testing.assert_allclose(w.document.surface(), after, atol=1e-5)
-    w.document.undo_stack.undo()
-    # the new shape is a slider; undo removes it and brings the nudge back; undo again removes the nudge
-    assert w.shapes_panel.rows[-1].name == "nudged"
+    # undo removes it and brings the nudge back; undo again removes the nudge
     w.document.undo_stack.undo()
     assert w.document.rig.n_shapes == n_shapes and w.document.edit_offset is not None
     w.document.undo_stack.undo()

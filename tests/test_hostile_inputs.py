@@ -132,3 +132,14 @@ def test_live_link_face_cell_over_131072_characters(tmp_path, llf_csv):
     path = tmp_path / "llf.csv"
     path.write_text("\n".join(lines) + "\n")
     _refused(read_livelink_csv, path)
+
+
+def test_trc_header_counts_that_are_not_counts(tmp_path, take_dir):
+    """Found by the long fuzzing run: a NumMarkers of 'inf' raised OverflowError."""
+    lines = (take_dir / "take.trc").read_text().splitlines()
+    keys, values = lines[1].split("\t"), lines[2].split("\t")
+    values[keys.index("NumMarkers")] = "inf"
+    lines[2] = "\t".join(values)
+    path = tmp_path / "take.trc"
+    path.write_text("\n".join(lines) + "\n")
+    _refused(load_take, path, "NumMarkers")

@@ -9,6 +9,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 RULE_LABELS = [("product", "Product (Maya multiplication)"), ("hierarchical", "Hierarchical (Smith)"),
                ("min", "Lowest weight"), ("smooth-min", "Lowest weight, smooth")]
+RULE_SHORT = {"product": "Product", "hierarchical": "Hierarchical", "min": "Lowest", "smooth-min": "Smooth lowest"}
 BRUSHES = [("grab", "Grab"), ("smooth", "Smooth"), ("inflate", "Inflate"), ("deflate", "Deflate")]
 FALLOFF_LABELS = [("smooth", "Smooth"), ("linear", "Linear"), ("constant", "Constant")]
 
@@ -71,7 +72,16 @@ class CorrectivesPanel(QtWidgets.QWidget):
         page = QtWidgets.QWidget()
         lay = QtWidgets.QVBoxLayout(page)
         self.table = QtWidgets.QTreeWidget()
-        self.table.setHeaderLabels(["Corrective", "Activation", "Rule", "Drivers"])  # the live value stays in view
+        # three columns that fit the dock (the drivers, usually the name itself, are in each row's tooltip): the
+        # name takes the width left, the live activation and the rule (short) their contents'
+        self.table.setHeaderLabels(["Corrective", "Activation", "Rule"])
+        header = self.table.header()
+        header.setStretchLastSection(False)
+        header.setSectionResizeMode(0, QtWidgets.QHeaderView.Stretch)
+        for c in (_ACTIVATION, _RULE):
+            header.setSectionResizeMode(c, QtWidgets.QHeaderView.ResizeToContents)
+        self.table.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarAlwaysOff)
+        self.table.setTextElideMode(QtCore.Qt.ElideMiddle)
         self.table.setRootIsDecorated(False)
         self.table.setAlternatingRowColors(True)
         self.table.setToolTip("Correctives of the rig, in evaluation order (lower orders first), with their "
@@ -289,28 +299,36 @@ class CorrectivesPanel(QtWidgets.QWidget):
         """rows: (name, drivers, rule) or (name, drivers, rule, muted) in evaluation order; activations: (C,)
         at the current pose."""
         selected = self.selected_name()
+        before = {self.table.topLevelItem(i).data(0, QtCore.Qt.UserRole) for i in range(self.table.topLevelItemCount())}
         self._updating = True
         self.table.clear()
         labels = dict(RULE_LABELS)
+        added = None
         for (name, drivers, rule, *muted), a in zip(rows, activations):
             muted = bool(muted and muted[0])
-            item = QtWidgets.QTreeWidgetItem([name, f"{a:.3f}", labels.get(rule, rule), ", ".join(drivers)])
+            item = QtWidgets.QTreeWidgetItem([name, f"{a:.3f}", RULE_SHORT.get(rule, rule)])
             item.setData(0, QtCore.Qt.UserRole, name)
+            item.setData(_RULE, QtCore.Qt.UserRole, rule)
             item.setFlags(item.flags() | QtCore.Qt.ItemIsUserCheckable)
             item.setCheckState(0, QtCore.Qt.Unchecked if muted else QtCore.Qt.Checked)
-            item.setToolTip(0, f"{name}: driven by {', '.join(drivers)}; {labels.get(rule, rule)}"
-                               + ("; muted: it adds nothing to the face until ticked again" if muted else ""))
+            tip = (f"{name}: driven by {', '.join(drivers)}; {labels.get(rule, rule)}"
+                   + ("; muted: it adds nothing to the face until ticked again" if muted else ""))
+            for c in range(3):
+                item.setToolTip(c, tip)
             if muted:
-                for c in range(4):
+                for c in range(3):
                     item.setForeground(c, QtCore.Qt.gray)
             item.setTextAlignment(_ACTIVATION, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
             self.table.addTopLevelItem(item)
             if name == selected:
                 item.setSelected(True)
-        for c in range(3):
-            self.table.resizeColumnToContents(c)
+            if before and name not in before:
+                added = item
         self._updating = False
         self._on_selection()
+        if added is not None and len(rows) == len(before) + 1:   # a corrective just made: show its row
+            self.table.scrollToItem(added)
+            self._reveal(self.table)
 
     def muted_names(self) -> list[str]:
         return [self.table.topLevelItem(i).text(0) for i in range(self.table.topLevelItemCount())
@@ -349,8 +367,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
                   self.delete_button):
             b.setEnabled(has)
         if has and not self._updating:
-            rule = self.table.selectedItems()[0].text(_RULE)
-            key = {label: k for k, label in RULE_LABELS}.get(rule, rule)
+            key = self.table.selectedItems()[0].data(_RULE, QtCore.Qt.UserRole)
             self._updating = True
             self.rule.setCurrentIndex(max(0, self.rule.findData(key)))
             self._updating = False
@@ -378,11 +395,21 @@ class CorrectivesPanel(QtWidgets.QWidget):
 
     def reveal_sculpt(self) -> None:
         """Scroll the dock so the Sculpt group (brush settings, Save corrective) is in view."""
+        self._reveal(self.sculpt_box)
+
+    def _reveal(self, widget: QtWidgets.QWidget) -> None:
+        """Scroll the dock (if the panel is taller than it) so ``widget`` is in view."""
         w = self.parentWidget()
         while w is not None and not isinstance(w, QtWidgets.QScrollArea):
             w = w.parentWidget()
         if w is not None:
-            QtCore.QTimer.singleShot(0, w, lambda: w.ensureWidgetVisible(self.sculpt_box, 0, 0))
+            QtCore.QTimer.singleShot(0, w, lambda: w.ensureWidgetVisible(widget, 0, 0))
+
+    def heightForWidth(self, width: int) -> int:  # Qt override
+        """No preferred height for a width: with it, the word-wrapped labels made the dock's scroll area size the
+        panel to its preferred height (taller than the dock of a 1400x900 window, Save corrective under the fold)
+        instead of fitting it to the dock (never below its minimum) with the lists taking what is left."""
+        return -1
 
     def brush_settings(self) -> dict:
         return {"brush": self.brush.currentData(), "radius": float(self.radius.value()),

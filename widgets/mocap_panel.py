@@ -42,6 +42,10 @@ class MocapPanel(QtWidgets.QWidget):
         self.take_label.setWordWrap(True)
         self.map_label = QtWidgets.QLabel("no marker map")
         self.map_label.setWordWrap(True)
+        for label, lines in ((self.take_label, 3), (self.map_label, 2)):
+            # a fixed height: a long take description must not push the Solve button from under the pointer
+            label.setFixedHeight(label.fontMetrics().lineSpacing() * lines + 4)
+            label.setAlignment(QtCore.Qt.AlignLeft | QtCore.Qt.AlignTop)
         fl.addWidget(self.take_label, 1, 0, 1, 3)
         fl.addWidget(self.map_label, 2, 0, 1, 3)
         lay.addWidget(files)
@@ -76,6 +80,16 @@ class MocapPanel(QtWidgets.QWidget):
         form.addRow("RBF scale", self.rbf_scale)
         form.addRow("RBF λ", self.rbf_lambda)
         form.addRow("Calibration frames", self.calibration_spin)
+        self.neutral_edit = QtWidgets.QLineEdit()
+        self.neutral_edit.setPlaceholderText("the calibration frames")
+        self.neutral_edit.setToolTip("The actor's neutral: frames A:B (inclusive), 'auto' for the most neutral "
+                                     "stretch, or empty for the first calibration frames")
+        self.stable_edit = QtWidgets.QLineEdit()
+        self.stable_edit.setPlaceholderText("all markers")
+        self.stable_edit.setToolTip("Markers the head motion is taken from: names or patterns, comma-separated "
+                                    "(e.g. root-* for a head band's markers)")
+        form.addRow("Neutral frames", self.neutral_edit)
+        form.addRow("Stable markers", self.stable_edit)
         self.solve_button = QtWidgets.QPushButton("Solve")
         self.solve_button.setToolTip("Solve head motion, weights and residual for every frame of the take "
                                      "(in the background, with progress; Esc cancels)")
@@ -154,12 +168,14 @@ class MocapPanel(QtWidgets.QWidget):
     # --- state shown ------------------------------------------------------------------------------
     def settings(self) -> dict:
         """Solve settings for ``model.take_workspace.TakeWorkspace.solve``: ``mode`` (global / region), ``level``,
-        the solver options and the calibration length."""
+        the solver options, the calibration length, the neutral frames and the stable markers."""
         return {"mode": "region" if self.mode_combo.currentIndex() == 1 else "global",
                 "level": self.level_spin.value(), "residual": self.residual_combo.currentText(),
                 "lam_sparsity": self.lam_sparsity.value(), "lam_temporal": self.lam_temporal.value(),
                 "rbf_scale": self.rbf_scale.value(), "rbf_lambda": self.rbf_lambda.value(),
-                "calibration_frames": self.calibration_spin.value()}
+                "calibration_frames": self.calibration_spin.value(),
+                "neutral_frames": self.neutral_edit.text().strip() or None,
+                "stable": self.stable_edit.text().strip() or None}
 
     def set_units(self, units: str) -> None:
         """Lengths (the RBF kernel length) are in the rig's units: show them."""

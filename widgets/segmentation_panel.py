@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from model.wording import count
+
 VIEW_LABELS = [("shaded", "Shaded"), ("deformation", "Deformation map"),
                ("deformation-rgb", "Deformation vector (RGB)"), ("segmentation", "Segmentation")]
 # (map kind, per-shape normalisation, label) of the map choice
@@ -190,7 +192,7 @@ class SegmentationPanel(QtWidgets.QWidget):
         counts = self._counts
         lv = self.level.value()
         if counts:
-            self.level_label.setText(f"{lv} of {len(counts) - 1}: {counts[lv]} regions")
+            self.level_label.setText(f"{lv} of {len(counts) - 1}: {count(counts[lv], 'region')}")
 
     def set_regions(self, rows: list[dict], colors) -> None:
         """rows: {'region', 'core_vertices', 'vertices', 'shapes': [(name, share), ...]}; colors (R, 3) in [0,1]."""

@@ -105,6 +105,21 @@ class SideBySideView(QtWidgets.QWidget):
         self._focus = np.asarray(points if focus is None else focus)
         self.set_camera(self._camera)
 
+    def clear(self) -> None:
+        """Show nothing: the surfaces, markers, error vectors and residual bar of the last solve go (a new take,
+        map or rig was loaded)."""
+        p = self.plotter
+        for col, names in ((0, ("surface_left", "markers", "errors")), (1, ("surface_right",))):
+            p.subplot(0, col)
+            for name in names:
+                p.remove_actor(name, render=False)
+        if self.residual_title in p.scalar_bars:
+            p.remove_scalar_bar(self.residual_title, render=False)
+        self.left_mesh = self.right_mesh = None
+        self.marker_cloud = self.error_lines = None
+        self._culled = []
+        self.render()
+
     def show_frame(self, projection: np.ndarray, dense: np.ndarray, residual: np.ndarray,
                    markers: np.ndarray | None = None, fitted: np.ndarray | None = None,
                    normals: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> None:

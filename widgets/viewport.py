@@ -140,6 +140,8 @@ class Viewport(QtWidgets.QWidget):
                     focus: np.ndarray | None = None, *, reset_camera: bool = True) -> None:
         """Show a new surface (a new rig): topology is uploaded once here."""
         self._focus = focus if focus is not None else points
+        if self._colormap is not None and len(self._colormap.scalars) != len(points):
+            self._colormap = None   # the last rig's colours: its owner sets the new rig's when they are ready
         self.mesh = rig_mesh(points, face_counts, face_indices)
         self._arrays = SurfaceArrays(self.mesh)
         self._redraw_surface()
@@ -181,6 +183,9 @@ class Viewport(QtWidgets.QWidget):
 
     def _redraw_surface(self) -> None:
         self.plotter.remove_scalar_bar() if self.plotter.scalar_bars else None
+        # the previous colour map's legend and its title go with it (they stayed up in Shaded view)
+        self.plotter.remove_legend(render=False)
+        self.plotter.remove_actor("legend_title", render=False)
         # point data from a previous colour map must not leak into the next one
         for key in ("values", "colors"):
             if key in self.mesh.point_data:

@@ -1,0 +1,69 @@
+"""The ``personalize`` command: the actor's own rig from a template rig and scans or a marker take
+(Ma et al. 2016 §3; ALGORITHMS.md §9; ``model.personalize``).
+
+Writes a new project with the personalised rig (same shape names, correctives and presets) and prints the
+solve's size and time and the shapes that changed most (RMS and largest change of their displacements).
+"""
+from __future__ import annotations
+
+import json
+
+from app.cli_common import load_rig_arg
+
+
+def add_parser(sub, rig_arg) -> None:
+    sp = sub.add_parser("personalize", help="build an actor's own rig from scans or a marker take (Ma et al. 2016)")
+    rig_arg(sp)
+    sp.add_argument("--neutral-scan", metavar="SCAN.obj",
+                    help="the actor's neutral scan in the rig's topology (default: warped to the take, or "
+                         "re-estimated from the pose scans)")
+    sp.add_argument("--scans", nargs="+", metavar="FILE_OR_DIR", default=[],
+                    help="pose scans of the actor (OBJ files in the rig's topology, or folders of them)")
+    sp.add_argument("--take", metavar="TAKE", help="a marker take of the actor (.c3d, .trc, .csv) for an actor without scans")
+    sp.add_argument("--map", metavar="MAP.json", help="marker map of the take (default: mapped automatically)")
+    sp.add_argument("--calibration-frames", type=int, default=30,
+                    help="neutral frames at the start of the take (default 30)")
+    sp.add_argument("--iterations", type=int, default=None, help="weight/delta alternations (default 3)")
+    sp.add_argument("--top", type=int, default=10, help="changed shapes to list (default 10)")
+    sp.add_argument("--report", help="JSON report to write (the summary and every shape's change)")
+    sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
+    sp.set_defaults(func=cmd_personalize)
+
+
+def cmd_personalize(args) -> int:
+    from model.errors import RigInputError
+    from model.personalize import personalize_rig_detailed, scan_paths, shape_change_report
+    from model.project import Project, save_project
+
+    if args.map and not args.take:
+        raise RigInputError("--map: a marker map needs --take.")
+    if args.iterations is not None and args.iterations < 1:
+        raise RigInputError(f"--iterations: {args.iterations} is fewer than one.")
+    rig = load_rig_arg(args)
+    scans = scan_paths(args.scans)
+    take = marker_map = None
+    if args.take:
+        from model.takes import MarkerTake, load_take
+        take = load_take(args.take)
+        if not isinstance(take, MarkerTake):
+            raise RigInputError(f"{args.take}: is a weight take (Live Link Face), not marker trajectories.")
+        if args.map:
+            from model.marker_map import load_marker_map
+            marker_map = load_marker_map(args.map)
+    options = {} if args.iterations is None else {"iterations": args.iterations}
+    actor, _, summary = personalize_rig_detailed(rig, args.neutral_scan, scans, take, marker_map,
+                                                 calibration_frames=args.calibration_frames, **options)
+    save_project(Project(rig=actor), args.output)
+    _, rows = shape_change_report(rig, actor)
+    if args.report:
+        from model.atomic import atomic_write
+        atomic_write(args.report, json.dumps({**summary, "rig": str(args.rig), "output": str(args.output),
+                                              "shapes": rows}, indent=1).encode("utf-8"))
+    fit = summary["fit_rms"]
+    fit_text = f"; scan fit RMS {fit[0]:.4g} -> {fit[-1]:.4g} {rig.units}" if fit else ""
+    print(f"wrote {args.output}: {actor.n_shapes} shapes personalised ({summary['unknowns']:,} unknowns, "
+          f"{summary['seconds']:.1f} s; neutral: {summary['neutral']}){fit_text}")
+    for r in rows[: max(args.top, 0)]:
+        print(f"  {r['shape']:<20} change RMS {r['rms']:.4g}  max {r['max']:.4g} {rig.units}  "
+              f"({100 * r['relative']:.0f}% of the shape)")
+    return 0

@@ -1,0 +1,158 @@
+"""An actor's own rig from a template rig (Ma et al. 2016 §3; ALGORITHMS.md §9; issue 15 item 5).
+
+``personalize_rig`` takes a template rig and measurements of the actor — a neutral scan, pose scans (the
+rig's topology, actor space, rig units, weights unknown) and/or a marker take — and returns a new rig with
+the same shape names, presets and correctives (the correctives re-based onto the actor by the same
+deformation transfer as the shapes, with no data: they keep their drivers, rule and mute state).
+
+* Scans (the main path): the neutral is the neutral scan (or, without one, re-estimated from the pose
+  scans by the row of ones of Ma's W); the deltas are refined by ``solvers.personalize.personalize``.
+* A marker take alone: the template neutral is aligned to the actor's neutral markers (the mean of the
+  calibration frames): scaled to the actor's size by the similarity (Umeyama 1991) between the rig's
+  marker points and the actor's, then warped onto the markers by a Gaussian RBF (``solvers.rbf``) in the
+  rig's frame; the deltas are the template's transferred onto that neutral (the
+  deformation-gradient and closeness terms of Ma's energy, no data term).
+
+``shape_change_report`` measures how far each shape moved from the template (for the CLI's report and the
+GUI's heat map, ``solvers.personalize.shape_change``).
+"""
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from solvers.personalize import PersonalizeResult, ShapeChange, personalize, shape_change
+
+from .errors import RigInputError
+from .rig import Rig
+
+RBF_SCALE = 3.0      # Gaussian kernel length of the marker warp, cm (the spacing of a 60-marker face layout)
+RBF_LAMBDA = 1e-3    # Tikhonov λ of the marker warp: the markers are met to a few µm
+
+
+def scan_paths(items) -> list[Path]:
+    """Files and folders (every ``*.obj`` inside, sorted by name) as a list of OBJ paths."""
+    out: list[Path] = []
+    for item in items:
+        p = Path(item)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir() if q.suffix.lower() == ".obj" and q.is_file())
+            if not found:
+                raise RigInputError(f"{p}: the folder holds no .obj scans.")
+            out.extend(found)
+        else:
+            out.append(p)
+    return out
+
+
+def _checked_scan(points, where: str, rig: Rig) -> np.ndarray:
+    a = np.asarray(points, dtype=np.float64)
+    if a.ndim != 2 or a.shape[1] != 3 or a.shape[0] != rig.n_vertices:
+        n = a.shape[0] if a.ndim == 2 else a.size // 3
+        raise RigInputError(f"{where}: has {n} vertices but the rig has {rig.n_vertices}; a scan must have the "
+                            "rig's vertices in the rig's order (wrap it to the rig first).")
+    bad = ~np.isfinite(a).all(axis=1)
+    if bad.any():
+        raise RigInputError(f"{where}: vertex {int(np.flatnonzero(bad)[0])} has NaN or infinite coordinates "
+                            f"({int(bad.sum())} vertices in all); a scan must measure every vertex.")
+    return a
+
+
+def read_scan(scan, rig: Rig, label: str = "scan") -> np.ndarray:
+    """(V, 3) vertices of a scan given as an OBJ path or an array, checked against the rig."""
+    if isinstance(scan, (str, Path)):
+        from .obj_io import read_obj
+        return _checked_scan(read_obj(scan).vertices, str(scan), rig)
+    return _checked_scan(scan, label, rig)
+
+
+def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tuple[np.ndarray, dict]:
+    """The template neutral rigidly aligned and RBF-warped onto the actor's neutral markers."""
+    from solvers.rbf import RBFResidual
+    from solvers.rigid import umeyama
+
+    from .marker_map import auto_marker_map, calibration_cloud
+
+    if marker_map is None:
+        marker_map, _ = auto_marker_map(rig, take, calibration_frames=calibration_frames)
+    marker_map.validate(rig, take)
+    labels, cols = marker_map.match(take)
+    binding = marker_map.binding(rig, labels)
+    cloud = calibration_cloud(take, calibration_frames, rig.units)[cols]
+    rest = binding @ rig.neutral
+    s, R, t = umeyama(rest, cloud, scale=True)       # cloud ≈ s R rest + t
+    aligned = (cloud - t) @ R                        # the actor's markers in the rig's frame, size kept
+    base = s * rig.neutral                           # the template at the actor's size (the whole head)
+    rbf = RBFResidual(s * rest, points=base, kernel="gaussian", scale=RBF_SCALE * s * _cm(rig), lam=RBF_LAMBDA)
+    neutral = base + rbf.evaluate(rbf.coefficients(aligned - s * rest))
+    fit = float(np.sqrt(((binding @ neutral - aligned) ** 2).sum(axis=1).mean()))
+    return neutral, {"markers": len(labels), "marker_fit": fit, "scale": float(s)}
+
+
+def _cm(rig: Rig) -> float:
+    from .rig import unit_scale
+    return unit_scale("cm", rig.units)
+
+
+def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, marker_map=None, *,
+                             calibration_frames: int = 30, name: str | None = None,
+                             **options) -> tuple[Rig, PersonalizeResult, dict]:
+    """``personalize_rig`` returning also the solver's result and a JSON-able summary."""
+    scans = list(scans or [])
+    if neutral_scan is None and not scans and take is None:
+        raise RigInputError("personalize needs measurements of the actor: a neutral scan, pose scans or a "
+                            "marker take; none was given.")
+    if scans and take is not None:
+        raise RigInputError("personalize takes pose scans or a marker take, not both: the take is for an "
+                            "actor without pose scans.")
+    if rig.n_shapes == 0:
+        raise RigInputError(f"{rig.source or rig.name}: the rig has no shapes to personalise.")
+    neutral = None if neutral_scan is None else read_scan(neutral_scan, rig, "the neutral scan")
+    poses = np.stack([read_scan(s, rig, f"scan {i + 1}") for i, s in enumerate(scans)]) if scans \
+        else np.zeros((0, rig.n_vertices, 3))
+    summary: dict = {"scans": len(scans), "neutral": "scan" if neutral is not None else "template"}
+    if take is not None and neutral is None:
+        neutral, info = _marker_neutral(rig, take, marker_map, calibration_frames)
+        summary.update(neutral="warped to the take's neutral markers", **info)
+    elif neutral is None:
+        summary["neutral"] = "re-estimated from the pose scans"
+    triangles = rig.triangles()
+    result = personalize(rig.neutral, rig.deltas, triangles, poses, neutral, **options)
+    correctives = []
+    live = [c for c in rig.correctives]
+    if live:
+        moved = personalize(rig.neutral, np.stack([c.delta for c in live]), triangles, np.zeros((0, rig.n_vertices, 3)),
+                            result.neutral, lam_r=options.get("lam_r", 0.1), lam_d=options.get("lam_d", 0.05))
+        correctives = [dataclasses.replace(c, delta=d) for c, d in zip(live, moved.deltas)]
+    out = Rig(neutral=result.neutral, face_counts=rig.face_counts.copy(), face_indices=rig.face_indices.copy(),
+              shape_names=list(rig.shape_names), deltas=result.deltas, units=rig.units,
+              name=name or f"{rig.name}_actor", source="", correctives=correctives,
+              presets={k: dict(v) for k, v in rig.presets.items()})
+    summary.update(unknowns=result.unknowns, seconds=round(result.seconds, 3),
+                   delta_seconds=[round(s, 3) for s in result.delta_seconds], cg_iterations=result.cg_iterations,
+                   fit_rms=[float(f) for f in result.fit_rms], units=rig.units)
+    return out, result, summary
+
+
+def personalize_rig(rig: Rig, neutral_scan=None, scans=(), take=None, marker_map=None, **options) -> Rig:
+    """The actor's own rig (module docstring): same shape names, presets and correctives as ``rig``.
+
+    neutral_scan: an OBJ path or (V, 3) array of the actor's neutral in the rig's topology; scans: OBJ
+    paths or (V, 3) arrays of the actor's poses; take: a ``model.takes.MarkerTake`` of the actor with its
+    ``marker_map`` (or None: mapped automatically). ``options`` go to ``solvers.personalize.personalize``.
+    The caller writes the new project."""
+    return personalize_rig_detailed(rig, neutral_scan, scans, take, marker_map, **options)[0]
+
+
+def shape_change_report(template: Rig, actor: Rig) -> tuple[ShapeChange, list[dict]]:
+    """Per-shape change of ``actor`` against ``template`` (same shapes): the ShapeChange (with its (K, V)
+    heat map) and rows {shape, rms, max, relative} sorted by rms, largest first."""
+    if template.shape_names != actor.shape_names or template.n_vertices != actor.n_vertices:
+        raise RigInputError("the rigs to compare have different shapes or vertex counts.")
+    ch = shape_change(template.deltas, actor.deltas)
+    rows = [{"shape": n, "rms": float(ch.rms[k]), "max": float(ch.max[k]), "relative": float(ch.relative[k])}
+            for k, n in enumerate(template.shape_names)]
+    rows.sort(key=lambda r: -r["rms"])
+    return ch, rows
