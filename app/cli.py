@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from app import cli_pairs, cli_personalize, cli_solve
+from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.cli_common import EXIT_INPUT, EXIT_UNEXPECTED, load_rig_arg, parse_size, pose_weights
 from model.errors import RigInputError
 
@@ -238,6 +238,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_solve.add_parser(sub, rig_arg)
     cli_pairs.add_parser(sub, rig_arg)
     cli_personalize.add_parser(sub, rig_arg)
+    cli_batch.add_parser(sub, rig_arg)
 
     sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder")
     sp.add_argument("-o", "--output", required=True, help="folder to write")
@@ -276,7 +277,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 _COMMANDS = {"info", "take-info", "render", "export", "sample", "segment", "solve", "corrective", "pairs",
-             "personalize"}
+             "personalize", "batch"}
 
 if __name__ == "__main__":
     sys.exit(main())

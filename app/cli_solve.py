@@ -16,6 +16,16 @@ def add_parser(sub, rig_arg) -> None:
     sp = sub.add_parser("solve", help="solve a marker take (C3D/TRC/CSV) onto the rig")
     rig_arg(sp)
     sp.add_argument("take", metavar="TAKE", help="marker take: .c3d, .trc or .csv")
+    add_solve_options(sp)
+    sp.add_argument("-o", "--output", required=True, help="weights CSV to write")
+    sp.add_argument("--cache", help="PC2 point cache of the dense result to write")
+    sp.add_argument("--report", help="JSON report to write")
+    sp.set_defaults(func=cmd_solve)
+
+
+def add_solve_options(sp) -> None:
+    """The options of a solve, one parser for ``solve``, ``batch`` (app.cli_batch) and the GUI's Batch Solve
+    dialog: an option means the same thing everywhere (``solve_settings`` reads them)."""
     sp.add_argument("--map", help="marker map JSON (default: map markers automatically from the calibration frames)")
     sp.add_argument("--rig-units", choices=["cm", "mm", "m"], help="units of the rig (default: the rig's own)")
     sp.add_argument("--global", dest="global_solve", action="store_true",
@@ -34,28 +44,26 @@ def add_parser(sub, rig_arg) -> None:
     sp.add_argument("--fixed-head", action="store_true",
                     help="the markers are already head-stabilised in rig space: no calibration, no head motion "
                          "(always so for a one-frame take)")
-    sp.add_argument("-o", "--output", required=True, help="weights CSV to write")
-    sp.add_argument("--cache", help="PC2 point cache of the dense result to write")
-    sp.add_argument("--report", help="JSON report to write")
-    sp.set_defaults(func=cmd_solve)
 
 
-def cmd_solve(args) -> int:
-    from model.take_exports import export_solve_outputs
-    from model.take_workspace import SOLVE_DEFAULTS, TakeWorkspace
-
+def load_solve_rig(args):
+    """The RIG argument's rig, in --rig-units when given."""
     rig = load_rig_arg(args)
     if args.rig_units:
         rig.units = args.rig_units
-    ws = TakeWorkspace(rig)
-    ws.load_take(args.take)
-    if ws.marker_take is None:
-        raise RigInputError(f"{args.take}: is a weight take (Live Link Face), not marker trajectories; "
-                            "it plays directly on the rig in the GUI.")
-    if args.map:
-        ws.load_map(args.map, strict=False)
-    else:
-        ws.auto_map(args.calibration_frames, neutral_frames=args.neutral_frames, stable=args.stable)
+    return rig
+
+
+def auto_map_options(args) -> dict:
+    """The keyword arguments of ``TakeWorkspace.auto_map`` from the solve options (when there is no --map)."""
+    return {"neutral_frames": args.neutral_frames, "stable": args.stable}
+
+
+def solve_settings(args, rig) -> tuple[dict, object]:
+    """(solve settings of ``model.take_workspace``, segmentation or None) from the solve options; a per-region
+    solve segments ``rig`` here, once for every take solved with these settings."""
+    from model.take_workspace import SOLVE_DEFAULTS
+
     regional = not args.global_solve and SOLVE_DEFAULTS["regional"]
     if args.threshold is not None or args.level is not None:
         regional = not args.global_solve
@@ -70,6 +78,24 @@ def cmd_solve(args) -> int:
                                    SegmentationSettings(t=t))
         settings["level"] = args.level if args.level is not None else \
             min(SOLVE_DEFAULTS["level"], len(segmentation.levels) - 1)
+    return settings, segmentation
+
+
+def cmd_solve(args) -> int:
+    from model.take_exports import export_solve_outputs
+    from model.take_workspace import TakeWorkspace
+
+    rig = load_solve_rig(args)
+    ws = TakeWorkspace(rig)
+    ws.load_take(args.take)
+    if ws.marker_take is None:
+        raise RigInputError(f"{args.take}: is a weight take (Live Link Face), not marker trajectories; "
+                            "it plays directly on the rig in the GUI.")
+    if args.map:
+        ws.load_map(args.map, strict=False)
+    else:
+        ws.auto_map(args.calibration_frames, **auto_map_options(args))
+    settings, segmentation = solve_settings(args, rig)
     sol = ws.solve(settings, segmentation=segmentation)
     report = export_solve_outputs(ws, args.output, args.cache, args.report)
     for lab in report["markers_left_out"]:

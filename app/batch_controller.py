@@ -1,0 +1,168 @@
+"""File ▸ Batch Solve…: the open rig and chosen takes solved with ``solve``'s options on a Dask cluster in the
+background (``model.batch.run_batch`` on the controller's BackgroundRunner thread, so the window stays usable),
+with progress in the dialog and a table of results from which a take opens in the Mocap panel.
+"""
+from __future__ import annotations
+
+import argparse
+import threading
+from pathlib import Path
+
+from PySide6 import QtCore
+
+from app.background import BackgroundRunner
+from model.errors import RigInputError
+from widgets.batch_dialog import BatchDialog
+
+
+class _OptionParser(argparse.ArgumentParser):
+    """``solve``'s options parsed for the dialog: a bad option is a RigInputError, not an exit."""
+
+    def error(self, message: str):
+        raise RigInputError(f"Solve options: {message}.")
+
+
+class _Relay(QtCore.QObject):
+    progress = QtCore.Signal(object)    # model.batch.BatchProgress, from the runner's thread
+
+
+class BatchController(QtCore.QObject):
+    """Owns the Batch Solve dialog and its run; ``finished(rows)`` after a run (``failed(message)`` if none)."""
+
+    finished = QtCore.Signal(list)
+    failed = QtCore.Signal(str)
+
+    def __init__(self, window) -> None:
+        super().__init__(window)
+        self.window = window
+        self.dialog: BatchDialog | None = None
+        self.rows: list[dict] = []
+        self.running = False
+        self.map_path: str | None = None
+        self.runner = BackgroundRunner(self)
+        self._cancel = threading.Event()
+        self._relay = _Relay(self)
+        self._relay.progress.connect(self._on_progress)
+
+    def show_dialog(self) -> BatchDialog | None:
+        if self.window.document.rig is None:
+            self.window.show_error("Batch Solve", "Open a rig first: the batch solves the takes onto the open rig.")
+            return None
+        if self.dialog is None:
+            d = self.dialog = BatchDialog(self.window)
+            d.run_requested.connect(self.run)
+            d.cancel_requested.connect(self.cancel)
+            d.open_requested.connect(self.open_take)
+        self.dialog.show()
+        self.dialog.raise_()
+        self.dialog.activateWindow()
+        return self.dialog
+
+    def _options(self):
+        from app.cli_solve import add_solve_options
+        parser = _OptionParser(prog="Batch Solve", add_help=False)
+        add_solve_options(parser)
+        return parser.parse_args(self.dialog.solve_options())
+
+    def run(self) -> bool:
+        """Start the batch the dialog describes; False (and the reason in the dialog) if it cannot start."""
+        from app.cli_batch import prepare_job, progress_text
+        from model.batch import find_takes, run_batch
+        d = self.dialog
+        if self.running or d is None:
+            return False
+        try:
+            args = self._options()
+            if not d.takes():
+                raise RigInputError("Add the takes to solve first.")
+            if not d.output():
+                raise RigInputError("Choose the output folder first.")
+            takes = find_takes(d.takes(), exclude=d.output())
+        except RigInputError as exc:
+            d.set_status(str(exc))
+            self.window.show_status(str(exc))
+            return False
+        args.cache = d.cache_check.isChecked()
+        rig = self.window.document.rig.copy()      # a snapshot: the user may go on editing the open rig
+        if args.rig_units:
+            rig.units = args.rig_units
+        out, force, scheduler = Path(d.output()), d.force_check.isChecked(), d.scheduler() or None
+        workers = None if scheduler else d.workers_spin.value()
+        self.map_path = args.map
+        self._cancel = cancel = threading.Event()
+        relay = self._relay
+
+        def job():
+            return run_batch(prepare_job(rig, args), takes, out, force=force, workers=workers, scheduler=scheduler,
+                             progress=relay.progress.emit, cancel=cancel.is_set)
+
+        self._progress_text = progress_text
+        self.running = True
+        d.set_running(True)
+        d.set_status(f"Starting: {len(takes)} take(s) onto {rig.name}…")
+        self.window.show_status(f"Batch solve of {len(takes)} take(s) started.")
+        self.runner.submit(job, self._on_done, self._on_failed)
+        return True
+
+    def cancel(self) -> None:
+        if self.running:
+            self._cancel.set()
+            if self.dialog is not None:
+                self.dialog.set_status("Cancelling: the takes being solved finish first…")
+
+    def _on_progress(self, p) -> None:
+        if self.dialog is None:
+            return
+        text = self._progress_text(p)
+        if p.dashboard:
+            text += f' — <a href="{p.dashboard}">Dask dashboard</a>'
+        self.dialog.set_progress(p.done, p.total, text)
+
+    def _on_done(self, rows: list) -> None:
+        self.running = False
+        self.rows = rows
+        count = {s: sum(r["status"] == s for r in rows) for s in ("solved", "skipped", "failed")}
+        text = (f"Batch: solved {count['solved']}, skipped {count['skipped']} (complete), failed {count['failed']}; "
+                f"summary in {Path(self.dialog.output()) / 'batch.json'}.")
+        self.dialog.set_running(False)
+        self.dialog.set_rows(rows)
+        self.dialog.set_progress(len(rows), len(rows), text)
+        self.window.show_status(text, 0)
+        self.finished.emit(rows)
+
+    def _on_failed(self, message: str) -> None:
+        self.running = False
+        if self.dialog is not None:
+            self.dialog.set_running(False)
+            self.dialog.set_progress(0, 1, f"Could not run the batch: {message}")
+        self.window.show_error("Batch Solve", message)
+        self.failed.emit(message)
+
+    def open_take(self, row: int) -> bool:
+        """Open row ``row``'s take (and the batch's marker map) in the Mocap panel."""
+        if not 0 <= row < len(self.rows):
+            return False
+        mocap = self.window.mocap
+        if not mocap.load_take(self.rows[row]["path"]):
+            return False
+        if self.map_path and not mocap.load_map(self.map_path):
+            return False
+        mocap.dock.show()
+        mocap.dock.raise_()
+        self.window.show_status(f"Opened {self.rows[row]['take']} in the Mocap panel: Solve to see it frame by frame.")
+        return True
+
+    def shutdown(self) -> None:
+        """Stop the run (the takes being solved finish) and wait for it: the window is closing."""
+        self._cancel.set()
+        self.runner.shutdown()
+
+
+def install(window) -> BatchController:
+    """File ▸ Batch Solve… in ``window`` (through its public interface); the window keeps it as ``window.batch``."""
+    controller = BatchController(window)
+    controller.action = window.add_action(
+        "file", "&Batch Solve…", lambda _=False: controller.show_dialog(), None,
+        "Solve many takes onto the open rig with the same options, on a Dask cluster, in the background")
+    window.add_separator("file")
+    return controller

@@ -1,0 +1,113 @@
+"""The ``batch`` command: every take of a capture day solved onto the rig with the same options as ``solve``, on a
+Dask cluster (a local one by default, or ``--scheduler ADDRESS``); ``model.batch`` does the work.
+
+Per take ``OUTDIR/<take>/`` holds ``weights.csv``, ``report.json``, ``preview.png`` (the most expressive frame),
+``cache.pc2`` with ``--cache``, and ``done.json`` (written last: the take is complete). ``OUTDIR/batch.json`` and
+``batch.csv`` summarise the run. Complete takes are skipped unless ``--force``. Exit 2 when a take failed (each
+failure is one sentence on stderr and in the summary); the other takes are solved regardless.
+"""
+from __future__ import annotations
+
+import sys
+from functools import partial
+
+from app.cli_solve import add_solve_options, load_solve_rig, solve_settings
+from model.errors import RigInputError
+
+
+def add_parser(sub, rig_arg) -> None:
+    sp = sub.add_parser("batch", help="solve many takes with the same options as solve, on a Dask cluster")
+    rig_arg(sp)
+    sp.add_argument("takes", nargs="+", metavar="TAKES", help="take files (.c3d, .trc, .csv), folders of takes or "
+                                                              "glob patterns ('day1/**/*.c3d')")
+    add_solve_options(sp)
+    sp.add_argument("-o", "--output", required=True, metavar="OUTDIR",
+                    help="folder: OUTDIR/<take>/ per take, OUTDIR/batch.json and batch.csv")
+    sp.add_argument("--cache", action="store_true", help="also write each take's dense result as cache.pc2 (large)")
+    where = sp.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, help="worker processes of the local cluster (default: the cores)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="a running Dask scheduler (tcp://host:8786) whose workers see the same paths")
+    sp.add_argument("--force", action="store_true", help="solve again the takes whose outputs are complete")
+    sp.set_defaults(func=cmd_batch)
+
+
+def preview_renderer():
+    """The preview PNG of a take (``widgets.scene.render_png`` off screen), picklable for the workers."""
+    from widgets.scene import render_png
+    from model.batch import PREVIEW_SIZE
+    return partial(render_png, size=PREVIEW_SIZE, camera="front")
+
+
+def prepare_job(rig, args):
+    """The ``model.batch.BatchJob`` of the solve options in ``args`` for ``rig`` (the command and the GUI)."""
+    from model.batch import BatchJob, preview_focus
+    from model.marker_map import load_marker_map
+    settings, segmentation = solve_settings(args, rig)
+    marker_map = load_marker_map(args.map) if args.map else None
+    return BatchJob.prepare(rig, settings, segmentation=segmentation, marker_map=marker_map,
+                            cache=bool(getattr(args, "cache", False)), preview=preview_renderer(),
+                            focus=preview_focus(rig))
+
+
+def _clock(seconds: float | None) -> str:
+    if seconds is None:
+        return "--:--"
+    s = int(round(seconds))
+    return f"{s // 3600}:{s % 3600 // 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+def progress_text(p) -> str:
+    """'5/12 takes, 840 frames/s, ETA 0:42' of a ``model.batch.BatchProgress`` (the terminal and the GUI)."""
+    return f"{p.done}/{p.total} takes, {p.frames_per_second:.0f} frames/s, ETA {_clock(p.eta)}"
+
+
+class ProgressPrinter:
+    """Takes done, frames/s and ETA: one redrawn line with a bar on a terminal, a plain line per take otherwise."""
+
+    def __init__(self, stream=None, width: int = 28) -> None:
+        self.stream = stream or sys.stdout
+        self.tty = bool(getattr(self.stream, "isatty", lambda: False)())
+        self.width = width
+        self._shown_dashboard = False
+
+    def __call__(self, p) -> None:
+        out = self.stream
+        if p.dashboard and not self._shown_dashboard:
+            print(f"dashboard: {p.dashboard}", file=out, flush=True)
+            self._shown_dashboard = True
+        status = progress_text(p)
+        if self.tty:
+            filled = int(self.width * p.done / max(p.total, 1))
+            out.write(f"\r[{'#' * filled}{'.' * (self.width - filled)}] {status}\033[K")
+            if p.done >= p.total:
+                out.write("\n")
+            out.flush()
+        elif p.row is not None:
+            r = p.row
+            what = (f"{r['frames']} frames, marker RMSE {r['marker_rmse']:.4g}" if r["status"] == "solved"
+                    else r["error"])
+            print(f"[{p.done}/{p.total}] {r['take']}: {r['status']} ({what}); {status}", file=out, flush=True)
+
+
+def cmd_batch(args) -> int:
+    from model.batch import find_takes, run_batch, take_names
+
+    if args.workers is not None and args.workers < 1:
+        raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
+    takes = find_takes(args.takes, exclude=args.output)
+    rig = load_solve_rig(args)
+    job = prepare_job(rig, args)
+    names = take_names(takes)
+    print(f"{len(takes)} take(s) onto {rig.name} into {args.output}", flush=True)
+    rows = run_batch(job, takes, args.output, names=names, force=args.force, workers=args.workers,
+                     scheduler=args.scheduler, progress=ProgressPrinter())
+    count = {s: sum(r["status"] == s for r in rows) for s in ("solved", "skipped", "failed")}
+    print(f"solved {count['solved']}, skipped {count['skipped']} (complete), failed {count['failed']}; "
+          f"wrote {args.output}/batch.json and batch.csv")
+    if count["failed"]:
+        for r in rows:
+            if r["status"] == "failed":
+                print(f"error: {r['error']}", file=sys.stderr)
+        return 2
+    return 0

@@ -1,0 +1,453 @@
+"""Batch solving: many marker takes onto one rig with one set of solve settings, on a Dask cluster (issue 21).
+Qt-free; the ``batch`` command (app.cli_batch) and the GUI's File ▸ Batch Solve… (app.batch_controller) call it.
+
+- ``find_takes`` expands files, folders and glob patterns into take files; ``take_names`` names each take's
+  output folder ``OUTDIR/<take>/``.
+- ``BatchJob`` is what every take shares: the rig, its float64 pose evaluator, the segmentation of a per-region
+  solve, the marker map, the settings and the preview's framing. ``run_batch`` scatters it to every worker once.
+- ``solve_take_file`` is one take's job (on a worker): the same ``TakeWorkspace`` solve as ``solve``, its weights
+  CSV, report, preview PNG and (optionally) PC2 cache written as one set (``model.output_set.write_set``) with a
+  done-marker (``done.json``) last, so a killed run never leaves half a take. A bad take (unreadable, a map
+  that does not fit) returns a failed row with its one-sentence error.
+- ``completed_row`` is the resumability check: a take whose done-marker matches the take file and the settings
+  is skipped unless forced.
+- ``run_batch`` runs the jobs on a ``LocalCluster`` (processes, one thread each) or a scheduler address, with
+  retries, and reports progress; ``write_summary`` writes ``batch.json`` and ``batch.csv``.
+"""
+from __future__ import annotations
+
+import csv
+import glob
+import hashlib
+import io
+import json
+import os
+import shutil
+import tempfile
+import time
+import uuid
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .errors import RigInputError
+from .marker_map import MarkerMap
+from .output_set import finish_interrupted_sets, write_set
+from .pose import PoseEvaluator
+from .rig import Rig
+
+TAKE_SUFFIXES = (".c3d", ".trc", ".csv")
+DONE = "done.json"                      # the done-marker, written last in a take's set
+OUTPUTS = {"weights": "weights.csv", "report": "report.json", "preview": "preview.png", "cache": "cache.pc2"}
+SUMMARY_JSON, SUMMARY_CSV = "batch.json", "batch.csv"
+ROW_KEYS = ("take", "status", "error", "frames", "rate", "frames_per_second", "marker_rmse", "motion_explained",
+            "seconds", "path", "output")
+PREVIEW_SIZE = (480, 360)
+_TMP_PREFIX = ".bs-batch-"
+
+
+# --- which takes, under which names ------------------------------------------------------------------
+def find_takes(items: list[str], exclude: str | Path | None = None) -> list[Path]:
+    """Take files from files, folders (their .c3d, .trc and .csv files) and glob patterns, in the order given,
+    each once, leaving out files under ``exclude`` (a batch's own output folder). RigInputError when an item
+    names nothing."""
+    found: list[Path] = []
+    for item in items:
+        p = Path(item)
+        if p.is_dir():
+            hits = sorted(q for q in p.iterdir() if q.is_file() and q.suffix.lower() in TAKE_SUFFIXES)
+            if not hits:
+                raise RigInputError(f"{item}: the folder holds no take (.c3d, .trc or .csv).")
+        elif p.is_file():
+            hits = [p]
+        elif glob.has_magic(item):
+            hits = sorted(Path(q) for q in glob.glob(item, recursive=True)
+                          if Path(q).is_file() and Path(q).suffix.lower() in TAKE_SUFFIXES)
+            if not hits:
+                raise RigInputError(f"{item}: the pattern matches no take (.c3d, .trc or .csv).")
+        else:
+            raise RigInputError(f"{item}: does not exist.")
+        found.extend(hits)
+    seen, out = set(), []
+    skip = Path(exclude).resolve() if exclude is not None else None
+    for p in found:
+        key = p.resolve()
+        if skip is not None and key.is_relative_to(skip):
+            continue
+        if key not in seen:
+            seen.add(key)
+            out.append(key)
+    return out
+
+
+def take_names(paths: list[Path]) -> list[str]:
+    """One output folder name per take: the file's stem; takes sharing a stem get as many parent folder names
+    as tell them apart (``actor_take_take``), then their extension (``take_trc``)."""
+    paths = [Path(p) for p in paths]
+
+    def name(p: Path, depth: int, ext: bool) -> str:
+        parts = list(p.parent.parts[-depth:]) if depth else []
+        n = "_".join([*parts, p.stem]) + (f"_{p.suffix[1:]}" if ext else "")
+        return n.replace(os.sep, "_").strip(". ") or "take"
+
+    by_stem: dict[str, list[int]] = {}
+    for i, p in enumerate(paths):
+        by_stem.setdefault(p.stem, []).append(i)
+    names = [""] * len(paths)
+    for group in by_stem.values():
+        depth_max = max(len(paths[i].parent.parts) for i in group)
+        for depth in range(depth_max + 1):
+            for ext in (False, True):
+                cand = [name(paths[i], depth, ext) for i in group]
+                if len(set(cand)) == len(cand):
+                    break
+            else:
+                continue
+            break
+        for i, n in zip(group, cand):
+            names[i] = n
+    used: dict[str, int] = {}
+    for i, n in enumerate(names):           # a clash across stems (rare): number the later ones
+        k = used.get(n, 0)
+        used[n] = k + 1
+        if k:
+            names[i] = f"{n}_{k + 1}"
+    return names
+
+
+# --- what every take shares -------------------------------------------------------------------------
+def _digest(*arrays) -> str:
+    h = hashlib.sha1()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
+
+
+@dataclass
+class BatchJob:
+    """Everything the takes of a batch share, built once in the client and scattered to the workers."""
+
+    rig: Rig
+    settings: dict
+    evaluator: PoseEvaluator
+    segmentation: object = None
+    marker_map: MarkerMap | None = None
+    cache: bool = False
+    preview: Callable | None = None       # preview(points, face_counts, face_indices, path, focus=...) or None
+    focus: np.ndarray | None = None       # the points the preview frames
+    signature: dict = field(default_factory=dict)
+
+    @classmethod
+    def prepare(cls, rig: Rig, settings: dict, *, segmentation=None, marker_map: MarkerMap | None = None,
+                cache: bool = False, preview: Callable | None = None, focus: np.ndarray | None = None) -> "BatchJob":
+        """The shared part of a batch: the rig's float64 pose evaluator is built here, once."""
+        map_id = "automatic" if marker_map is None else hashlib.sha1(
+            json.dumps(marker_map.to_json(), sort_keys=True).encode()).hexdigest()[:16]
+        signature = {"settings": {k: settings[k] for k in sorted(settings)}, "marker_map": map_id,
+                     "rig": _digest(rig.neutral, rig.deltas, *[c.delta for c in rig.correctives]),
+                     "rig_units": rig.units, "cache": bool(cache), "preview": preview is not None}
+        return cls(rig=rig, settings=dict(settings), evaluator=PoseEvaluator(rig, dtype=np.float64),
+                   segmentation=segmentation, marker_map=marker_map, cache=cache, preview=preview,
+                   focus=focus, signature=json.loads(json.dumps(signature)))
+
+
+# --- one take ---------------------------------------------------------------------------------------
+def _take_identity(path: Path) -> dict:
+    st = path.stat()
+    return {"size": st.st_size, "mtime_ns": st.st_mtime_ns}
+
+
+def _row(name: str, path: Path, out_dir: Path | None, status: str, error: str | None = None, **values) -> dict:
+    """A summary row; ``out_dir`` None when nothing was written."""
+    row = dict.fromkeys(ROW_KEYS)
+    row.update(take=name, path=str(path), output=None if out_dir is None else str(out_dir), status=status,
+               error=error)
+    row.update(values)
+    return row
+
+
+def completed_row(job: BatchJob, take_path: str | Path, out_dir: str | Path, name: str | None = None) -> dict | None:
+    """The take's row as ``skipped`` when its outputs are complete for this take file and these settings (its
+    done-marker says so and every output it lists exists), else None. Finishes an interrupted set first."""
+    take_path, out_dir = Path(take_path), Path(out_dir)
+    if not out_dir.is_dir():
+        return None
+    finish_interrupted_sets(out_dir)
+    try:
+        done = json.loads((out_dir / DONE).read_text())
+        ok = (done["signature"] == job.signature and done["take_file"] == _take_identity(take_path)
+              and all((out_dir / f).is_file() for f in done["outputs"]))
+        row = dict(done["row"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    if not ok:
+        return None
+    row.update(status="skipped", error=None, take=name or row.get("take"), path=str(take_path), output=str(out_dir))
+    return row
+
+
+_BLAS_LIMITED = False
+
+
+def _limit_blas_once() -> None:
+    """One BLAS thread in a worker, as ``solve`` runs (and as results stay identical to it)."""
+    global _BLAS_LIMITED
+    if not _BLAS_LIMITED:
+        from threadpoolctl import threadpool_limits
+        threadpool_limits(1, user_api="blas")
+        _BLAS_LIMITED = True
+
+
+def _sweep_temporaries(out_dir: Path) -> None:
+    """Remove the private folders of this take's writers that are gone (a killed worker's)."""
+    for d in out_dir.glob(f"{_TMP_PREFIX}*"):
+        try:
+            pid = int(d.name[len(_TMP_PREFIX):].split("-")[0])
+        except ValueError:
+            continue
+        try:
+            os.kill(pid, 0)
+            continue
+        except ProcessLookupError:
+            pass
+        except PermissionError:
+            continue
+            shutil.rmtree(d, ignore_errors=True)
+
+
+def preview_focus(rig: Rig, fraction: float = 0.05) -> np.ndarray:
+    """The points a preview frames: the neutral where some shape moves a vertex more than ``fraction`` of the
+    rig's largest displacement (the face, not the still head and neck), else the whole neutral."""
+    if not rig.n_shapes:
+        return rig.neutral
+    reach = np.linalg.norm(rig.deltas, axis=2).max(axis=0)
+    face = reach > fraction * reach.max()
+    return rig.neutral[face] if face.sum() >= 3 else rig.neutral
+
+
+def preview_frame(weights: np.ndarray) -> int:
+    """The frame the preview shows: the most expressive one (largest sum of weights)."""
+    return int(np.argmax(np.asarray(weights).sum(axis=1))) if len(weights) else 0
+
+
+def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | None = None) -> dict:
+    """Solve one take as ``solve`` does and write its outputs into ``out_dir`` as one set, the done-marker last.
+    Returns the summary row; a bad take gives a failed row with its one-sentence error (nothing is written).
+    Anything unexpected propagates (the cluster retries the take, then reports it)."""
+    from .take_exports import export_pc2, export_report, export_weights_csv
+    from .take_workspace import TakeWorkspace
+
+    _limit_blas_once()
+    take_path, out_dir = Path(take_path), Path(out_dir)
+    name = name or out_dir.name
+    start = time.perf_counter()
+    try:
+        ws = TakeWorkspace(job.rig)
+        ws.load_take(take_path)
+        if ws.marker_take is None:
+            raise RigInputError(f"{take_path}: is a weight take (Live Link Face), not marker trajectories; "
+                                "it plays directly on the rig in the GUI.")
+        if job.marker_map is not None:
+            ws.set_map(job.marker_map, strict=False)
+        else:
+            ws.auto_map(job.settings.get("calibration_frames", 30), neutral_frames=job.settings.get("neutral_frames"),
+                        stable=job.settings.get("stable"))
+        identity = _take_identity(take_path)
+        sol = ws.solve(job.settings, segmentation=job.segmentation, evaluator=job.evaluator)
+    except RigInputError as exc:
+        return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    _sweep_temporaries(out_dir)
+    tmp = Path(tempfile.mkdtemp(prefix=f"{_TMP_PREFIX}{os.getpid()}-", dir=out_dir))
+    try:
+        files = {OUTPUTS["weights"]: lambda p: export_weights_csv(ws, p),
+                 OUTPUTS["report"]: lambda p: export_report(ws, p)}
+        if job.cache:
+            files[OUTPUTS["cache"]] = lambda p: export_pc2(ws, p)
+        for fname, write in files.items():
+            write(tmp / fname)
+        frame, preview_error = preview_frame(sol.weights), None
+        if job.preview is not None:
+            try:          # a preview that cannot be drawn (no display, no EGL) costs the take its picture only
+                job.preview(sol.dense(frame), job.rig.face_counts, job.rig.face_indices, tmp / OUTPUTS["preview"],
+                            focus=job.focus)
+                files[OUTPUTS["preview"]] = None
+            except Exception as exc:
+                preview_error = f"the preview could not be rendered ({type(exc).__name__}: {exc})"
+        report = json.loads((tmp / OUTPUTS["report"]).read_text())
+        row = _row(name, take_path, out_dir, "solved", frames=int(report["frames"]), rate=float(report["rate"]),
+                   frames_per_second=float(report["frames_per_second"]), marker_rmse=float(report["marker_rmse"]),
+                   motion_explained=report.get("motion_explained"), preview_frame=frame, preview_error=preview_error)
+        row["seconds"] = time.perf_counter() - start
+        done = {"take_file": identity, "signature": job.signature, "outputs": list(files), "row": row}
+
+        def copier(src: Path):
+            def write(f) -> None:
+                with open(src, "rb") as s:
+                    shutil.copyfileobj(s, f, 1 << 20)
+            return write
+
+        writers = {out_dir / fname: copier(tmp / fname) for fname in files}
+        writers[out_dir / DONE] = lambda f: f.write((json.dumps(done, indent=1) + "\n").encode())
+        write_set(writers)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    return row
+
+
+# --- the summary ------------------------------------------------------------------------------------
+def write_summary(out_dir: str | Path, rows: list[dict], meta: dict | None = None) -> None:
+    """``batch.json`` (``{"takes": [rows]}`` plus ``meta``) and ``batch.csv`` (one line per take), as one set."""
+    out_dir = Path(out_dir)
+    doc = dict(meta or {})
+    doc["takes"] = [{k: r.get(k) for k in ROW_KEYS} for r in rows]
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(ROW_KEYS)
+    for r in doc["takes"]:
+        w.writerow(["" if r[k] is None else (repr(r[k]) if isinstance(r[k], float) else r[k]) for k in ROW_KEYS])
+    write_set({out_dir / SUMMARY_JSON: lambda f: f.write((json.dumps(doc, indent=1) + "\n").encode()),
+               out_dir / SUMMARY_CSV: lambda f: f.write(buf.getvalue().encode())})
+
+
+def read_summary(out_dir: str | Path) -> dict:
+    path = Path(out_dir) / SUMMARY_JSON
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise RigInputError(f"{path}: could not be read ({exc}).") from None
+
+
+# --- the cluster ------------------------------------------------------------------------------------
+@dataclass
+class BatchProgress:
+    """What a progress display shows after each take: counts, frames solved and time so far, the last row."""
+
+    done: int                      # takes finished (solved, failed or skipped)
+    total: int
+    frames: int                    # frames solved in this run
+    elapsed: float                 # seconds since the takes went to the cluster
+    finished: int = 0              # takes the cluster finished in this run
+    row: dict | None = None
+    dashboard: str | None = None
+
+    @property
+    def frames_per_second(self) -> float:
+        return self.frames / self.elapsed if self.elapsed > 0 else 0.0
+
+    @property
+    def eta(self) -> float | None:
+        """Seconds left, from the mean time of the takes finished so far in this run (None before the first)."""
+        return None if self.finished <= 0 else self.elapsed / self.finished * (self.total - self.done)
+
+
+def _unexpected(path: Path, exc: BaseException) -> str:
+    from distributed import KilledWorker
+    if isinstance(exc, KilledWorker):
+        return f"{path}: every worker that solved it died ({exc})."
+    text = str(exc).strip().splitlines()[0] if str(exc).strip() else ""
+    return f"{path}: the solve stopped unexpectedly ({type(exc).__name__}{': ' + text if text else ''})."
+
+
+def start_client(workers: int | None = None, scheduler: str | None = None, *, timeout: float | None = None,
+                 dashboard_address: str = "127.0.0.1:8787"):
+    """(Dask client, local cluster or None): a scheduler's address, or a LocalCluster of ``workers`` processes
+    with one thread each on 127.0.0.1 (default: the machine's cores). ``timeout`` (seconds) for a scheduler to
+    answer and show a worker: Dask's connect timeout by default (``distributed.comm.timeouts.connect``)."""
+    import logging
+
+    import dask
+    from dask.utils import parse_timedelta
+    from distributed import Client, LocalCluster
+    if timeout is None:
+        timeout = parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"), default="s")
+    if scheduler:
+        try:
+            client = Client(scheduler, timeout=timeout)
+            client.wait_for_workers(1, timeout=timeout)
+        except (OSError, TimeoutError) as exc:
+            raise RigInputError(f"--scheduler {scheduler}: no scheduler with workers answered within "
+                                f"{timeout:g} s ({type(exc).__name__}).") from None
+        return client, None
+    n = workers or os.cpu_count() or 1
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                           dashboard_address=dashboard_address, silence_logs=logging.ERROR)
+    return Client(cluster), cluster
+
+
+def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: list[str] | None = None,
+              force: bool = False, workers: int | None = None, scheduler: str | None = None, retries: int = 2,
+              progress: Callable[[BatchProgress], None] | None = None, cancel: Callable[[], bool] | None = None,
+              on_client: Callable | None = None, dashboard_address: str = "127.0.0.1:8787") -> list[dict]:
+    """Solve ``takes`` into ``out_dir/<name>/`` and write the summary; returns the rows in the order of ``takes``.
+    Complete takes are skipped unless ``force``; the rest go to the cluster with the job scattered once.
+    ``cancel()`` true stops the run (unfinished takes are failed rows, 'cancelled')."""
+    out_dir = Path(out_dir)
+    takes = [Path(t).resolve() for t in takes]
+    names = names or take_names(takes)
+    rows: list[dict | None] = [None] * len(takes)
+    for i, (path, name) in enumerate(zip(takes, names)):
+        if not force:
+            rows[i] = completed_row(job, path, out_dir / name, name)
+    pending = [i for i, r in enumerate(rows) if r is None]
+    t0 = time.perf_counter()
+    frames = 0
+    done = len(takes) - len(pending)
+    dashboard = None
+    if progress is not None and not pending:
+        progress(BatchProgress(done, len(takes), 0, 0.0))
+    if pending:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        client, cluster = start_client(workers, scheduler, dashboard_address=dashboard_address)
+        try:
+            from distributed import as_completed
+            try:
+                dashboard = client.dashboard_link
+            except Exception:   # no dashboard (bokeh missing, or the scheduler runs none)
+                dashboard = None
+            if on_client is not None:
+                on_client(client, dashboard)
+            if progress is not None:
+                progress(BatchProgress(done, len(takes), 0, 0.0, dashboard=dashboard))
+            shared = client.scatter(job, broadcast=True, hash=False)
+            run = uuid.uuid4().hex[:8]
+            futures = {client.submit(solve_take_file, shared, str(takes[i]), str(out_dir / names[i]), names[i],
+                                     key=f"solve-{names[i]}-{run}", pure=False, retries=retries): i
+                       for i in pending}
+            t0 = time.perf_counter()
+            finished = 0
+            for fut in as_completed(list(futures)):
+                i = futures[fut]
+                try:
+                    row = fut.result()
+                except Exception as exc:       # retried and still failing, or every worker it met died
+                    row = _row(names[i], takes[i], None, "failed", _unexpected(takes[i], exc))
+                rows[i] = row
+                done += 1
+                finished += 1
+                if row["status"] == "solved":
+                    frames += int(row["frames"] or 0)
+                if progress is not None:
+                    progress(BatchProgress(done, len(takes), frames, time.perf_counter() - t0, finished, row, dashboard))
+                if cancel is not None and cancel():
+                    client.cancel(list(futures))
+                    break
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    for i, r in enumerate(rows):
+        if r is None:
+            rows[i] = _row(names[i], takes[i], None, "failed",
+                           f"{takes[i]}: cancelled before it was solved.")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    meta = {"rig": job.rig.name, "rig_units": job.rig.units, "settings": job.signature["settings"],
+            "marker_map": job.marker_map.source if job.marker_map is not None else "automatic",
+            "solved": sum(r["status"] == "solved" for r in rows), "skipped": sum(r["status"] == "skipped" for r in rows),
+            "failed": sum(r["status"] == "failed" for r in rows), "seconds": time.perf_counter() - t0,
+            "frames_per_second": frames / max(time.perf_counter() - t0, 1e-9) if frames else None,
+            "dashboard": dashboard}
+    write_summary(out_dir, rows, meta)
+    return rows

@@ -1,0 +1,269 @@
+"""``blendshape-studio batch`` on Dask (issue 21): twelve takes made from the shared ones on a local cluster of two
+workers, each solved exactly as ``solve`` solves it; a truncated take reported, not fatal; a second run solves
+nothing; a worker killed mid-run changes nothing; a separate scheduler and worker (``--scheduler``).
+
+Takes are short (60-90 frames, one full shared take) to keep the run modest on a 2-core CI machine.
+"""
+from __future__ import annotations
+
+import copy
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from tests.cli_runner import command, run_cli
+
+pytestmark = pytest.mark.data
+
+if not os.environ.get("CI"):      # the [batch] extra; CI installs it with [test], so there it must be present
+    pytest.importorskip("distributed")
+
+
+def _rotation_y(deg: float) -> np.ndarray:
+    a = np.radians(deg)
+    return np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+
+
+@pytest.fixture(scope="module")
+def takes(tmp_path_factory, take_dir):
+    """The shared ICT take as it is, ten variations of the ICT and actor takes (trimmed, offset, rotated,
+    resampled, in other units and formats) and one truncated C3D: 12 files, 11 of them solvable."""
+    from model.take_c3d import write_c3d
+    from model.take_csv import write_marker_csv
+    from model.takes import MarkerTake, load_take
+    d = tmp_path_factory.mktemp("takes")
+    ict = load_take(take_dir / "take.c3d")
+    actor = load_take(take_dir.parent / "actor_take" / "take.c3d")
+
+    def take(src, positions, rate=None, units=None):
+        return MarkerTake(positions, src.labels, rate or src.rate, units or src.units)
+
+    made = {
+        "ict_trim.c3d": take(ict, ict.positions[:90]),
+        "ict_late.c3d": take(ict, np.concatenate([ict.positions[:30], ict.positions[150:210]])),
+        "ict_offset.csv": take(ict, ict.positions[:80] + [40.0, -15.0, 5.0]),
+        "ict_half_rate.c3d": take(ict, ict.positions[:180:2], rate=ict.rate / 2),
+        "ict_turned.c3d": take(ict, ict.positions[:80] @ _rotation_y(12).T),
+        "ict_cm.c3d": take(ict, ict.positions[:70] / 10.0, units="cm"),
+        "actor_trim.c3d": take(actor, actor.positions[:90]),
+        "actor_offset.csv": take(actor, actor.positions[:80] + [0.0, 20.0, -30.0]),
+        "actor_half_rate.c3d": take(actor, actor.positions[:160:2], rate=actor.rate / 2),
+        "actor_late.c3d": take(actor, np.concatenate([actor.positions[:30], actor.positions[250:300]])),
+    }
+    paths = [take_dir / "take.c3d"]
+    for name, t in made.items():
+        p = d / name
+        (write_marker_csv if p.suffix == ".csv" else write_c3d)(p, t)
+        paths.append(p)
+    raw = (d / "ict_trim.c3d").read_bytes()
+    (d / "ict_cut.c3d").write_bytes(raw[:3000])     # cut after its first frame: refused as truncated
+    paths.append(d / "ict_cut.c3d")
+    return paths
+
+
+@pytest.fixture(scope="module")
+def references(takes, ict_rig, take_dir, tmp_path_factory):
+    """Each solvable take's weights CSV from the ``solve`` command (run in this process, on the session's rig)."""
+    from app import cli, cli_solve
+    out = tmp_path_factory.mktemp("solve")
+    mp = pytest.MonkeyPatch()
+    mp.setattr(cli_solve, "load_rig_arg", lambda args: copy.deepcopy(ict_rig))
+    refs = {}
+    try:
+        for p in takes[:-1]:
+            csv = out / f"{p.parent.name}_{p.name}.csv"
+            assert cli.main(["solve", str(take_dir.parent.parent / "ict-facekit"), str(p), "--map",
+                             str(take_dir / "marker_map.json"), "-o", str(csv)]) == 0
+            refs[p] = csv.read_bytes()
+    finally:
+        mp.undo()
+    return refs
+
+
+def _batch(ict_dir, take_dir, takes, out, *extra, check=False, **kw):
+    return run_cli("batch", ict_dir, *takes, "--map", take_dir / "marker_map.json", "-o", out, *extra,
+                   check=check, **kw)
+
+
+def _summary(out: Path) -> dict:
+    return {r["take"]: r for r in json.loads((out / "batch.json").read_text())["takes"]}
+
+
+def _names(takes) -> list[str]:
+    from model.batch import take_names
+    return take_names(takes)
+
+
+def test_take_names_tell_takes_apart(tmp_path):
+    from model.batch import find_takes, take_names
+    a, b = tmp_path / "day1" / "actor" / "take.c3d", tmp_path / "day1" / "other" / "take.c3d"
+    c = tmp_path / "day1" / "actor" / "take.trc"
+    for p in (a, b, c):
+        p.parent.mkdir(parents=True, exist_ok=True)
+        p.write_bytes(b"x")
+    assert take_names([a, b]) == ["actor_take", "other_take"]
+    assert take_names([a, c]) == ["take_c3d", "take_trc"]
+    assert take_names([tmp_path / "x.c3d"]) == ["x"]
+    # folders, globs and files, each take once, in the order given
+    assert find_takes([str(a.parent), str(tmp_path / "day1" / "*" / "*.c3d")]) == [a, c, b]
+    # a batch's own outputs are never taken for takes
+    (tmp_path / "day1" / "out" / "take").mkdir(parents=True)
+    (tmp_path / "day1" / "out" / "take" / "weights.csv").write_text("frame,time\n")
+    assert find_takes([str(tmp_path / "day1" / "**" / "*.c3d"), str(tmp_path / "day1" / "**" / "*.csv")],
+                      exclude=tmp_path / "day1" / "out") == [a, b]
+    from model.errors import RigInputError
+    with pytest.raises(RigInputError, match="matches no take"):
+        find_takes([str(tmp_path / "*.nothing")])
+
+
+def test_batch_on_a_local_cluster_matches_solve_resumes_and_survives_a_killed_worker(
+        tmp_path, ict_dir, take_dir, takes, references):
+    out = tmp_path / "out"
+    names = _names(takes)
+    assert len(takes) == 12 and len(set(names)) == 12
+    proc = _batch(ict_dir, take_dir, takes, out, "--workers", "2", timeout=600)
+    assert proc.returncode == 2, proc.stderr                    # one take failed: said on stderr, exit 2
+    assert "ict_cut.c3d" in proc.stderr and "truncated" in proc.stderr
+    assert "dashboard: http" in proc.stdout
+    rows = _summary(out)
+    assert set(rows) == set(names)
+    for p, name in zip(takes, names):
+        r = rows[name]
+        if p.name == "ict_cut.c3d":
+            assert r["status"] == "failed" and "truncated" in r["error"] and str(p) in r["error"]
+            assert not (out / name / "done.json").exists()
+            continue
+        assert r["status"] == "solved", r
+        assert (out / name / "weights.csv").read_bytes() == references[p], f"{name} differs from solve"
+        report = json.loads((out / name / "report.json").read_text())
+        assert r["frames"] == report["frames"] and r["marker_rmse"] == report["marker_rmse"]
+        assert r["rate"] == report["rate"] and r["frames_per_second"] == report["frames_per_second"]
+        assert r["error"] is None and r["motion_explained"] == report.get("motion_explained")
+        assert (out / name / "preview.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert not list((out / name).glob(".*")), "temporaries left behind"
+    from tests.image_compare import load_png
+    img = load_png(out / "ict_turned" / "preview.png")
+    assert img.shape[:2] == (360, 480)
+    assert (np.abs(img.astype(int) - img[:, :1].astype(int)).max(axis=2) > 30).mean() > 0.2   # a face on it
+    assert rows["ict_half_rate"]["rate"] == 30.0 and rows["ict_half_rate"]["frames"] == 90
+    assert names[0] == "take" and rows["take"]["frames"] == 358
+    assert rows["ict_cm"]["marker_rmse"] == pytest.approx(rows["ict_trim"]["marker_rmse"], rel=0.5)
+    lines = (out / "batch.csv").read_text().splitlines()
+    assert lines[0].split(",")[:3] == ["take", "status", "error"] and len(lines) == 13
+
+    # Run again: nothing is solved again; the truncated take (it may have been fixed) is tried and fails again.
+    stamps = {n: (out / n / "done.json").stat().st_mtime_ns for n in names if (out / n / "done.json").exists()}
+    again = _batch(ict_dir, take_dir, takes, out, "--workers", "2", timeout=300)
+    assert again.returncode == 2 and "solved 0, skipped 11 (complete), failed 1" in again.stdout
+    rows2 = _summary(out)
+    assert sorted(r["status"] for r in rows2.values()) == ["failed"] + ["skipped"] * 11
+    assert {n: (out / n / "done.json").stat().st_mtime_ns for n in stamps} == stamps
+    assert rows2["ict_trim"]["marker_rmse"] == rows["ict_trim"]["marker_rmse"]
+
+    # --force with a worker killed mid-run: its take goes to another worker and every take still finishes.
+    import psutil
+    for n in stamps:
+        (out / n / "done.json").unlink()      # to see when the forced run completes its first take
+    env = dict(os.environ)
+    p = subprocess.Popen(command() + ["batch", str(ict_dir), *map(str, takes), "--map", str(take_dir / "marker_map.json"),
+                                      "-o", str(out), "--workers", "2", "--force"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        deadline = time.monotonic() + 300
+        while not any((out / n / "done.json").exists() for n in stamps):
+            assert p.poll() is None and time.monotonic() < deadline, "no take finished"
+            time.sleep(0.2)
+        workers = [c for c in psutil.Process(p.pid).children(recursive=True)
+                   if "spawn_main" in " ".join(c.cmdline())]
+        assert len(workers) == 2
+        finished = sum((out / n / "done.json").exists() for n in stamps)
+        assert finished < 11, "the run was over before a worker could be killed"
+        os.kill(workers[0].pid, signal.SIGKILL)
+        stdout, stderr = p.communicate(timeout=600)
+    finally:
+        if p.poll() is None:
+            p.kill()
+            p.communicate()
+    assert p.returncode == 2, stderr
+    rows3 = _summary(out)
+    assert sorted(r["status"] for r in rows3.values()) == ["failed"] + ["solved"] * 11, stderr
+    for path, name in zip(takes[:-1], names[:-1]):
+        assert (out / name / "weights.csv").read_bytes() == references[path]
+
+
+def test_a_take_that_does_not_fit_the_map_fails_alone(tmp_path, ict_rig, take_dir):
+    """A map naming markers the take lacks: that take's row says so in one sentence; the job is not stopped."""
+    from model.batch import BatchJob, solve_take_file
+    from model.marker_map import load_marker_map
+    from model.take_c3d import write_c3d
+    from model.takes import MarkerTake, load_take
+    t = load_take(take_dir / "take.c3d")
+    other = MarkerTake(t.positions[:40], [f"X{i}" for i in range(t.n_markers)], t.rate, t.units)
+    write_c3d(tmp_path / "other.c3d", other)
+    job = BatchJob.prepare(ict_rig, {"mode": "global", "residual": None, "calibration_frames": 30,
+                                     "fixed_head": False}, marker_map=load_marker_map(take_dir / "marker_map.json"))
+    row = solve_take_file(job, str(tmp_path / "other.c3d"), str(tmp_path / "out" / "other"))
+    assert row["status"] == "failed" and row["output"] is None
+    assert row["error"].count(". ") == 0 and "marker" in row["error"], row["error"]
+    assert not (tmp_path / "out" / "other").exists()
+
+
+def _wait_for(path: Path, proc: subprocess.Popen, seconds: float) -> None:
+    deadline = time.monotonic() + seconds
+    while not path.exists():
+        assert proc.poll() is None, proc.communicate()[1]
+        assert time.monotonic() < deadline, f"{path} did not appear within {seconds} s"
+        time.sleep(0.2)
+
+
+def test_batch_against_a_separate_scheduler_and_worker(tmp_path, ict_dir, take_dir, takes, references):
+    """``dask scheduler`` and ``dask worker`` as their own processes on 127.0.0.1; ``batch --scheduler`` uses them."""
+    sched_file = tmp_path / "scheduler.json"
+    procs = []
+    try:
+        procs.append(subprocess.Popen([str(Path(sys.executable).parent / "dask"), "scheduler", "--host", "127.0.0.1",
+                                       "--port", "0", "--no-dashboard", "--scheduler-file", str(sched_file)],
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                                      cwd=tmp_path))
+        _wait_for(sched_file, procs[0], 60)
+        address = json.loads(sched_file.read_text())["address"]
+        assert address.startswith("tcp://127.0.0.1:")
+        procs.append(subprocess.Popen([str(Path(sys.executable).parent / "dask"), "worker", address,
+                                       "--host", "127.0.0.1", "--nworkers", "1", "--nthreads", "1",
+                                       "--no-dashboard", "--death-timeout", "60"],
+                                      stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=tmp_path))
+        out = tmp_path / "out"
+        chosen = [takes[1], takes[7]]
+        proc = _batch(ict_dir, take_dir, chosen, out, "--scheduler", address, timeout=300)
+        assert proc.returncode == 0, proc.stderr
+        rows = _summary(out)
+        for p, name in zip(chosen, _names(chosen)):
+            assert rows[name]["status"] == "solved"
+            assert (out / name / "weights.csv").read_bytes() == references[p]
+    finally:
+        for pr in reversed(procs):
+            if pr.poll() is None:
+                pr.terminate()
+                try:
+                    pr.wait(timeout=20)
+                except subprocess.TimeoutExpired:
+                    pr.kill()
+                    pr.wait()
+
+
+def test_batch_says_when_no_scheduler_answers(tmp_path, ict_dir, take_dir, takes):
+    import socket
+    with socket.socket() as s:      # a port nobody listens on
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    proc = _batch(ict_dir, take_dir, [takes[1]], tmp_path / "out", "--scheduler", f"tcp://127.0.0.1:{port}",
+                  env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "3s"}, timeout=120)
+    assert proc.returncode == 2
+    assert "--scheduler" in proc.stderr and proc.stderr.count("\n") == 1

@@ -1,0 +1,221 @@
+"""File ▸ Batch Solve…: the form of a batch (takes, output folder, the solve options of ``solve``, where to run),
+its progress and the table of results. Holds no algorithm: the options become ``solve`` command-line options
+(``solve_options``) that the controller (app.batch_controller) parses with the command's own parser.
+"""
+from __future__ import annotations
+
+import os
+import shlex
+
+from PySide6 import QtCore, QtWidgets
+
+TAKE_FILTER = "Marker takes (*.c3d *.trc *.csv);;All files (*)"
+COLUMNS = (("take", "Take"), ("status", "Status"), ("frames", "Frames"), ("rate", "Rate (fps)"),
+           ("marker_rmse", "Marker RMSE"), ("motion_explained", "Motion explained"), ("error", "Error"))
+RESIDUALS = ("default", "none", "joshi", "gaussian", "multiquadric")
+
+
+class BatchDialog(QtWidgets.QDialog):
+    """Non-modal: the window stays usable while a batch runs."""
+
+    run_requested = QtCore.Signal()
+    cancel_requested = QtCore.Signal()
+    open_requested = QtCore.Signal(int)     # a row of the results table
+
+    def __init__(self, parent=None) -> None:
+        super().__init__(parent)
+        self.setWindowTitle("Batch Solve")
+        self.setObjectName("batch_dialog")
+        self.resize(820, 640)
+        lay = QtWidgets.QVBoxLayout(self)
+
+        takes_box = QtWidgets.QGroupBox("Takes")
+        tl = QtWidgets.QHBoxLayout(takes_box)
+        self.take_list = QtWidgets.QListWidget()
+        self.take_list.setSelectionMode(QtWidgets.QAbstractItemView.ExtendedSelection)
+        tl.addWidget(self.take_list, 1)
+        buttons = QtWidgets.QVBoxLayout()
+        self.add_files_button = QtWidgets.QPushButton("Add Takes…")
+        self.add_folder_button = QtWidgets.QPushButton("Add Folder…")
+        self.remove_button = QtWidgets.QPushButton("Remove")
+        for b in (self.add_files_button, self.add_folder_button, self.remove_button):
+            buttons.addWidget(b)
+        buttons.addStretch(1)
+        tl.addLayout(buttons)
+        lay.addWidget(takes_box, 1)
+
+        form = QtWidgets.QFormLayout()
+        self.output_edit, out_row = self._path_row("Choose…", self._choose_output)
+        form.addRow("Output folder:", out_row)
+        self.map_edit, map_row = self._path_row("Choose…", self._choose_map)
+        self.map_edit.setPlaceholderText("automatic, from each take's calibration frames")
+        form.addRow("Marker map:", map_row)
+        self.mode_combo = QtWidgets.QComboBox()
+        self.mode_combo.addItems(["Global", "Per region"])
+        form.addRow("Solve:", self.mode_combo)
+        self.residual_combo = QtWidgets.QComboBox()
+        self.residual_combo.addItems(RESIDUALS)
+        form.addRow("Residual:", self.residual_combo)
+        self.calibration_spin = QtWidgets.QSpinBox()
+        self.calibration_spin.setRange(0, 10000)
+        self.calibration_spin.setValue(30)
+        form.addRow("Calibration frames:", self.calibration_spin)
+        self.fixed_head_check = QtWidgets.QCheckBox("Markers already head-stabilised in rig space")
+        form.addRow("", self.fixed_head_check)
+        self.extra_edit = QtWidgets.QLineEdit()
+        self.extra_edit.setPlaceholderText("more solve options, as on the command line (e.g. --threshold 0.8 --level 1)")
+        form.addRow("More options:", self.extra_edit)
+        self.cache_check = QtWidgets.QCheckBox("Also write each take's dense result (PC2, large)")
+        form.addRow("", self.cache_check)
+        self.force_check = QtWidgets.QCheckBox("Solve again takes whose outputs are complete")
+        form.addRow("", self.force_check)
+        where = QtWidgets.QHBoxLayout()
+        self.workers_spin = QtWidgets.QSpinBox()
+        self.workers_spin.setRange(1, 256)
+        self.workers_spin.setValue(os.cpu_count() or 1)
+        where.addWidget(QtWidgets.QLabel("local workers"))
+        where.addWidget(self.workers_spin)
+        self.scheduler_edit = QtWidgets.QLineEdit()
+        self.scheduler_edit.setPlaceholderText("or a Dask scheduler: tcp://host:8786")
+        where.addWidget(self.scheduler_edit, 1)
+        form.addRow("Run on:", where)
+        lay.addLayout(form)
+
+        run_row = QtWidgets.QHBoxLayout()
+        self.run_button = QtWidgets.QPushButton("Run")
+        self.run_button.setDefault(True)
+        self.cancel_button = QtWidgets.QPushButton("Cancel")
+        self.cancel_button.setEnabled(False)
+        self.progress_bar = QtWidgets.QProgressBar()
+        self.progress_bar.setRange(0, 1)
+        self.progress_bar.setValue(0)
+        run_row.addWidget(self.run_button)
+        run_row.addWidget(self.cancel_button)
+        run_row.addWidget(self.progress_bar, 1)
+        lay.addLayout(run_row)
+        self.status_label = QtWidgets.QLabel("")
+        self.status_label.setTextInteractionFlags(QtCore.Qt.TextBrowserInteraction)
+        self.status_label.setOpenExternalLinks(True)
+        self.status_label.setWordWrap(True)
+        lay.addWidget(self.status_label)
+
+        self.table = QtWidgets.QTableWidget(0, len(COLUMNS))
+        self.table.setHorizontalHeaderLabels([c[1] for c in COLUMNS])
+        self.table.setEditTriggers(QtWidgets.QAbstractItemView.NoEditTriggers)
+        self.table.setSelectionBehavior(QtWidgets.QAbstractItemView.SelectRows)
+        self.table.setSelectionMode(QtWidgets.QAbstractItemView.SingleSelection)
+        self.table.horizontalHeader().setStretchLastSection(True)
+        self.table.verticalHeader().setVisible(False)
+        lay.addWidget(self.table, 2)
+        self.open_button = QtWidgets.QPushButton("Open in Mocap Panel")
+        self.open_button.setEnabled(False)
+        lay.addWidget(self.open_button, 0, QtCore.Qt.AlignRight)
+
+        self.add_files_button.clicked.connect(self._choose_takes)
+        self.add_folder_button.clicked.connect(self._choose_folder)
+        self.remove_button.clicked.connect(self._remove_selected)
+        self.run_button.clicked.connect(self.run_requested)
+        self.cancel_button.clicked.connect(self.cancel_requested)
+        self.table.itemSelectionChanged.connect(
+            lambda: self.open_button.setEnabled(bool(self.table.selectionModel().selectedRows())))
+        self.table.cellDoubleClicked.connect(lambda row, _col: self.open_requested.emit(row))
+        self.open_button.clicked.connect(self._open_selected)
+
+    def _path_row(self, label: str, slot) -> tuple[QtWidgets.QLineEdit, QtWidgets.QWidget]:
+        w = QtWidgets.QWidget()
+        h = QtWidgets.QHBoxLayout(w)
+        h.setContentsMargins(0, 0, 0, 0)
+        edit = QtWidgets.QLineEdit()
+        button = QtWidgets.QPushButton(label)
+        button.clicked.connect(slot)
+        h.addWidget(edit, 1)
+        h.addWidget(button)
+        return edit, w
+
+    # --- choosing ---------------------------------------------------------------------------------
+    def _choose_takes(self) -> None:
+        paths, _ = QtWidgets.QFileDialog.getOpenFileNames(self, "Add Takes", "", TAKE_FILTER)
+        self.add_takes(paths)
+
+    def _choose_folder(self) -> None:
+        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Add a Folder of Takes")
+        if path:
+            self.add_takes([path])
+
+    def _choose_output(self) -> None:
+        path = QtWidgets.QFileDialog.getExistingDirectory(self, "Output Folder")
+        if path:
+            self.output_edit.setText(path)
+
+    def _choose_map(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Marker Map", "", "Marker maps (*.json)")
+        if path:
+            self.map_edit.setText(path)
+
+    def add_takes(self, paths) -> None:
+        have = set(self.takes())
+        for p in paths:
+            if str(p) not in have:
+                self.take_list.addItem(str(p))
+                have.add(str(p))
+
+    def _remove_selected(self) -> None:
+        for item in self.take_list.selectedItems():
+            self.take_list.takeItem(self.take_list.row(item))
+
+    def _open_selected(self) -> None:
+        rows = self.table.selectionModel().selectedRows()
+        if rows:
+            self.open_requested.emit(rows[0].row())
+
+    # --- what the form says -----------------------------------------------------------------------
+    def takes(self) -> list[str]:
+        return [self.take_list.item(i).text() for i in range(self.take_list.count())]
+
+    def output(self) -> str:
+        return self.output_edit.text().strip()
+
+    def scheduler(self) -> str:
+        return self.scheduler_edit.text().strip()
+
+    def solve_options(self) -> list[str]:
+        """The form's solve options as ``solve``'s command-line options (shlex-split ``More options`` last)."""
+        argv = []
+        if self.map_edit.text().strip():
+            argv += ["--map", self.map_edit.text().strip()]
+        if self.mode_combo.currentIndex() == 0:
+            argv.append("--global")
+        if self.residual_combo.currentText() != "default":
+            argv += ["--residual", self.residual_combo.currentText()]
+        argv += ["--calibration-frames", str(self.calibration_spin.value())]
+        if self.fixed_head_check.isChecked():
+            argv.append("--fixed-head")
+        return argv + shlex.split(self.extra_edit.text())
+
+    # --- showing the run --------------------------------------------------------------------------
+    def set_running(self, running: bool) -> None:
+        self.run_button.setEnabled(not running)
+        self.cancel_button.setEnabled(running)
+        if running:
+            self.table.setRowCount(0)
+            self.progress_bar.setRange(0, 0)     # busy until the first count arrives
+
+    def set_progress(self, done: int, total: int, text: str) -> None:
+        self.progress_bar.setRange(0, max(total, 1))
+        self.progress_bar.setValue(done)
+        self.status_label.setText(text)
+
+    def set_status(self, text: str) -> None:
+        self.status_label.setText(text)
+
+    def set_rows(self, rows: list[dict]) -> None:
+        self.table.setRowCount(len(rows))
+        for i, r in enumerate(rows):
+            for j, (key, _) in enumerate(COLUMNS):
+                v = r.get(key)
+                text = "" if v is None else (f"{v:.4g}" if isinstance(v, float) else str(v))
+                item = QtWidgets.QTableWidgetItem(text)
+                if key == "error" and v:
+                    item.setToolTip(str(v))
+                self.table.setItem(i, j, item)
+        self.table.resizeColumnsToContents()
