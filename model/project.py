@@ -175,8 +175,6 @@ def load_project(path: str | Path) -> Project:
     path = regular_file(path)
     try:
         z = zipfile.ZipFile(path)
-    except FileNotFoundError:
-        raise RigInputError(f"{path}: does not exist.") from None
     except (zipfile.BadZipFile, OSError) as exc:
         raise RigInputError(f"{path}: is not a readable project (damaged zip: {exc}).") from None
     with z:

@@ -44,6 +44,15 @@ if numba is not None:
             out[i] = v / L[i, i]
 
     @njit(cache=True, nogil=True)
+    def _bound_ratio(xi, cur, lo, hi, none):
+        """How far along the step from ``cur`` to ``xi`` the variable meets a bound (``none`` if it stays inside)."""
+        if xi < lo:
+            return (lo - cur) / (xi - cur)
+        if xi > hi:
+            return (hi - cur) / (xi - cur)
+        return none
+
+    @njit(cache=True, nogil=True)
     def _chol_append(L, order, nf, H, j):
         """Append variable j to the factor of H over ``order[:nf]``: returns False when the block would not be
         positive definite (the caller refactors)."""
@@ -159,13 +168,7 @@ if numba is not None:
                         if s[a] != 0.0:
                             continue
                         i = pos[a]
-                        xi, cur = x[i], w[a]
-                        if xi < lo:
-                            ratio = (lo - cur) / (xi - cur)
-                        elif xi > hi:
-                            ratio = (hi - cur) / (xi - cur)
-                        else:
-                            ratio = np.inf
+                        ratio = _bound_ratio(x[i], w[a], lo, hi, np.inf)
                         if ratio < best:
                             best, jb = ratio, a
                     step = max(best, 0.0)
@@ -376,13 +379,7 @@ if numba is not None:
                     for j in range(K):
                         if s[j] != 0.0:
                             continue
-                        xi, cur = x[j], w[j]
-                        if xi < lo:
-                            ratio = (lo - cur) / (xi - cur)
-                        elif xi > hi:
-                            ratio = (hi - cur) / (xi - cur)
-                        else:
-                            ratio = _BIG
+                        ratio = _bound_ratio(x[j], w[j], lo, hi, _BIG)
                         if ratio < best:
                             best, jb = ratio, j
                     step = max(best, 0.0)
