@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import struct
 
 import numpy as np
 import pytest
@@ -358,23 +359,29 @@ def test_livelink_timecodes_that_go_back_or_are_not_timecodes(tmp_path):
 
 # --- C3D files that bend the standard (built here, one bend at a time) ----------------------------
 def _bent_c3d(path, pos, labels, *, units=(b"mm", (2,)), scale_dims=(), rate_dims=(), analog_used=0,
-              analog_ratio=1, header_analog=None, cut=0):
-    """A float C3D of ``pos`` with the given parameter shapes; analog channels hold noise."""
+              analog_ratio=1, header_analog=None, cut=0, point=None, data_start=None):
+    """A float C3D of ``pos`` with the given parameter shapes; analog channels hold noise. ``point`` replaces
+    POINT parameters by name with (type, dims, payload); ``data_start`` overrides POINT:DATA_START."""
     import struct
     from model.take_c3d import BLOCK, _group, _param
     F, M, _ = pos.shape
     width = max(len(s) for s in labels)
-    plist = [_group(1, "POINT"), _param(1, "USED", 2, (), struct.pack("<h", M)),
-             _param(1, "FRAMES", 2, (), struct.pack("<H", F)),
-             _param(1, "SCALE", 4, scale_dims, struct.pack("<f", -0.1)),
-             _param(1, "RATE", 4, rate_dims, struct.pack("<f", 60.0)),
+    point = point or {}
+
+    def pt(name, dtype, dims, payload):
+        return _param(1, name, *point.get(name, (dtype, dims, payload)))
+    plist = [_group(1, "POINT"), pt("USED", 2, (), struct.pack("<h", M)),
+             pt("FRAMES", 2, (), struct.pack("<H", F)),
+             pt("SCALE", 4, scale_dims, struct.pack("<f", -0.1)),
+             pt("RATE", 4, rate_dims, struct.pack("<f", 60.0)),
              _param(1, "UNITS", -1, units[1], units[0]),
              _param(1, "LABELS", -1, (width, M), b"".join(s.encode().ljust(width) for s in labels)),
              _group(2, "ANALOG"), _param(2, "USED", 2, (), struct.pack("<h", analog_used)),
              _param(2, "RATE", 4, (), struct.pack("<f", 60.0 * analog_ratio))]
     body = b"".join(plist)
     n_blocks = (4 + len(body) + 16 + BLOCK - 1) // BLOCK
-    body += _param(1, "DATA_START", 2, (), struct.pack("<h", 2 + n_blocks)) + b"\x00\x00"
+    body += _param(1, "DATA_START", 2, (), struct.pack("<h", 2 + n_blocks if data_start is None else data_start)) \
+        + b"\x00\x00"
     psec = (bytes([1, 80, n_blocks, 84]) + body).ljust(n_blocks * BLOCK, b"\x00")
     words = analog_used * analog_ratio
     header = np.zeros(256, dtype="<u2")
@@ -456,3 +463,34 @@ def test_c3d_damaged_parameters_never_crash_or_loop(take_dir, tmp_path):
             read_c3d(path)
         except RigInputError as exc:
             assert path.name in str(exc) and "\n" not in str(exc)
+
+
+@pytest.mark.parametrize("name,param", [
+    ("scale_inf", ("SCALE", (4, (), struct.pack("<f", float("inf"))))),
+    ("rate_1e38", ("RATE", (4, (), struct.pack("<f", 1e38)))),
+    ("used_negative", ("USED", (2, (), struct.pack("<h", -32768)))),
+    ("frames_array", ("FRAMES", (2, (3,), struct.pack("<3H", 50, 7, 9)))),
+])
+def test_c3d_parameters_no_file_holds(bent_positions, tmp_path, name, param):
+    """The tester's C3D cases (issue 17): SCALE=inf, RATE=1e38, USED=-32768, FRAMES as an array. Each is read
+    from what the rest of the file proves (header, file size) or refused in one sentence, never garbage."""
+    key, value = param
+    path = _bent_c3d(tmp_path / f"{name}.c3d", bent_positions, ["A", "B", "C", "D"], point={key: value})
+    try:
+        take = read_c3d(path)
+    except RigInputError as exc:
+        assert path.name in str(exc) and "\n" not in str(exc)
+        return
+    assert take.n_frames == 50 and take.labels == ["A", "B", "C", "D"] and 0 < take.rate <= 100_000
+    np.testing.assert_allclose(take.positions, bent_positions.astype(np.float32), equal_nan=True)
+
+
+@pytest.mark.parametrize("data_start", [0, -5])
+def test_c3d_data_start_at_or_below_zero(bent_positions, tmp_path, data_start):
+    path = _bent_c3d(tmp_path / "start.c3d", bent_positions, ["A", "B", "C", "D"], data_start=data_start)
+    try:
+        take = read_c3d(path)
+    except RigInputError as exc:
+        assert path.name in str(exc) and "\n" not in str(exc)
+        return
+    np.testing.assert_allclose(take.positions, bent_positions.astype(np.float32), equal_nan=True)
