@@ -35,6 +35,17 @@ def atomic_write_with(path: str | Path, writer: Callable[[IO[bytes]], object]) -
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path.parent)
+    tmp = write_temporary(path, writer)
+    try:
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
+def write_temporary(path: Path, writer: Callable[[IO[bytes]], object]) -> Path:
+    """Write a new temporary beside ``path`` completely (``writer(file)``, flushed and fsynced, the user's umask)
+    and return it; on any failure it is removed and the error raised. Moving it into place is the caller's."""
     tmp = temp_path(path)
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 & ~current_umask())
     try:
@@ -42,13 +53,10 @@ def atomic_write_with(path: str | Path, writer: Callable[[IO[bytes]], object]) -
             writer(f)
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
     except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
+        tmp.unlink(missing_ok=True)
         raise
+    return tmp
 
 
 # --- temporaries -----------------------------------------------------------------------------------------
@@ -61,7 +69,8 @@ def temp_path(path: str | Path, suffix: str = ".tmp") -> Path:
     return path.with_name(f".{path.name}{TEMP_MARK}{os.getpid()}.{secrets.token_hex(4)}{suffix}")
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` of this machine still runs (ours always does)."""
     if pid == os.getpid():
         return True
     try:
@@ -86,7 +95,7 @@ def remove_stale_temporaries(folder: str | Path) -> int:
             pid = int(tmp.name.rsplit(TEMP_MARK, 1)[1].split(".")[0])
         except (IndexError, ValueError):
             continue
-        if not _alive(pid):
+        if not process_alive(pid):
             try:
                 tmp.unlink()
                 n += 1

@@ -14,7 +14,7 @@ import os
 from pathlib import Path
 from typing import IO, Callable
 
-from .atomic import current_umask, remove_stale_temporaries, temp_path
+from .atomic import atomic_write, remove_stale_temporaries, write_temporary
 
 JOURNAL_SUFFIX = ".bs-set.json"
 
@@ -43,23 +43,11 @@ def write_set(writers: dict[str | Path, Callable[[IO[bytes]], object]]) -> None:
     temps: list[tuple[Path, Path]] = []
     try:
         for path, writer in items:
-            tmp = temp_path(path)
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 & ~current_umask())
-            temps.append((tmp, path))
-            with os.fdopen(fd, "wb") as f:
-                writer(f)
-                f.flush()
-                os.fsync(f.fileno())
+            temps.append((write_temporary(path, writer), path))
         first = items[0][0]
         journal = first.with_name(f".{first.name}{JOURNAL_SUFFIX}")
-        data = json.dumps({"moves": [[str(t), str(p)] for t, p in temps]}).encode()
-        jtmp = temp_path(journal)
-        with open(jtmp, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(jtmp, journal)          # the commit point: from here on the new set wins
-        _fsync_dir(journal.parent)
+        atomic_write(journal, json.dumps({"moves": [[str(t), str(p)] for t, p in temps]}).encode())
+        _fsync_dir(journal.parent)          # the journal in place is the commit point: the new set wins
     except BaseException:
         for tmp, _ in temps:
             tmp.unlink(missing_ok=True)

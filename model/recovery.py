@@ -19,7 +19,7 @@ import socket
 from dataclasses import dataclass
 from pathlib import Path
 
-from .atomic import atomic_write
+from .atomic import atomic_write, process_alive
 from .project import Project, load_project, save_project
 
 SECTION = "recovery"
@@ -114,16 +114,6 @@ def lock_path(project_path: str | Path) -> Path:
     return p.with_name(f".{p.name}.lock")
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def lock_owner(project_path: str | Path) -> dict | None:
     """The live process (pid, host, since) that holds the project open, or None (no lock, or a stale one)."""
     try:
@@ -131,7 +121,7 @@ def lock_owner(project_path: str | Path) -> dict | None:
         pid, host = int(data["pid"]), str(data["host"])
     except (OSError, ValueError, KeyError, TypeError):
         return None
-    if host == socket.gethostname() and (pid == os.getpid() or not _alive(pid)):
+    if host == socket.gethostname() and (pid == os.getpid() or not process_alive(pid)):
         return None
     return data
 
