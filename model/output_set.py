@@ -5,7 +5,8 @@ Each file is first written completely to a temporary file beside its target (fsy
 (``.<first target>.bs-set.json``) lists the moves, and the moves are made; the journal is removed last.
 If the process dies before the journal exists, the old files are untouched and the temporaries are
 leftovers (removed by ``finish_interrupted_sets``); if it dies after, the next ``finish_interrupted_sets`` of
-that folder (every ``write_set`` call runs it first, and the GUI at start) completes the moves: the new set.
+that folder (every ``write_set`` call runs it first, and ``batch`` on its output folder) completes the moves:
+the new set. Any atomic write to the folder also removes the orphaned temporaries (``model.atomic``).
 """
 from __future__ import annotations
 
