@@ -72,12 +72,8 @@ def animation_from_timeline(timeline, rate: float = 30.0, *, deltas=None, blend=
     T = timeline.times
     frames = np.arange(int(np.floor((T[-1] - T[0]) * rate + 1e-9)) + 1)
     times = T[0] + frames / rate
-    W = np.stack([timeline.evaluate(t) for t in times])
-    if W.ndim == 3:
-        if deltas is None or blend is None:
-            raise RigInputError("A timeline of regional poses needs the rig's shapes and the keys' blend to export.")
-        from solvers.surface_fit import global_weights_of_regional
-        W = global_weights_of_regional(deltas, blend, W, lower=timeline.lower, upper=timeline.upper)
+    from .keyframes import keyed_global_weights
+    W = keyed_global_weights(timeline, times, deltas, blend)
     return WeightAnimation(times=times - T[0], weights=W, source="keyframes")
 
 

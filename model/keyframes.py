@@ -172,6 +172,7 @@ def keyed_global_weights(timeline: Timeline, times: np.ndarray, deltas: np.ndarr
     W = keyed_frames(timeline, times)
     if W.ndim == 2:
         return W
-    if blend is None:
-        raise RigInputError("A regional timeline needs the partition of unity of its level to export global weights.")
+    if blend is None or deltas is None:
+        raise RigInputError("A regional timeline needs the rig's shapes and the partition of unity of its level to "
+                            "export global weights.")
     return global_weights_of_regional(deltas, blend, W, lower=timeline.lower, upper=timeline.upper)
