@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError
+from .input_files import regular_file
 from .rig import Rig, unit_scale
 
 UP_AXES = ("y", "z")
@@ -79,9 +80,7 @@ def animation_from_timeline(timeline, rate: float = 30.0, *, deltas=None, blend=
 
 def load_animation(path: str | Path, rig: Rig) -> WeightAnimation:
     """A weights CSV (``frame,time,<shapes>``, as ``solve`` writes) or a Live Link Face CSV, for ``rig``."""
-    path = Path(path)
-    if not path.is_file():
-        raise RigInputError(f"{path}: does not exist.")
+    path = regular_file(path)   # a missing file, a folder, a FIFO or a device: one sentence, nothing read
     if path.suffix.lower() != ".csv":
         raise RigInputError(f"{path}: an animation is a weights CSV or a Live Link Face CSV.")
     from .livelink import is_livelink_csv

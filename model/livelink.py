@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError, shown
+from .input_files import regular_file
 from .take_data import WeightTake
 
 ROTATION_COLUMNS = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePitch", "LeftEyeRoll",
@@ -120,9 +121,7 @@ def default_arkit_mapping(columns: list[str], shape_names: list[str]) -> dict[st
 
 def read_livelink_raw(path: str | Path) -> tuple[list[str], list[str], np.ndarray]:
     """(timecodes, column names after BlendShapeCount, values (F, C)) of a Live Link Face CSV."""
-    path = Path(path)
-    if not path.is_file():
-        raise RigInputError(f"{path}: does not exist.")
+    path = regular_file(path)   # a missing file, a folder, a FIFO or a device: one sentence, nothing read
     try:
         with open(path, newline="", encoding="utf-8", errors="replace") as f:
             rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]

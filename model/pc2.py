@@ -14,6 +14,7 @@ import numpy as np
 
 from .atomic import atomic_write_with
 from .errors import RigInputError
+from .input_files import regular_file
 
 MAGIC = b"POINTCACHE2\0"
 HEADER = struct.Struct("<12siiffi")
@@ -70,9 +71,7 @@ def pc2_writer(path: str | Path, frames, *, n_points: int | None = None, start_f
 
 def read_pc2_header(path: str | Path) -> dict:
     """{"n_points", "start_frame", "sample_rate", "n_samples"} of a PC2 file (validated against its size)."""
-    path = Path(path)
-    if not path.is_file():
-        raise RigInputError(f"{path}: does not exist.")
+    path = regular_file(path)   # a missing file, a folder, a FIFO or a device: one sentence, nothing read
     size = path.stat().st_size
     with open(path, "rb") as f:
         head = f.read(HEADER.size)

@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .errors import RigInputError
+from .input_files import regular_file
 from .take_data import MarkerTake, WeightTake, take_summary, unique_labels, units_from_text
 
 __all__ = ["MarkerTake", "WeightTake", "load_take", "take_summary", "unique_labels", "units_from_text"]
@@ -20,9 +21,7 @@ __all__ = ["MarkerTake", "WeightTake", "load_take", "take_summary", "unique_labe
 
 def load_take(path: str | Path, **kwargs) -> MarkerTake | WeightTake:
     """Open a take: ``.c3d``, ``.trc``, or ``.csv`` (marker trajectories or a Live Link Face recording)."""
-    path = Path(path)
-    if not path.is_file():
-        raise RigInputError(f"{path}: does not exist.")
+    path = regular_file(path)   # a missing file, a folder, a FIFO or a device: one sentence, nothing read
     suffix = path.suffix.lower()
     if suffix == ".c3d":
         from .take_c3d import read_c3d

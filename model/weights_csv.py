@@ -9,6 +9,7 @@ import numpy as np
 
 from .atomic import atomic_write
 from .errors import RigInputError
+from .input_files import regular_file
 
 
 def write_weights_csv(path: str | Path, weights: np.ndarray, names: list[str], *, rate: float | None = None,
@@ -44,9 +45,7 @@ def weights_csv_bytes(path: str | Path, weights: np.ndarray, names: list[str], *
 
 def read_weights_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray]:
     """(frames (F,) int, times (F,), names (K), weights (F, K)) from a weights CSV."""
-    path = Path(path)
-    if not path.is_file():
-        raise RigInputError(f"{path}: does not exist.")
+    path = regular_file(path)   # a missing file, a folder, a FIFO or a device: one sentence, nothing read
     text = path.read_text(encoding="utf-8-sig", errors="replace")
     rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
     if not rows:

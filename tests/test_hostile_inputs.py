@@ -143,3 +143,12 @@ def test_trc_header_counts_that_are_not_counts(tmp_path, take_dir):
     path = tmp_path / "take.trc"
     path.write_text("\n".join(lines) + "\n")
     _refused(load_take, path, "NumMarkers")
+
+
+@pytest.mark.parametrize("name", ["take.c3d", "take.trc", "take.csv"])
+def test_a_fifo_named_as_a_take_is_refused_unread(tmp_path, name):
+    import os
+    fifo = tmp_path / name
+    os.mkfifo(fifo)
+    proc = run_cli("take-info", fifo, check=False, timeout=60)   # opening a FIFO for reading would block
+    assert proc.returncode == 2 and "not a regular file" in proc.stderr and "Traceback" not in proc.stderr
