@@ -22,11 +22,12 @@ def project_file(tmp_path, sample_rig):
     return path
 
 
-def _rewrite(path, out, change):
-    """Copy a project, passing each member's bytes through ``change(name, bytes)``."""
+def _rewrite(path, out, member, change):
+    """Copy a project with one member's bytes passed through ``change(bytes)``."""
     with zipfile.ZipFile(path) as src, zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as dst:
         for n in src.namelist():
-            dst.writestr(n, change(n, src.read(n)))
+            b = src.read(n)
+            dst.writestr(n, change(b) if n == member else b)
     return out
 
 
@@ -34,6 +35,15 @@ def _npy(a) -> bytes:
     buf = io.BytesIO()
     np.save(buf, a)
     return buf.getvalue()
+
+
+def _rewrite_array(path, out, key, edit):
+    """Copy a project with the array ``key`` replaced by ``edit(array)``."""
+    return _rewrite(path, out, f"{key}.npy", lambda b: _npy(edit(np.load(io.BytesIO(b)))))
+
+
+def _rewrite_manifest(path, out, edit):
+    return _rewrite(path, out, "manifest.json", lambda b: json.dumps(edit(json.loads(b))).encode())
 
 
 def _refused(path, *words):
@@ -47,74 +57,59 @@ def _refused(path, *words):
 
 
 def test_negative_face_count_with_the_same_total_is_refused(project_file, tmp_path):
-    def change(name, b):
-        if name == "rig/face_counts.npy":
-            a = np.load(io.BytesIO(b)).astype(np.int32)
-            a[0] += 5
-            a[1] -= 5          # the total still matches the indices: only the sign gives it away
-            return _npy(a)
-        return b
-    _refused(_rewrite(project_file, tmp_path / "neg.bsproj", change), "corners")
+    def edit(a):
+        a = a.astype(np.int32)
+        a[0] += 5
+        a[1] -= 5          # the total still matches the indices: only the sign gives it away
+        return a
+    _refused(_rewrite_array(project_file, tmp_path / "neg.bsproj", "rig/face_counts", edit), "corners")
 
 
 def test_int64_indices_beyond_int32_are_not_wrapped(project_file, tmp_path):
-    def change(name, b):
-        if name == "rig/face_indices.npy":
-            a = np.load(io.BytesIO(b)).astype(np.int64)
-            a[0] = 2**32   # would wrap to 0, a valid vertex, if cast silently
-            return _npy(a)
-        return b
-    _refused(_rewrite(project_file, tmp_path / "wrap.bsproj", change), "2³¹")
+    def edit(a):
+        a = a.astype(np.int64)
+        a[0] = 2**32       # would wrap to 0, a valid vertex, if cast silently
+        return a
+    _refused(_rewrite_array(project_file, tmp_path / "wrap.bsproj", "rig/face_indices", edit), "2³¹")
 
 
 def test_a_declared_shape_of_10_to_the_12_is_refused_before_allocating(project_file, tmp_path):
-    def change(name, b):
-        if name == "rig/deltas.npy":
-            header = np.lib.format.header_data_from_array_1_0(np.zeros((1, 3)))
-            header["shape"] = (10**12, 3)
-            buf = io.BytesIO()
-            np.lib.format.write_array_header_1_0(buf, header)
-            return buf.getvalue() + b[-4096:]
-        return b
-    _refused(_rewrite(project_file, tmp_path / "huge.bsproj", change), "declares 3000000000000 values")
+    def change(b):
+        header = np.lib.format.header_data_from_array_1_0(np.zeros((1, 3)))
+        header["shape"] = (10**12, 3)
+        buf = io.BytesIO()
+        np.lib.format.write_array_header_1_0(buf, header)
+        return buf.getvalue() + b[-4096:]
+    out = _rewrite(project_file, tmp_path / "huge.bsproj", "rig/deltas.npy", change)
+    _refused(out, "declares 3000000000000 values")
 
 
 def test_a_member_that_inflates_beyond_its_header_is_refused(project_file, tmp_path):
-    def change(name, b):
-        if name == "rig/neutral.npy":
-            return b + bytes(64 << 20)   # 64 MiB of zeros that deflate to almost nothing
-        return b
-    out = _rewrite(project_file, tmp_path / "bomb.bsproj", change)
+    # 64 MiB of zeros that deflate to almost nothing
+    out = _rewrite(project_file, tmp_path / "bomb.bsproj", "rig/neutral.npy", lambda b: b + bytes(64 << 20))
     assert out.stat().st_size < 2 << 20
     _refused(out, "rig/neutral", "damaged")
 
 
 @pytest.mark.parametrize("weights", [[np.nan], [1e308]])
 def test_nan_or_absurd_pose_weights_are_refused(project_file, tmp_path, weights):
-    def change(name, b):
-        if name == "pose/weights.npy":
-            a = np.load(io.BytesIO(b))
-            a[: len(weights)] = weights
-            return _npy(a)
-        return b
-    _refused(_rewrite(project_file, tmp_path / "w.bsproj", change))
+    def edit(a):
+        a[: len(weights)] = weights
+        return a
+    _refused(_rewrite_array(project_file, tmp_path / "w.bsproj", "pose/weights", edit))
 
 
 @pytest.mark.parametrize("preset_weight", [None, "1", [1], 1e308, True])
 def test_preset_weights_of_the_wrong_type_or_size_are_refused(project_file, tmp_path, preset_weight):
-    def change(name, b):
-        if name == "manifest.json":
-            m = json.loads(b)
-            m["rig"]["presets"] = {"happy": {m["rig"]["shape_names"][0]: preset_weight}}
-            return json.dumps(m).encode()
-        return b
-    _refused(_rewrite(project_file, tmp_path / "p.bsproj", change), "happy")
+    def edit(m):
+        m["rig"]["presets"] = {"happy": {m["rig"]["shape_names"][0]: preset_weight}}
+        return m
+    _refused(_rewrite_manifest(project_file, tmp_path / "p.bsproj", edit), "happy")
 
 
 def test_a_manifest_nested_100000_deep_is_one_sentence(project_file, tmp_path):
-    def change(name, b):
-        return (b"[" * 100_000 + b"]" * 100_000) if name == "manifest.json" else b
-    _refused(_rewrite(project_file, tmp_path / "deep.bsproj", change), "nested too deeply")
+    out = _rewrite(project_file, tmp_path / "deep.bsproj", "manifest.json", lambda b: b"[" * 100_000 + b"]" * 100_000)
+    _refused(out, "nested too deeply")
 
 
 def test_a_fifo_named_bsproj_does_not_block(tmp_path):
