@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .atomic import atomic_write, process_alive
+from .json_file import parse_json_text, read_json_file
 from .project import Project, load_project, save_project
 
 SECTION = "recovery"
@@ -72,16 +73,17 @@ def write_recovery(project: Project, project_path: str | Path | None) -> Path:
 def read_recovery_info(path: Path) -> Recovery | None:
     """What a recovery file says about itself (cheap: the manifest only); None if it is not one."""
     import zipfile
+    import zlib
     try:
         with zipfile.ZipFile(path) as z:
             info = z.getinfo("manifest.json")
             if info.file_size > 64 << 20:
                 return None
-            meta = json.loads(z.read(info)).get("sections", {}).get(SECTION)
+            meta = parse_json_text(z.read(info).decode("utf-8"), str(path)).get("sections", {}).get(SECTION)
         saved = _dt.datetime.fromisoformat(meta["saved_at"])
         return Recovery(path, saved, meta.get("project_path"), str(meta.get("rig_source", "")))
-    except (OSError, ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile):
-        return None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, zipfile.BadZipFile, zlib.error):
+        return None   # damaged or not ours (RigInputError is a ValueError): nothing to offer
 
 
 def find_recoveries(project_path: str | Path | None = None) -> list[Recovery]:
@@ -117,7 +119,7 @@ def lock_path(project_path: str | Path) -> Path:
 def lock_owner(project_path: str | Path) -> dict | None:
     """The live process (pid, host, since) that holds the project open, or None (no lock, or a stale one)."""
     try:
-        data = json.loads(lock_path(project_path).read_text())
+        data = read_json_file(lock_path(project_path))     # regular files only: a FIFO must not block a start
         pid, host = int(data["pid"]), str(data["host"])
     except (OSError, ValueError, KeyError, TypeError):
         return None
@@ -142,7 +144,7 @@ def take_lock(project_path: str | Path) -> dict | None:
 def release_lock(project_path: str | Path) -> None:
     p = lock_path(project_path)
     try:
-        data = json.loads(p.read_text())
+        data = read_json_file(p)
         if int(data.get("pid", -1)) == os.getpid() and data.get("host") == socket.gethostname():
             p.unlink()
     except (OSError, ValueError, TypeError, AttributeError):

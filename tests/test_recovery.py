@@ -65,3 +65,19 @@ def test_a_lock_held_by_a_live_process_is_reported_and_a_dead_ones_is_not(tmp_pa
     take_lock(path)
     release_lock(path)
     assert not lock_path(path).exists()
+
+
+def test_damaged_recovery_files_and_a_fifo_lock_neither_crash_nor_block_a_start(tmp_path):
+    import os
+    import threading
+    import zipfile
+    path = tmp_path / "face.bsproj"
+    with zipfile.ZipFile(recovery_path(path), "w") as z:        # a manifest nested deeper than Python follows
+        z.writestr("manifest.json", "[" * 100_000 + "]" * 100_000)
+    assert find_recoveries(path) == []
+    os.mkfifo(lock_path(path))
+    result = {}
+    t = threading.Thread(target=lambda: result.setdefault("owner", lock_owner(path)), daemon=True)
+    t.start()
+    t.join(10)
+    assert not t.is_alive() and result["owner"] is None
