@@ -107,18 +107,19 @@ def read_npy_member(z: zipfile.ZipFile, name: str, path: Path, key: str) -> np.n
             if header + nbytes != info.file_size:
                 raise RigInputError(f"{path}: the array '{key}' declares {count} values but holds "
                                     f"{max(info.file_size - header, 0) // max(dtype.itemsize, 1)}; it is damaged.")
-            data = f.read(nbytes + 1)
+            a = np.empty(shape, dtype=dtype, order="F" if fortran else "C")   # read straight into it: one copy
+            got = f.readinto(memoryview(a.reshape(-1, order="A")).cast("B")) if nbytes else 0
+            extra = f.read(1)
     except RigInputError:
         raise
     except (ValueError, OSError, zipfile.BadZipFile, EOFError, SyntaxError, TypeError, tokenize.TokenError,
             zlib.error) as exc:
         raise RigInputError(f"{path}: the array '{key}' is damaged ({shown(exc, 80)}).") from None
-    if len(data) != nbytes:
+    if got != nbytes or extra:
         raise RigInputError(f"{path}: the array '{key}' is truncated.")
-    a = np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C")
     if a.dtype.kind == "f" and not np.isfinite(a).all():
         raise RigInputError(f"{path}: the array '{key}' holds NaN or infinite values.")
-    return np.array(a)   # writable, owned
+    return a
 
 
 def save_project(project: Project, path: str | Path) -> None:
