@@ -32,6 +32,9 @@ from typing import Callable
 
 import numpy as np
 
+from solvers.take_solve import DEFAULTS
+
+from .atomic import process_alive
 from .errors import RigInputError
 from .marker_map import MarkerMap
 from .output_set import finish_interrupted_sets, write_set
@@ -138,6 +141,13 @@ class BatchJob:
     preview: Callable | None = None       # preview(points, face_counts, face_indices, path, focus=...) or None
     focus: np.ndarray | None = None       # the points the preview frames
     signature: dict = field(default_factory=dict)
+    antagonists: list | None = None       # the rig's antagonist pairs, derived once when the settings use them
+
+    def take_settings(self) -> dict:
+        """The solve settings of every take: the job's, with the antagonist pairs found once for the batch."""
+        if self.antagonists is None:
+            return self.settings
+        return dict(self.settings, antagonists=self.antagonists)
 
     @classmethod
     def prepare(cls, rig: Rig, settings: dict, *, segmentation=None, marker_map: MarkerMap | None = None,
@@ -148,9 +158,13 @@ class BatchJob:
         signature = {"settings": {k: settings[k] for k in sorted(settings)}, "marker_map": map_id,
                      "rig": _digest(rig.neutral, rig.deltas, *[c.delta for c in rig.correctives]),
                      "rig_units": rig.units, "cache": bool(cache), "preview": preview is not None}
+        antagonists = None
+        if settings.get("lam_antagonist", DEFAULTS["lam_antagonist"]) and settings.get("antagonists") is None:
+            from .antagonists import rig_antagonists      # ~0.07 s on ICT: once per batch, not once per take
+            antagonists = rig_antagonists(rig)
         return cls(rig=rig, settings=dict(settings), evaluator=PoseEvaluator(rig, dtype=np.float64),
                    segmentation=segmentation, marker_map=marker_map, cache=cache, preview=preview,
-                   focus=focus, signature=json.loads(json.dumps(signature)))
+                   focus=focus, signature=json.loads(json.dumps(signature)), antagonists=antagonists)
 
 
 # --- one take ---------------------------------------------------------------------------------------
@@ -207,13 +221,7 @@ def _sweep_temporaries(out_dir: Path) -> None:
             pid = int(d.name[len(_TMP_PREFIX):].split("-")[0])
         except ValueError:
             continue
-        try:
-            os.kill(pid, 0)
-            continue
-        except ProcessLookupError:
-            pass
-        except PermissionError:
-            continue
+        if not process_alive(pid):
             shutil.rmtree(d, ignore_errors=True)
 
 
@@ -255,7 +263,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
             ws.auto_map(job.settings.get("calibration_frames", 30), neutral_frames=job.settings.get("neutral_frames"),
                         stable=job.settings.get("stable"))
         identity = _take_identity(take_path)
-        sol = ws.solve(job.settings, segmentation=job.segmentation, evaluator=job.evaluator)
+        sol = ws.solve(job.take_settings(), segmentation=job.segmentation, evaluator=job.evaluator)
     except RigInputError as exc:
         return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -267,3 +267,25 @@ def test_batch_says_when_no_scheduler_answers(tmp_path, ict_dir, take_dir, takes
                   env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "3s"}, timeout=120)
     assert proc.returncode == 2
     assert "--scheduler" in proc.stderr and proc.stderr.count("\n") == 1
+
+
+def test_a_killed_writers_private_folder_is_removed_by_the_next_write(tmp_path, ict_rig, take_dir):
+    """A worker killed while writing a take leaves its private folder in OUTDIR/<take>/; the next writer of that
+    take removes it (its process is gone) and leaves a live writer's folder alone."""
+    from model.batch import BatchJob, solve_take_file
+    from model.marker_map import load_marker_map
+    gone = subprocess.Popen([sys.executable, "-c", "pass"])
+    gone.wait()
+    out = tmp_path / "out" / "take"
+    stale = out / f".bs-batch-{gone.pid}-x1"
+    live = out / f".bs-batch-{os.getppid()}-x2"
+    for d in (stale, live):
+        d.mkdir(parents=True)
+        (d / "weights.csv").write_text("half a file")
+    job = BatchJob.prepare(ict_rig, {"mode": "global", "residual": None, "calibration_frames": 30,
+                                     "fixed_head": False}, marker_map=load_marker_map(take_dir / "marker_map.json"))
+    row = solve_take_file(job, str(take_dir / "take.c3d"), str(out))
+    assert row["status"] == "solved", row
+    assert not stale.exists(), "the dead writer's folder was left behind"
+    assert live.exists(), "a live writer's folder was removed"
+    assert (out / "weights.csv").read_text().startswith("frame,time,")
