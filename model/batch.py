@@ -380,8 +380,11 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
                                 f"{timeout:g} s ({type(exc).__name__}).") from None
         return client, None
     n = workers or os.cpu_count() or 1
+    # One core a worker: Dask's nanny already sets one BLAS/OpenMP thread; llvmpipe, which draws the previews
+    # off screen, would otherwise rasterise on every core of the machine from each worker at once.
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=dashboard_address, silence_logs=logging.ERROR)
+                           dashboard_address=dashboard_address, silence_logs=logging.ERROR,
+                           env={"LP_NUM_THREADS": "1"})
     return Client(cluster), cluster
 
 
