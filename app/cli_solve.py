@@ -102,7 +102,7 @@ def cmd_solve(args) -> int:
         print(f"warning: marker {lab} left out ({report['markers_left_out_why'][lab]})", file=sys.stderr)
     with_c = f" with {len(report['correctives'])} corrective(s)" if report["correctives"] else ""
     print(f"solved {sol.n_frames} frames{with_c} in {sol.solve_seconds:.2f} s ({sol.frames_per_second:.0f} fps); "
-          f"marker RMSE {report['marker_rmse']:.4f} {rig.units}; motion explained "
+          f"marker RMSE {report['marker_rmse']:.4g} {rig.units}; motion explained "
           f"{report['motion_explained'] if report['motion_explained'] is not None else float('nan'):.3f}; "
           f"neutral frames {report['neutral_frames']}; wrote {args.output}"
           + (f", {args.cache}" if args.cache else "") + (f", {args.report}" if args.report else ""))

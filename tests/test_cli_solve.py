@@ -150,3 +150,26 @@ def test_solve_reports_the_neutral_it_found(ict_dir, take_dir, tmp_path):
     assert b - a == 29 and b <= 31, rep["neutral_frames"]        # the take's neutral lead-in is frames 0–29
     assert "most neutral" in rep["neutral_frames_how"] and 0.9 < rep["motion_explained"] < 1.0
     assert "motion explained" in proc.stdout
+
+
+def test_a_rig_in_metres_solves_as_well_as_in_centimetres(ict_rig, ict_dir, take_dir, tmp_path):
+    """Issue 16: ICT exported as glTF (metres, float32) solves the shared take as the OBJ rig in cm does: the solver's
+    lengths are physical, not rig units (before, the metres rig's dense result was 2.9 mm off instead of 0.20)."""
+    from model.take_workspace import solve_take
+    from model.marker_map import load_marker_map
+    from model.take_c3d import read_c3d
+    run_cli("export", ict_dir, "-o", tmp_path / "ict.glb")
+    info = json.loads(run_cli("info", tmp_path / "ict.glb", "--json").stdout)
+    assert info["units"] == "m"
+    run_cli("solve", tmp_path / "ict.glb", take_dir / "take.c3d", "--map", take_dir / "marker_map.json",
+            "-o", tmp_path / "w.csv", "--cache", tmp_path / "d.pc2", "--report", tmp_path / "r.json")
+    frames, _, _ = read_pc2(tmp_path / "d.pc2")
+    rms = dense_rms_mm(frames * 100.0, np.load(take_dir / "truth_dense_face.npz"))    # m -> cm
+    assert rms < 0.205, f"dense RMS {rms:.4f} mm"                                   # measured 0.2025, as in cm
+    cm = solve_take(ict_rig, read_c3d(take_dir / "take.c3d"), load_marker_map(take_dir / "marker_map.json"))
+    _, _, names, W = read_weights_csv(tmp_path / "w.csv")
+    assert names == ict_rig.shape_names
+    assert np.abs(W - cm.weights).max() < 1e-5       # measured 1.2e-6: the glTF's float32 vertices
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["rig_units"] == "m"
+    assert rep["marker_rmse"] * 100 == pytest.approx(float(np.nanmean(cm.marker_rmse)), rel=1e-3)

@@ -1,0 +1,98 @@
+"""Units that do not change results (issue 16, item 5): the rig's units only say how its numbers are written. The
+same face written in metres, centimetres and millimetres solves the shared marker take to the same weights (global
+and per region), with the dense result and the marker errors scaled by the unit, and a marker drag poses it alike;
+every length the application chooses is physical and converted in one place (``model.units``)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from model.marker_map import load_marker_map
+from model.markers import Marker, MarkerSet
+from model.rig import Rig
+from model.segmentation import SegmentationSettings, segment_rig
+from model.take_c3d import read_c3d
+from model.take_workspace import regional_solve_options, solve_take
+from model.units import area, length, take_solver_options, unit_scale
+from solvers.regional_solve import shape_region_max
+from solvers.take_solve import DEFAULTS
+
+UNITS = ("m", "cm", "mm")
+
+
+def written_in(rig: Rig, units: str) -> Rig:
+    """The same face with its numbers written in ``units``: neutral and shapes scaled, nothing else."""
+    f = unit_scale(rig.units, units)
+    return Rig(rig.neutral * f, rig.face_counts, rig.face_indices, rig.shape_names, rig.deltas * f, units=units,
+               name=f"{rig.name} in {units}")
+
+
+@pytest.fixture(scope="module")
+def rigs(ict_rig):
+    return {u: ict_rig if u == ict_rig.units else written_in(ict_rig, u) for u in UNITS}
+
+
+@pytest.fixture(scope="module")
+def take(take_dir):
+    return read_c3d(take_dir / "take.c3d"), load_marker_map(take_dir / "marker_map.json")
+
+
+@pytest.fixture(scope="module")
+def segmentation(ict_rig):
+    return segment_rig(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, ict_rig.deltas,
+                       SegmentationSettings())
+
+
+def test_physical_defaults_convert_in_one_place():
+    """A length default is in cm, a λ of squared lengths in cm², a frame count or a ratio is unchanged; the
+    multiquadric kernel is a length, so its λ is one too."""
+    assert length(2.0, "m") == pytest.approx(0.02) and length(2.0, "mm") == pytest.approx(20.0)
+    assert area(1.0, "m") == pytest.approx(1e-4) and area(1.0, "mm") == pytest.approx(100.0)
+    m = take_solver_options({"lam_temporal": 2.0}, "m")
+    assert m["lam_temporal"] == pytest.approx(2e-4) and m["rbf_scale"] == pytest.approx(DEFAULTS["rbf_scale"] / 100)
+    assert m["phantom_distance"] == pytest.approx(0.02) and m["rigid_noise"] == pytest.approx(5e-4)
+    assert m["lam_antagonist"] == pytest.approx(0.15e-4) and m["rbf_lambda"] == DEFAULTS["rbf_lambda"]
+    assert "marker_smoothing" not in m and "rigid_weighting" not in m
+    assert take_solver_options({"residual": "multiquadric", "rbf_lambda": 0.5}, "mm")["rbf_lambda"] == 5.0
+    assert take_solver_options({}, "cm") == {k: DEFAULTS[k] for k in m}
+
+
+@pytest.mark.parametrize("mode", ["global", "regional"])
+def test_the_same_take_on_a_rig_in_m_cm_mm_gives_the_same_weights(rigs, take, segmentation, mode):
+    take_, mm = take
+    options = regional_solve_options(segmentation, 2) if mode == "regional" else {}
+    sols = {u: solve_take(rigs[u], take_, mm, **options) for u in UNITS}
+    ref = sols["cm"]
+    W = "region_weights" if mode == "regional" else "weights"
+    for u in ("m", "mm"):
+        sol, f = sols[u], unit_scale("cm", u)
+        assert np.abs(getattr(sol, W) - getattr(ref, W)).max() < 1e-6, u
+        np.testing.assert_allclose(sol.marker_rmse, ref.marker_rmse * f, rtol=1e-6)
+        np.testing.assert_allclose(sol.marker_rmse_residual, ref.marker_rmse_residual * f, rtol=1e-5)
+        assert sol.neutral_frames == ref.neutral_frames
+        for frame in (0, 120, 300):
+            # the dense result is the same surface, written in the rig's units (1e-5 cm = 0.1 µm)
+            np.testing.assert_allclose(sol.dense(frame) / f, ref.dense(frame), atol=1e-5)
+
+
+def test_a_drag_poses_the_face_alike_in_m_cm_mm(rigs, segmentation):
+    """The mouth-corner drag of test_retarget at level 3 on the rig in each unit: the same regional weights."""
+    regions = [r.vertices for r in segmentation.levels[3].regions]
+    cm = rigs["cm"]
+    corner = int(np.argmax(np.linalg.norm(cm.deltas[cm.shape_index("mouthSmile_L"), :9409], axis=1)))
+    brow = int(np.argmax(np.linalg.norm(cm.deltas[cm.shape_index("browInnerUp_L"), :9409], axis=1)))
+    found = {}
+    for u in UNITS:
+        rig = rigs[u]
+        ms = MarkerSet([Marker("corner", corner), Marker("brow", brow)], rig.n_vertices)
+        solver = ms.drag_solver(rig, regions, shape_region_max(rig.deltas, regions))
+        rest = ms.positions(rig.neutral)
+        W = np.zeros((len(regions) + 1, rig.n_shapes))
+        for step in range(1, 7):
+            targets = rest.copy()
+            targets[0] += np.array([1.5, 1.0, 0.0]) * length(step / 6, u)    # 1.5 cm out, 1 cm up in six moves
+            W = solver.solve((targets - rest).reshape(-1), W)
+        found[u] = W
+    assert found["cm"].max() > 0.2   # the drag does pose the face
+    for u in ("m", "mm"):
+        assert np.abs(found[u] - found["cm"]).max() < 1e-6, u
