@@ -82,16 +82,21 @@ def resolve_stable(labels: list[str], spec) -> list[str]:
 
 
 def read_take(path: str | Path, rig: Rig | None = None) -> MarkerTake | WeightTake:
-    """Open a marker take (C3D, TRC, CSV) or a Live Link Face CSV, whose weights are mapped onto ``rig``'s shapes.
+    """Open a marker take (C3D, TRC, CSV), or a weight take on ``rig``'s shapes: a Live Link Face CSV (its ARKit
+    columns mapped by ``model.livelink.default_arkit_mapping``) or a weights CSV (``frame,time,<shapes>``).
     Raises RigInputError (one sentence naming the file) for anything unreadable."""
     from .livelink import is_livelink_csv, read_livelink_csv
     from .takes import load_take
+    from .weights_csv import is_weights_csv, read_weights_take
     path = Path(path)
     try:
-        if path.suffix.lower() == ".csv" and path.is_file() and is_livelink_csv(path):
-            if rig is None:
-                raise RigInputError(f"{path}: open a rig before playing a Live Link Face take on it.")
-            return read_livelink_csv(path, rig.shape_names)
+        if path.suffix.lower() == ".csv" and path.is_file():
+            for is_kind, read, what in ((is_livelink_csv, read_livelink_csv, "a Live Link Face take"),
+                                        (is_weights_csv, read_weights_take, "a weights CSV")):
+                if is_kind(path):
+                    if rig is None:
+                        raise RigInputError(f"{path}: open a rig before playing {what} on it.")
+                    return read(path, rig.shape_names)
         return load_take(path)
     except RigInputError:
         raise
