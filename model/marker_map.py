@@ -279,7 +279,8 @@ def auto_marker_map(rig: Rig, take: MarkerTake, *, calibration_frames: int | sli
             if np.array_equal(nn2, nn):
                 break
             nn = nn2
-            on_face = d <= max(np.quantile(d, 0.9), length(OFF_FACE_CM, rig.units)) if d.size > 10 else np.ones(d.size, bool)
+            on_face = d <= max(np.quantile(d, 0.9), length(OFF_FACE_CM, rig.units)) if d.size > 10 \
+                else np.ones(d.size, bool)
     keep = d <= length(OFF_FACE_CM, rig.units)
     if keep.sum() < 3:
         keep = np.ones(d.size, bool)

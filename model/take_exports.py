@@ -51,7 +51,7 @@ def export_pc2(workspace, path: str | Path, frames: Iterable[np.ndarray] | None 
 def weight_take_report(workspace) -> dict:
     """The report of a weight take played on the rig, JSON-ready: the keys of a solve report (README, "Solve
     report") with null where markers would have measured something, plus what the take drives: ``shapes_driven``
-    (the rig's shapes some column drives), ``unmapped`` (source columns that drive none), ``frames_filled``
+    (the rig's shapes the take moves: a weight other than 0 in some frame), ``unmapped`` (source columns that drive none), ``frames_filled``
     (frames the recording dropped, interpolated in time) and the reader's ``warnings``."""
     take, rig = workspace.take, workspace.rig
     driven = [n for n, on in zip(rig.shape_names, np.abs(take.weights).max(axis=0, initial=0.0) > 0) if on] \

@@ -354,7 +354,7 @@ class TakeWorkspace:
         return float(info.get("rms", float("nan")))
 
     def set_rig(self, rig: Rig) -> list[str]:
-        """A new rig: the solution goes, a Live Link Face take is mapped onto the new shapes and the marker map
+        """A new rig: the solution goes, a weight take is mapped onto the new shapes and the marker map
         is checked again; what no longer fits is dropped. Returns one sentence per thing dropped."""
         self.rig, self.solution = rig, None
         dropped = []
@@ -363,7 +363,7 @@ class TakeWorkspace:
                 self.take = read_take(self.take_path, rig)
             except RigInputError as exc:
                 self.take = self.take_path = None
-                dropped.append(f"The Live Link Face take does not fit this rig: {exc}")
+                dropped.append(f"The weight take does not fit this rig: {exc}")
         elif self.marker_map is not None:
             try:
                 self.check_map(self.marker_map)

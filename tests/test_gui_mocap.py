@@ -244,3 +244,8 @@ def test_a_30_fps_live_link_face_take_plays_in_real_time(qtbot, tmp_path, monkey
     assert mc.frame == 45 and take.times()[mc.frame] == pytest.approx(1.5)
     np.testing.assert_allclose(w.document.weights, take.weights[45])
     assert w.document.weights[w.document.rig.shape_index("jawOpen")] == pytest.approx(jaw[45], abs=1e-4)
+    # the same weights as a weights CSV (what `solve` writes) open as a weight take at the same rate
+    from model.weights_csv import write_weights_csv
+    write_weights_csv(tmp_path / "w.csv", take.weights, take.names, rate=30.0)
+    assert mc.load_take(tmp_path / "w.csv")
+    assert mc.take.rate == 30.0 and np.array_equal(mc.take.weights, take.weights) and mc.playback.rate == 30.0

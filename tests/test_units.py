@@ -38,9 +38,19 @@ def take(take_dir):
 
 
 @pytest.fixture(scope="module")
-def segmentation(ict_rig):
-    return segment_rig(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, ict_rig.deltas,
-                       SegmentationSettings())
+def segmentations(rigs):
+    return {u: segment_rig(r.neutral, r.face_counts, r.face_indices, r.deltas, SegmentationSettings())
+            for u, r in rigs.items()}
+
+
+def test_the_segmentation_is_the_same_in_m_cm_mm(segmentations):
+    """A per-region solve segments the rig it is given: the face's regions do not depend on its units."""
+    ref = segmentations["cm"]
+    for u in ("m", "mm"):
+        seg = segmentations[u]
+        assert [lvl.n_regions for lvl in seg.levels] == [lvl.n_regions for lvl in ref.levels]
+        for a, b in zip(seg.levels, ref.levels):
+            assert all(np.array_equal(x.vertices, y.vertices) for x, y in zip(a.regions, b.regions))
 
 
 def test_physical_defaults_convert_in_one_place():
@@ -58,10 +68,10 @@ def test_physical_defaults_convert_in_one_place():
 
 
 @pytest.mark.parametrize("mode", ["global", "regional"])
-def test_the_same_take_on_a_rig_in_m_cm_mm_gives_the_same_weights(rigs, take, segmentation, mode):
+def test_the_same_take_on_a_rig_in_m_cm_mm_gives_the_same_weights(rigs, take, segmentations, mode):
     take_, mm = take
-    options = regional_solve_options(segmentation, 2) if mode == "regional" else {}
-    sols = {u: solve_take(rigs[u], take_, mm, **options) for u in UNITS}
+    options = {u: regional_solve_options(segmentations[u], 2) if mode == "regional" else {} for u in UNITS}
+    sols = {u: solve_take(rigs[u], take_, mm, **options[u]) for u in UNITS}
     ref = sols["cm"]
     W = "region_weights" if mode == "regional" else "weights"
     for u in ("m", "mm"):
@@ -75,9 +85,9 @@ def test_the_same_take_on_a_rig_in_m_cm_mm_gives_the_same_weights(rigs, take, se
             np.testing.assert_allclose(sol.dense(frame) / f, ref.dense(frame), atol=1e-5)
 
 
-def test_a_drag_poses_the_face_alike_in_m_cm_mm(rigs, segmentation):
+def test_a_drag_poses_the_face_alike_in_m_cm_mm(rigs, segmentations):
     """The mouth-corner drag of test_retarget at level 3 on the rig in each unit: the same regional weights."""
-    regions = [r.vertices for r in segmentation.levels[3].regions]
+    regions = [r.vertices for r in segmentations["cm"].levels[3].regions]
     cm = rigs["cm"]
     corner = int(np.argmax(np.linalg.norm(cm.deltas[cm.shape_index("mouthSmile_L"), :9409], axis=1)))
     brow = int(np.argmax(np.linalg.norm(cm.deltas[cm.shape_index("browInnerUp_L"), :9409], axis=1)))
@@ -96,3 +106,12 @@ def test_a_drag_poses_the_face_alike_in_m_cm_mm(rigs, segmentation):
     assert found["cm"].max() > 0.2   # the drag does pose the face
     for u in ("m", "mm"):
         assert np.abs(found[u] - found["cm"]).max() < 1e-6, u
+
+
+def test_the_multiquadric_residual_is_a_length_too(rigs, take):
+    """The multiquadric kernel is a length, so its Tikhonov λ is one: the residual of a rig in metres is the one in
+    centimetres, scaled (with a dimensionless λ it would be 100 times stiffer)."""
+    take_, mm = take
+    cm, m = (solve_take(rigs[u], take_, mm, residual="multiquadric") for u in ("cm", "m"))
+    assert np.abs(m.weights - cm.weights).max() < 1e-6
+    np.testing.assert_allclose(m.dense(200) * 100.0, cm.dense(200), atol=1e-5)
