@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .atomic import atomic_write
-from .errors import RigInputError
+from .errors import RigInputError, shown
 from .input_files import regular_file
 
 
@@ -47,7 +47,10 @@ def read_weights_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, list[str
     """(frames (F,) int, times (F,), names (K), weights (F, K)) from a weights CSV."""
     path = regular_file(path)   # a missing file, a folder, a FIFO or a device: one sentence, nothing read
     text = path.read_text(encoding="utf-8-sig", errors="replace")
-    rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
+    try:
+        rows = [r for r in csv.reader(io.StringIO(text)) if r and any(c.strip() for c in r)]
+    except csv.Error as exc:   # a cell over the csv module's 131,072 characters, a NUL byte, ...
+        raise RigInputError(f"{path}: is not a readable CSV ({shown(exc, 80)}).") from None
     if not rows:
         raise RigInputError(f"{path}: the file is empty.")
     header = [c.strip() for c in rows[0]]
@@ -66,7 +69,11 @@ def read_weights_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, list[str
         raise RigInputError(f"{path}: has a value that is not a number.") from None
     if not np.isfinite(arr).all():
         raise RigInputError(f"{path}: has NaN or infinite values.")
-    return arr[:, 0].astype(np.int64), arr[:, 1], names, arr[:, 2:]
+    frames = arr[:, 0]
+    bad = (frames != np.round(frames)) | (np.abs(frames) > 2 ** 53)
+    if bad.any():
+        raise RigInputError(f"{path}: row {int(np.argmax(bad)) + 2} has a frame number that is not a whole number.")
+    return frames.astype(np.int64), arr[:, 1], names, arr[:, 2:]
 
 
 def is_weights_csv(path: str | Path) -> bool:

@@ -238,3 +238,27 @@ def test_a_solved_take_with_a_corrective_exports_a_valid_gltf_animation(ict_rig,
         report = validate(tmp_path / "take.glb")
         assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:10]
         assert report["info"]["animationCount"] == 1 and report["info"]["totalVertexCount"] == 26719
+
+
+def test_a_weights_csv_as_a_take_keeps_time_or_says_why_not(ict_rig, tmp_path):
+    """A weights CSV read as a take: its rate from the times; frames that skip, times that do not step evenly, a
+    cell too large for a CSV and a frame number that is not whole are refused in one sentence naming the file."""
+    from model.errors import RigInputError
+    from model.weights_csv import read_weights_take
+    names = ict_rig.shape_names
+    ok = tmp_path / "ok.csv"
+    ok.write_text("frame,time,jawOpen\n" + "".join(f"{k},{k / 24},{k / 10}\n" for k in range(10)))
+    take = read_weights_take(ok, names)
+    assert take.rate == 24.0 and take.weights.shape == (10, 57) and take.weights[9, names.index("jawOpen")] == 0.9
+    one = tmp_path / "one.csv"
+    one.write_text("frame,time,jawOpen\n0,0.0,0.5\n")
+    assert read_weights_take(one, names).warnings == [f"{one}: one frame has no frame rate; 30 frames a second assumed."]
+    cases = {"skips.csv": ("frame,time,jawOpen\n0,0,0\n1,0.04,0\n3,0.12,0\n", "do not count up one by one (row 4)"),
+             "uneven.csv": ("frame,time,jawOpen\n0,0,0\n1,0.04,0\n2,0.2,0\n", "not evenly spaced"),
+             "huge.csv": ("frame,time,jawOpen\n0,0," + "9" * 140000 + "\n", "not a readable CSV"),
+             "half.csv": ("frame,time,jawOpen\n0,0,0\n1.5,0.04,0\n", "row 3 has a frame number that is not a whole")}
+    for name, (text, words) in cases.items():
+        (tmp_path / name).write_text(text)
+        with pytest.raises(RigInputError) as err:
+            read_weights_take(tmp_path / name, names)
+        assert name in str(err.value) and words in str(err.value), str(err.value)
