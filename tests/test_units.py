@@ -115,3 +115,23 @@ def test_the_multiquadric_residual_is_a_length_too(rigs, take):
     cm, m = (solve_take(rigs[u], take_, mm, residual="multiquadric") for u in ("cm", "m"))
     assert np.abs(m.weights - cm.weights).max() < 1e-6
     np.testing.assert_allclose(m.dense(200) * 100.0, cm.dense(200), atol=1e-5)
+
+
+def test_length_boxes_keep_their_physical_size_across_units(qtbot):
+    """The Mocap panel's RBF length and the nudge step show the rig's units: on a rig in metres they show the same
+    2 cm and 1 mm in metres, the solve settings still get 2 cm, and going back to cm gives the defaults again."""
+    from widgets.mocap_panel import MocapPanel
+    from widgets.segmentation_panel import SegmentationPanel
+    mocap, seg = MocapPanel(), SegmentationPanel()
+    qtbot.addWidget(mocap)
+    qtbot.addWidget(seg)
+    assert mocap.rbf_scale.value() == DEFAULTS["rbf_scale"] and seg.nudge_amount.value() == pytest.approx(0.1)
+    for units, rbf, nudge in (("m", 0.02, 0.001), ("mm", 20.0, 1.0), ("cm", 2.0, 0.1)):
+        mocap.set_units(units)
+        seg.set_units(units)
+        assert mocap.rbf_scale.suffix() == f" {units}" and seg.nudge_amount.suffix() == f" {units}"
+        assert mocap.rbf_scale.value() == pytest.approx(rbf) and seg.nudge_amount.value() == pytest.approx(nudge)
+        assert mocap.settings()["rbf_scale"] == pytest.approx(DEFAULTS["rbf_scale"])
+    seg.set_units("m")
+    seg.nudge_amount.setValue(0.0005)          # half a millimetre can be set on a rig in metres
+    assert seg.nudge_amount.value() == pytest.approx(0.0005)
