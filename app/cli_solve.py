@@ -1,8 +1,10 @@
-"""The ``solve`` command: a marker take onto a rig (Joshi §3–4, Ma §3.1, Fidaleo RBF residual).
+"""The ``solve`` command: a marker take onto a rig (Joshi §3–4, Ma §3.1, Fidaleo RBF residual), or a weight take
+(Live Link Face CSV, weights CSV) on it.
 
-Writes per-frame weights (CSV), optionally the dense head-stabilised result as a PC2 cache and a JSON
-report (``model.take_workspace.solve_report``; README, "Solve report"), through the same
-``TakeWorkspace`` as the GUI's Mocap panel.
+Writes per-frame weights (CSV), optionally the dense head-stabilised result as a PC2 cache, a JSON report
+(``model.take_workspace.solve_report``; README, "Solve report") and the rig animated by the weights as glTF,
+through the same ``TakeWorkspace`` as the GUI's Mocap panel. A weight take needs no solve: its weights, mapped
+onto the rig's shapes as the GUI plays them, are written as the same files.
 """
 from __future__ import annotations
 
@@ -13,13 +15,17 @@ from model.errors import RigInputError
 
 
 def add_parser(sub, rig_arg) -> None:
-    sp = sub.add_parser("solve", help="solve a marker take (C3D/TRC/CSV) onto the rig")
+    sp = sub.add_parser("solve", help="solve a marker take (C3D/TRC/CSV) onto the rig, or write a weight take "
+                                      "(Live Link Face or weights CSV) as the same outputs")
     rig_arg(sp)
-    sp.add_argument("take", metavar="TAKE", help="marker take: .c3d, .trc or .csv")
+    sp.add_argument("take", metavar="TAKE", help="marker take (.c3d, .trc, marker .csv) or weight take (Live Link "
+                                                 "Face .csv, weights .csv as solve writes)")
     add_solve_options(sp)
     sp.add_argument("-o", "--output", required=True, help="weights CSV to write")
     sp.add_argument("--cache", help="PC2 point cache of the dense result to write")
     sp.add_argument("--report", help="JSON report to write")
+    sp.add_argument("--gltf", metavar="OUT.glb", help="the rig animated by the weights, as .glb or .gltf (metres, "
+                                                      "correctives as extra targets)")
     sp.set_defaults(func=cmd_solve)
 
 
@@ -89,21 +95,41 @@ def cmd_solve(args) -> int:
     ws = TakeWorkspace(rig)
     ws.load_take(args.take)
     if ws.marker_take is None:
-        raise RigInputError(f"{args.take}: is a weight take (Live Link Face), not marker trajectories; "
-                            "it plays directly on the rig in the GUI.")
+        return write_weight_take(ws, args)
     if args.map:
         ws.load_map(args.map, strict=False)
     else:
         ws.auto_map(args.calibration_frames, **auto_map_options(args))
     settings, segmentation = solve_settings(args, rig)
     sol = ws.solve(settings, segmentation=segmentation)
-    report = export_solve_outputs(ws, args.output, args.cache, args.report)
+    report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
     for lab in report["markers_left_out"]:
         print(f"warning: marker {lab} left out ({report['markers_left_out_why'][lab]})", file=sys.stderr)
     with_c = f" with {len(report['correctives'])} corrective(s)" if report["correctives"] else ""
     print(f"solved {sol.n_frames} frames{with_c} in {sol.solve_seconds:.2f} s ({sol.frames_per_second:.0f} fps); "
-          f"marker RMSE {report['marker_rmse']:.4f} {rig.units}; motion explained "
+          f"marker RMSE {report['marker_rmse']:.4g} {rig.units}; motion explained "
           f"{report['motion_explained'] if report['motion_explained'] is not None else float('nan'):.3f}; "
           f"neutral frames {report['neutral_frames']}; wrote {args.output}"
-          + (f", {args.cache}" if args.cache else "") + (f", {args.report}" if args.report else ""))
+          + _written(args))
+    return 0
+
+
+def _written(args) -> str:
+    return "".join(f", {p}" for p in (args.cache, args.report, args.gltf) if p)
+
+
+def write_weight_take(ws, args) -> int:
+    """``solve`` on a weight take: its weights on the rig's shapes, written as a solve's outputs."""
+    from model.take_exports import export_solve_outputs
+    take = ws.take
+    if args.map:
+        print(f"warning: {args.take} holds weights, not markers: --map is not used", file=sys.stderr)
+    report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
+    for message in take.warnings:
+        print(f"warning: {message}", file=sys.stderr)
+    if take.unmapped:
+        print(f"warning: {len(take.unmapped)} column(s) drive no shape of the rig: {', '.join(take.unmapped)}",
+              file=sys.stderr)
+    print(f"weight take: {take.n_frames} frames at {take.rate:g} fps driving {len(report['shapes_driven'])} of "
+          f"{ws.rig.n_shapes} shapes; wrote {args.output}" + _written(args))
     return 0

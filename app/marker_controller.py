@@ -21,7 +21,7 @@ from app.document import PoseState
 from app.marker_commands import SetMarkersCommand, SetPoseCommand
 from model.correctives import solver_correctives
 from model.errors import RigInputError
-from model.markers import Marker, MarkerSet
+from model.markers import DRAG_LAM_REG, Marker, MarkerSet
 from model.wording import count
 from solvers.correctives import linearised_correctives
 from solvers.damping import damping_gains, point_mobility
@@ -141,7 +141,7 @@ class MarkerController(QtCore.QObject):
         self.tool = MarkerTool(self)
         self.markers: MarkerSet | None = None
         self.mode = False
-        self.lam_reg = 1e-3
+        self.lam_reg = DRAG_LAM_REG      # cm², whatever the rig's units (MarkerSet.drag_solver converts it)
         self.drag: DragState | None = None
         self.last_message = ""
         self._gains: np.ndarray | None = None
@@ -402,8 +402,7 @@ class MarkerController(QtCore.QObject):
             level, blend, regions, region_max = None, None, [], np.zeros((0, rig.n_shapes))
         W0 = pose_at_level(old, blend)
         ms = self.markers
-        solver = RegionalSolver(regions, ms.S, ms.delta_rows(rig.deltas), region_max=region_max,
-                                solve_background=True, lam_reg=self.lam_reg, antagonists=self._antagonists(rig))
+        solver = ms.drag_solver(rig, regions, region_max, lam_reg=self.lam_reg, antagonists=self._antagonists(rig))
         if blend is not None and not (old.is_regional and same_blend(old.blend, blend)):
             doc.set_pose_state(PoseState(old.weights, W0, blend, level))  # same pose, now per region
         start = self.marker_positions()

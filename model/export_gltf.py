@@ -101,15 +101,19 @@ def gltf_document(content) -> tuple[dict, bytes]:
 
 def write_gltf_content(content, path: str | Path) -> None:
     """Write an ``ExportContent`` as ``.glb`` or ``.gltf`` (buffer embedded as base64), atomically."""
+    atomic_write(path, gltf_bytes(content, path))
+
+
+def gltf_bytes(content, path: str | Path) -> bytes:
+    """The ``.glb`` or ``.gltf`` file (by ``path``'s extension) of an ``ExportContent``, for writers of file sets."""
     path = Path(path)
-    gltf, blob = gltf_document(content)
     suffix = path.suffix.lower()
+    if suffix not in (".gltf", ".glb"):
+        raise RigInputError(f"{path}: write glTF to a .gltf or .glb file.")
+    gltf, blob = gltf_document(content)
     if suffix == ".gltf":
         gltf["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
-        atomic_write(path, json.dumps(gltf).encode("utf-8"))
-    elif suffix == ".glb":
-        js = _pad4(json.dumps(gltf).encode("utf-8"), b" ")
-        body = struct.pack("<II", len(js), CHUNK_JSON) + js + struct.pack("<II", len(blob), CHUNK_BIN) + blob
-        atomic_write(path, struct.pack("<4sII", GLB_MAGIC, 2, 12 + len(body)) + body)
-    else:
-        raise RigInputError(f"{path}: write glTF to a .gltf or .glb file.")
+        return json.dumps(gltf).encode("utf-8")
+    js = _pad4(json.dumps(gltf).encode("utf-8"), b" ")
+    body = struct.pack("<II", len(js), CHUNK_JSON) + js + struct.pack("<II", len(blob), CHUNK_BIN) + blob
+    return struct.pack("<4sII", GLB_MAGIC, 2, 12 + len(body)) + body

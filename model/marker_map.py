@@ -21,7 +21,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import RigInputError, shown
-from .rig import UNIT_IN_METRES, Rig, unit_scale
+from .rig import Rig
+from .units import UNIT_IN_METRES, length, unit_scale
 from .takes import MarkerTake
 
 
@@ -267,20 +268,20 @@ def auto_marker_map(rig: Rig, take: MarkerTake, *, calibration_frames: int | sli
         if best is None or rms < best[0]:
             best = (rms, s, R, t, d, nn, moved)
     rms, s, R, t, d, nn, moved = best
-    cm = unit_scale("cm", rig.units)
     on_face = d <= np.quantile(d, 0.9) if d.size > 10 else np.ones(d.size, bool)
     surface = pts
     if warp and on_face.sum() >= 4:
         # a smooth warp of the rig's neutral toward the markers, alternating with nearest points (§12 (b))
         for _ in range(WARP_ITERATIONS):
-            phi = SmoothWarp(pts[nn[on_face]], moved[on_face], scale=WARP_SCALE_CM * cm, lam=WARP_LAMBDA)
+            phi = SmoothWarp(pts[nn[on_face]], moved[on_face], scale=length(WARP_SCALE_CM, rig.units), lam=WARP_LAMBDA)
             surface = phi(pts)
             d, nn2 = cKDTree(surface).query(moved)
             if np.array_equal(nn2, nn):
                 break
             nn = nn2
-            on_face = d <= max(np.quantile(d, 0.9), OFF_FACE_CM * cm) if d.size > 10 else np.ones(d.size, bool)
-    keep = d <= OFF_FACE_CM * cm
+            on_face = d <= max(np.quantile(d, 0.9), length(OFF_FACE_CM, rig.units)) if d.size > 10 \
+                else np.ones(d.size, bool)
+    keep = d <= length(OFF_FACE_CM, rig.units)
     if keep.sum() < 3:
         keep = np.ones(d.size, bool)
     left_out = [lab for lab, u in zip(take.labels, usable) if not u] + \

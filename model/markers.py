@@ -25,6 +25,7 @@ from .errors import RigInputError
 from .rig import UNITS, Rig
 
 BARY_TOL = 1e-3
+DRAG_LAM_REG = 1e-3   # a drag's λ_r toward the pose at the press, cm² (Markers panel, "Stay near pose")
 
 
 @dataclass(frozen=True)
@@ -172,6 +173,17 @@ class MarkerSet:
         Ssub = self.S[:, cols]
         sampled = np.asarray(Ssub @ D[:, cols, :].transpose(1, 0, 2).reshape(cols.size, K * 3))  # (M, K*3)
         return np.ascontiguousarray(sampled.reshape(-1, K, 3).transpose(0, 2, 1).reshape(-1, K))
+
+    def drag_solver(self, rig: Rig, regions: list[np.ndarray], region_max: np.ndarray, *,
+                    lam_reg: float = DRAG_LAM_REG, antagonists=None):
+        """The regional solver a drag of these markers re-solves at each mouse move (``solvers.regional_solve``;
+        ALGORITHMS.md §8): ``regions`` of the chosen level (none: one global solve), ``region_max`` their
+        per-shape displacement, ``lam_reg`` the pull toward the pose at the press in cm² (a physical weight,
+        converted to the rig's units by ``model.units``, so a drag poses a face in m, cm or mm alike)."""
+        from solvers.regional_solve import RegionalSolver
+        from .units import area
+        return RegionalSolver(regions, self.S, self.delta_rows(rig.deltas), region_max=region_max,
+                              solve_background=True, lam_reg=area(lam_reg, rig.units), antagonists=antagonists)
 
     # --- editing (returns new sets; markers are immutable) ----------------------------------------
     def with_marker(self, marker: Marker) -> "MarkerSet":

@@ -27,6 +27,7 @@ from solvers.personalize import PersonalizeResult, ShapeChange, personalize, sha
 
 from .errors import RigInputError
 from .rig import Rig
+from .units import length
 
 RBF_SCALE = 3.0      # Gaussian kernel length of the marker warp, cm (the spacing of a 60-marker face layout)
 RBF_LAMBDA = 1e-3    # Tikhonov λ of the marker warp: the markers are met to a few µm
@@ -85,15 +86,10 @@ def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tupl
     s, R, t = umeyama(rest, cloud, scale=True)       # cloud ≈ s R rest + t
     aligned = (cloud - t) @ R                        # the actor's markers in the rig's frame, size kept
     base = s * rig.neutral                           # the template at the actor's size (the whole head)
-    rbf = RBFResidual(s * rest, points=base, kernel="gaussian", scale=RBF_SCALE * s * _cm(rig), lam=RBF_LAMBDA)
+    rbf = RBFResidual(s * rest, points=base, kernel="gaussian", scale=s * length(RBF_SCALE, rig.units), lam=RBF_LAMBDA)
     neutral = base + rbf.evaluate(rbf.coefficients(aligned - s * rest))
     fit = float(np.sqrt(((binding @ neutral - aligned) ** 2).sum(axis=1).mean()))
     return neutral, {"markers": len(labels), "marker_fit": fit, "scale": float(s)}
-
-
-def _cm(rig: Rig) -> float:
-    from .rig import unit_scale
-    return unit_scale("cm", rig.units)
 
 
 def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, marker_map=None, *,

@@ -12,8 +12,8 @@ import numpy as np
 from solvers.mesh import fan_triangulate
 
 from .errors import RigInputError, shown
+from .units import UNIT_IN_METRES, UNITS, unit_scale  # noqa: F401  (the units of a rig; re-exported)
 
-UNITS = ("cm", "mm", "m")
 MAX_COORDINATE = 1e9   # in any unit: no face is a thousand kilometres across; beyond it a file is damaged
 MAX_WEIGHT = 1e3       # presets and poses: overdrive and negative weights exist, a weight of 10⁴ does not
 
@@ -63,15 +63,6 @@ def checked_presets(presets, shape_names, where: str) -> dict[str, dict[str, flo
             clean[str(k)] = f
         out[str(preset)] = clean
     return out
-UNIT_IN_METRES = {"mm": 0.001, "cm": 0.01, "m": 1.0}
-
-
-def unit_scale(from_units: str, to_units: str) -> float:
-    """Factor that converts a length in ``from_units`` to ``to_units``."""
-    for u in (from_units, to_units):
-        if u not in UNIT_IN_METRES:
-            raise RigInputError(f"Unknown units '{u}': use one of {', '.join(UNIT_IN_METRES)}.")
-    return UNIT_IN_METRES[from_units] / UNIT_IN_METRES[to_units]
 
 
 @dataclass

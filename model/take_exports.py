@@ -1,6 +1,8 @@
 """What a worked take exports (``model.take_workspace.TakeWorkspace``), without Qt: the per-frame weights as a CSV,
-every frame's surface as a PC2 point cache, and the solve report as JSON. The GUI's Mocap panel and the command
-line's ``solve`` call these. Each raises RigInputError (one sentence) when there is nothing to export.
+every frame's surface as a PC2 point cache, the rig animated by the weights as glTF, and the solve report as JSON.
+A marker take exports its solve; a weight take (Live Link Face or a weights CSV, already on the rig's shapes)
+exports the same files from its own weights. The GUI's Mocap panel and the command line's ``solve`` call these.
+Each raises RigInputError (one sentence) when there is nothing to export.
 """
 from __future__ import annotations
 
@@ -46,28 +48,67 @@ def export_pc2(workspace, path: str | Path, frames: Iterable[np.ndarray] | None 
     write_pc2(path, frames, n_points=workspace.rig.n_vertices, start_frame=0, sample_rate=1.0)
 
 
+def weight_take_report(workspace) -> dict:
+    """The report of a weight take played on the rig, JSON-ready: the keys of a solve report (README, "Solve
+    report") with null where markers would have measured something, plus what the take drives: ``shapes_driven``
+    (the rig's shapes the take moves: a weight other than 0 in some frame), ``unmapped`` (source columns that drive none), ``frames_filled``
+    (frames the recording dropped, interpolated in time) and the reader's ``warnings``."""
+    take, rig = workspace.take, workspace.rig
+    driven = [n for n, on in zip(rig.shape_names, np.abs(take.weights).max(axis=0, initial=0.0) > 0) if on] \
+        if take.n_frames else []
+    return {"rig": rig.name, "take": str(workspace.take_path) if workspace.take_path else take.source,
+            "kind": "weights", "frames": take.n_frames, "rate": float(take.rate), "rig_units": rig.units,
+            "solve_seconds": 0.0, "frames_per_second": None, "marker_rmse": None, "motion_explained": None,
+            "neutral_frames": None, "markers_left_out": [], "shapes_driven": driven, "unmapped": list(take.unmapped),
+            "frames_filled": int(take.filled.sum()) if take.filled is not None else 0,
+            "warnings": list(take.warnings), "correctives": [c.name for c in rig.correctives if not c.muted]}
+
+
+def take_report(workspace) -> dict:
+    """The report of what is loaded: the solve's (``TakeWorkspace.report``) or a weight take's."""
+    if isinstance(workspace.take, WeightTake):
+        return weight_take_report(workspace)
+    return workspace.report()
+
+
+def take_animation(workspace):
+    """The weights to play as a ``model.export.WeightAnimation`` (frame k at k / rate seconds)."""
+    from .export import WeightAnimation
+    W = workspace.playing_weights()
+    if W is None:
+        raise RigInputError("Nothing to export: solve a marker take or load a Live Link Face take first.")
+    return WeightAnimation(times=np.arange(W.shape[0]) / workspace.rate, weights=W,
+                           source=str(workspace.take_path or ""))
+
+
 def export_report(workspace, path: str | Path) -> dict:
     """The solve report (``TakeWorkspace.report``) as JSON; returns it."""
     from .atomic import atomic_write
-    report = workspace.report()
+    report = take_report(workspace)
     atomic_write(path, (json.dumps(report, indent=1) + "\n").encode("utf-8"))
     return report
 
 
 def export_solve_outputs(workspace, weights_path: str | Path, cache_path: str | Path | None = None,
-                         report_path: str | Path | None = None) -> dict:
-    """The weights CSV, and optionally the PC2 cache and the report, written as one set
-    (``model.output_set``): a solve killed while writing leaves either all the old files or all the new ones.
-    Returns the report."""
+                         report_path: str | Path | None = None, gltf_path: str | Path | None = None) -> dict:
+    """The weights CSV, and optionally the PC2 cache, the report and the rig animated by the weights as glTF
+    (``.glb``/``.gltf``, metres, ``model.export``: correctives as extra targets driven by their activations),
+    written as one set (``model.output_set``): a solve killed while writing leaves either all the old files or
+    all the new ones. For a solved marker take or a weight take alike. Returns the report."""
     from .output_set import write_set
     from .pc2 import pc2_writer
     from .weights_csv import weights_csv_bytes
     W = workspace.playing_weights()
     if W is None:
         raise RigInputError("Nothing to export: solve a marker take or load a Live Link Face take first.")
-    report = workspace.report()
+    report = take_report(workspace)
     csv_bytes = weights_csv_bytes(weights_path, W, list(workspace.rig.shape_names), rate=workspace.rate)
     writers = {weights_path: lambda f: f.write(csv_bytes)}
+    if gltf_path:
+        from .export import export_content
+        from .export_gltf import gltf_bytes
+        glb = gltf_bytes(export_content(workspace.rig, animation=take_animation(workspace)), gltf_path)
+        writers[gltf_path] = lambda f: f.write(glb)
     if cache_path:
         writers[cache_path] = pc2_writer(cache_path, take_surfaces(workspace), n_points=workspace.rig.n_vertices,
                                          start_frame=0, sample_rate=1.0)[0]

@@ -5,7 +5,8 @@ command line's ``solve`` both work through ``TakeWorkspace``; the exports are in
 Solve settings are a plain dict, as the panel and the command line gather them:
 ``mode`` ('global' or 'region'), ``level`` (hierarchy level of a per-region solve), ``residual``,
 ``lam_sparsity``, ``lam_temporal``, ``rbf_scale``, ``rbf_lambda``, ``retarget`` (solver options,
-``solvers.take_solve.DEFAULTS`` for any left out), ``calibration_frames``, ``neutral_frames`` (None: the first
+``solvers.take_solve.DEFAULTS`` for any left out; lengths in cm and the λ's in cm², whatever the rig's units:
+``model.units`` converts them), ``calibration_frames``, ``neutral_frames`` (None: the first
 ``calibration_frames``; ``"auto"``; or ``"A:B"`` / (A, B), inclusive), ``stable`` (marker names or patterns such as
 ``root-*``, comma-separated, for the head motion) and ``fixed_head`` (markers already head-stabilised in rig space).
 """
@@ -22,9 +23,10 @@ from .correctives import solver_correctives
 from .errors import RigInputError
 from .marker_map import MarkerMap, auto_marker_map, load_marker_map
 from .pose import PoseEvaluator
-from .rig import Rig, unit_scale
+from .rig import Rig
 from .segmentation import SegmentationSettings
 from .takes import MarkerTake, WeightTake
+from .units import take_solver_options, unit_scale
 
 # Defaults of a solve, chosen by measurement (see README, Motion capture). On the ICT Live Link take a global
 # solve measured 0.205 mm dense RMS against the actor's true surface and a two-region solve 0.212 mm: per-region
@@ -80,16 +82,21 @@ def resolve_stable(labels: list[str], spec) -> list[str]:
 
 
 def read_take(path: str | Path, rig: Rig | None = None) -> MarkerTake | WeightTake:
-    """Open a marker take (C3D, TRC, CSV) or a Live Link Face CSV, whose weights are mapped onto ``rig``'s shapes.
+    """Open a marker take (C3D, TRC, CSV), or a weight take on ``rig``'s shapes: a Live Link Face CSV (its ARKit
+    columns mapped by ``model.livelink.default_arkit_mapping``) or a weights CSV (``frame,time,<shapes>``).
     Raises RigInputError (one sentence naming the file) for anything unreadable."""
     from .livelink import is_livelink_csv, read_livelink_csv
     from .takes import load_take
+    from .weights_csv import is_weights_csv, read_weights_take
     path = Path(path)
     try:
-        if path.suffix.lower() == ".csv" and path.is_file() and is_livelink_csv(path):
-            if rig is None:
-                raise RigInputError(f"{path}: open a rig before playing a Live Link Face take on it.")
-            return read_livelink_csv(path, rig.shape_names)
+        if path.suffix.lower() == ".csv" and path.is_file():
+            for is_kind, read, what in ((is_livelink_csv, read_livelink_csv, "a Live Link Face take"),
+                                        (is_weights_csv, read_weights_take, "a weights CSV")):
+                if is_kind(path):
+                    if rig is None:
+                        raise RigInputError(f"{path}: open a rig before playing {what} on it.")
+                    return read(path, rig.shape_names)
         return load_take(path)
     except RigInputError:
         raise
@@ -120,7 +127,9 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
     patterns of the markers the head motion is taken from (``resolve_stable``); those the map does not bind (a head
     band) are used as rigid head markers. The rig's live (unmuted) correctives are solved with the shapes, and every
     dense frame is the rig's pose evaluation (``evaluator``: a float64 ``PoseEvaluator`` of ``rig``, built here if
-    not given) plus the residual. ``options`` go to ``TakeSolver``. The solution's marker columns follow
+    not given) plus the residual. ``options`` go to ``TakeSolver``, their lengths physical (cm, and cm² for the
+    λ's: ``solvers.take_solve.DEFAULTS``) whatever the rig's units, converted here (``model.units``) so that the
+    same face solves alike in m, cm or mm. The solution's marker columns follow
     ``marker_map.match(take)`` without the markers left out."""
     labels, cols = marker_map.match(take)
     missing = np.isnan(take.positions).any(axis=2).mean(axis=0)               # (take markers,) fraction
@@ -145,7 +154,8 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
             left_out.setdefault(lab, f"missing in {100 * missing[i]:.0f}% of the frames" if missing[i] > MOSTLY_MISSING
                                 else "not in the marker map")
     binding = marker_map.binding(rig, labels)
-    if options.get("lam_antagonist", DEFAULTS["lam_antagonist"]) and options.get("antagonists") is None:
+    options = take_solver_options(options, rig.units)      # physical lengths (cm, cm²) -> the rig's units
+    if options["lam_antagonist"] and options.get("antagonists") is None:
         from .antagonists import rig_antagonists
         options["antagonists"] = rig_antagonists(rig)
     if options.get("antagonists") is not None:
@@ -344,7 +354,7 @@ class TakeWorkspace:
         return float(info.get("rms", float("nan")))
 
     def set_rig(self, rig: Rig) -> list[str]:
-        """A new rig: the solution goes, a Live Link Face take is mapped onto the new shapes and the marker map
+        """A new rig: the solution goes, a weight take is mapped onto the new shapes and the marker map
         is checked again; what no longer fits is dropped. Returns one sentence per thing dropped."""
         self.rig, self.solution = rig, None
         dropped = []
@@ -353,7 +363,7 @@ class TakeWorkspace:
                 self.take = read_take(self.take_path, rig)
             except RigInputError as exc:
                 self.take = self.take_path = None
-                dropped.append(f"The Live Link Face take does not fit this rig: {exc}")
+                dropped.append(f"The weight take does not fit this rig: {exc}")
         elif self.marker_map is not None:
             try:
                 self.check_map(self.marker_map)

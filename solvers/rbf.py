@@ -21,6 +21,9 @@ import scipy.linalg as la
 from scipy.spatial import cKDTree
 
 KERNELS = ("none", "joshi", "gaussian", "multiquadric")
+# The power of length in each kernel's values, and so in its Tikhonov λ (``Φ + λI``): the exponentials are
+# dimensionless, the multiquadric is a length.
+KERNEL_LENGTH_POWER = {"joshi": 0, "gaussian": 0, "multiquadric": 1}
 
 
 def eck_stiffness(centres: np.ndarray) -> np.ndarray:

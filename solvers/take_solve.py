@@ -34,7 +34,7 @@ import scipy.sparse as sp
 
 from .antagonists import pair_penalty
 from .correctives import linearised_correctives
-from .rbf import KERNELS, RBFResidual, phantom_points
+from .rbf import KERNEL_LENGTH_POWER, KERNELS, RBFResidual, phantom_points
 from .retarget import SmoothWarp, neutral_stretch
 from .rigid import to_matrix, umeyama
 from .weight_solve import WeightSolver
@@ -58,10 +58,27 @@ CORRECTIVE_STEPS = 6      # Gauss–Newton steps per weight solve on a rig with 
 # determine well (their local scale correlated 0.3 with the true one). lam_antagonist (rig units², per antagonist
 # pair w_i w_j, ALGORITHMS.md §13): 0 left up to 22 frames with both weights of a pair above 0.2; 0.15 none, and
 # the same-face take's dense RMS went from 0.2042 to 0.2025 mm (0.2 gave 0.2075, 0.3 gave 0.2216).
+# Lengths are in centimetres and the weights of squared-length terms in cm² (``LENGTH_OPTIONS``): these are the
+# values for a rig in centimetres, and ``model.units.take_solver_options`` converts them for a rig in other units,
+# so that the same face gives the same weights in m, cm or mm. ``ridge`` keeps the QP positive definite (cm²).
 DEFAULTS = dict(lam_sparsity=0.0, lam_temporal=1.0, iterations=3, two_pass=True, marker_smoothing=0.7,
                 residual="gaussian", rbf_scale=2.0, rbf_lambda=1.0, residual_smoothing=6.0, n_phantoms=48,
                 phantom_distance=2.0, calibration_frames=30, rigid_weighting=0.1, rigid_noise=0.05,
-                lam_region=0.1, retarget="scale", warp_scale=3.0, warp_lambda=0.1, lam_antagonist=0.15)
+                lam_region=0.1, retarget="scale", warp_scale=3.0, warp_lambda=0.1, lam_antagonist=0.15,
+                ridge=1e-10)
+
+# The options that carry a length, with its power: λ's weigh terms against squared marker misfits (length²);
+# kernel and ring lengths and the head-motion noise are lengths; ``rbf_lambda`` has the kernel's dimension
+# (``solvers.rbf.KERNEL_LENGTH_POWER``). Smoothing σ's are in frames; rigid_weighting, warp_lambda and SHRINK
+# are ratios.
+LENGTH_OPTIONS = {"lam_sparsity": 2, "lam_temporal": 2, "lam_region": 2, "lam_antagonist": 2, "ridge": 2,
+                  "rbf_scale": 1, "phantom_distance": 1, "rigid_noise": 1, "warp_scale": 1, "rbf_lambda": None}
+
+
+def option_length_power(name: str, residual: str = DEFAULTS["residual"]) -> int:
+    """The power of length in option ``name`` (0 for a dimensionless one), for the residual kernel ``residual``."""
+    power = LENGTH_OPTIONS.get(name, 0)
+    return KERNEL_LENGTH_POWER.get(residual, 0) if power is None else power
 
 
 def _mean_rigid(Ra: np.ndarray, ta: np.ndarray, Rb: np.ndarray, tb: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -163,7 +180,7 @@ class _CachedBoxQP:
         self._factors: dict[bytes, tuple] = {}
         self._seen: dict[bytes, int] = {}
         self._posv = _POSV
-        self.tol = 1e-12 * max(1.0, float(np.abs(H).max()))
+        self.tol = 1e-12 * max(float(np.abs(H).max()), 1e-300)   # relative: H scales with the rig's units²
 
     def _factor(self, free: np.ndarray):
         if not self.cache:
@@ -317,7 +334,8 @@ class TakeSolver:
     rbf_lambda (Tikhonov λ), n_phantoms / phantom_distance (zero-residual ring, rig units),
     residual_vertices (vertices that receive the residual; default: those nearer to a marker than the
     phantom ring), regions (list of vertex index arrays) and blend ((V, R+1) partition of unity, last
-    column the background) for a per-region solve.
+    column the background) for a per-region solve. Every length option is in rig units (``LENGTH_OPTIONS``; the
+    ``DEFAULTS`` are those of a rig in cm: ``model.units.take_solver_options`` converts them for any other).
 
     correctives: the rig's corrective shapes (Smith 2006 §4.5; ALGORITHMS.md §6), as (activate, E, drivers):
     activate maps weights (U, K) to activations (U, C) by the rig's rules, E (C, V, 3) holds their deltas and
@@ -349,7 +367,7 @@ class TakeSolver:
                  surface: Callable[[np.ndarray], np.ndarray] | None = None,
                  retarget: str = DEFAULTS["retarget"], warp_scale: float = DEFAULTS["warp_scale"],
                  warp_lambda: float = DEFAULTS["warp_lambda"], antagonists=None,
-                 lam_antagonist: float = DEFAULTS["lam_antagonist"],
+                 lam_antagonist: float = DEFAULTS["lam_antagonist"], ridge: float = DEFAULTS["ridge"],
                  surface_many: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
         if residual not in KERNELS:
             raise ValueError(f"Unknown residual '{residual}': use one of {', '.join(KERNELS)}.")
@@ -380,6 +398,7 @@ class TakeSolver:
         self.rest = np.asarray(self.binding @ self.neutral)  # (M, 3) markers at rest
         self._Dm_rig = np.stack([self.binding @ self.deltas[k] for k in range(K)])  # (K, M, 3)
         self.mode, self.lam_sparsity, self.lam_temporal = mode, float(lam_sparsity), float(lam_temporal)
+        self.ridge = float(ridge)   # rig units²: keeps H positive definite where λ_t is 0
         self.lower, self.upper = 0.0, 1.0
         # Antagonist pairs (ALGORITHMS.md §13): λ_a w_i w_j added to the QP for each pair (i, j).
         self.lam_antagonist = float(lam_antagonist)
@@ -753,7 +772,7 @@ class TakeSolver:
         missing-marker mask is the cached one of ``_qp_entry``."""
         take_kernel = self._kernel
         masks, mask_of = take_kernel.pass_masks(Y)
-        mu = self.lam_temporal + 1e-10                  # H's diagonal term, as _qp_entry builds it
+        mu = self.lam_temporal + self.ridge             # H's diagonal term, as _qp_entry builds it
         if self.K > 2 * (3 * self.M + 1) and mu > 0 and not self.pair_penalty.any():
             # many more shapes than marker coordinates: the QP in its low-rank form, H = BᵀB + μI with
             # B = [A_present; √λ_s 1ᵀ] (a step O(K·3M) instead of O(n_free²); the dense form is faster up to about
@@ -763,7 +782,7 @@ class TakeSolver:
                 Bts[i, :, :-1] = self.At * np.repeat(m, 3)
             Bts[:, :, -1] = np.sqrt(self.lam_sparsity)
             Hs = np.zeros((0, 1, 1))
-            tols = 1e-12 * np.maximum(1.0, (Bts * Bts).sum(axis=2).max(axis=1) + mu)
+            tols = 1e-12 * np.maximum((Bts * Bts).sum(axis=2).max(axis=1) + mu, 1e-300)
         else:
             qps = [self._qp_entry(m)[2] for m in masks]
             Hs = np.stack([q.H for q in qps])
@@ -846,7 +865,7 @@ class TakeSolver:
         if qp is None:
             rows = np.repeat(valid, 3)
             A = self.A[rows]
-            H = A.T @ A + self.lam_sparsity + (self.lam_temporal + 1e-10) * np.eye(self.K)
+            H = A.T @ A + self.lam_sparsity + (self.lam_temporal + self.ridge) * np.eye(self.K)
             if self.lam_antagonist:
                 # λ_a w_i w_j is not convex by itself: the temporal term keeps H positive definite along a take;
                 # where it cannot (a one-frame keyframe, λ_t = 0), the penalty is left out of this solve

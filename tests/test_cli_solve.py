@@ -78,9 +78,10 @@ def test_one_frame_trc_global_recovers_weights(ict_rig, ict_dir, tmp_path):
 
 @pytest.mark.parametrize("case", ["absent", "beyond", "weights"])
 def test_solve_bad_input(ict_dir, take_dir, llf_csv, tmp_path, case):
-    if case == "weights":
-        proc = run_cli("solve", ict_dir, llf_csv, "-o", tmp_path / "w.csv", check=False)
-        words = "weight take"
+    if case == "weights":   # a weights CSV naming a shape the rig does not have
+        (tmp_path / "weights.csv").write_text("frame,time,jawOpen,tail_L\n0,0.0,0.5,0.2\n1,0.04,0.6,0.1\n")
+        proc = run_cli("solve", ict_dir, tmp_path / "weights.csv", "-o", tmp_path / "w.csv", check=False)
+        words = "weights.csv: names shapes the rig does not have: tail_L."
     else:
         m = json.loads((take_dir / "marker_map.json").read_text())
         if case == "absent":
@@ -150,3 +151,114 @@ def test_solve_reports_the_neutral_it_found(ict_dir, take_dir, tmp_path):
     assert b - a == 29 and b <= 31, rep["neutral_frames"]        # the take's neutral lead-in is frames 0–29
     assert "most neutral" in rep["neutral_frames_how"] and 0.9 < rep["motion_explained"] < 1.0
     assert "motion explained" in proc.stdout
+
+
+def test_a_rig_in_metres_solves_as_well_as_in_centimetres(ict_rig, ict_dir, take_dir, tmp_path):
+    """Issue 16: ICT exported as glTF (metres, float32) solves the shared take as the OBJ rig in cm does: the solver's
+    lengths are physical, not rig units (before, the metres rig's dense result was 2.9 mm off instead of 0.20)."""
+    from model.take_workspace import solve_take
+    from model.marker_map import load_marker_map
+    from model.take_c3d import read_c3d
+    run_cli("export", ict_dir, "-o", tmp_path / "ict.glb")
+    info = json.loads(run_cli("info", tmp_path / "ict.glb", "--json").stdout)
+    assert info["units"] == "m"
+    run_cli("solve", tmp_path / "ict.glb", take_dir / "take.c3d", "--map", take_dir / "marker_map.json",
+            "-o", tmp_path / "w.csv", "--cache", tmp_path / "d.pc2", "--report", tmp_path / "r.json")
+    frames, _, _ = read_pc2(tmp_path / "d.pc2")
+    rms = dense_rms_mm(frames * 100.0, np.load(take_dir / "truth_dense_face.npz"))    # m -> cm
+    assert rms < 0.205, f"dense RMS {rms:.4f} mm"                                   # measured 0.2025, as in cm
+    cm = solve_take(ict_rig, read_c3d(take_dir / "take.c3d"), load_marker_map(take_dir / "marker_map.json"))
+    _, _, names, W = read_weights_csv(tmp_path / "w.csv")
+    assert names == ict_rig.shape_names
+    assert np.abs(W - cm.weights).max() < 1e-5       # measured 1.2e-6: the glTF's float32 vertices
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["rig_units"] == "m"
+    assert rep["marker_rmse"] * 100 == pytest.approx(float(np.nanmean(cm.marker_rmse)), rel=1e-3)
+
+
+def test_solve_a_live_link_face_take_writes_weights_cache_report_and_gltf(ict_rig, ict_dir, llf_csv, tmp_path):
+    """Issue 16: `solve` on the shared Live Link Face CSV writes the weights CSV (the rig's shapes, ARKit columns
+    mapped as the GUI plays them), the PC2 cache (frame k = the rig posed with row k), the report and a glTF whose
+    animation holds the CSV's weights; a weights CSV solves to the same weights again."""
+    from model.livelink import read_livelink_csv
+    from model.pose import PoseEvaluator
+    from tests.gltf_reference import reference_animation
+    out = {k: tmp_path / f"llf{k}" for k in (".csv", ".pc2", ".json", ".glb")}
+    proc = run_cli("solve", ict_dir, llf_csv, "-o", out[".csv"], "--cache", out[".pc2"], "--report", out[".json"],
+                   "--gltf", out[".glb"])
+    assert "328 frames at 60 fps" in proc.stdout and "TongueOut" in proc.stderr
+    frames, times, names, W = read_weights_csv(out[".csv"])
+    played = read_livelink_csv(llf_csv, ict_rig.shape_names)          # what the GUI's Mocap panel plays
+    assert names == ict_rig.shape_names and np.array_equal(W, played.weights) and W.shape == (328, 57)
+    np.testing.assert_allclose(times, np.arange(328) / 60.0, atol=1e-12)
+    rep = json.loads(out[".json"].read_text())
+    assert rep["kind"] == "weights" and rep["frames"] == 328 and rep["rate"] == 60.0
+    assert rep["unmapped"] == ["TongueOut"] and "jawOpen" in rep["shapes_driven"] and rep["marker_rmse"] is None
+    t, G = reference_animation(out[".glb"])                               # read by pygltflib
+    np.testing.assert_allclose(t, times, atol=1e-6)
+    assert G.shape == W.shape and np.abs(G - W).max() < 1e-6               # float32 in the file
+    cache, _, _ = read_pc2(out[".pc2"])
+    ev = PoseEvaluator(ict_rig, dtype=np.float64)
+    for k in (0, 150, 327):
+        assert np.abs(cache[k] - ev.evaluate(W[k])).max() < 1e-4, k
+    again = tmp_path / "again.csv"
+    run_cli("solve", ict_dir, out[".csv"], "-o", again)
+    assert again.read_bytes() == out[".csv"].read_bytes()
+
+
+def test_a_solved_take_with_a_corrective_exports_a_valid_gltf_animation(ict_rig, take_dir, tmp_path):
+    """`solve --gltf` on ICT with a corrective and the shared marker take: the animation is the solved weights plus
+    the corrective's activation per frame, and the file passes the glTF validator's rules (and the Khronos validator
+    itself where node and the gltf-validator module are found, on NODE_PATH)."""
+    from model.correctives import Corrective, add_corrective, corrective_activations
+    from model.project import Project, save_project
+    from tests.gltf_reference import reference_animation
+    from tests.gltf_rules import read_gltf_file, violations
+    from tests.test_export import _validator
+    rig = ict_rig.copy()
+    jaw, smile = rig.shape_index("jawOpen"), rig.shape_index("mouthSmile_L")
+    centre = 0.5 * (rig.neutral[np.argmax(np.linalg.norm(rig.deltas[jaw], axis=1))]
+                    + rig.neutral[np.argmax(np.linalg.norm(rig.deltas[smile], axis=1))])
+    delta = 0.3 * np.exp(-((rig.neutral - centre) ** 2).sum(axis=1) / 4.0)[:, None] * np.array([0.0, 0.6, 0.8])
+    delta[np.abs(delta).max(axis=1) < 1e-9] = 0.0
+    add_corrective(rig, Corrective(drivers=["jawOpen", "mouthSmile_L"], delta=delta, rule="min"))
+    save_project(Project(rig=rig), tmp_path / "ict.bsproj")
+    run_cli("solve", tmp_path / "ict.bsproj", take_dir / "take.c3d", "--map", take_dir / "marker_map.json",
+            "-o", tmp_path / "w.csv", "--gltf", tmp_path / "take.glb")
+    _, times, _, W = read_weights_csv(tmp_path / "w.csv")
+    t, G = reference_animation(tmp_path / "take.glb")
+    act = np.array([corrective_activations(rig.correctives, rig.shape_names, w)[0] for w in W])
+    assert act.max() > 0.1                                              # the take does drive the corrective
+    np.testing.assert_allclose(t, times, atol=1e-6)
+    assert G.shape == (358, 58) and np.abs(G[:, :57] - W).max() < 1e-6 and np.abs(G[:, 57] - act).max() < 1e-6
+    doc, blob, container = read_gltf_file(tmp_path / "take.glb")
+    assert container == [] and violations(doc, blob) == []
+    validate = _validator()
+    if validate is not None:
+        report = validate(tmp_path / "take.glb")
+        assert report["issues"]["numErrors"] == 0, report["issues"]["messages"][:10]
+        assert report["info"]["animationCount"] == 1 and report["info"]["totalVertexCount"] == 26719
+
+
+def test_a_weights_csv_as_a_take_keeps_time_or_says_why_not(ict_rig, tmp_path):
+    """A weights CSV read as a take: its rate from the times; frames that skip, times that do not step evenly, a
+    cell too large for a CSV and a frame number that is not whole are refused in one sentence naming the file."""
+    from model.errors import RigInputError
+    from model.weights_csv import read_weights_take
+    names = ict_rig.shape_names
+    ok = tmp_path / "ok.csv"
+    ok.write_text("frame,time,jawOpen\n" + "".join(f"{k},{k / 24},{k / 10}\n" for k in range(10)))
+    take = read_weights_take(ok, names)
+    assert take.rate == 24.0 and take.weights.shape == (10, 57) and take.weights[9, names.index("jawOpen")] == 0.9
+    one = tmp_path / "one.csv"
+    one.write_text("frame,time,jawOpen\n0,0.0,0.5\n")
+    assert read_weights_take(one, names).warnings == [f"{one}: one frame has no frame rate; 30 frames a second assumed."]
+    cases = {"skips.csv": ("frame,time,jawOpen\n0,0,0\n1,0.04,0\n3,0.12,0\n", "do not count up one by one (row 4)"),
+             "uneven.csv": ("frame,time,jawOpen\n0,0,0\n1,0.04,0\n2,0.2,0\n", "not evenly spaced"),
+             "huge.csv": ("frame,time,jawOpen\n0,0," + "9" * 140000 + "\n", "not a readable CSV"),
+             "half.csv": ("frame,time,jawOpen\n0,0,0\n1.5,0.04,0\n", "row 3 has a frame number that is not a whole")}
+    for name, (text, words) in cases.items():
+        (tmp_path / name).write_text(text)
+        with pytest.raises(RigInputError) as err:
+            read_weights_take(tmp_path / name, names)
+        assert name in str(err.value) and words in str(err.value), str(err.value)

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 from PySide6 import QtWidgets
 
 from tests.cli_runner import run_cli
@@ -219,3 +220,32 @@ def test_side_by_side_culls_the_faces_turned_away_whatever_the_winding():
     ccw, cw = np.array([0, 1, 2, 3]), np.array([0, 3, 2, 1])
     assert _faces_forward(quad, VertexNormals(np.array([4]), ccw, 4))
     assert not _faces_forward(quad, VertexNormals(np.array([4]), cw, 4))
+
+
+def test_a_30_fps_live_link_face_take_plays_in_real_time(qtbot, tmp_path, monkeypatch):
+    """Issue 16: a Live Link Face CSV recorded at 30 fps plays at 30 frames a second: on the playback's clock, the
+    frame shown 1.5 s after Play is the one the timecodes put at 1.5 s (frame 45, not frame 90 as at a fixed 60),
+    and the face shows that row's weights."""
+    import app.mocap_playback as playback
+    from tests.test_takes import _codes, _llf_file
+    w, mc = _install(qtbot, tmp_path, size=(1100, 800))
+    jaw = np.linspace(0.0, 0.9, 90)
+    assert mc.load_take(_llf_file(tmp_path / "llf30.csv", _codes(range(90), 30), jaw))
+    take = mc.take
+    assert take.rate == 30.0 and take.n_frames == 90 and mc.playback.rate == 30.0
+    clock = [1000.0]
+    monkeypatch.setattr(playback.time, "perf_counter", lambda: clock[0])
+    mc.set_frame(0)
+    mc.panel.loop_check.setChecked(False)
+    mc.play()
+    clock[0] += 1.5
+    mc.playback._tick()                       # the timer's tick at 1.5 s on the clock
+    mc.pause()
+    assert mc.frame == 45 and take.times()[mc.frame] == pytest.approx(1.5)
+    np.testing.assert_allclose(w.document.weights, take.weights[45])
+    assert w.document.weights[w.document.rig.shape_index("jawOpen")] == pytest.approx(jaw[45], abs=1e-4)
+    # the same weights as a weights CSV (what `solve` writes) open as a weight take at the same rate
+    from model.weights_csv import write_weights_csv
+    write_weights_csv(tmp_path / "w.csv", take.weights, take.names, rate=30.0)
+    assert mc.load_take(tmp_path / "w.csv")
+    assert mc.take.rate == 30.0 and np.array_equal(mc.take.weights, take.weights) and mc.playback.rate == 30.0

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from model.markers import DRAG_LAM_REG
+
 
 class MarkersPanel(QtWidgets.QWidget):
     mode_toggled = QtCore.Signal(bool)
@@ -30,8 +32,9 @@ class MarkersPanel(QtWidgets.QWidget):
         self.lam.setDecimals(4)
         self.lam.setRange(0.0, 10.0)
         self.lam.setSingleStep(0.001)
-        self.lam.setValue(0.001)
-        self.lam.setToolTip("λ_r: how strongly a drag keeps each region near the pose it started from")
+        self.lam.setValue(DRAG_LAM_REG)
+        self.lam.setToolTip("λ_r: how strongly a drag keeps each region near the pose it started from "
+                            "(per cm², whatever the rig's units)")
         self.lam.valueChanged.connect(self.lam_reg_changed)
         form.addRow("Stay near pose (λ_r)", self.lam)
         lay.addLayout(form)

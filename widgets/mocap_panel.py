@@ -6,7 +6,9 @@ from __future__ import annotations
 
 from PySide6 import QtCore, QtWidgets
 
+from model.units import unit_scale
 from solvers.take_solve import DEFAULTS
+from widgets.length_box import length_units, show_length_in
 
 RESIDUALS = ("none", "joshi", "gaussian", "multiquadric")
 
@@ -64,8 +66,11 @@ class MocapPanel(QtWidgets.QWidget):
         self.residual_combo.setCurrentText(DEFAULTS["residual"])
         self.residual_combo.setToolTip("Radial-basis residual that carries the marker errors the shapes cannot "
                                        "reach to the dense surface (Joshi Eq. 3; Fidaleo), or none")
-        self.lam_sparsity = self._spin(DEFAULTS["lam_sparsity"], 0.0, 10.0, 4, "Sparsity λ_s (Ma et al. 2016, Eq. 3)")
-        self.lam_temporal = self._spin(DEFAULTS["lam_temporal"], 0.0, 10.0, 4, "Temporal λ_t (Ma et al. 2016, Eq. 4)")
+        # the λ's weigh squared lengths: given per cm² whatever the rig's units (model.units converts them)
+        self.lam_sparsity = self._spin(DEFAULTS["lam_sparsity"], 0.0, 10.0, 4,
+                                       "Sparsity λ_s (Ma et al. 2016, Eq. 3), per cm² whatever the rig's units")
+        self.lam_temporal = self._spin(DEFAULTS["lam_temporal"], 0.0, 10.0, 4,
+                                       "Temporal λ_t (Ma et al. 2016, Eq. 4), per cm² whatever the rig's units")
         self.rbf_scale = self._spin(DEFAULTS["rbf_scale"], 0.01, 100.0, 3, "RBF kernel length (rig units)")
         self.rbf_lambda = self._spin(DEFAULTS["rbf_lambda"], 0.0, 10.0, 4, "RBF Tikhonov λ (Fidaleo)")
         self.calibration_spin = QtWidgets.QSpinBox()
@@ -172,14 +177,16 @@ class MocapPanel(QtWidgets.QWidget):
         return {"mode": "region" if self.mode_combo.currentIndex() == 1 else "global",
                 "level": self.level_spin.value(), "residual": self.residual_combo.currentText(),
                 "lam_sparsity": self.lam_sparsity.value(), "lam_temporal": self.lam_temporal.value(),
-                "rbf_scale": self.rbf_scale.value(), "rbf_lambda": self.rbf_lambda.value(),
+                "rbf_scale": self.rbf_scale.value() * unit_scale(length_units(self.rbf_scale), "cm"),
+                "rbf_lambda": self.rbf_lambda.value(),
                 "calibration_frames": self.calibration_spin.value(),
                 "neutral_frames": self.neutral_edit.text().strip() or None,
                 "stable": self.stable_edit.text().strip() or None}
 
     def set_units(self, units: str) -> None:
-        """Lengths (the RBF kernel length) are in the rig's units: show them."""
-        self.rbf_scale.setSuffix(f" {units}")
+        """Lengths (the RBF kernel length) are in the rig's units: show them, the length kept physically the same
+        (``settings`` gives it in cm, as the solve settings are)."""
+        show_length_in(self.rbf_scale, units)
 
     def set_marker_mode(self, markers: bool, solved: bool = False) -> None:
         """Enable what makes sense: map and solve for a marker take, exports once something is playable."""

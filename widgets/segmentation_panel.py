@@ -5,6 +5,7 @@ from __future__ import annotations
 from PySide6 import QtCore, QtGui, QtWidgets
 
 from model.wording import count
+from widgets.length_box import show_length_in
 
 VIEW_LABELS = [("shaded", "Shaded"), ("deformation", "Deformation map"),
                ("deformation-rgb", "Deformation vector (RGB)"), ("segmentation", "Segmentation")]
@@ -126,7 +127,7 @@ class SegmentationPanel(QtWidgets.QWidget):
         self.nudge_amount.setRange(0.001, 10.0)
         self.nudge_amount.setDecimals(3)
         self.nudge_amount.setValue(0.1)
-        self.nudge_amount.setToolTip("Distance of one nudge, in rig units")
+        self.nudge_amount.setToolTip("Distance of one nudge, in rig units (1 mm at first, whatever the units)")
         ng.addWidget(QtWidgets.QLabel("Step"), 0, 0)
         ng.addWidget(self.nudge_amount, 0, 1, 1, 2)
         buttons = [("Out", "out", "Ctrl+Shift+="), ("In", "in", "Ctrl+Shift+-"), ("Up", "up", "Ctrl+Shift+Up"),
@@ -155,8 +156,8 @@ class SegmentationPanel(QtWidgets.QWidget):
 
     # --- state in ----------------------------------------------------------------------------------
     def set_units(self, units: str) -> None:
-        """Lengths (the nudge step) are in the rig's units: show them."""
-        self.nudge_amount.setSuffix(f" {units}")
+        """Lengths (the nudge step) are in the rig's units: show them, the step kept the same physical length."""
+        show_length_in(self.nudge_amount, units)
 
     def set_shapes(self, names: list[str]) -> None:
         self.shape.blockSignals(True)

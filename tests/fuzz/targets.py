@@ -149,6 +149,16 @@ def build_targets(work: Path) -> dict[str, Target]:
         t.positions = t.positions[:40]
         write_marker_csv(csv_seed, t)
 
+    weights_seed = work / "weights.csv"
+    if not weights_seed.exists():
+        from model.weights_csv import write_weights_csv
+        rng = np.random.default_rng(0)
+        write_weights_csv(weights_seed, rng.random((40, 6)), sample.shape_names[:6], rate=30.0)
+
+    def load_weights_take(path):
+        from model.weights_csv import read_weights_take
+        return read_weights_take(path, sample.shape_names)
+
     tp = DATA / "thirdparty"
     c3d_small = sorted((tp / "c3d").glob("*"), key=lambda p: p.stat().st_size)[:8]
     trc_small = sorted((tp / "trc").glob("*.trc"), key=lambda p: p.stat().st_size)[:6]
@@ -172,6 +182,7 @@ def build_targets(work: Path) -> dict[str, Target]:
         "marker-csv": Target("marker-csv", [csv_seed], M.TEXT, load_take, check_take),
         "livelink": Target("livelink", [DATA / "livelinkface" / "MySlate_3_iPhone.csv"], M.TEXT,
                            lambda p: read_livelink_csv(p), check_take),
+        "weights-csv": Target("weights-csv", [weights_seed], M.TEXT, load_weights_take, check_take),
         "marker-map": Target("marker-map", [takes / "marker_map.json"], [M.mutate_json], load_map, check_marker_map),
         "rig-any": Target("rig-any", [proj, gltf_seed], [M.truncate], load_rig, check_rig),
     }

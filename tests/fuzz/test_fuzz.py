@@ -16,7 +16,8 @@ import pytest
 from tests.conftest import DATA, require_data
 
 REPO = Path(__file__).resolve().parents[2]
-READERS = ["obj-folder", "gltf", "bsproj", "c3d", "trc", "marker-csv", "livelink", "marker-map", "rig-any"]
+READERS = ["obj-folder", "gltf", "bsproj", "c3d", "trc", "marker-csv", "livelink", "weights-csv", "marker-map",
+           "rig-any"]
 NORMAL = int(os.environ.get("BLENDSHAPE_STUDIO_FUZZ_INPUTS", "200"))
 LONG = 1200
 
