@@ -85,8 +85,12 @@ class ProgressPrinter:
             out.flush()
         elif p.row is not None:
             r = p.row
-            what = (f"{r['frames']} frames, marker RMSE {r['marker_rmse']:.4g}" if r["status"] == "solved"
-                    else r["error"])
+            if r["status"] != "solved":
+                what = r["error"]
+            elif r["marker_rmse"] is None:
+                what = f"{r['frames']} frames, a weight take played on the rig"
+            else:
+                what = f"{r['frames']} frames, marker RMSE {r['marker_rmse']:.4g}"
             print(f"[{p.done}/{p.total}] {r['take']}: {r['status']} ({what}); {status}", file=out, flush=True)
 
 

@@ -60,9 +60,17 @@ def load_solve_rig(args):
     return rig
 
 
-def auto_map_options(args) -> dict:
-    """The keyword arguments of ``TakeWorkspace.auto_map`` from the solve options (when there is no --map)."""
-    return {"neutral_frames": args.neutral_frames, "stable": args.stable}
+def solve_options(args) -> dict:
+    """The solve settings of ``model.take_workspace`` from the solve options, before a per-region solve's level
+    (``solve_settings`` adds it with the segmentation)."""
+    from model.take_workspace import SOLVE_DEFAULTS
+
+    regional = not args.global_solve and SOLVE_DEFAULTS["regional"]
+    if args.threshold is not None or args.level is not None:
+        regional = not args.global_solve
+    return {"mode": "region" if regional else "global", "residual": args.residual,
+            "calibration_frames": args.calibration_frames, "fixed_head": args.fixed_head,
+            "neutral_frames": args.neutral_frames, "stable": args.stable}
 
 
 def solve_settings(args, rig) -> tuple[dict, object]:
@@ -70,12 +78,8 @@ def solve_settings(args, rig) -> tuple[dict, object]:
     solve segments ``rig`` here, once for every take solved with these settings."""
     from model.take_workspace import SOLVE_DEFAULTS
 
-    regional = not args.global_solve and SOLVE_DEFAULTS["regional"]
-    if args.threshold is not None or args.level is not None:
-        regional = not args.global_solve
-    settings = {"mode": "region" if regional else "global", "residual": args.residual,
-                "calibration_frames": args.calibration_frames, "fixed_head": args.fixed_head,
-                "neutral_frames": args.neutral_frames, "stable": args.stable}
+    settings = solve_options(args)
+    regional = settings["mode"] == "region"
     segmentation = None
     if regional:
         from model.segmentation import SegmentationSettings, segment_rig
@@ -88,18 +92,14 @@ def solve_settings(args, rig) -> tuple[dict, object]:
 
 
 def cmd_solve(args) -> int:
+    from model.marker_map import load_marker_map
     from model.take_exports import export_solve_outputs
     from model.take_workspace import TakeWorkspace
 
     rig = load_solve_rig(args)
     ws = TakeWorkspace(rig)
-    ws.load_take(args.take)
-    if ws.marker_take is None:
+    if not ws.prepare_solve(args.take, load_marker_map(args.map) if args.map else None, solve_options(args)):
         return write_weight_take(ws, args)
-    if args.map:
-        ws.load_map(args.map, strict=False)
-    else:
-        ws.auto_map(args.calibration_frames, **auto_map_options(args))
     settings, segmentation = solve_settings(args, rig)
     sol = ws.solve(settings, segmentation=segmentation)
     report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)

@@ -253,17 +253,10 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     start = time.perf_counter()
     try:
         ws = TakeWorkspace(job.rig)
-        ws.load_take(take_path)
-        if ws.marker_take is None:
-            raise RigInputError(f"{take_path}: is a weight take (Live Link Face), not marker trajectories; "
-                                "it plays directly on the rig in the GUI.")
-        if job.marker_map is not None:
-            ws.set_map(job.marker_map, strict=False)
-        else:
-            ws.auto_map(job.settings.get("calibration_frames", 30), neutral_frames=job.settings.get("neutral_frames"),
-                        stable=job.settings.get("stable"))
+        solved = ws.prepare_solve(take_path, job.marker_map, job.settings)   # False: a weight take, played as it is
         identity = _take_identity(take_path)
-        sol = ws.solve(job.take_settings(), segmentation=job.segmentation, evaluator=job.evaluator)
+        sol = ws.solve(job.take_settings(), segmentation=job.segmentation, evaluator=job.evaluator) if solved \
+            else None
     except RigInputError as exc:
         return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -273,20 +266,23 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
         files = {OUTPUTS["weights"]: lambda p: export_weights_csv(ws, p),
                  OUTPUTS["report"]: lambda p: export_report(ws, p)}
         if job.cache:
-            files[OUTPUTS["cache"]] = lambda p: export_pc2(ws, p)
+            files[OUTPUTS["cache"]] = lambda p: export_pc2(ws, p, evaluator=job.evaluator)
         for fname, write in files.items():
             write(tmp / fname)
-        frame, preview_error = preview_frame(sol.weights), None
+        weights = ws.playing_weights()
+        frame, preview_error = preview_frame(weights), None
         if job.preview is not None:
             try:          # a preview that cannot be drawn (no display, no EGL) costs the take its picture only
-                job.preview(sol.dense(frame), job.rig.face_counts, job.rig.face_indices, tmp / OUTPUTS["preview"],
+                surface = sol.dense(frame) if sol is not None else job.evaluator.pose(weights[frame])
+                job.preview(surface, job.rig.face_counts, job.rig.face_indices, tmp / OUTPUTS["preview"],
                             focus=job.focus)
                 files[OUTPUTS["preview"]] = None
             except Exception as exc:
                 preview_error = f"the preview could not be rendered ({type(exc).__name__}: {exc})"
         report = json.loads((tmp / OUTPUTS["report"]).read_text())
+        measured = {k: None if report[k] is None else float(report[k]) for k in ("frames_per_second", "marker_rmse")}
         row = _row(name, take_path, out_dir, "solved", frames=int(report["frames"]), rate=float(report["rate"]),
-                   frames_per_second=float(report["frames_per_second"]), marker_rmse=float(report["marker_rmse"]),
+                   **measured,
                    motion_explained=report.get("motion_explained"), preview_frame=frame, preview_error=preview_error)
         row["seconds"] = time.perf_counter() - start
         done = {"take_file": identity, "signature": job.signature, "outputs": list(files), "row": row}

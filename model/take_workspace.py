@@ -299,6 +299,21 @@ class TakeWorkspace:
         self.take, self.take_path, self.solution = take, Path(path), None
         return take
 
+    def prepare_solve(self, path: str | Path, marker_map: MarkerMap | None, settings: dict) -> bool:
+        """What ``solve`` and ``batch`` do with a take file before solving it: load it, then map its markers with
+        ``marker_map`` (markers the take lacks are warnings, not a refusal) or automatically from its neutral
+        frames (``settings``' ``calibration_frames``, ``neutral_frames`` and ``stable``). False for a weight take
+        (Live Link Face, weights CSV): it has nothing to solve, it plays on the rig as it is."""
+        self.load_take(path)
+        if self.marker_take is None:
+            return False
+        if marker_map is not None:
+            self.set_map(marker_map, strict=False)
+        else:
+            self.auto_map(settings.get("calibration_frames", DEFAULTS["calibration_frames"]),
+                          neutral_frames=settings.get("neutral_frames"), stable=settings.get("stable"))
+        return True
+
     def load_map(self, path: str | Path, *, strict: bool = True) -> MarkerMap:
         mm = load_marker_map(path)
         self.set_map(mm, strict=strict)

@@ -289,3 +289,27 @@ def test_a_killed_writers_private_folder_is_removed_by_the_next_write(tmp_path, 
     assert not stale.exists(), "the dead writer's folder was left behind"
     assert live.exists(), "a live writer's folder was removed"
     assert (out / "weights.csv").read_text().startswith("frame,time,")
+
+
+def test_a_weight_take_in_a_batch_writes_what_solve_writes(tmp_path, ict_dir, ict_rig, llf_csv, take_dir):
+    """A Live Link Face CSV among the takes is played on the rig, as ``solve`` does with it: the same weights CSV
+    byte for byte, a report of kind 'weights', a PC2 of the posed rig and a preview; not a failure."""
+    from model.batch import BatchJob, solve_take_file
+    from model.marker_map import load_marker_map
+    from model.pc2 import read_pc2
+    from model.pose import PoseEvaluator
+    ref = tmp_path / "solve.csv"
+    run_cli("solve", ict_dir, llf_csv, "-o", ref, check=True)
+    job = BatchJob.prepare(ict_rig, {"mode": "global", "residual": None, "calibration_frames": 30,
+                                     "fixed_head": False}, marker_map=load_marker_map(take_dir / "marker_map.json"),
+                           cache=True)
+    row = solve_take_file(job, str(llf_csv), str(tmp_path / "out" / "llf"))
+    assert row["status"] == "solved" and row["error"] is None, row
+    assert row["marker_rmse"] is None and row["frames"] == 328
+    out = tmp_path / "out" / "llf"
+    assert (out / "weights.csv").read_bytes() == ref.read_bytes()
+    assert json.loads((out / "report.json").read_text())["kind"] == "weights"
+    W = np.loadtxt(ref, delimiter=",", skiprows=1)[:, 2:]
+    frames = read_pc2(out / "cache.pc2")[0]
+    k = 200
+    assert np.abs(frames[k] - PoseEvaluator(ict_rig, dtype=np.float64).pose(W[k])).max() < 1e-4
