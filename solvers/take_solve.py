@@ -66,8 +66,8 @@ CORRECTIVE_STEPS = 6      # Gauss–Newton steps per weight solve on a rig with 
 # pair w_i w_j, ALGORITHMS.md §13): 0 left up to 22 frames with both weights of a pair above 0.2; 0.15 none, and
 # the same-face take's dense RMS went from 0.2042 to 0.2025 mm (0.2 gave 0.2075, 0.3 gave 0.2216). lam_region (per-region
 # solves, λ_r toward the parent region's weights, rig units²): at the middle level of ICT's default segmentation,
-# coarse to fine, 0.1 gave 0.2018 / 0.2279 mm on the same-face / actor takes, 0.3 gave 0.1988 / 0.2271, 1.0 gave
-# 0.2006 / 0.2274 (the global solve: 0.2025 / 0.2276).
+# coarse to fine, 0.1 gave 0.1985 / 0.2276 mm on the same-face / actor takes, 0.3 gave 0.1988 / 0.2271, 1.0 gave
+# 0.2007 / 0.2274 (the global solve: 0.2025 / 0.2276).
 DEFAULTS = dict(lam_sparsity=0.0, lam_temporal=1.0, iterations=3, two_pass=True, marker_smoothing=0.7,
                 residual="gaussian", rbf_scale=2.0, rbf_lambda=1.0, residual_smoothing=6.0, n_phantoms=48,
                 phantom_distance=2.0, calibration_frames=30, rigid_weighting=0.1, rigid_noise=0.05,
