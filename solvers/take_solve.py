@@ -415,7 +415,7 @@ class TakeSolver:
         self.surface_many = surface_many     # global weights (n, K) -> (n, V, 3) float32, the same pose (exports)
         # Regions.
         self.lam_region = float(lam_region)
-        self.regions = None
+        self.n_regions: int | None = None     # regions of a per-region solve (None: a global solve)
         self._region_args = None if regions is None else (regions, blend, min_region_markers, coarser_regions)
         # The model the markers are fitted with: the rig's marker points until a take's neutral is known.
         self._set_actor(self.rest, None)
@@ -513,7 +513,7 @@ class TakeSolver:
         flat = [v for lvl in levels for v in lvl]
         region_max = shape_region_max(self.deltas, flat)                    # (all regions, K)
         acting = region_max > REGION_SHAPE_SHARE * region_max.max(axis=0, initial=0.0)
-        self.regions = len(regions)
+        self.n_regions = len(regions)
         self.region_tiers = []
         n, parents = 0, None
         for lvl in levels:
@@ -676,7 +676,7 @@ class TakeSolver:
             Rs, ts = _mean_rigid(Rs, ts, Rb, tb)
         Z = np.einsum("fmc,fck->fmk", Y - ts[:, None], Rs)  # head-stabilised markers
         RW = None
-        if self.regions is not None:
+        if self.n_regions is not None:
             RW = self._solve_regions(Z, W, solved, cancel)
             fit = self.anchor + np.einsum("mr,frk,kmc->fmc", self.marker_blend, RW,
                                           self.Dm.reshape(self.K, self.M, 3))
