@@ -106,14 +106,17 @@ def read_take(path: str | Path, rig: Rig | None = None) -> MarkerTake | WeightTa
 
 def regional_solve_options(segmentation, level: int) -> dict:
     """The solver's ``regions`` and ``blend`` for a per-region solve on ``level`` of a segmentation
-    (``model.segmentation``); RigInputError when there is none or the level does not exist."""
+    (``model.segmentation``), and the regions of the levels above it (``coarser_regions``, finest first, without
+    the top one-region level, which is the global solve) for the coarse-to-fine solve; RigInputError when there is
+    none or the level does not exist."""
     if segmentation is None:
         raise RigInputError("A per-region solve needs a segmentation: segment the rig first.")
     n = len(segmentation.levels)
     if not 0 <= level < n:
         raise RigInputError(f"Level {level} does not exist: the segmentation has levels 0 to {n - 1}.")
     lvl = segmentation.levels[level]
-    return {"regions": [r.vertices for r in lvl.regions], "blend": lvl.blend}
+    coarser = [[r.vertices for r in segmentation.levels[up].regions] for up in range(level + 1, n - 1)]
+    return {"regions": [r.vertices for r in lvl.regions], "blend": lvl.blend, "coarser_regions": coarser}
 
 
 def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: PoseEvaluator | None = None,

@@ -13,7 +13,9 @@ Pipeline (all in rig units):
    ``two_pass`` a backward sweep is run too and the two causal solutions are averaged, cancelling the
    lag of the causal temporal term.
 4. Optionally per region (Joshi §4): the same QP per region of a segmentation level over the markers inside
-   it and the shapes that move there; the surface blends the region weights by a partition of unity.
+   it and the shapes that move there, coarse to fine down the hierarchy (each region regularised toward its
+   parent's weights, forward and backward over the take; a region with too few markers inherits them); the
+   surface blends the region weights by a partition of unity, and the residual is fitted after the blend.
 5. The remaining marker misfit, low-passed in time (``residual_smoothing``), is interpolated by RBFs and
    added to the dense result (Joshi Eq. 3; Fidaleo Eq. 1–5; ``solvers.rbf``).
 The box QP of a take solve runs in ``_CachedBoxQP`` (same problem as ``solvers.weight_solve``, whose
@@ -35,6 +37,7 @@ import scipy.sparse as sp
 from .antagonists import pair_penalty
 from .correctives import linearised_correctives
 from .rbf import KERNEL_LENGTH_POWER, KERNELS, RBFResidual, phantom_points
+from .regional_solve import shape_region_max
 from .retarget import SmoothWarp, neutral_stretch
 from .rigid import to_matrix, umeyama
 from .weight_solve import WeightSolver
@@ -49,6 +52,10 @@ RETARGET = ("jacobian", "scale", "none")   # how the markers' motion is carried 
 # (0.067 RMS) do not change.
 SHRINK = 30.0
 
+# Per-region solves: a shape acts in a region where its displacement exceeds this share of its largest over the regions
+# (Joshi §4: the weights of the shapes that move inside r); the others keep the parent region's weights.
+REGION_SHAPE_SHARE = 0.02
+
 DENSE_BLOCK = 32          # frames per block of dense results (32 × 106k vertices × 12 bytes = 41 MB)
 CORRECTIVE_STEPS = 6      # Gauss–Newton steps per weight solve on a rig with correctives (quadratic: 2–3 suffice)
 
@@ -57,14 +64,17 @@ CORRECTIVE_STEPS = 6      # Gauss–Newton steps per weight solve on a rig with 
 # against 0.10 / 0.43 mm through the smooth warp's Jacobian ('jacobian'), whose per-marker maps the 60 markers do not
 # determine well (their local scale correlated 0.3 with the true one). lam_antagonist (rig units², per antagonist
 # pair w_i w_j, ALGORITHMS.md §13): 0 left up to 22 frames with both weights of a pair above 0.2; 0.15 none, and
-# the same-face take's dense RMS went from 0.2042 to 0.2025 mm (0.2 gave 0.2075, 0.3 gave 0.2216).
+# the same-face take's dense RMS went from 0.2042 to 0.2025 mm (0.2 gave 0.2075, 0.3 gave 0.2216). lam_region (per-region
+# solves, λ_r toward the parent region's weights, cm²): at the middle level of ICT's default segmentation,
+# coarse to fine, 0.1 gave 0.1985 / 0.2276 mm on the same-face / actor takes, 0.3 gave 0.1988 / 0.2271, 1.0 gave
+# 0.2007 / 0.2274 (the global solve: 0.2025 / 0.2276).
 # Lengths are in centimetres and the weights of squared-length terms in cm² (``LENGTH_OPTIONS``): these are the
 # values for a rig in centimetres, and ``model.units.take_solver_options`` converts them for a rig in other units,
 # so that the same face gives the same weights in m, cm or mm. ``ridge`` keeps the QP positive definite (cm²).
 DEFAULTS = dict(lam_sparsity=0.0, lam_temporal=1.0, iterations=3, two_pass=True, marker_smoothing=0.7,
                 residual="gaussian", rbf_scale=2.0, rbf_lambda=1.0, residual_smoothing=6.0, n_phantoms=48,
                 phantom_distance=2.0, calibration_frames=30, rigid_weighting=0.1, rigid_noise=0.05,
-                lam_region=0.1, retarget="scale", warp_scale=3.0, warp_lambda=0.1, lam_antagonist=0.15,
+                lam_region=0.3, retarget="scale", warp_scale=3.0, warp_lambda=0.1, lam_antagonist=0.15,
                 ridge=1e-10)
 
 # The options that carry a length, with its power: λ's weigh terms against squared marker misfits (length²);
@@ -334,7 +344,11 @@ class TakeSolver:
     rbf_lambda (Tikhonov λ), n_phantoms / phantom_distance (zero-residual ring, rig units),
     residual_vertices (vertices that receive the residual; default: those nearer to a marker than the
     phantom ring), regions (list of vertex index arrays) and blend ((V, R+1) partition of unity, last
-    column the background) for a per-region solve. Every length option is in rig units (``LENGTH_OPTIONS``; the
+    column the background) for a per-region solve; coarser_regions (the region lists of the hierarchy's levels
+    above, finest first, without the top one-region level) makes it coarse to fine: each region is regularised
+    toward its parent region's weights (λ_r, lam_region) instead of the global solve's, and a region with fewer
+    than min_region_markers markers, fewer marker coordinates than shapes acting in it, or equal to its parent
+    takes its parent's weights (``_solve_regions``). Every length option is in rig units (``LENGTH_OPTIONS``; the
     ``DEFAULTS`` are those of a rig in cm: ``model.units.take_solver_options`` converts them for any other).
 
     correctives: the rig's corrective shapes (Smith 2006 §4.5; ALGORITHMS.md §6), as (activate, E, drivers):
@@ -356,7 +370,7 @@ class TakeSolver:
                  rbf_scale: float = DEFAULTS["rbf_scale"], rbf_lambda: float = DEFAULTS["rbf_lambda"],
                  n_phantoms: int = DEFAULTS["n_phantoms"], phantom_distance: float = DEFAULTS["phantom_distance"],
                  residual_vertices: np.ndarray | None = None, regions: list[np.ndarray] | None = None,
-                 blend=None, min_region_markers: int = 3,
+                 blend=None, min_region_markers: int = 3, coarser_regions=(),
                  residual_smoothing: float = DEFAULTS["residual_smoothing"],
                  two_pass: bool = DEFAULTS["two_pass"],
                  marker_smoothing: float = DEFAULTS["marker_smoothing"],
@@ -420,8 +434,8 @@ class TakeSolver:
         self.surface_many = surface_many     # global weights (n, K) -> (n, V, 3) float32, the same pose (exports)
         # Regions.
         self.lam_region = float(lam_region)
-        self.regions = None
-        self._region_args = None if regions is None else (regions, blend, min_region_markers)
+        self.n_regions: int | None = None     # regions of a per-region solve (None: a global solve)
+        self._region_args = None if regions is None else (regions, blend, min_region_markers, coarser_regions)
         # The model the markers are fitted with: the rig's marker points until a take's neutral is known.
         self._set_actor(self.rest, None)
         # Residual.
@@ -459,8 +473,9 @@ class TakeSolver:
         self.weight_solver = WeightSolver(self.A, mode=self.mode, lam_sparsity=self.lam_sparsity,
                                           lam_temporal=self.lam_temporal)
         if self._region_args is not None:
-            regions, blend, min_markers = self._region_args
-            self._setup_regions(regions, blend, min_markers, self.mode, self.lam_sparsity, self.lam_temporal)
+            regions, blend, min_markers, coarser = self._region_args
+            self._setup_regions(regions, blend, min_markers, coarser, self.mode, self.lam_sparsity,
+                                self.lam_temporal)
 
     def to_rig(self, z: np.ndarray) -> np.ndarray:
         """(…, M, 3) head-stabilised actor markers carried into the rig's frame: rest + J⁻¹ (z − anchor)
@@ -501,7 +516,11 @@ class TakeSolver:
         self._set_actor(anchor, jac)
 
     # --- regions (Joshi §4) ----------------------------------------------------------------------
-    def _setup_regions(self, regions, blend, min_markers, mode, lam_s, lam_t) -> None:
+    def _setup_regions(self, regions, blend, min_markers, coarser, mode, lam_s, lam_t) -> None:
+        """The per-region problems of every tier, coarsest first (``coarser`` levels, then ``regions``): each
+        region's markers (their main vertex inside it), the shapes that act in it (``REGION_SHAPE_SHARE`` of a
+        shape's largest displacement over the regions), its parent (the region of the tier above holding most of
+        its vertices; -1: the global solve) and a solver, or None where it inherits the parent's weights."""
         blend = sp.csr_matrix(blend)
         R = len(regions)
         if blend.shape != (self.V, R + 1):
@@ -509,22 +528,34 @@ class TakeSolver:
         self.blend = blend
         self.marker_blend = np.asarray((self.binding @ blend).todense())  # (M, R+1)
         main_vertex = np.asarray(self.binding.argmax(axis=1)).ravel()
-        self.regions = []
-        Dfull = np.abs(self.deltas)
-        for verts in regions:
-            verts = np.asarray(verts, dtype=np.int64)
-            inside = np.isin(main_vertex, verts)
-            mk = np.flatnonzero(inside)
-            moving = Dfull[:, verts].max(axis=(1, 2))
-            shapes = np.flatnonzero(moving > 1e-6 * max(float(moving.max(initial=0.0)), 1e-300))
-            if mk.size < min_markers or shapes.size == 0:
-                self.regions.append(None)
-                continue
-            rows = (mk[:, None] * 3 + np.arange(3)).ravel()
-            A = self.A[np.ix_(rows, shapes)]
-            self.regions.append((mk, rows, shapes,
-                                 WeightSolver(A, mode=mode, lam_sparsity=lam_s, lam_temporal=lam_t,
-                                              lam_reg=self.lam_region)))
+        levels = [[np.asarray(v, dtype=np.int64) for v in lvl] for lvl in [*coarser][::-1] + [regions]]
+        flat = [v for lvl in levels for v in lvl]
+        region_max = shape_region_max(self.deltas, flat)                    # (all regions, K)
+        acting = region_max > REGION_SHAPE_SHARE * region_max.max(axis=0, initial=0.0)
+        self.n_regions = len(regions)
+        self.region_tiers = []
+        n, parents = 0, None
+        for lvl in levels:
+            tier = []
+            for verts in lvl:
+                parent, same = -1, False
+                if parents is not None:
+                    parent = int(np.argmax([np.intersect1d(verts, p, assume_unique=True).size for p in parents]))
+                    same = np.array_equal(verts, parents[parent])
+                mk = np.flatnonzero(np.isin(main_vertex, verts))
+                shapes = np.flatnonzero(acting[n])
+                n += 1
+                # a region equal to its parent, or with fewer marker coordinates than shapes, inherits
+                if same or mk.size < min_markers or shapes.size == 0 or 3 * mk.size < shapes.size:
+                    tier.append(_RegionProblem(parent))
+                    continue
+                rows = (mk[:, None] * 3 + np.arange(3)).ravel()
+                others = np.setdiff1d(np.arange(self.K), shapes)
+                solver = WeightSolver(self.A[np.ix_(rows, shapes)], mode=mode, lam_sparsity=lam_s,
+                                      lam_temporal=lam_t, lam_reg=self.lam_region)
+                tier.append(_RegionProblem(parent, rows, shapes, others, solver, self.A[np.ix_(rows, others)]))
+            self.region_tiers.append(tier)
+            parents = lvl
 
     # --- poses -----------------------------------------------------------------------------------
     def corrective_markers(self, W: np.ndarray) -> np.ndarray:
@@ -664,13 +695,8 @@ class TakeSolver:
             Rs, ts = _mean_rigid(Rs, ts, Rb, tb)
         Z = np.einsum("fmc,fck->fmk", Y - ts[:, None], Rs)  # head-stabilised markers
         RW = None
-        if self.regions is not None:
-            RW = np.zeros((F, len(self.regions) + 1, self.K))
-            for f in range(F):
-                if cancel is not None and cancel():
-                    raise SolveCancelled(f"Take solve cancelled at frame {f} of {F}.")
-                RW[f] = self._solve_regions(Z[f], W[f], RW[f - 1] if f else None) if solved[f] else \
-                    (RW[f - 1] if f else W[f])
+        if self.n_regions is not None:
+            RW = self._solve_regions(Z, W, solved, cancel)
             fit = self.anchor + np.einsum("mr,frk,kmc->fmc", self.marker_blend, RW,
                                           self.Dm.reshape(self.K, self.M, 3))
             if self._activate is not None:
@@ -890,19 +916,60 @@ class TakeSolver:
         g += self.lam_temporal * w_prev
         return solver.solve(g, w_start)
 
-    def _solve_regions(self, z: np.ndarray, w: np.ndarray, prev: np.ndarray | None) -> np.ndarray:
-        """Per-region QPs (Joshi et al. 2003, Eq. 2 per region; Ma Eq. 3–4 terms) with the head fixed."""
-        out = np.repeat(w[None], len(self.regions) + 1, axis=0)
-        b_all = (z - self.anchor).reshape(-1) - self.corrective_markers(w)[0]   # correctives frozen at w
-        for r, reg in enumerate(self.regions):
-            if reg is None:
-                continue
-            mk, rows, shapes, solver = reg
-            b = b_all[rows]
-            if np.isfinite(b).sum() < 9:
-                continue
-            wp = prev[r, shapes] if prev is not None else None
-            out[r, shapes] = solver.solve(b, w_prev=wp, w_ref=w[shapes],
-                                          w_start=w[shapes] if prev is None else prev[r, shapes])
+    def _solve_regions(self, Z: np.ndarray, W: np.ndarray, solved: np.ndarray, cancel) -> np.ndarray:
+        """(F, R+1, K) region weights of the take, coarse to fine (Joshi et al. 2003, §4: the hierarchy's coarse
+        levels first, finer ones refine locally): each tier's regions solve the QP of Joshi Eq. 2 per region with
+        Ma Eq. 3–4's temporal term, regularised toward the parent region's weights (λ_r, ``lam_region``; the
+        global solve's for the coarsest tier), forward and backward over the take and averaged as the global
+        solve is; regions that inherit take the parent's weights. Z (F, M, 3) head-stabilised markers, W (F, K)
+        the global weights (also the background row), ``solved`` the frames the global solve solved."""
+        F = W.shape[0]
+        B = (Z - self.anchor).reshape(F, -1) - self.corrective_markers(W)   # correctives frozen at the global w
+        out = None
+        for tier in self.region_tiers:
+            ref = np.repeat(W[:, None], len(tier) + 1, axis=1)
+            for r, reg in enumerate(tier):
+                if out is not None and reg.parent >= 0:
+                    ref[:, r] = out[:, reg.parent]
+            out = ref.copy()
+            for r, reg in enumerate(tier):
+                if reg.solver is None:
+                    continue
+                if cancel is not None and cancel():
+                    raise SolveCancelled("Take solve cancelled in the per-region solve.")
+                w = self._region_sweep(reg, B, ref[:, r], solved, range(F))
+                if self.two_pass:
+                    w = 0.5 * (w + self._region_sweep(reg, B, ref[:, r], solved, range(F - 1, -1, -1)))
+                out[:, r, reg.shapes] = w
         return out
 
+    @staticmethod
+    def _region_sweep(reg: "_RegionProblem", B: np.ndarray, ref: np.ndarray, solved: np.ndarray,
+                      order) -> np.ndarray:
+        """One causal sweep of region ``reg`` over the frames in ``order``: (F, shapes) weights fitting the region's
+        markers of B (F, 3M) with the other shapes at the reference ``ref`` (F, K), λ_r toward ``ref`` and λ_t
+        toward the previous frame; a frame with fewer than 3 of the region's markers holds the previous weights."""
+        out = np.empty((B.shape[0], reg.shapes.size))
+        prev = None
+        for f in order:
+            b = B[f, reg.rows]
+            if solved[f] and np.isfinite(b).sum() >= 9:
+                if reg.others.size:
+                    b = b - reg.A_others @ ref[f, reg.others]
+                w_ref = ref[f, reg.shapes]
+                prev = reg.solver.solve(b, w_prev=prev, w_ref=w_ref, w_start=w_ref if prev is None else prev)
+            out[f] = prev if prev is not None else ref[f, reg.shapes]
+        return out
+
+
+@dataclass
+class _RegionProblem:
+    """One region of a per-region take solve: its parent in the tier above (-1: the global solve) and, when it
+    solves its own weights, its marker rows of A, the shapes it solves, the others and their columns of A."""
+
+    parent: int
+    rows: np.ndarray | None = None
+    shapes: np.ndarray | None = None
+    others: np.ndarray | None = None
+    solver: WeightSolver | None = None
+    A_others: np.ndarray | None = None
