@@ -244,6 +244,8 @@ class MocapController(QtCore.QObject):
             return
         ws = self.workspace
         settings = dict(self.panel.settings())
+        if self.document.project.antagonists is not None:   # edited in Edit ▸ Antagonist Pairs (else the rig's)
+            settings["antagonists"] = list(self.document.project.antagonists)
         segmentation = self._segmentation() if settings["mode"] == "region" else None
         try:
             ws.check_ready()

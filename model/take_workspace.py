@@ -7,7 +7,8 @@ Solve settings are a plain dict, as the panel and the command line gather them:
 ``lam_sparsity``, ``lam_temporal``, ``rbf_scale``, ``rbf_lambda``, ``retarget`` (solver options,
 ``solvers.take_solve.DEFAULTS`` for any left out), ``calibration_frames``, ``neutral_frames`` (None: the first
 ``calibration_frames``; ``"auto"``; or ``"A:B"`` / (A, B), inclusive), ``stable`` (marker names or patterns such as
-``root-*``, comma-separated, for the head motion) and ``fixed_head`` (markers already head-stabilised in rig space).
+``root-*``, comma-separated, for the head motion), ``fixed_head`` (markers already head-stabilised in rig space) and
+``antagonists`` (the shape pairs kept apart, as names; None: the rig's, ``model.antagonists``).
 """
 from __future__ import annotations
 
@@ -194,6 +195,8 @@ def solver_options(settings: dict, take: MarkerTake, segmentation=None) -> tuple
         options["stable"] = settings.get("stable") or None
     if settings.get("mode", "global") == "region":
         options.update(regional_solve_options(segmentation, int(settings.get("level", 0))))
+    if settings.get("antagonists") is not None:   # the project's edited pairs ("A+B" or (A, B)); else the rig's
+        options["antagonists"] = list(settings["antagonists"])
     return options, calibration
 
 

@@ -1,0 +1,211 @@
+"""Actors who are not the rig, in the window (issue 15), with real input events: File ▸ Personalize to Actor… writes
+and opens the actor's project and shows each shape's change as a heat map; Edit ▸ Antagonist Pairs… edits the
+pairs the solves keep apart (undoable, saved); "Use This Frame as Neutral" on the take; the marker map shown on the
+rig, a map point dragged to correct it."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PySide6 import QtCore, QtWidgets
+from PySide6.QtTest import QTest
+
+from model.obj_io import write_obj
+from model.project import Project, load_project, save_project
+from tests.gui_helpers import make_window, mouse, open_and_wait
+
+
+def _click(widget, pos=None, button=QtCore.Qt.LeftButton):
+    QTest.mouseClick(widget, button, QtCore.Qt.NoModifier, pos if pos is not None else widget.rect().center())
+    QtWidgets.QApplication.processEvents()
+
+
+def _click_item(tree: QtWidgets.QTreeWidget, item, modifier=QtCore.Qt.NoModifier):
+    rect = tree.visualItemRect(item)
+    QTest.mouseClick(tree.viewport(), QtCore.Qt.LeftButton, modifier, rect.center())
+    QtWidgets.QApplication.processEvents()
+
+
+def _type(widget, text: str):
+    widget.setFocus()
+    QTest.keyClick(widget, QtCore.Qt.Key_A, QtCore.Qt.ControlModifier)
+    QTest.keyClicks(widget, text)
+    QtWidgets.QApplication.processEvents()
+
+
+def _key(qtbot, widget, key, modifiers=QtCore.Qt.NoModifier):
+    """A key pressed in ``widget``'s window with it active (as under a window manager) and the focus in it."""
+    window = widget.window()
+    window.activateWindow()
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is window, timeout=5000)
+    target = QtWidgets.QApplication.focusWidget() or widget
+    QTest.keyClick(target, key, modifiers)
+    QtWidgets.QApplication.processEvents()
+
+
+def _undo(qtbot, widget):
+    _key(qtbot, widget, QtCore.Qt.Key_Z, QtCore.Qt.ControlModifier)
+
+
+def _redo(qtbot, widget):
+    _key(qtbot, widget, QtCore.Qt.Key_Z, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+
+
+def _close_error_box(message: str):
+    """The error box says ``message``; close it as the user would (its OK button)."""
+    box = next(b for b in QtWidgets.QApplication.topLevelWidgets()
+               if isinstance(b, QtWidgets.QMessageBox) and b.isVisible())
+    assert box.text() == message
+    _click(box.button(QtWidgets.QMessageBox.Ok))
+    assert not any(isinstance(b, QtWidgets.QMessageBox) and b.isVisible()
+                   for b in QtWidgets.QApplication.topLevelWidgets())
+
+
+# --- antagonist pairs -------------------------------------------------------------------------------
+def test_antagonist_pairs_are_edited_undone_saved_and_used_by_the_drag(qtbot, tmp_path):
+    from model.antagonists import pair_indices, rig_antagonists
+    w = make_window(qtbot, tmp_path)
+    rig = w.document.rig
+    found = rig_antagonists(rig)
+    assert ("mouthLeft", "mouthRight") in found
+    ctl = w.actor.antagonists
+    dlg = ctl.show_dialog()
+    qtbot.waitExposed(dlg)
+    assert dlg.pairs() == found and not dlg.reset_button.isEnabled()
+    # remove mouthLeft/mouthRight: select its row with the mouse, click Remove Selected
+    row = next(dlg.table.topLevelItem(i) for i in range(dlg.table.topLevelItemCount())
+               if dlg.table.topLevelItem(i).text(0) == "mouthLeft" and dlg.table.topLevelItem(i).text(1) == "mouthRight")
+    _click_item(dlg.table, row)
+    assert dlg.remove_button.isEnabled()
+    _click(dlg.remove_button)
+    assert ("mouthLeft", "mouthRight") not in dlg.pairs() and len(dlg.pairs()) == len(found) - 1
+    assert w.document.project.antagonists == [p for p in found if p != ("mouthLeft", "mouthRight")]
+    assert w.document.undo_stack.undoText() == "Remove antagonist pair mouthLeft+mouthRight"
+    # add jawOpen against mouthClose, typed into the two boxes
+    _type(dlg.first.lineEdit(), "jawOpen")
+    _type(dlg.second.lineEdit(), "mouthClose")
+    _click(dlg.add_button)
+    assert dlg.pairs()[-1] == ("jawOpen", "mouthClose") and dlg.table.topLevelItem(len(found) - 1).text(2) == "added"
+    assert dlg.reset_button.isEnabled()
+    # the drag solve keeps the project's pairs apart, not the rig's
+    drag_pairs = set(w.markers._antagonists(rig))
+    ij = pair_indices(rig, [("jawOpen", "mouthClose")])[0]
+    assert ij in drag_pairs and pair_indices(rig, [("mouthLeft", "mouthRight")])[0] not in drag_pairs
+    # undo the add (Ctrl+Z), redo it (Ctrl+Shift+Z)
+    _undo(qtbot, dlg)
+    assert ("jawOpen", "mouthClose") not in dlg.pairs() and ij not in set(w.markers._antagonists(rig))
+    _redo(qtbot, dlg)
+    assert dlg.pairs()[-1] == ("jawOpen", "mouthClose")
+    # a shape the rig does not have is refused with one sentence, nothing changes
+    before = list(w.document.project.antagonists)
+    _type(dlg.second.lineEdit(), "noSuchShape")
+    _click(dlg.add_button)
+    assert "noSuchShape" in w.last_error and w.document.project.antagonists == before
+    _close_error_box(w.last_error)
+    # saved in the project and read back
+    path = tmp_path / "pairs.bsproj"
+    assert w.save_to(path)
+    assert load_project(path).antagonists == before
+    w.open_path(path)
+    qtbot.waitUntil(lambda: not w.is_loading, timeout=60000)
+    assert w.document.project.antagonists == before
+    # back to the rig's own pairs, one undo step
+    dlg = ctl.show_dialog()
+    _click(dlg.reset_button)
+    assert w.document.project.antagonists is None and dlg.pairs() == found
+    _undo(qtbot, dlg)
+    assert w.document.project.antagonists == before
+
+
+# --- personalisation and the heat map ---------------------------------------------------------------
+def _actor_scans(rig, folder, n=3, seed=0):
+    """An actor 6 % larger than the rig, its neutral and n pose scans (OBJ, the rig's topology)."""
+    rng = np.random.default_rng(seed)
+    folder.mkdir()
+    neutral = rig.neutral * 1.06
+    write_obj(folder / "neutral.obj", neutral, rig.face_counts, rig.face_indices)
+    poses = folder / "poses"
+    poses.mkdir()
+    for i in range(n):
+        w = np.zeros(rig.n_shapes)
+        w[rng.choice(rig.n_shapes, 4, replace=False)] = rng.uniform(0.4, 1.0, 4)
+        write_obj(poses / f"pose_{i}.obj", neutral + np.einsum("k,kvc->vc", w, rig.deltas * 1.1),
+                  rig.face_counts, rig.face_indices)
+    return folder / "neutral.obj", poses
+
+
+def test_personalize_in_the_window_writes_and_opens_the_actor_and_shows_the_change(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    template = tmp_path / "face.bsproj"
+    assert w.save_to(template)
+    original = template.read_bytes()
+    rig = w.document.rig.copy()
+    neutral, poses = _actor_scans(rig, tmp_path / "actor")
+    _key(qtbot, w, QtCore.Qt.Key_P, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    dlg = w.actor.dialog
+    assert dlg is not None and dlg.output_edit.text() == str(tmp_path / "face_actor.bsproj")
+    _type(dlg.neutral_edit, str(neutral))
+    dlg.add_scans([str(poses)])          # what Add Folder… adds (a native file dialog cannot be driven)
+    with qtbot.waitSignal(w.actor.personalized, timeout=180000):
+        _click(dlg.ok_button)
+        assert w.actor.busy                    # control came back at once: the work is in the background
+        assert w.jobs_bar.isVisible()
+    out = tmp_path / "face_actor.bsproj"
+    qtbot.waitUntil(lambda: w.document.path == out and not w.is_loading, timeout=60000)
+    qtbot.waitUntil(lambda: w.actor.heat_action.isChecked(), timeout=5000)
+    assert template.read_bytes() == original                      # the template's file is untouched
+    actor = w.document.rig
+    assert actor.shape_names == rig.shape_names and actor.presets == rig.presets
+    assert np.allclose(actor.neutral, rig.neutral * 1.06, atol=1e-4)
+    # the heat map shows the most changed shape, in mm, personalised minus template
+    panel = w.actor.panel
+    top = panel.table.topLevelItem(0).text(0)
+    assert w.actor.heat_shape == top
+    k = rig.shape_index(top)
+    expected = np.linalg.norm(actor.deltas[k] - rig.deltas[k], axis=1) * 10.0     # cm -> mm
+    cmap = w.viewport.colormap
+    assert cmap is not None and "mm" in cmap.title and top in cmap.title
+    assert np.allclose(cmap.scalars, expected, atol=1e-3 * max(expected.max(), 1e-6))
+    assert cmap.clim[1] == pytest.approx(expected.max(), rel=1e-3)
+    # another shape picked in the Actor Change panel
+    other = panel.table.topLevelItem(3)
+    _click_item(panel.table, other)
+    k = rig.shape_index(other.text(0))
+    assert w.actor.heat_shape == other.text(0)
+    assert np.allclose(w.viewport.colormap.scalars, np.linalg.norm(actor.deltas[k] - rig.deltas[k], axis=1) * 10,
+                       atol=1e-3)
+    # it follows the Shapes panel: a click on jawOpen's slider
+    slider = w.shapes_panel.row("jawOpen").slider
+    w.shapes_dock.raise_()
+    w.shapes_panel.scroll.ensureWidgetVisible(slider)
+    QtWidgets.QApplication.processEvents()
+    _click(slider)
+    assert w.actor.heat_shape == "jawOpen" and "jawOpen" in w.viewport.colormap.title
+    # picking a view in the Segmentation panel turns it off
+    w.segmentation_panel.set_view("deformation")
+    assert not w.actor.heat_action.isChecked()
+    # undo has nothing to lose: the template is still there to open
+    assert load_project(template).rig.shape_names == rig.shape_names
+
+
+def test_personalize_refuses_bad_scans_with_one_sentence_and_keeps_the_rig(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    rig = w.document.rig
+    before = rig.neutral.copy()
+    bad = tmp_path / "nan.obj"
+    pts = rig.neutral.copy()
+    pts[5] = np.nan
+    write_obj(bad, pts, rig.face_counts, rig.face_indices)
+    other = tmp_path / "other.obj"
+    write_obj(other, rig.neutral[:100], np.array([3]), np.array([0, 1, 2]))
+    for scan, words in ((bad, ("NaN",)), (other, ("100 vertices", f"{rig.n_vertices}"))):
+        with qtbot.waitSignal(w.actor.failed, timeout=60000) as sig:
+            assert w.actor.personalize({"neutral_scan": str(scan), "scans": [], "output": str(tmp_path / "o.bsproj")})
+        message = sig.args[0]
+        assert str(scan) in message and "\n" not in message and all(x in message for x in words), message
+        assert w.last_error == message
+        _close_error_box(message)
+        assert w.document.rig is rig and np.array_equal(rig.neutral, before)
+        assert not (tmp_path / "o.bsproj").exists()
+    # no measurement at all: refused before any work
+    assert not w.actor.personalize({"neutral_scan": None, "scans": [], "output": str(tmp_path / "o.bsproj")})
+    assert "neutral scan, pose scans or a marker take" in w.last_error
