@@ -260,7 +260,7 @@ class PersonalizeController(QtCore.QObject):
             rows = change_rows(section, change)
             summary = section.get("summary") or {}
             self.panel.set_rows(rows, f"Personalised from {Path(str(section.get('template', '?'))).name}: "
-                                      f"{len(rows)} shapes, neutral {summary.get('neutral', '?')}. Change of each "
+                                      f"{len(rows)} shapes (neutral: {summary.get('neutral', '?')}). Change of each "
                                       "shape, personalised minus template:")
             opened, self._open_when_loaded = self._open_when_loaded, None
             if opened is not None and self.document.path is not None and \
@@ -318,7 +318,7 @@ class PersonalizeController(QtCore.QObject):
             return None
         values = change[names.index(self.heat_shape)] * unit_scale(section.get("units", "cm"), "mm")
         hi = float(values.max(initial=0.0))
-        return ColorMap(values, title=f"{self.heat_shape}\nchange (mm)", cmap="inferno",
+        return ColorMap(values, title=f"{self.heat_shape}\nchange (mm)", cmap="YlOrRd",
                         clim=(0.0, max(hi, 1e-3)))
 
     def _on_pose_edit(self, edit) -> None:

@@ -209,3 +209,53 @@ def test_personalize_refuses_bad_scans_with_one_sentence_and_keeps_the_rig(qtbot
     # no measurement at all: refused before any work
     assert not w.actor.personalize({"neutral_scan": None, "scans": [], "output": str(tmp_path / "o.bsproj")})
     assert "neutral scan, pose scans or a marker take" in w.last_error
+
+
+# --- the heat map's picture ---------------------------------------------------------------------------
+# the nearest wrong pictures: another shape's change, a shape that did not change (a pale face), no heat map
+HEAT_UNLIKE = {"window_heat_map_smile": ["window_heat_map_jaw", "window_heat_map_unchanged", "window_viewport_neutral"],
+               "window_heat_map_jaw": ["window_heat_map_smile", "window_heat_map_unchanged", "window_viewport_neutral"],
+               "window_heat_map_unchanged": ["window_heat_map_smile", "window_viewport_neutral"]}
+
+
+def _heat_map_shot(qtbot, tmp_path, shape):
+    """The sample face personalised to a made-up actor whose mouthSmile_L is 40 % stronger and whose jawOpen is
+    30 % weaker (a known change, independent of the solver), the heat map of ``shape`` (None: off) in the window."""
+    from app.personalize_controller import record_change
+    w = make_window(qtbot, tmp_path, size=(1000, 700))
+    template = w.document.rig.copy()
+    actor = template.copy()
+    actor.deltas = actor.deltas.copy()
+    actor.deltas[actor.shape_index("mouthSmile_L")] *= 1.4
+    actor.deltas[actor.shape_index("jawOpen")] *= 0.7
+    sections, arrays = {}, {}
+    record_change(sections, arrays, template, actor, {"neutral": "scan"}, "sample")
+    path = tmp_path / "actor.bsproj"
+    save_project(Project(rig=actor, sections=sections, arrays=arrays), path)
+    open_and_wait(qtbot, w, path)
+    if shape is not None:
+        w.actor.show_shape(shape)
+    else:
+        w.actor.heat_action.setChecked(False)
+    w.redraw_now()
+    img = w.viewport.grab_image(size=(640, 480))
+    return w, img
+
+
+@pytest.mark.parametrize("shape, name", [("mouthSmile_L", "window_heat_map_smile"), ("jawOpen", "window_heat_map_jaw"),
+                                         ("mouthSmile_R", "window_heat_map_unchanged")])
+def test_heat_map_matches_its_reference(qtbot, tmp_path, shape, name):
+    from tests.image_compare import assert_matches_reference
+    w, img = _heat_map_shot(qtbot, tmp_path, shape)
+    bar = w.viewport.plotter.scalar_bars
+    assert any("change (mm)" in title and shape in title for title in bar.keys()), list(bar.keys())
+    assert_matches_reference(img, name, tolerance=0.03, unlike=HEAT_UNLIKE[name])
+
+
+@pytest.mark.parametrize("shape, name", [("jawOpen", "window_heat_map_smile"), (None, "window_heat_map_smile"),
+                                         ("mouthSmile_L", "window_heat_map_jaw"), ("mouthSmile_R", "window_heat_map_smile")])
+def test_a_wrong_heat_map_fails_the_comparison(qtbot, tmp_path, shape, name):
+    """Another shape's change, a shape that did not change, or no heat map at all is not the smile's heat map."""
+    from tests.image_compare import assert_wrong_picture_fails
+    _, img = _heat_map_shot(qtbot, tmp_path, shape)
+    assert_wrong_picture_fails(img, name, tolerance=0.03, unlike=HEAT_UNLIKE[name])
