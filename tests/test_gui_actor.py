@@ -259,3 +259,100 @@ def test_a_wrong_heat_map_fails_the_comparison(qtbot, tmp_path, shape, name):
     from tests.image_compare import assert_wrong_picture_fails
     _, img = _heat_map_shot(qtbot, tmp_path, shape)
     assert_wrong_picture_fails(img, name, tolerance=0.03, unlike=HEAT_UNLIKE[name])
+
+
+# --- the take: its neutral frame and its marker map on the rig ------------------------------------------
+def _context_menu(widget):
+    """A right-click's context menu event on ``widget`` (what the platform sends on a right-button press; QTest's
+    synthetic presses do not produce one under Xvfb)."""
+    from PySide6 import QtGui
+    pos = widget.rect().center()
+    ev = QtGui.QContextMenuEvent(QtGui.QContextMenuEvent.Mouse, pos, widget.mapToGlobal(pos))
+    QtWidgets.QApplication.sendEvent(widget, ev)
+    QtWidgets.QApplication.processEvents()
+
+
+def _menu_click(menu: QtWidgets.QMenu, text_start: str):
+    act = next(a for a in menu.actions() if a.text().startswith(text_start))
+    QTest.mouseClick(menu, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier, menu.actionGeometry(act).center())
+    QtWidgets.QApplication.processEvents()
+
+
+def test_use_this_frame_as_neutral_and_drag_a_map_point(qtbot, tmp_path, ict_dir, take_dir):
+    import json
+    w = make_window(qtbot, tmp_path, size=(1400, 1000))
+    open_and_wait(qtbot, w, ict_dir)
+    mc, rig = w.mocap, w.document.rig
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    with qtbot.waitSignal(mc.solved, timeout=180000):
+        _click(mc.panel.solve_button)
+    assert mc.workspace.report()["neutral_frames"] == [0, 29]
+    # right-click the take's slider at frame 120: Use This Frame as Neutral
+    mc.dock.raise_()
+    mc.panel.slider.setValue(120)
+    QtWidgets.QApplication.processEvents()
+    _context_menu(mc.panel.slider)
+    qtbot.waitUntil(lambda: getattr(mc.panel, "last_menu", None) is not None and mc.panel.last_menu.isVisible())
+    _menu_click(mc.panel.last_menu, "Use This Frame as Neutral")
+    assert mc.panel.settings()["neutral_frames"] == "120:120"
+    assert w.document.undo_stack.undoText() == "Use frame 120 as neutral"
+    _undo(qtbot, w)
+    assert mc.panel.settings()["neutral_frames"] is None
+    _redo(qtbot, w)
+    assert mc.panel.settings()["neutral_frames"] == "120:120"
+    # the solve uses it, and its report and the panel say so
+    with qtbot.waitSignal(mc.solved, timeout=180000):
+        _click(mc.panel.solve_button)
+    report = mc.workspace.report()
+    assert report["neutral_frames"] == [120, 120] and report["neutral_frames_how"] == "as chosen"
+    assert "neutral frames 120–120" in mc.panel.status_label.text()
+    # Alt+N on the frame shown
+    mc.set_frame(200)
+    _key(qtbot, w, QtCore.Qt.Key_N, QtCore.Qt.AltModifier)
+    assert mc.panel.settings()["neutral_frames"] == "200:200"
+    # a frame outside the take: one sentence, nothing changes
+    assert not mc.use_neutral_frames(400)
+    assert "outside the take" in w.last_error and "0 to 357" in w.last_error
+    assert mc.panel.settings()["neutral_frames"] == "200:200"
+    _close_error_box(w.last_error)
+
+    # the map on the rig: a point per mapped marker, the actor's neutral markers beside them
+    _click(mc.panel.show_map_button)
+    ed = mc.map_editor
+    assert ed.shown and len(ed.point_positions()) == 60 and not w.markers.mode_action.isChecked()
+    B = mc.marker_map.binding(rig, ed.labels)
+    assert np.allclose(ed.point_positions(), B @ w.document.surface().astype(np.float64), atol=1e-4)
+    # drag the first marker's point 8 mm to the character's left along the face
+    i, label = 0, ed.labels[0]
+    old_entry = mc.marker_map.markers[label]
+    P = ed.point_positions()[i]
+    d = w.viewport.world_to_display(np.vstack([P, P + [0.8, 0.0, 0.0]]))
+    a, b = (w.viewport.display_to_qt(x, y) for x, y, _ in d)
+    start, end = QtCore.QPoint(round(a.x()), round(a.y())), QtCore.QPoint(round(b.x()), round(b.y()))
+    canvas = w.viewport.canvas
+    mouse(canvas, "press", start)
+    assert ed.drag is not None and ed.drag["label"] == label
+    for k in range(1, 5):
+        mouse(canvas, "move", start + (end - start) * k / 4)
+    mouse(canvas, "release", end)
+    new_entry = mc.marker_map.markers[label]
+    assert new_entry != old_entry
+    moved = mc.marker_map.binding(rig, [label]) @ rig.neutral
+    was = B[i] @ rig.neutral
+    assert 0.5 < np.linalg.norm(moved - was) < 1.2 and (moved - was)[0, 0] > 0.4   # ~8 mm along +x (cm)
+    assert w.document.undo_stack.undoText() == f"Move marker {label} on the rig"
+    assert mc.solution is None                          # the solve was of the old map
+    _undo(qtbot, w)
+    assert mc.marker_map.markers[label] == old_entry
+    _redo(qtbot, w)
+    assert mc.marker_map.markers[label] == new_entry
+    # saved as a marker map (Save Map…) and with the project
+    out = tmp_path / "corrected_map.json"
+    assert mc.save_map(out)
+    assert json.loads(out.read_text())["markers"][label] == new_entry
+    project = tmp_path / "actor.bsproj"
+    assert w.save_to(project)
+    open_and_wait(qtbot, w, project)
+    qtbot.waitUntil(lambda: w.mocap.marker_map is not None, timeout=30000)
+    assert w.mocap.marker_map.markers[label] == new_entry
+    assert w.mocap.panel.settings()["neutral_frames"] == "200:200"
