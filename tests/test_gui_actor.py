@@ -315,6 +315,23 @@ def test_use_this_frame_as_neutral_and_drag_a_map_point(qtbot, tmp_path, ict_dir
     assert "outside the take" in w.last_error and "0 to 357" in w.last_error
     assert mc.panel.settings()["neutral_frames"] == "200:200"
     _close_error_box(w.last_error)
+    # typed neutral frames outside the take, stable markers the take does not have or fewer than 3: Solve says
+    # why in one sentence and a box, the solve shown stays
+    solution = mc.solution
+    for edit, text, words in ((mc.panel.neutral_edit, "400:420", "outside the take"),
+                              (mc.panel.stable_edit, "root-*", "not in the take"),
+                              (mc.panel.stable_edit, "M00,M01", "at least 3 stable markers")):
+        mc.panel.neutral_edit.clear()
+        mc.panel.stable_edit.clear()
+        _type(edit, text)
+        with qtbot.waitSignal(mc.solve_failed, timeout=60000) as sig:
+            _click(mc.panel.solve_button)
+        assert words in sig.args[0] and "\n" not in sig.args[0] and w.last_error == sig.args[0]
+        _close_error_box(sig.args[0])
+        assert mc.solution is solution and mc.take is not None and mc.marker_map is not None
+        assert w.document.rig is rig
+    mc.panel.stable_edit.clear()
+    _type(mc.panel.neutral_edit, "200:200")
 
     # the map on the rig: a point per mapped marker, the actor's neutral markers beside them
     _click(mc.panel.show_map_button)
