@@ -249,6 +249,9 @@ def solve_report(rig: Rig, take: MarkerTake, solution: TakeSolution, settings: d
         "options": {k: options[k] for k in SOLVER_OPTIONS},
         "residual": options["residual"],
         "correctives": [c.name for c in rig.correctives if not c.muted],   # solved with the shapes
+        # the project's edited antagonist pairs ("A+B"), or None: the pairs found from the rig
+        "antagonists": None if settings.get("antagonists") is None else
+        [p if isinstance(p, str) else "+".join(p) for p in settings["antagonists"]],
     }
 
 

@@ -1,5 +1,6 @@
-"""Bad input around actors (issue 15): a scan with NaN on the command line, and a project's antagonist pairs
-hardened like its other members (one sentence naming the file; projects without them open as before)."""
+"""A project's antagonist pairs (issue 15): saved, hardened like the project's other members (one sentence naming
+the file; projects without them open as before) and used by `solve` on the project; and a scan with NaN refused by
+`personalize` on the command line."""
 from __future__ import annotations
 
 import json
@@ -103,3 +104,38 @@ def test_duplicated_pairs_are_kept_once(pairs_project, tmp_path):
         return m
     assert load_project(_with_manifest(pairs_project, tmp_path / "dup.bsproj", edit)).antagonists == \
         [("jawOpen", "mouthClose")]
+
+
+def test_cli_solve_on_a_project_keeps_its_own_pairs_apart(sample_rig, tmp_path):
+    """jawOpen and mouthSmile_L both at 0.6 in a take: the rig's pairs let the solve find both, a project that added
+    the pair holds them apart; the report says which list was used."""
+    import csv
+    from model.take_csv import write_marker_csv
+    from model.take_data import MarkerTake
+    rig = sample_rig
+    k1, k2 = rig.shape_index("jawOpen"), rig.shape_index("mouthSmile_L")
+    moving = np.flatnonzero(np.linalg.norm(rig.deltas[k1], axis=1) + np.linalg.norm(rig.deltas[k2], axis=1) > 0.05)
+    verts = moving[np.linspace(0, len(moving) - 1, 24).astype(int)]
+    w = np.zeros((60, rig.n_shapes))
+    w[30:, [k1, k2]] = 0.6
+    X = rig.neutral[None] + np.einsum("fk,kvc->fvc", w, rig.deltas)
+    labels = [f"M{i:02d}" for i in range(len(verts))]
+    take = tmp_path / "both.csv"
+    write_marker_csv(take, MarkerTake(X[:, verts] * 10.0, labels, 30.0, units="mm"))
+    (tmp_path / "map.json").write_text(json.dumps({"rig_units": "cm", "markers": dict(zip(labels, map(int, verts)))}))
+    from model.antagonists import rig_antagonists
+    pairs = rig_antagonists(rig) + [("jawOpen", "mouthSmile_L")]
+    edited, plain = tmp_path / "edited.bsproj", tmp_path / "plain.bsproj"
+    save_project(Project(rig=rig.copy(), antagonists=pairs), edited)
+    save_project(Project(rig=rig.copy()), plain)
+    weights = {}
+    for path in (edited, plain):
+        run_cli("solve", path, take, "--map", tmp_path / "map.json", "--global", "--residual", "none",
+                "-o", tmp_path / f"{path.stem}.csv", "--report", tmp_path / f"{path.stem}.json")
+        with open(tmp_path / f"{path.stem}.csv") as f:
+            rows = list(csv.DictReader(f))
+        weights[path.stem] = np.array([[float(r["jawOpen"]), float(r["mouthSmile_L"])] for r in rows[40:]])
+    assert json.loads((tmp_path / "edited.json").read_text())["antagonists"] == ["+".join(p) for p in pairs]
+    assert json.loads((tmp_path / "plain.json").read_text())["antagonists"] is None
+    both_edited, both_plain = weights["edited"].min(axis=1).mean(), weights["plain"].min(axis=1).mean()
+    assert both_plain > 0.5 and both_edited < both_plain - 0.05, (both_edited, both_plain)
