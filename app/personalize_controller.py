@@ -156,7 +156,10 @@ class PersonalizeController(QtCore.QObject):
             self.window.show_status("A personalisation is already running; it finishes in the background.")
             return None
         ws = self.window.mocap.workspace
-        folder = doc.path.parent if doc.path else Path.cwd()
+        from app import settings as app_settings
+        s = app_settings.settings()
+        folder = doc.path.parent if doc.path else Path(s.value("lastProjectFolder", "") or s.value("lastFolder", "")
+                                                       or Path.home())
         base = doc.path.stem if doc.path else doc.rig.name
         take = str(ws.take_path) if ws.marker_take is not None and ws.take_path else ""
         mm = ws.marker_map.source if ws.marker_map is not None and Path(ws.marker_map.source or "").is_file() else ""

@@ -85,9 +85,9 @@ class AntagonistsDialog(QtWidgets.QDialog):
             combo.addItems(shape_names)
             combo.setCurrentText(text if text in shape_names else "")
             combo.blockSignals(False)
-        self.info.setText(f"{len(pairs)} pairs are never both above 0.2 in a drag or a take solve: "
-                          + ("edited for this project." if edited else "those found from the rig's shapes "
-                             "(their displacements cancel where both act)."))
+        self.info.setText(f"{len(pairs)} pairs are kept from being both on (held apart in marker drags, penalised "
+                          "in take solves): " + ("edited for this project." if edited else "those found from the "
+                                                 "rig's shapes (their displacements cancel where both act)."))
         self.reset_button.setEnabled(edited)
 
     def selected_pairs(self) -> list[tuple[str, str]]:

@@ -50,7 +50,8 @@ class PersonalizeDialog(QtWidgets.QDialog):
         self.scan_list = QtWidgets.QListWidget()
         self.scan_list.setSelectionMode(QtWidgets.QAbstractItemView.ExtendedSelection)
         self.scan_list.setToolTip("OBJ files or folders of them: the actor's poses (weights unknown)")
-        self.scan_list.setMaximumHeight(120)
+        self.scan_list.setMinimumHeight(90)
+        self.scan_list.setMaximumHeight(140)
         sl.addWidget(self.scan_list)
         buttons = QtWidgets.QHBoxLayout()
         for text, slot in (("Add Files…", self._add_files), ("Add Folder…", self._add_folder),
@@ -74,7 +75,7 @@ class PersonalizeDialog(QtWidgets.QDialog):
         self.calibration_spin.setToolTip("The take's neutral frames at its start")
         form.addRow("Take", _file_row(self.take_edit, "Browse…", self._pick_take))
         form.addRow("Marker map", _file_row(self.map_edit, "Browse…", self._pick_map))
-        form.addRow("Neutral frames", self.calibration_spin)
+        form.addRow("Neutral frames at its start", self.calibration_spin)
         lay.addWidget(mocap)
 
         out = QtWidgets.QFormLayout()
