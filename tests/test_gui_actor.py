@@ -4,6 +4,8 @@ pairs the solves keep apart (undoable, saved); "Use This Frame as Neutral" on th
 rig, a map point dragged to correct it."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from PySide6 import QtCore, QtWidgets
@@ -373,3 +375,33 @@ def test_use_this_frame_as_neutral_and_drag_a_map_point(qtbot, tmp_path, ict_dir
     qtbot.waitUntil(lambda: w.mocap.marker_map is not None, timeout=30000)
     assert w.mocap.marker_map.markers[label] == new_entry
     assert w.mocap.panel.settings()["neutral_frames"] == "200:200"
+
+
+def test_personalize_from_the_mocap_panels_marker_take(qtbot, tmp_path):
+    """An actor without scans: the Mocap panel's take and map fill the dialog; the template is warped to the
+    actor's neutral markers (here the rig 8 % larger) and its shapes carried onto it."""
+    from model.take_csv import write_marker_csv
+    from model.take_data import MarkerTake
+    w = make_window(qtbot, tmp_path)
+    rig = w.document.rig.copy()
+    moving = np.flatnonzero(np.abs(rig.deltas).max(axis=(0, 2)) > 0.05)
+    verts = moving[np.linspace(0, len(moving) - 1, 40).astype(int)]
+    labels = [f"M{i:02d}" for i in range(len(verts))]
+    X = np.repeat((rig.neutral[verts] * 1.08)[None], 40, axis=0)
+    take, mapping = tmp_path / "actor.csv", tmp_path / "map.json"
+    write_marker_csv(take, MarkerTake(X * 10.0, labels, 30.0, units="mm"))
+    mapping.write_text(json.dumps({"rig_units": "cm", "markers": dict(zip(labels, map(int, verts)))}))
+    assert w.mocap.load_take(take) and w.mocap.load_map(mapping)
+    _key(qtbot, w, QtCore.Qt.Key_P, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    dlg = w.actor.dialog
+    assert dlg.take_edit.text() == str(take) and dlg.map_edit.text() == str(mapping)
+    _type(dlg.output_edit, str(tmp_path / "from_take.bsproj"))
+    with qtbot.waitSignal(w.actor.personalized, timeout=180000):
+        _click(dlg.ok_button)
+    qtbot.waitUntil(lambda: w.document.path == tmp_path / "from_take.bsproj" and not w.is_loading, timeout=60000)
+    actor = w.document.rig
+    assert w.actor.last_summary["neutral"] == "warped to the take's neutral markers"
+    assert np.abs(actor.neutral[verts] - rig.neutral[verts] * 1.08).max() < 0.02        # cm, at the markers
+    assert actor.shape_names == rig.shape_names
+    # the take and its map came along with the project
+    assert w.mocap.take is not None and w.mocap.marker_map is not None
