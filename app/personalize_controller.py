@@ -229,8 +229,10 @@ class PersonalizeController(QtCore.QObject):
         out, summary, rows = result
         self.last_summary = summary
         top = ", ".join(f"{r['shape']} {r['rms']:.2f} mm" for r in rows[:3])
+        template = self.document.path or self.document.rig.name
         self.window.show_status(f"Wrote {out}: {len(rows)} shapes personalised ({summary['unknowns']:,} unknowns, "
-                                f"{summary['seconds']:.1f} s); most changed: {top}.", 15000)
+                                f"{summary['seconds']:.1f} s); most changed: {top}. The template ({template}) is "
+                                "unchanged.", 15000)
         self.personalized.emit(str(out))
         self._open_when_loaded = Path(out)
         self.window.open_path(out)    # asks first when the current project has unsaved changes
