@@ -662,6 +662,7 @@ class MainWindow(QtWidgets.QMainWindow):
         if self._worker is not None:
             self._worker.wait()
         self.segmentation.runner.shutdown()
+        self.actor.shutdown()
         self.jobs.shutdown()
         self.mocap.shutdown()
         self.exports.shutdown()

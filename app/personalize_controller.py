@@ -2,11 +2,11 @@
 (View ▸ Personalisation Change), and Edit ▸ Antagonist Pairs….
 
 * Personalise: the dialog (``widgets.personalize_dialog``) gathers the actor's scans or marker take; the work is
-  ``model.personalize.personalize_rig_detailed`` and ``shape_change_report`` on a copy of the rig, off the GUI
-  thread (``MainWindow.run_in_background``; the solver takes no cancel, so it runs to its end while the window
-  stays usable). The result is written as a new project -- the rig's presets, correctives, antagonist pairs and
-  project sections come along, with each shape's change per vertex -- and opened (the window asks first if the
-  current project has unsaved changes); the current rig's file is never touched.
+  ``model.actor_project.personalize_project`` on a copy of the rig, in a child process (``app.personalize_job``:
+  the solver has no cancel of its own, a process can be stopped), with a progress dialog whose Cancel stops it and
+  writes nothing; the window stays usable. The result is written as a new project -- the rig's presets,
+  correctives, antagonist pairs and project sections come along, with each shape's change per vertex -- and opened
+  (the window asks first if the current project has unsaved changes); the current rig's file is never touched.
 * The heat map colours the surface by ``‖d_k − d*_k‖`` in mm of one shape, the one picked in the Actor Change panel
   or last touched in the Shapes panel, with a colour bar in mm. It is the Segmentation controller's colour map
   while shown (``view_override``); choosing a view there turns it off.
@@ -23,106 +23,28 @@ import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from app.actor_commands import ANTAGONISTS, SetAntagonistsCommand
+from model.actor_project import CHANGE, SECTION, change_rows
 from model.errors import RigInputError
 from model.rig import unit_scale
 from widgets.antagonists_dialog import AntagonistsDialog
 from widgets.personalize_dialog import PersonalizeDialog, ShapeChangePanel
 from widgets.scene import ColorMap
 
-SECTION = "personalize"          # project section: {"template", "shapes", "units", "summary"}
-CHANGE = "personalize/change"    # project array: (K, V) float32 change per vertex, rig units
-
-
-def personalize_project(template, project_state: dict, request: dict):
-    """The actor's project from ``template`` (a Rig, not the live one) and the dialog's ``request`` (Qt-free: runs on
-    a worker thread). ``project_state``: {weights, sections, arrays, antagonists, template} carried into the new
-    project. Writes ``request['output']`` and returns (path, summary, rows of ``shape_change_report`` in mm)."""
-    from model.personalize import personalize_rig_detailed, scan_paths
-    from model.project import Project, save_project
-
-    out = Path(request["output"])
-    scans = scan_paths(request.get("scans") or [])
-    take = marker_map = None
-    if request.get("take"):
-        from model.take_workspace import read_take
-        from model.takes import MarkerTake
-        take = read_take(request["take"])
-        if not isinstance(take, MarkerTake):
-            raise RigInputError(f"{request['take']}: is a weight take (Live Link Face), not marker trajectories.")
-        if request.get("marker_map"):
-            from model.marker_map import load_marker_map
-            marker_map = load_marker_map(request["marker_map"])
-    elif request.get("marker_map"):
-        raise RigInputError("A marker map needs a marker take to go with it.")
-    actor, _, summary = personalize_rig_detailed(template, request.get("neutral_scan"), scans, take, marker_map,
-                                                 calibration_frames=int(request.get("calibration_frames") or 30),
-                                                 name=out.stem)
-    sections = copy.deepcopy(project_state.get("sections") or {})
-    arrays = dict(project_state.get("arrays") or {})
-    rows = record_change(sections, arrays, template, actor, summary, project_state.get("template") or template.name)
-    weights = project_state.get("weights")
-    project = Project(rig=actor, weights=None if weights is None or len(weights) != actor.n_shapes else weights,
-                      sections=sections, arrays=arrays, antagonists=project_state.get("antagonists"))
-    try:
-        save_project(project, out)
-    except OSError as exc:
-        raise RigInputError(f"{out}: could not be written ({exc.strerror or exc}).") from None
-    return out, summary, rows
-
-
-def record_change(sections: dict, arrays: dict, template, actor, summary: dict, template_label: str) -> list[dict]:
-    """Put how far ``actor``'s shapes moved from ``template``'s into a project's ``sections`` and ``arrays`` (what the
-    heat map shows); returns the rows of ``shape_change_report`` with lengths in mm."""
-    from model.personalize import shape_change_report
-    change, rows = shape_change_report(template, actor)
-    mm = unit_scale(template.units, "mm")
-    rows = [dict(r, rms=r["rms"] * mm, max=r["max"] * mm) for r in rows]
-    sections[SECTION] = {"template": template_label, "shapes": list(actor.shape_names), "units": actor.units,
-                         "summary": _jsonable(summary), "rows": rows}
-    arrays[CHANGE] = change.per_vertex.astype(np.float32)
-    return rows
-
-
-def _jsonable(summary: dict) -> dict:
-    out = {}
-    for k, v in summary.items():
-        if isinstance(v, (str, int, float, bool)) or v is None:
-            out[k] = v
-        elif isinstance(v, (list, tuple)) and all(isinstance(x, (int, float)) for x in v):
-            out[k] = [float(x) for x in v]
-    return out
-
-
-def change_rows(section: dict, change: np.ndarray) -> list[dict]:
-    """{shape, rms, max, relative} (mm) per shape of a saved change, largest RMS first: the rows saved with it, or
-    measured again from the (K, V) change when they are missing or damaged."""
-    names = section["shapes"]
-    saved = section.get("rows")
-    if isinstance(saved, list) and len(saved) == len(names) and all(
-            isinstance(r, dict) and r.get("shape") in names and all(
-                isinstance(r.get(k), (int, float)) and not isinstance(r.get(k), bool) for k in ("rms", "max", "relative"))
-            for r in saved):
-        return sorted(saved, key=lambda r: -r["rms"])
-    mm = unit_scale(section.get("units", "cm"), "mm")
-    rows = []
-    for k, name in enumerate(names):
-        c = change[k].astype(np.float64)
-        moved = c[c > 0]
-        rms = float(np.sqrt((moved ** 2).mean())) if moved.size else 0.0
-        rows.append({"shape": name, "rms": rms * mm, "max": float(c.max(initial=0.0)) * mm, "relative": 0.0})
-    rows.sort(key=lambda r: -r["rms"])
-    return rows
-
-
 class PersonalizeController(QtCore.QObject):
     personalized = QtCore.Signal(str)      # the actor's project was written (its path)
     failed = QtCore.Signal(str)
+    cancelled = QtCore.Signal()
     heat_map_changed = QtCore.Signal(str)  # the shape the heat map shows ("" when off)
 
     def __init__(self, window) -> None:
         super().__init__(window)
         self.window, self.document = window, window.document
         self.busy = False
+        self.job = None                      # the running app.personalize_job.PersonalizeJob
+        self.progress: QtWidgets.QProgressDialog | None = None
+        self._timer = QtCore.QTimer(self)    # polls the job's child process
+        self._timer.setInterval(200)
+        self._timer.timeout.connect(self._poll)
         self.last_summary: dict | None = None
         self.dialog: PersonalizeDialog | None = None
         self._open_when_loaded: Path | None = None
@@ -206,26 +128,73 @@ class PersonalizeController(QtCore.QObject):
                  "template": str(doc.path) if doc.path else doc.rig.name}
         state["sections"].pop(SECTION, None)
         template = doc.rig.copy()   # the job never sees the live rig (edits go on meanwhile)
+        from app.personalize_job import PersonalizeJob
+        try:
+            self.job = PersonalizeJob(template, state, request)
+        except OSError as exc:
+            self._fail(f"The personalisation could not start ({exc.strerror or exc}).")
+            return False
         self.busy = True
         self.action.setEnabled(False)
         self.window.show_status(f"Personalising {template.name} to the actor in the background…", 0)
-        self.window.run_in_background(f"Personalising {template.name}…",
-                                      lambda: personalize_project(template, state, request),
-                                      self._on_done, self._on_failed)
+        dlg = QtWidgets.QProgressDialog(f"Personalising {template.name} to the actor…\nIt runs on its own: the window "
+                                        "stays usable. Cancel stops it and writes nothing.", "Cancel", 0, 0, self.window)
+        dlg.setWindowTitle("Personalize to Actor")
+        dlg.setWindowModality(QtCore.Qt.NonModal)
+        dlg.setMinimumDuration(0)
+        dlg.canceled.connect(self.cancel)
+        self.progress = dlg
+        dlg.show()
+        self._timer.start()
         return True
+
+    def cancel(self) -> None:
+        """Stop the running personalisation (Cancel in its progress dialog): nothing is written."""
+        job = self.job
+        if job is None:
+            return
+        job.cancel()
+        self._finish()
+        self.window.show_status("Personalisation cancelled; nothing was written.")
+        self.cancelled.emit()
+
+    def shutdown(self) -> None:
+        """The window is closing: stop a running personalisation at once."""
+        if self.job is not None:
+            self.job.cancel()
+            self._finish()
+
+    def _poll(self) -> None:
+        job = self.job
+        if job is None:
+            return
+        result = job.poll()
+        if result is None:
+            return
+        self._finish()
+        kind, value = result
+        if kind == "done":
+            self._on_done(value)
+        elif kind == "failed":
+            self._fail(value)
+
+    def _finish(self) -> None:
+        self._timer.stop()
+        self.job = None
+        self.busy = False
+        self.action.setEnabled(True)
+        dlg, self.progress = self.progress, None
+        if dlg is not None:
+            dlg.canceled.disconnect()
+            dlg.reset()
+            dlg.close()
+            dlg.deleteLater()
 
     def _fail(self, message: str) -> None:
         self.window.show_error("Could not personalise", message)
         self.failed.emit(message)
 
-    def _on_failed(self, message: str) -> None:
-        self.busy = False
-        self.action.setEnabled(True)
-        self._fail(message)
-
     def _on_done(self, result) -> None:
-        self.busy = False
-        self.action.setEnabled(True)
         out, summary, rows = result
         self.last_summary = summary
         top = ", ".join(f"{r['shape']} {r['rms']:.2f} mm" for r in rows[:3])

@@ -150,7 +150,8 @@ def test_personalize_in_the_window_writes_and_opens_the_actor_and_shows_the_chan
     with qtbot.waitSignal(w.actor.personalized, timeout=180000):
         _click(dlg.ok_button)
         assert w.actor.busy                    # control came back at once: the work is in the background
-        assert w.jobs_bar.isVisible()
+        assert w.actor.progress is not None and w.actor.progress.isVisible()
+        assert w.actor.job.process.is_alive()  # in its own process, which Cancel can stop
     out = tmp_path / "face_actor.bsproj"
     qtbot.waitUntil(lambda: w.document.path == out and not w.is_loading, timeout=60000)
     qtbot.waitUntil(lambda: w.actor.heat_action.isChecked(), timeout=5000)
@@ -189,6 +190,27 @@ def test_personalize_in_the_window_writes_and_opens_the_actor_and_shows_the_chan
     assert load_project(template).rig.shape_names == rig.shape_names
 
 
+def test_cancel_stops_the_personalisation_and_writes_nothing(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    rig = w.document.rig
+    neutral, poses = _actor_scans(rig, tmp_path / "actor", n=6)
+    out = tmp_path / "never.bsproj"
+    assert w.actor.personalize({"neutral_scan": str(neutral), "scans": [str(poses)], "output": str(out)})
+    dlg, job = w.actor.progress, w.actor.job
+    qtbot.waitExposed(dlg)
+    cancel = next(b for b in dlg.findChildren(QtWidgets.QPushButton) if b.text() == "Cancel")
+    with qtbot.waitSignal(w.actor.cancelled, timeout=30000):
+        _click(cancel)
+    assert not job.process.is_alive() and not w.actor.busy and w.actor.action.isEnabled()
+    assert not out.exists() and not list(tmp_path.glob("never*"))
+    assert w.document.rig is rig
+    # and it can start again
+    assert w.actor.personalize({"neutral_scan": str(neutral), "scans": [], "output": str(out)})
+    with qtbot.waitSignal(w.actor.personalized, timeout=180000):
+        pass
+    assert out.exists()
+
+
 def test_personalize_refuses_bad_scans_with_one_sentence_and_keeps_the_rig(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path)
     rig = w.document.rig
@@ -223,7 +245,7 @@ HEAT_UNLIKE = {"window_heat_map_smile": ["window_heat_map_jaw", "window_heat_map
 def _heat_map_shot(qtbot, tmp_path, shape):
     """The sample face personalised to a made-up actor whose mouthSmile_L is 40 % stronger and whose jawOpen is
     30 % weaker (a known change, independent of the solver), the heat map of ``shape`` (None: off) in the window."""
-    from app.personalize_controller import record_change
+    from model.actor_project import record_change
     w = make_window(qtbot, tmp_path, size=(1000, 700))
     template = w.document.rig.copy()
     actor = template.copy()
