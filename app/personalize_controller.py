@@ -30,6 +30,7 @@ from widgets.antagonists_dialog import AntagonistsDialog
 from widgets.personalize_dialog import PersonalizeDialog, ShapeChangePanel
 from widgets.scene import ColorMap
 
+
 class PersonalizeController(QtCore.QObject):
     personalized = QtCore.Signal(str)      # the actor's project was written (its path)
     failed = QtCore.Signal(str)
