@@ -53,8 +53,16 @@ def add_solve_options(sp) -> None:
 
 
 def load_solve_rig(args):
-    """The RIG argument's rig, in --rig-units when given."""
-    rig = load_rig_arg(args)
+    """The RIG argument's rig, in --rig-units when given. A project's edited antagonist pairs (Edit ▸ Antagonist
+    Pairs…) are kept as ``args.antagonists`` for the solve (None: the rig's)."""
+    from pathlib import Path
+    args.antagonists = None
+    if str(args.rig).lower().endswith(".bsproj") and Path(args.rig).is_file():
+        from model.project import load_project
+        project = load_project(args.rig)
+        rig, args.antagonists = project.rig, project.antagonists
+    else:
+        rig = load_rig_arg(args)
     if args.rig_units:
         rig.units = args.rig_units
     return rig
@@ -101,6 +109,8 @@ def cmd_solve(args) -> int:
     if not ws.prepare_solve(args.take, load_marker_map(args.map) if args.map else None, solve_options(args)):
         return write_weight_take(ws, args)
     settings, segmentation = solve_settings(args, rig)
+    if args.antagonists is not None:
+        settings["antagonists"] = args.antagonists
     sol = ws.solve(settings, segmentation=segmentation)
     report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
     for lab in report["markers_left_out"]:

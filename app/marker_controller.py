@@ -129,7 +129,7 @@ class MarkerController(QtCore.QObject):
         super().__init__(window)
         self.window = window
         self.document, self.viewport = window.document, window.viewport
-        self._antagonist_cache: tuple[int, list] | None = None   # (rig version, the rig's antagonist pairs)
+        self._antagonist_cache: tuple | None = None   # (rig version, the project's pairs, their shape indices)
         self.panel = panel = MarkersPanel(window)
         self.dock = window.add_dock("Markers", panel, QtCore.Qt.LeftDockWidgetArea, scroll=True)
         self.mode_action = window.add_action(
@@ -381,12 +381,16 @@ class MarkerController(QtCore.QObject):
         return hit[1]
 
     def _antagonists(self, rig) -> list[tuple[int, int]]:
-        """The rig's antagonist pairs (``model.antagonists``), found once per rig: a drag never leaves both on."""
-        from model.antagonists import pair_indices, rig_antagonists
+        """The project's antagonist pairs (``Project.antagonist_pairs``: the user's, else those found from the rig,
+        found once per rig): a drag never leaves both on."""
+        from model.antagonists import pair_indices
+        project = self.document.project
         hit = self._antagonist_cache
-        if hit is None or hit[0] != self.document.rig_version:
-            hit = self._antagonist_cache = (self.document.rig_version, pair_indices(rig, rig_antagonists(rig)))
-        return hit[1]
+        if hit is None or hit[0] != self.document.rig_version or hit[1] != project.antagonists:
+            edited = None if project.antagonists is None else list(project.antagonists)
+            hit = self._antagonist_cache = (self.document.rig_version, edited,
+                                            pair_indices(rig, project.antagonist_pairs()))
+        return hit[2]
 
     def begin_drag(self, index: int) -> DragState:
         """Set up a drag of marker ``index``: the regional solver of the chosen level for the current markers,

@@ -88,6 +88,11 @@ class MocapController(QtCore.QObject):
         p.export_report_requested.connect(lambda: self._export_dialog("Export Solve Report", "JSON (*.json)",
                                                                       "_report.json", self.export_report))
         p.frame_requested.connect(self.set_frame)
+        p.neutral_frames_requested.connect(self.use_neutral_frames)
+        from app.marker_map_editor import MarkerMapEditor
+        self.map_editor = MarkerMapEditor(window, self)   # the map shown on the rig, its points dragged
+        p.map_shown.connect(self.map_editor.show)
+        p.save_map_requested.connect(self.save_map_dialog)
         p.play_toggled.connect(self.play)
         p.curves_changed.connect(self._update_weight_curves)
         p.loop_check.toggled.connect(lambda on: setattr(pb, "loop", on))
@@ -216,6 +221,20 @@ class MocapController(QtCore.QObject):
     def _describe_map(self, mm) -> None:
         name = Path(mm.source).name if mm.source else "automatic map"
         self.panel.map_label.setText(f"{name}: {len(mm.labels)} markers on the rig ({mm.rig_units})")
+        self.map_editor.refresh()
+
+    def save_map_dialog(self) -> None:
+        mm = self.marker_map
+        if mm is None:
+            self._error("Save Map", "There is no marker map to save: load one or Auto Map the take.")
+            return
+        path = self.workspace.take_path
+        self.window.save_dialog("Save Marker Map", (path.stem if path else "take") + "_map.json",
+                                "Marker maps (*.json)", self.save_map)
+
+    def save_map(self, path) -> bool:
+        """Write the marker map (with the points moved on the rig) as JSON, as ``solve --map`` reads it."""
+        return self._write("marker map", path, lambda: self.marker_map.save(path))
 
     def auto_map(self) -> bool:
         try:
@@ -232,6 +251,44 @@ class MocapController(QtCore.QObject):
                               f"{rms * unit_scale(self.rig.units, 'mm'):.2f} mm.")
         return True
 
+    # --- the actor's neutral ----------------------------------------------------------------------
+    def use_neutral_frames(self, first: int, last: int | None = None) -> bool:
+        """Make frames ``first``..``last`` (counted from 0; ``last`` None: ``first`` alone) the actor's neutral for
+        the next solve, one undo step; ``first`` -1: back to the first calibration frames, -2: found automatically."""
+        from app.actor_commands import SetNeutralFramesCommand
+        if not isinstance(self.take, MarkerTake) or self.document.project is None:
+            self._error("Use as Neutral", "Load a marker take first: its neutral frames are chosen on its timeline.")
+            return False
+        last = first if last is None else last
+        if first == -1:
+            new, text = None, "Neutral: the first calibration frames"
+        elif first == -2:
+            new, text = "auto", "Neutral: found automatically"
+        else:
+            n = self.take.n_frames
+            if not 0 <= first <= last < n:
+                self._error("Use as Neutral", f"Frames {first}:{last} are outside the take, which has frames 0 to "
+                                              f"{n - 1}.")
+                return False
+            new = f"{first}:{last}"
+            text = f"Use frame {first} as neutral" if first == last else f"Use frames {first}:{last} as neutral"
+        old = self.panel.settings()["neutral_frames"]
+        if old == new:
+            return False
+        self.document.undo_stack.push(SetNeutralFramesCommand(self, old, new, text))
+        return True
+
+    def use_frame_as_neutral(self) -> bool:
+        """Animation ▸ Use Take Frame as Neutral (Alt+N): the frame shown."""
+        return self.use_neutral_frames(self.frame) if self.n_frames else False
+
+    def show_neutral_frames(self, value: str | None) -> None:
+        """Show the neutral frames setting in the panel (the undo commands call this)."""
+        self.panel.set_neutral_frames(value)
+        said = ("the first calibration frames" if value is None else "found automatically" if value == "auto"
+                else f"frames {value}" if value.split(":")[0] != value.split(":")[-1] else f"frame {value.split(':')[0]}")
+        self.panel.set_status(f"The actor's neutral: {said} (counted from 0). Solve again to use it.")
+
     # --- solving ----------------------------------------------------------------------------------
     def _segmentation(self):
         """The segmentation the Segmentation panel shows (a per-region solve uses its levels), or None."""
@@ -244,6 +301,8 @@ class MocapController(QtCore.QObject):
             return
         ws = self.workspace
         settings = dict(self.panel.settings())
+        if self.document.project.antagonists is not None:   # edited in Edit ▸ Antagonist Pairs (else the rig's)
+            settings["antagonists"] = list(self.document.project.antagonists)
         segmentation = self._segmentation() if settings["mode"] == "region" else None
         try:
             ws.check_ready()
@@ -468,6 +527,7 @@ class MocapController(QtCore.QObject):
             self.panel.take_label.setText("no take")
         if self.workspace.marker_map is None:
             self.panel.map_label.setText("no marker map")
+        self.map_editor.refresh()
         if isinstance(self.take, WeightTake):
             self.panel.take_label.setText(self._weight_take_text(self.take, self.workspace.take_path))
             self._start_weight_playback()
@@ -574,6 +634,9 @@ def _add_take_actions(window, controller: MocapController) -> None:
     for text, slot, key, tip in (
             ("Play / Pause &Take", controller.toggle_play, "Ctrl+Space", "Play or pause the loaded take"),
             ("Previous Take Frame", lambda: controller.step(-1), "Alt+,", "Step the take one frame back"),
-            ("Next Take Frame", lambda: controller.step(1), "Alt+.", "Step the take one frame on")):
+            ("Next Take Frame", lambda: controller.step(1), "Alt+.", "Step the take one frame on"),
+            ("Use Take Frame as &Neutral", controller.use_frame_as_neutral, "Alt+N",
+             "The take's frame shown becomes the actor's neutral for the next solve (undoable; right-click the "
+             "take's slider for a range)")):
         window.add_action("animation", text, lambda _=False, f=slot: f(), key, tip)
     controller.panel.play_button.setToolTip("Play or pause the take (Ctrl+Space); Alt+, and Alt+. step a frame")

@@ -47,6 +47,7 @@ class SegmentationController(QtCore.QObject):
         self.level = 0
         self.view = "shaded"
         self.shape_map = -1
+        self.view_override = None   # a callable giving the colour map shown instead (the personalisation heat map)
         self.highlight: int | None = None
         self._last_nudge: tuple[int, str] | None = None   # (region, direction): names a saved nudge
         self.last_seconds = 0.0
@@ -213,7 +214,8 @@ class SegmentationController(QtCore.QObject):
         return segmentation_colormap(self.segmentation, self.level, self.highlight)
 
     def refresh_view(self) -> None:
-        self.viewport.set_colormap(self.colormap())
+        override = self.view_override
+        self.viewport.set_colormap(override() if override is not None else self.colormap())
 
     def wait(self) -> None:
         self.runner.wait()

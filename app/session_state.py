@@ -3,8 +3,9 @@ and level) and the take with its marker map. Stored in ``project.sections`` when
 when it is opened; view state, not an edit (no undo step, the project stays unmodified).
 
 ``sections['view']``: ``{"view": "segmentation", "level": 1}``.
-``sections['take']``: ``{"path": "/takes/take.c3d", "map": {<marker map JSON>, "source": "..."}}`` -- the map is
-stored whole, so an automatic map (no file) comes back too.
+``sections['take']``: ``{"path": "/takes/take.c3d", "map": {<marker map JSON>, "source": "..."}, "neutral_frames":
+"A:B"}`` -- the map is stored whole, so an automatic map (no file) comes back too; the neutral frames only when
+chosen.
 """
 from __future__ import annotations
 
@@ -26,6 +27,9 @@ def store(window) -> None:
         sections.pop("take", None)
         return
     take: dict = {"path": str(ws.take_path)}
+    neutral = window.mocap.panel.settings().get("neutral_frames")
+    if neutral:
+        take["neutral_frames"] = neutral   # the actor's neutral chosen on the take (Use This Frame as Neutral)
     if ws.marker_map is not None:
         take["map"] = dict(ws.marker_map.to_json(), source=ws.marker_map.source)
     sections["take"] = take
@@ -52,6 +56,8 @@ def restore(window) -> None:
     mocap = window.mocap
     if not mocap.load_take(path):
         return
+    neutral = take.get("neutral_frames")
+    mocap.panel.set_neutral_frames(neutral[:40] if isinstance(neutral, str) else None)
     mm = take.get("map")
     if isinstance(mm, dict):
         try:

@@ -373,3 +373,28 @@ def _closest_bary(p, a, b, c) -> np.ndarray:
     denom = 1.0 / (va + vb + vc)
     v, w = vb * denom, vc * denom
     return np.array([1 - v - w, v, w])
+
+
+def polygon_point_entry(rig: Rig, face: int, point, points: np.ndarray | None = None) -> int | dict:
+    """The map entry of the point of polygon ``face`` nearest ``point``, on the surface ``points`` (default the
+    neutral; a posed surface gives the same place on the face): ``{"face": f, "bary": [one weight per corner]}``,
+    or the corner's vertex index when the point is on it. For a map point the user drags onto another place."""
+    if not 0 <= int(face) < rig.n_faces:
+        raise RigInputError(f"Face {face} is not a face of the rig (it has {rig.n_faces}).")
+    X = rig.neutral if points is None else np.asarray(points, dtype=np.float64)
+    starts = np.concatenate(([0], np.cumsum(rig.face_counts)))
+    corners = rig.face_indices[starts[face]:starts[face + 1]]
+    p = np.asarray(point, dtype=np.float64)
+    best = None
+    for k in range(len(corners) - 2):             # the polygon's fan, as rig.triangles() cuts it
+        tri = X[[corners[0], corners[k + 1], corners[k + 2]]]
+        uvw = _closest_bary(p, *tri)
+        d = float(np.linalg.norm(uvw @ tri - p))
+        if best is None or d < best[0]:
+            best = (d, k, uvw)
+    _, k, uvw = best
+    bary = np.zeros(len(corners))
+    bary[[0, k + 1, k + 2]] += uvw
+    if bary.max() > 0.999:
+        return int(corners[int(np.argmax(bary))])
+    return {"face": int(face), "bary": [float(x) for x in (bary[:3] if len(corners) == 3 else bary)]}

@@ -49,6 +49,9 @@ class Project:
     region_weights: np.ndarray | None = None
     region_blend: sp.csr_matrix | None = None
     region_level: int | None = None
+    # The antagonist pairs the user edited (Rig ▸ Antagonist Pairs…), as (name, name) of the rig's shapes: never both
+    # strongly on in a drag solve or a take solve. None: the pairs found from the rig (``model.antagonists``).
+    antagonists: list[tuple[str, str]] | None = None
 
     def __post_init__(self) -> None:
         if self.weights is None:
@@ -69,6 +72,43 @@ class Project:
             if (not np.isfinite(self.region_weights).all() or not np.isfinite(self.region_blend.data).all()
                     or np.abs(self.region_weights).max(initial=0) > MAX_WEIGHT):
                 raise RigInputError("the regional pose holds NaN or infinite values.")
+        if self.antagonists is not None:
+            self.antagonists = checked_antagonists(self.antagonists, self.rig.shape_names)
+
+    def antagonist_pairs(self) -> list[tuple[str, str]]:
+        """The pairs the solves keep apart: the user's (``antagonists``), else those found from the rig."""
+        if self.antagonists is not None:
+            return list(self.antagonists)
+        from .antagonists import rig_antagonists
+        return rig_antagonists(self.rig)
+
+
+MAX_PAIRS = 100_000   # more pairs than any rig's K(K-1)/2 of a few hundred shapes: a damaged file
+
+
+def checked_antagonists(value, shape_names: list[str]) -> list[tuple[str, str]]:
+    """Antagonist pairs as a list of (name, name) of two different shapes of the rig, each pair once; one
+    sentence (RigInputError) for anything else (a hand-edited or damaged project)."""
+    if not isinstance(value, (list, tuple)) or len(value) > MAX_PAIRS:
+        raise RigInputError("the antagonist pairs are not a list of shape-name pairs.")
+    names = set(shape_names)
+    out, seen = [], set()
+    for p in value:
+        if (not isinstance(p, (list, tuple)) or len(p) != 2
+                or not all(isinstance(n, str) for n in p)):
+            raise RigInputError(f"the antagonist pair {shown(p, 60)} is not two shape names.")
+        a, b = p
+        for n in (a, b):
+            if n not in names:
+                raise RigInputError(f"the antagonist pair {shown(a, 40)}+{shown(b, 40)} names "
+                                    f"{shown(n, 40)}, which the rig does not have.")
+        if a == b:
+            raise RigInputError(f"the antagonist pair {shown(a, 40)}+{shown(b, 40)} pairs a shape with itself.")
+        key = frozenset((a, b))
+        if key not in seen:
+            seen.add(key)
+            out.append((a, b))
+    return out
 
 
 def _npy_bytes(a: np.ndarray) -> bytes:
@@ -150,6 +190,9 @@ def save_project(project: Project, path: str | Path) -> None:
         arrays.update({"pose/region_weights": project.region_weights, "pose/blend_data": blend.data,
                        "pose/blend_indices": blend.indices, "pose/blend_indptr": blend.indptr})
         pose = {"region_level": project.region_level, "blend_shape": list(blend.shape)}
+    names = set(rig.shape_names)   # a pair of a shape deleted since is not written (the file would be refused)
+    antagonists = None if project.antagonists is None else \
+        [[a, b] for a, b in project.antagonists if a in names and b in names]
     manifest = {
         "format": FORMAT,
         "version": VERSION,
@@ -158,6 +201,7 @@ def save_project(project: Project, path: str | Path) -> None:
                 "records": [list(r) for r in corners.records] if corners is not None else None},
         "correctives": correctives,
         "pose": pose,
+        **({} if antagonists is None else {"antagonists": antagonists}),
         "sections": project.sections,
         "arrays": {k: [list(v.shape), str(v.dtype)] for k, v in arrays.items()},
     }
@@ -254,6 +298,8 @@ def load_project(path: str | Path) -> Project:
         sections = manifest.get("sections", {})
         if not isinstance(sections, dict):
             raise RigInputError("the project's sections are not an object of name: settings.")
-        return Project(rig=rig, weights=weights, sections=sections, arrays=extras, **regional)
+        antagonists = manifest.get("antagonists")   # absent in projects saved before it existed
+        return Project(rig=rig, weights=weights, sections=sections, arrays=extras, antagonists=antagonists,
+                       **regional)
     except RigInputError as exc:
         raise RigInputError(f"{path}: {exc}") from None

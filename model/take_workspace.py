@@ -8,7 +8,8 @@ Solve settings are a plain dict, as the panel and the command line gather them:
 ``solvers.take_solve.DEFAULTS`` for any left out; lengths in cm and the λ's in cm², whatever the rig's units:
 ``model.units`` converts them), ``calibration_frames``, ``neutral_frames`` (None: the first
 ``calibration_frames``; ``"auto"``; or ``"A:B"`` / (A, B), inclusive), ``stable`` (marker names or patterns such as
-``root-*``, comma-separated, for the head motion) and ``fixed_head`` (markers already head-stabilised in rig space).
+``root-*``, comma-separated, for the head motion), ``fixed_head`` (markers already head-stabilised in rig space) and
+``antagonists`` (the shape pairs kept apart, as names; None: the rig's, ``model.antagonists``).
 """
 from __future__ import annotations
 
@@ -207,6 +208,8 @@ def solver_options(settings: dict, take: MarkerTake, segmentation=None) -> tuple
         options["stable"] = settings.get("stable") or None
     if settings.get("mode", "global") == "region":
         options.update(regional_solve_options(segmentation, int(settings.get("level", 0))))
+    if settings.get("antagonists") is not None:   # the project's edited pairs ("A+B" or (A, B)); else the rig's
+        options["antagonists"] = list(settings["antagonists"])
     return options, calibration
 
 
@@ -259,6 +262,9 @@ def solve_report(rig: Rig, take: MarkerTake, solution: TakeSolution, settings: d
         "options": {k: options[k] for k in SOLVER_OPTIONS},
         "residual": options["residual"],
         "correctives": [c.name for c in rig.correctives if not c.muted],   # solved with the shapes
+        # the project's edited antagonist pairs ("A+B"), or None: the pairs found from the rig
+        "antagonists": None if settings.get("antagonists") is None else
+        [p if isinstance(p, str) else "+".join(p) for p in settings["antagonists"]],
     }
 
 

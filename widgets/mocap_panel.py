@@ -24,6 +24,11 @@ class MocapPanel(QtWidgets.QWidget):
     frame_requested = QtCore.Signal(int)
     play_toggled = QtCore.Signal(bool)
     curves_changed = QtCore.Signal()
+    # the actor's neutral from the transport's context menu: (first, last) frames, or (-1, -1) for the first
+    # calibration frames and (-2, -2) for the most neutral stretch found automatically
+    neutral_frames_requested = QtCore.Signal(int, int)
+    map_shown = QtCore.Signal(bool)        # show the marker map on the rig (and let its points be dragged)
+    save_map_requested = QtCore.Signal()
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
@@ -50,6 +55,14 @@ class MocapPanel(QtWidgets.QWidget):
             label.setAlignment(QtCore.Qt.AlignLeft | QtCore.Qt.AlignTop)
         fl.addWidget(self.take_label, 1, 0, 1, 3)
         fl.addWidget(self.map_label, 2, 0, 1, 3)
+        self.show_map_button = QtWidgets.QPushButton("Show Map on Rig")
+        self.show_map_button.setCheckable(True)
+        self.show_map_button.setToolTip("Show where each marker sits on the rig (and the actor's neutral markers "
+                                        "aligned to it); drag a point along the face to correct the map (undoable)")
+        self.save_map_button = QtWidgets.QPushButton("Save Map…")
+        self.save_map_button.setToolTip("Write the marker map (with your corrections) as JSON, for `solve --map`")
+        fl.addWidget(self.show_map_button, 3, 0, 1, 2)
+        fl.addWidget(self.save_map_button, 3, 2)
         lay.addWidget(files)
 
         solve = QtWidgets.QGroupBox("Solve")
@@ -87,8 +100,9 @@ class MocapPanel(QtWidgets.QWidget):
         form.addRow("Calibration frames", self.calibration_spin)
         self.neutral_edit = QtWidgets.QLineEdit()
         self.neutral_edit.setPlaceholderText("the calibration frames")
-        self.neutral_edit.setToolTip("The actor's neutral: frames A:B (inclusive), 'auto' for the most neutral "
-                                     "stretch, or empty for the first calibration frames")
+        self.neutral_edit.setToolTip("The actor's neutral: frames A:B (inclusive, counted from 0), 'auto' for the "
+                                     "most neutral stretch, or empty for the first calibration frames; right-click "
+                                     "the take's slider: Use This Frame as Neutral")
         self.stable_edit = QtWidgets.QLineEdit()
         self.stable_edit.setPlaceholderText("all markers")
         self.stable_edit.setToolTip("Markers the head motion is taken from: names or patterns, comma-separated "
@@ -154,6 +168,11 @@ class MocapPanel(QtWidgets.QWidget):
         self.slider.valueChanged.connect(self.frame_requested)
         self.play_button.toggled.connect(self._on_play_toggled)
         self.curve_list.itemChanged.connect(lambda _item: self.curves_changed.emit())
+        self.show_map_button.toggled.connect(self.map_shown)
+        self.save_map_button.clicked.connect(self.save_map_requested)
+        for w in (self.slider, self.frame_label):   # right-click the transport: this frame as the actor's neutral
+            w.setContextMenuPolicy(QtCore.Qt.CustomContextMenu)
+            w.customContextMenuRequested.connect(lambda pos, w=w: self.neutral_menu(w.mapToGlobal(pos)))
         self.set_marker_mode(False)
 
     @staticmethod
@@ -169,6 +188,36 @@ class MocapPanel(QtWidgets.QWidget):
     def _on_play_toggled(self, on: bool) -> None:
         self.play_button.setText("Pause" if on else "Play")
         self.play_toggled.emit(on)
+
+    def neutral_menu_actions(self, menu: QtWidgets.QMenu) -> list:
+        """Fill ``menu`` with the neutral-frame choices for the frame shown; returns its actions."""
+        f = self.slider.value()
+        n = self.calibration_spin.value()
+        last = min(f + n - 1, self.slider.maximum())
+        choices = ((f"Use This Frame as Neutral (frame {f + 1})", f, f),
+                   (f"Use Frames {f + 1}–{last + 1} as Neutral", f, last),
+                   ("Neutral: the First Calibration Frames", -1, -1),
+                   ("Neutral: Find the Most Neutral Stretch", -2, -2))
+        acts = []
+        for text, a, b in choices:
+            act = menu.addAction(text)
+            act.triggered.connect(lambda _=False, a=a, b=b: self.neutral_frames_requested.emit(a, b))
+            acts.append(act)
+        acts[0].setToolTip("The actor's neutral for the next solve: this frame (undoable)")
+        return acts
+
+    def neutral_menu(self, global_pos) -> QtWidgets.QMenu:
+        menu = QtWidgets.QMenu(self)
+        menu.setAttribute(QtCore.Qt.WA_DeleteOnClose)
+        self.neutral_menu_actions(menu)
+        menu.popup(global_pos)
+        self.last_menu = menu
+        return menu
+
+    def set_neutral_frames(self, value: str | None) -> None:
+        """Show the neutral frames setting ('A:B' with frames counted from 0, 'auto', or None: the first
+        calibration frames)."""
+        self.neutral_edit.setText(value or "")
 
     # --- state shown ------------------------------------------------------------------------------
     def settings(self) -> dict:
@@ -192,6 +241,8 @@ class MocapPanel(QtWidgets.QWidget):
         """Enable what makes sense: map and solve for a marker take, exports once something is playable."""
         for w in (self.load_map_button, self.auto_map_button, self.solve_button):
             w.setEnabled(markers)
+        self.show_map_button.setEnabled(markers)
+        self.save_map_button.setEnabled(markers)
         self.export_pc2_button.setEnabled(solved)
         self.export_report_button.setEnabled(solved and markers)
 

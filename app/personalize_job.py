@@ -1,0 +1,81 @@
+"""Personalisation in a child process, so that the window can cancel it (the solver has no cancel of its own; a
+process can be stopped, a thread cannot) and never waits for it when it closes.
+
+Qt-free: the child imports only this module and the model. ``start(template, state, request)`` spawns the process
+and returns a ``PersonalizeJob``; the child runs ``app.personalize_controller.personalize_project`` (which writes the
+project atomically, so a cancelled job leaves the previous file, or none) and sends back one message:
+``("done", (path, summary, rows))`` or ``("failed", message)``.
+"""
+from __future__ import annotations
+
+import multiprocessing as mp
+import traceback
+
+
+def _run(conn, template, state: dict, request: dict) -> None:
+    from model.errors import RigInputError
+    try:
+        from model.actor_project import personalize_project
+        result = personalize_project(template, state, request)
+    except RigInputError as exc:
+        conn.send(("failed", str(exc)))
+    except MemoryError:
+        conn.send(("failed", "Personalising ran out of memory."))
+    except Exception as exc:       # reported to the user as one sentence; the traceback goes to stderr
+        traceback.print_exc()
+        conn.send(("failed", f"{type(exc).__name__}: {exc}"))
+    else:
+        conn.send(("done", (str(result[0]), result[1], result[2])))
+    finally:
+        conn.close()
+
+
+class PersonalizeJob:
+    """One personalisation running in a child process: ``poll()`` its result, ``cancel()`` it."""
+
+    def __init__(self, template, state: dict, request: dict) -> None:
+        ctx = mp.get_context("spawn")   # a fresh interpreter: nothing of the GUI (threads, Qt, OpenGL) is copied
+        self._conn, child = ctx.Pipe(duplex=False)
+        self.process = ctx.Process(target=_run, args=(child, template, state, request), daemon=True,
+                                   name="blendshape-studio personalize")
+        self.process.start()
+        child.close()
+        self.result: tuple | None = None
+
+    def poll(self) -> tuple | None:
+        """("done", result) or ("failed", message) once the child has finished, else None."""
+        if self.result is not None:
+            return self.result
+        try:
+            if self._conn.poll():
+                self.result = self._conn.recv()
+        except (EOFError, OSError):
+            self.result = ("failed", f"The personalisation stopped unexpectedly (exit code {self.process.exitcode}).")
+        if self.result is None and not self.process.is_alive():
+            try:
+                if self._conn.poll():
+                    self.result = self._conn.recv()
+            except (EOFError, OSError):
+                pass
+            if self.result is None:
+                self.result = ("failed", f"The personalisation stopped unexpectedly (exit code "
+                                         f"{self.process.exitcode}).")
+        if self.result is not None:
+            self.process.join(5)
+        return self.result
+
+    @property
+    def running(self) -> bool:
+        return self.result is None and self.process.is_alive()
+
+    def cancel(self) -> None:
+        """Stop the child now (nothing is written: the project is saved atomically at the very end)."""
+        if self.process.is_alive():
+            self.process.terminate()
+        self.process.join(10)
+        if self.process.is_alive():
+            self.process.kill()
+            self.process.join(5)
+        self._conn.close()
+        if self.result is None:
+            self.result = ("cancelled", None)
