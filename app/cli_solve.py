@@ -87,6 +87,8 @@ def solve_settings(args, rig) -> tuple[dict, object]:
     from model.take_workspace import SOLVE_DEFAULTS
 
     settings = solve_options(args)
+    if getattr(args, "antagonists", None) is not None:      # a project's edited pairs (``load_solve_rig``)
+        settings["antagonists"] = args.antagonists
     regional = settings["mode"] == "region"
     segmentation = None
     if regional:
@@ -109,8 +111,6 @@ def cmd_solve(args) -> int:
     if not ws.prepare_solve(args.take, load_marker_map(args.map) if args.map else None, solve_options(args)):
         return write_weight_take(ws, args)
     settings, segmentation = solve_settings(args, rig)
-    if args.antagonists is not None:
-        settings["antagonists"] = args.antagonists
     sol = ws.solve(settings, segmentation=segmentation)
     report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
     for lab in report["markers_left_out"]:
