@@ -35,6 +35,9 @@ class ObjMesh:
     face_indices: np.ndarray    # (sum counts,) int32, 0-based
     face_section: bytes         # raw bytes from the first face record on, for fast equality checks
     corners: CornerAttributes | None = None  # vt/vn per corner and group records, when the file has them
+    # Everything after the one run of 'v' lines, when no face record comes before it: a target whose bytes
+    # end with it has the neutral's faces, vt/vn and groups, and its own 'v' run just before it.
+    vertex_tail: bytes | None = None
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -56,8 +59,8 @@ def _read_bytes(path: Path) -> bytes:
     return data
 
 
-def _vertex_block(data: bytes) -> bytes | None:
-    """The bytes of the one run of consecutive 'v' lines, or None when 'v' records are scattered."""
+def _vertex_span(data: bytes) -> tuple[int, int] | None:
+    """(start, end) of the one run of consecutive 'v' lines, or None when 'v' records are scattered."""
     start = 0 if data[:2] in (b"v ", b"v\t") else -1
     if start < 0:
         m = _V_NEXT.search(data)
@@ -68,20 +71,65 @@ def _vertex_block(data: bytes) -> bytes | None:
     end = m.start() + 1 if m else len(data)
     if _V_NEXT.search(data, end - 1) is not None:
         return None  # more 'v' records later in the file
-    return data[start:end]
+    return start, end
+
+
+def _vertex_block(data: bytes) -> bytes | None:
+    """The bytes of the one run of consecutive 'v' lines, or None when 'v' records are scattered."""
+    span = _vertex_span(data)
+    return None if span is None else data[span[0]:span[1]]
+
+
+def _arrow_columns(block: bytes, n_columns: int) -> np.ndarray | None:
+    """The numbers of a run of records ``key n1 .. n{n_columns}`` (one space between fields, nothing else), as
+    (rows, n_columns) float64 parsed by Arrow's CSV reader (correctly rounded: the same values as
+    ``np.loadtxt``, about twice as fast); None when the block is not exactly that or Arrow is not installed:
+    the caller parses it the careful way, whose errors name the problem."""
+    try:
+        import pyarrow as pa
+        import pyarrow.csv as pcsv
+    except ImportError:
+        return None
+    names = ["key"] + [f"c{j}" for j in range(n_columns)]
+    try:
+        table = pcsv.read_csv(
+            pa.py_buffer(block),
+            read_options=pcsv.ReadOptions(column_names=names, use_threads=False, block_size=max(1 << 20, len(block) + 1)),
+            parse_options=pcsv.ParseOptions(delimiter=" ", quote_char=False, double_quote=False, escape_char=False,
+                                            newlines_in_values=False, ignore_empty_lines=False),
+            convert_options=pcsv.ConvertOptions(include_columns=names[1:], null_values=[],
+                                                strings_can_be_null=False, quoted_strings_can_be_null=False,
+                                                column_types={c: pa.float64() for c in names[1:]}))
+    except (pa.ArrowException, ValueError):
+        return None
+    out = np.empty((table.num_rows, n_columns), dtype=np.float64)
+    for j in range(n_columns):
+        row = 0
+        for chunk in table.column(j).chunks:   # the values buffer as it is (to_numpy would import pandas)
+            if chunk.null_count:
+                return None
+            n = len(chunk)
+            out[row:row + n, j] = np.frombuffer(chunk.buffers()[1], dtype="<f8", count=n, offset=chunk.offset * 8)
+            row += n
+    return out
+
+
+def _parse_vertex_block(block: bytes) -> np.ndarray | None:
+    """(V, 3) from a run of 'v' lines, None when some line does not parse (the caller's careful path)."""
+    verts = _arrow_columns(block, 3)
+    if verts is not None:
+        return verts
+    try:
+        return np.loadtxt(io.BytesIO(block), usecols=(1, 2, 3), dtype=np.float64, ndmin=2, comments=None)
+    except ValueError:
+        return None  # ragged lines (colours on some, w on others): take the careful path
 
 
 def _parse_vertices(path: Path, data: bytes) -> np.ndarray:
     block = _vertex_block(data)
     if block is None and _V_NEXT.search(data) is None and data[:2] not in (b"v ", b"v\t"):
         raise RigInputError(f"{path}: has no vertex ('v') records.")
-    verts = None
-    if block is not None:
-        try:
-            verts = np.loadtxt(io.BytesIO(block), usecols=(1, 2, 3), dtype=np.float64, ndmin=2,
-                               comments=None)
-        except ValueError:
-            verts = None  # ragged lines (colours on some, w on others): take the careful path
+    verts = None if block is None else _parse_vertex_block(block)
     if verts is None:
         rows = []
         for i, line in enumerate(_V_LINE.findall(data)):
@@ -254,7 +302,44 @@ def read_obj(path: str | Path) -> ObjMesh:
     verts = _parse_vertices(path, data)
     faces = _F_LINE.findall(data)
     counts, idx = _parse_faces(path, data, len(verts), faces)
-    return ObjMesh(verts, counts, idx, _face_section(data), _parse_corners(path, data, idx.size, faces))
+    return ObjMesh(verts, counts, idx, _face_section(data), _parse_corners(path, data, idx.size, faces),
+                   vertex_tail=_vertex_tail(data))
+
+
+def _vertex_tail(data: bytes) -> bytes | None:
+    """The bytes after the file's one run of 'v' lines, when no face record comes before that run."""
+    span = _vertex_span(data)
+    if span is None or data[span[1] - 1:span[1]] != b"\n" or _F_LINE.search(data, 0, span[0]) is not None:
+        return None
+    return data[span[1]:]
+
+
+def _target_vertices(data: bytes, neutral: ObjMesh) -> np.ndarray | None:
+    """A target's (V, 3) vertices when the file is the neutral's but for its header and its run of 'v' lines
+    (every line of the run a 'v ' record, the neutral's vertex count): then its faces, vt/vn and groups are
+    the neutral's byte for byte and need no parse. None when that is not so (the caller's full checks)."""
+    tail = neutral.vertex_tail
+    if tail is None or not data.endswith(tail):
+        return None
+    end = len(data) - len(tail)
+    m = _V_NEXT.search(data, 0, end)
+    start = 0 if data[:2] in (b"v ", b"v\t") else (m.start() + 1 if m else -1)
+    if start < 0 or _F_LINE.search(data, 0, start) is not None:
+        return None
+    block = data[start:end]
+    n = len(neutral.vertices)
+    # every line of the run is one 'v ' record, and there are V of them
+    chars = np.frombuffer(block, np.uint8)
+    ends = np.flatnonzero(chars == 10)
+    if n == 0 or len(ends) != n or ends[-1] != len(block) - 1 or not block.startswith(b"v "):
+        return None
+    starts = ends[:-1] + 1
+    if not ((chars[starts] == ord("v")) & (chars[starts + 1] == ord(" "))).all():
+        return None
+    verts = _parse_vertex_block(block)
+    if verts is None or len(verts) != n or not np.isfinite(verts).all():
+        return None
+    return verts
 
 
 def read_obj_target(path: str | Path, neutral: ObjMesh) -> np.ndarray:
@@ -264,6 +349,9 @@ def read_obj_target(path: str | Path, neutral: ObjMesh) -> np.ndarray:
     """
     path = Path(path)
     data = _read_bytes(path)
+    verts = _target_vertices(data, neutral)
+    if verts is not None:
+        return verts
     verts = _parse_vertices(path, data)
     if len(verts) != len(neutral.vertices):
         raise RigInputError(f"{path}: has {len(verts)} vertices but the neutral has "
