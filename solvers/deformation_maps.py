@@ -2,8 +2,8 @@
 
 Per-shape Laplacian magnitude ``m_k(v) = ‖L d_k(v)‖``, combined map ``M(v) = max_k m_k(v)``, the arg-max
 shape and its Laplacian vector (the RGB view), and the plain displacement map ``max_k ‖d_k(v)‖``.
-The shapes go through the Laplacian one (V, 3) sparse product each, so the cost is linear in vertices and
-shapes; the maps are (V, K) row-major.
+The shapes go through the Laplacian one (V, 3) sparse product each, on the (K, V, 3) deltas as stored (no
+transposed copy), so the cost is linear in vertices and shapes.
 
 Per-shape normalisation (``normalised_map``): Joshi's maximum lets shapes with sharp local bending (lips,
 lids) outvote shapes that move a broad area smoothly (a brow raise). Dividing each shape's map by a high
@@ -109,40 +109,32 @@ def displacement_map(deltas: np.ndarray) -> np.ndarray:
 def deformation_maps(laplacian: sp.spmatrix, deltas: np.ndarray) -> DeformationMaps:
     """All deformation maps of a rig (Joshi et al. 2003, §2: ``m_k = ‖L d_k‖``, ``M = max_k m_k``).
 
-    ``laplacian`` (V, V) sparse, from ``solvers.laplacian``; ``deltas`` (K, V, 3) with K ≥ 1 (float32 deltas are
-    widened one shape at a time). One (V, 3) product per shape: its operand and result stay in the processor's
-    cache, where a product over a block of shapes streams them from memory. The maps are handed out as (V, K)
-    row-major arrays (one transposing copy at the end): what the segmentation reads per vertex (normalised
-    maxima, the support) then runs along rows.
+    ``laplacian`` (V, V) sparse, from ``solvers.laplacian``; ``deltas`` (K, V, 3) with K ≥ 1.
     """
     L = sp.csr_matrix(laplacian)
     V = L.shape[0]
-    d = np.asarray(deltas)
-    if d.dtype != np.float32:
-        d = _check_deltas(d, V)
-    elif d.ndim != 3 or d.shape[1:] != (V, 3):
-        _check_deltas(d[:0], V)      # the same message for a wrong shape
+    d = _check_deltas(deltas, V)
     K = d.shape[0]
     if K == 0:
         raise RigInputError("The rig has no blendshapes, so there is no deformation map to compute.")
+    # (K, V) rows written contiguously; handed out as their (V, K) transposes (column-major views)
     per_shape = np.empty((K, V))
     disp = np.empty((K, V))
     combined = np.full(V, -1.0)
     arg = np.zeros(V, dtype=np.int64)
     vector = np.zeros((V, 3))
+    better = np.empty(V, dtype=bool)
     for k in range(K):  # one (V, 3) product per shape, the running arg-max kept as it goes
-        dk = np.asarray(d[k], dtype=np.float64)
-        y = L @ dk
+        y = L @ d[k]
         m = per_shape[k]
-        m[:] = _norm3(y)
-        disp[k] = _norm3(dk)
-        better = m > combined
-        combined[better] = m[better]
-        arg[better] = k
-        vector[better] = y[better]
-    return DeformationMaps(per_shape=np.ascontiguousarray(per_shape.T), combined=combined, argmax_shape=arg,
-                           vector=vector, displacement=disp.max(axis=0),
-                           per_shape_displacement=np.ascontiguousarray(disp.T))
+        np.sqrt(np.einsum("vc,vc->v", y, y), out=m)
+        np.sqrt(np.einsum("vc,vc->v", d[k], d[k]), out=disp[k])
+        np.greater(m, combined, out=better)        # strictly: an earlier shape keeps a tie
+        np.copyto(combined, m, where=better)
+        np.copyto(arg, k, where=better)
+        np.copyto(vector, y, where=better[:, None])
+    return DeformationMaps(per_shape=per_shape.T, combined=combined, argmax_shape=arg, vector=vector,
+                           displacement=disp.max(axis=0), per_shape_displacement=disp.T)
 
 
 def shape_moves(per_shape_displacement: np.ndarray, fraction: float = MOVING_FRACTION) -> np.ndarray:
