@@ -161,8 +161,16 @@ def shape_scales(per_shape: np.ndarray, moves: np.ndarray, quantile: float = NOR
 
 
 def normalised_map(per_shape: np.ndarray, scales: np.ndarray) -> np.ndarray:
-    """(V,) ``max_k m_k(v) / s_k``: every shape's map on its own scale before the maximum (see module doc)."""
-    return (np.asarray(per_shape) / np.asarray(scales)[None, :]).max(axis=1)
+    """(V,) ``max_k m_k(v) / s_k``: every shape's map on its own scale before the maximum (see module doc).
+    One shape at a time into a (V,) running maximum: no (V, K) temporary."""
+    P = np.asarray(per_shape)
+    s = np.asarray(scales, dtype=np.float64)
+    out = P[:, 0] / s[0]
+    col = np.empty_like(out)
+    for k in range(1, P.shape[1]):
+        np.divide(P[:, k], s[k], out=col)
+        np.maximum(out, col, out=out)
+    return out
 
 
 def smooth_map(values: np.ndarray, adjacency: sp.spmatrix, iterations: int) -> np.ndarray:
