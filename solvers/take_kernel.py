@@ -5,7 +5,8 @@ about 0.5 s of CPU in every fresh process (the command line's ``solve``, the GUI
 whole solve of a 358-frame take; so the kernel is compiled ahead of time (numba.pycc) into a small extension
 module, once per machine and per version of the source, and later processes load that (well under 1 ms).
 The module is kept in ``solvers/__pycache__`` (or the user's cache folder when that is not writable) under a
-name that carries a hash of the source and of numpy's version, so an edited kernel is rebuilt. When the
+name that carries a hash of the source, numpy's version and the processor it is compiled for (its own
+instruction set, as the just-in-time kernel uses), so an edited kernel, or another machine, gets a new build. When the
 ahead-of-time build cannot run (no C compiler), the kernel runs through numba's just-in-time dispatcher
 (``cache=True``); where numba is missing, ``available()`` is False and the solver keeps its Python loop.
 """
@@ -78,10 +79,21 @@ def __getattr__(name):
 
 
 # --- the ahead-of-time build ---------------------------------------------------------------------------------
+def _cpu() -> str:
+    """This machine's processor (its model and instruction set flags): the build is compiled for it."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            return "".join(line for line in f.read().split("\n\n")[0].splitlines(True)
+                           if line.startswith(("model name", "flags", "Features", "CPU part")))
+    except OSError:
+        import platform
+        return platform.machine() + platform.processor()
+
+
 def _key() -> str:
     h = hashlib.sha256(_SOURCE.read_bytes())
-    h.update(_SIGNATURE.encode())
-    h.update(np.__version__.encode())
+    for part in (_SIGNATURE, np.__version__, _cpu()):
+        h.update(part.encode())
     return h.hexdigest()[:16]
 
 
@@ -134,13 +146,21 @@ def _build():
                     warnings.simplefilter("ignore")   # numba.pycc's pending deprecation
                     from numba.pycc import CC
                     from . import take_kernel_jit
+                    import llvmlite.binding as llvm
                     cc = CC(_MODULE)
-                    cc.output_dir = tmp
+                    cc.target_cpu = llvm.get_host_cpu_name()   # this processor's instructions (AVX2, FMA ...): the
+                    cc.output_dir = tmp                        # cache key carries the processor (_cpu)
                     cc.output_file = name
                     cc.verbose = False
                     cc.export("solve_pass", _SIGNATURE)(take_kernel_jit.solve_pass.py_func)
                     cc.compile()
                 os.replace(Path(tmp) / name, folder / name)   # atomic: a concurrent build wins or loses whole
+            for old in folder.glob(f"{_MODULE}_*"):       # builds of earlier sources or another processor
+                if old.name != name:
+                    try:
+                        old.unlink()
+                    except OSError:
+                        pass
             return _import(folder / name)
         except Exception:        # no compiler, a read-only folder, ...: the next folder, then the jit kernel
             continue
