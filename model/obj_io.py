@@ -35,6 +35,9 @@ class ObjMesh:
     face_indices: np.ndarray    # (sum counts,) int32, 0-based
     face_section: bytes         # raw bytes from the first face record on, for fast equality checks
     corners: CornerAttributes | None = None  # vt/vn per corner and group records, when the file has them
+    # Everything after the one run of 'v' lines, when no face record comes before it: a target whose bytes
+    # end with it has the neutral's faces, vt/vn and groups, and its own 'v' run just before it.
+    vertex_tail: bytes | None = None
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -56,32 +59,50 @@ def _read_bytes(path: Path) -> bytes:
     return data
 
 
-def _vertex_block(data: bytes) -> bytes | None:
-    """The bytes of the one run of consecutive 'v' lines, or None when 'v' records are scattered."""
-    start = 0 if data[:2] in (b"v ", b"v\t") else -1
+# the start of a record of each kind, and of a line that is not one (runs of 'vt' and 'vn' lines)
+_RUNS = {b"v": (_V_NEXT, _NOT_V_NEXT)}
+_RUNS.update({key: (re.compile(rb"\n" + key + rb"[ \t]"), re.compile(rb"\n(?!" + key + rb"[ \t])"))
+              for key in (b"vt", b"vn")})
+
+
+def _vertex_span(data: bytes, key: bytes = b"v") -> tuple[int, int] | None:
+    """(start, end) of the one run of consecutive ``key`` lines ('v' by default), or None when those records
+    are scattered or absent."""
+    is_next, not_next = _RUNS[key]
+    start = 0 if data[:len(key) + 1] in (key + b" ", key + b"\t") else -1
     if start < 0:
-        m = _V_NEXT.search(data)
+        m = is_next.search(data)
         if m is None:
             return None
         start = m.start() + 1
-    m = _NOT_V_NEXT.search(data, start)
+    m = not_next.search(data, start)
     end = m.start() + 1 if m else len(data)
-    if _V_NEXT.search(data, end - 1) is not None:
-        return None  # more 'v' records later in the file
-    return data[start:end]
+    if is_next.search(data, end - 1) is not None:
+        return None  # more such records later in the file
+    return start, end
 
 
-def _parse_vertices(path: Path, data: bytes) -> np.ndarray:
-    block = _vertex_block(data)
+def _vertex_block(data: bytes) -> bytes | None:
+    """The bytes of the one run of consecutive 'v' lines, or None when 'v' records are scattered."""
+    span = _vertex_span(data)
+    return None if span is None else data[span[0]:span[1]]
+
+
+def _parse_vertex_block(block: bytes) -> np.ndarray | None:
+    """(V, 3) from a run of 'v' lines, None when some line does not parse (the caller's careful path)."""
+    try:
+        return np.loadtxt(io.BytesIO(block), usecols=(1, 2, 3), dtype=np.float64, ndmin=2, comments=None)
+    except ValueError:
+        return None  # ragged lines (colours on some, w on others): take the careful path
+
+
+def _parse_vertices(path: Path, data: bytes, span: tuple[int, int] | None | bool = False) -> np.ndarray:
+    """The (V, 3) vertices; ``span``: the file's ``_vertex_span`` when the caller has it."""
+    span = _vertex_span(data) if span is False else span
+    block = None if span is None else data[span[0]:span[1]]
     if block is None and _V_NEXT.search(data) is None and data[:2] not in (b"v ", b"v\t"):
         raise RigInputError(f"{path}: has no vertex ('v') records.")
-    verts = None
-    if block is not None:
-        try:
-            verts = np.loadtxt(io.BytesIO(block), usecols=(1, 2, 3), dtype=np.float64, ndmin=2,
-                               comments=None)
-        except ValueError:
-            verts = None  # ragged lines (colours on some, w on others): take the careful path
+    verts = None if block is None else _parse_vertex_block(block)
     if verts is None:
         rows = []
         for i, line in enumerate(_V_LINE.findall(data)):
@@ -101,19 +122,26 @@ def _parse_vertices(path: Path, data: bytes) -> np.ndarray:
     return verts
 
 
-def _parse_faces(path: Path, data: bytes, n_vertices: int, records: list[bytes] | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
+def _parse_faces(path: Path, data: bytes, n_vertices: int, records: list[bytes] | None = None,
+                 columns: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(counts, 0-based vertex indices) of the face records; ``columns``: their corners' numbers as
+    ``_uniform_columns`` parsed them, when the caller has them (the vertex index is the first)."""
     records = _F_LINE.findall(data) if records is None else records
     if not records:
         return np.zeros(0, np.int32), np.zeros(0, np.int32)
-    # Keep only the vertex index of each corner ("12/5/7" -> "12"), then parse all at once.
-    text = re.sub(rb"/[^\s]*", b"", b"\n".join(records))
-    lines = text.split(b"\n")
-    counts = np.fromiter((len(l.split()) for l in lines), dtype=np.int32, count=len(lines))
-    try:
-        idx = _whole_numbers(text, int(counts.sum()))
-    except ValueError:
-        raise RigInputError(f"{path}: a face record has an index that is not a whole number.") from None
+    counts = None
+    if columns is not None:
+        counts = np.fromiter((len(r.split()) for r in records), dtype=np.int32, count=len(records))
+        idx = columns[:, 0]
+    if counts is None or len(idx) != int(counts.sum()):
+        # Keep only the vertex index of each corner ("12/5/7" -> "12"), then parse all at once.
+        text = re.sub(rb"/[^\s]*", b"", b"\n".join(records))
+        lines = text.split(b"\n")
+        counts = np.fromiter((len(l.split()) for l in lines), dtype=np.int32, count=len(lines))
+        try:
+            idx = _whole_numbers(text, int(counts.sum()))
+        except ValueError:
+            raise RigInputError(f"{path}: a face record has an index that is not a whole number.") from None
     if (counts < 3).any():
         raise RigInputError(f"{path}: face {int(np.argmax(counts < 3)) + 1} has fewer than 3 corners "
                             "(the file may be truncated).")
@@ -130,18 +158,65 @@ def _parse_table(path: Path, data: bytes, line: re.Pattern, what: str, width: tu
     key = line.pattern[1:3]  # b"vt" or b"vn"
     if not (data.startswith(key) or b"\n" + key in data):
         return None
-    rows = line.findall(data)
-    if not rows:
-        return None
-    try:
-        table = np.loadtxt(io.BytesIO(b"\n".join(rows)), dtype=np.float64, ndmin=2, comments=None)
-    except ValueError:
-        raise RigInputError(f"{path}: a {what} record is not a list of numbers.") from None
+    table = _table_run(data, key)
+    if table is None:
+        rows = line.findall(data)
+        if not rows:
+            return None
+        try:
+            table = np.loadtxt(io.BytesIO(b"\n".join(rows)), dtype=np.float64, ndmin=2, comments=None)
+        except ValueError:
+            raise RigInputError(f"{path}: a {what} record is not a list of numbers.") from None
     if not width[0] <= table.shape[1] <= max(width):
         table = table[:, :width[1]] if table.shape[1] > width[1] else None
         if table is None:
             raise RigInputError(f"{path}: its {what} records have too few numbers.")
     return table
+
+
+def _table_run(data: bytes, key: bytes) -> np.ndarray | None:
+    """The numbers of the file's ``key`` records ('vt', 'vn') when they are one run of lines each written
+    ``key`` + one space + numbers: the rows ``_parse_table`` parses, without a regular expression over the
+    file. None otherwise (``_parse_table`` finds the records one by one)."""
+    span = _vertex_span(data, key)
+    if span is None:
+        return None
+    block = data[span[0]:span[1]]
+    lines = block.count(b"\n") + (not block.endswith(b"\n"))
+    if block.count(key + b" ") != lines:   # each line starts 'key ', and the key appears nowhere else
+        return None
+    try:
+        return np.loadtxt(io.BytesIO(block.replace(key + b" ", b"")), dtype=np.float64, ndmin=2, comments=None)
+    except ValueError:
+        return None
+
+
+def _uniform_columns(tokens: list[bytes]) -> np.ndarray | None:
+    """(n, k + 1) int64: the numbers of face corners all written alike, ``v``, ``v/vt``, ``v//vn`` (vt 0) or
+    ``v/vt/vn``, parsed at once; None when the corners are written differently or a number is missing or bad
+    (the callers' careful paths then find and name the problem)."""
+    n = len(tokens)
+    if not n:
+        return None
+    text = b" ".join(tokens)
+    k = tokens[0].count(b"/")
+    if k not in (0, 1, 2) or text.count(b"/") != n * k:
+        return None
+    if k:
+        # token i lies between spaces i-1 and i; with n·k slashes in all, each has k when slashes k·i and
+        # k·i + k − 1 both lie inside it
+        chars = np.frombuffer(text, np.uint8)
+        bounds = np.concatenate(([-1], np.flatnonzero(chars == ord(" ")), [len(text)]))
+        slashes = np.flatnonzero(chars == ord("/"))
+        if len(bounds) != n + 1 or not ((slashes[::k] > bounds[:-1]).all() and (slashes[k - 1::k] < bounds[1:]).all()):
+            return None
+        text = text.replace(b"//", b"/0/")
+        if text.endswith(b"/") or b"/ " in text:
+            return None
+    try:
+        return _whole_numbers(text.replace(b"/", b" ") if k else text, n * (k + 1)).reshape(n, k + 1)
+    except ValueError:
+        return None
 
 
 def _whole_numbers(text: bytes, expected: int) -> np.ndarray:
@@ -167,24 +242,14 @@ def _corner_index(path: Path, idx: np.ndarray, n: int, what: str) -> np.ndarray:
     return out.astype(np.int32)
 
 
-def _corner_columns(path: Path, tokens: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
-    """The vt and vn numbers (0 = none) of face corners written ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``."""
+def _corner_columns(path: Path, tokens: list[bytes], columns: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+    """The vt and vn numbers (0 = none) of face corners written ``v``, ``v/vt``, ``v//vn`` or ``v/vt/vn``;
+    ``columns``: ``_uniform_columns(tokens)`` when the caller has it."""
     n = len(tokens)
-    text = b" ".join(tokens)
-    k = tokens[0].count(b"/") if tokens else 0
-    if k in (1, 2):
-        chars = np.frombuffer(text, np.uint8)
-        token_of = np.cumsum(chars == ord(" "))
-        per_token = np.bincount(token_of[chars == ord("/")], minlength=n)
-        if (per_token == k).all():  # every corner written alike: one parse of all the numbers
-            text = text.replace(b"//", b"/0/")
-            try:
-                if text.endswith(b"/") or b"/ " in text:
-                    raise ValueError
-                cols = _whole_numbers(text.replace(b"/", b" "), n * (k + 1)).reshape(n, k + 1)
-                return cols[:, 1], (cols[:, 2] if k == 2 else np.zeros(n, np.int64))
-            except ValueError:
-                pass
+    cols = _uniform_columns(tokens) if columns is None else columns
+    if cols is not None and cols.shape[1] > 1:  # every corner written alike: one parse of all the numbers
+        return cols[:, 1], (cols[:, 2] if cols.shape[1] == 3 else np.zeros(n, np.int64))
     try:
         parts = [t.split(b"/") for t in tokens]
         return tuple(np.array([int(p[j]) if len(p) > j and p[j] else 0 for p in parts], dtype=np.int64)
@@ -193,43 +258,56 @@ def _corner_columns(path: Path, tokens: list[bytes]) -> tuple[np.ndarray, np.nda
         raise RigInputError(f"{path}: a face record has a texture or normal index that is not a whole number.") from None
 
 
+_RECORD_KEYS = (b"g", b"o", b"s", b"usemtl", b"mtllib")
+
+
 def _records(data: bytes) -> list[tuple[int, str]]:
-    """(byte offset, line) of the g/o/s/usemtl/mtllib lines, in file order (a find per keyword: fast)."""
+    """(byte offset, line) of the g/o/s/usemtl/mtllib lines, in file order (the lines whose first letter is one of
+    theirs, found in one pass over the line starts)."""
+    chars = np.frombuffer(data, np.uint8)
+    starts = np.flatnonzero(chars[:-1] == 10) + 1
+    first = chars[starts]
+    maybe = starts[(first == ord("g")) | (first == ord("o")) | (first == ord("s")) | (first == ord("u"))
+                   | (first == ord("m"))].tolist()
+    if data[:1] in (b"g", b"o", b"s", b"u", b"m"):
+        maybe.insert(0, 0)
     found = []
-    for key in (b"g", b"o", b"s", b"usemtl", b"mtllib"):
-        starts = [0] if data.startswith(key) else []
-        pos = data.find(b"\n" + key)
-        while pos >= 0:
-            starts.append(pos + 1)
-            pos = data.find(b"\n" + key, pos + 1)
-        for start in starts:
-            if data[start + len(key):start + len(key) + 1] in (b" ", b"\t", b"\r", b"\n", b""):
+    for start in maybe:
+        for key in _RECORD_KEYS:
+            if data.startswith(key, start) and \
+                    data[start + len(key):start + len(key) + 1] in (b" ", b"\t", b"\r", b"\n", b""):
                 end = data.find(b"\n", start)
                 found.append((start, data[start:end if end >= 0 else len(data)].decode("utf-8").rstrip()))
-    return sorted(found)
+                break
+    return found
 
 
-def _parse_corners(path: Path, data: bytes, n_corners: int, faces: list[bytes]) -> CornerAttributes | None:
-    """The file's vt/vn lists, each face corner's vt/vn index and the group records, without touching v/f."""
+def _faces_before(data: bytes, offsets: list[int]) -> list[int]:
+    """How many face records ('f ' or 'f\\t' lines) come before each offset (a line start)."""
+    chars = np.frombuffer(data, np.uint8)
+    nl = np.flatnonzero((chars[:-2] == 10) & (chars[1:-1] == ord("f")) & ((chars[2:] == 32) | (chars[2:] == 9)))
+    lead = 1 if data.startswith(b"f ") else 0
+    return [int(np.searchsorted(nl, pos - 1)) + (lead if pos > 0 else 0) for pos in offsets]
+
+
+def _parse_corners(path: Path, data: bytes, n_corners: int, faces: list[bytes], tokens: list[bytes] | None = None,
+                   columns: np.ndarray | None = None) -> CornerAttributes | None:
+    """The file's vt/vn lists, each face corner's vt/vn index and the group records, without touching v/f;
+    ``tokens`` and ``columns``: the face corners and ``_uniform_columns(tokens)`` when the caller has them."""
     uvs = _parse_table(path, data, _VT_LINE, "texture coordinate ('vt')", (2, 3))
     normals = _parse_table(path, data, _VN_LINE, "normal ('vn')", (3, 3))
     records = _records(data)
     if uvs is None and normals is None and not records:
         return None
     corner_uv = corner_normal = None
-    tokens = b" ".join(faces).split()
+    tokens = b" ".join(faces).split() if tokens is None else tokens
     if len(tokens) == n_corners and (uvs is not None or normals is not None):
-        vt, vn = _corner_columns(path, tokens)
+        vt, vn = _corner_columns(path, tokens, columns)
         if uvs is not None:
             corner_uv = _corner_index(path, vt, len(uvs), "texture coordinate")
         if normals is not None:
             corner_normal = _corner_index(path, vn, len(normals), "normal")
-    # the face number of each record: the face records before it (counted between consecutive records)
-    at, count, prev = [], 0, 0
-    for pos, _ in records:
-        count += data.count(b"\nf ", prev, pos) + data.count(b"\nf\t", prev, pos) + (pos > 0 and data.startswith(b"f ") and prev == 0)
-        at.append(count)
-        prev = pos
+    at = _faces_before(data, [pos for pos, _ in records])   # the face number of each record
     return CornerAttributes(uvs=uvs, corner_uv=corner_uv, normals=normals, corner_normal=corner_normal,
                             records=[(f, line) for f, (_, line) in zip(at, records)])
 
@@ -251,10 +329,49 @@ def read_obj(path: str | Path) -> ObjMesh:
     """Read vertices and polygon faces of an OBJ in file order (vertex order is sacred)."""
     path = Path(path)
     data = _read_bytes(path)
-    verts = _parse_vertices(path, data)
+    span = _vertex_span(data)
+    verts = _parse_vertices(path, data, span)
     faces = _F_LINE.findall(data)
-    counts, idx = _parse_faces(path, data, len(verts), faces)
-    return ObjMesh(verts, counts, idx, _face_section(data), _parse_corners(path, data, idx.size, faces))
+    tokens = b" ".join(faces).split()
+    columns = _uniform_columns(tokens)
+    counts, idx = _parse_faces(path, data, len(verts), faces, columns)
+    return ObjMesh(verts, counts, idx, _face_section(data),
+                   _parse_corners(path, data, idx.size, faces, tokens, columns), vertex_tail=_vertex_tail(data, span))
+
+
+def _vertex_tail(data: bytes, span: tuple[int, int] | None) -> bytes | None:
+    """The bytes after the file's one run of 'v' lines (``span``), when no face record comes before that run."""
+    if span is None or data[span[1] - 1:span[1]] != b"\n" or _F_LINE.search(data, 0, span[0]) is not None:
+        return None
+    return data[span[1]:]
+
+
+def _target_vertices(data: bytes, neutral: ObjMesh) -> np.ndarray | None:
+    """A target's (V, 3) vertices when the file is the neutral's but for its header and its run of 'v' lines
+    (every line of the run a 'v ' record, the neutral's vertex count): then its faces, vt/vn and groups are
+    the neutral's byte for byte and need no parse. None when that is not so (the caller's full checks)."""
+    tail = neutral.vertex_tail
+    if tail is None or not data.endswith(tail):
+        return None
+    end = len(data) - len(tail)
+    m = _V_NEXT.search(data, 0, end)
+    start = 0 if data[:2] in (b"v ", b"v\t") else (m.start() + 1 if m else -1)
+    if start < 0 or _F_LINE.search(data, 0, start) is not None:
+        return None
+    block = data[start:end]
+    n = len(neutral.vertices)
+    # every line of the run is one 'v ' record, and there are V of them
+    chars = np.frombuffer(block, np.uint8)
+    ends = np.flatnonzero(chars == 10)
+    if n == 0 or len(ends) != n or ends[-1] != len(block) - 1 or not block.startswith(b"v "):
+        return None
+    starts = ends[:-1] + 1
+    if not ((chars[starts] == ord("v")) & (chars[starts + 1] == ord(" "))).all():
+        return None
+    verts = _parse_vertex_block(block)
+    if verts is None or len(verts) != n or not np.isfinite(verts).all():
+        return None
+    return verts
 
 
 def read_obj_target(path: str | Path, neutral: ObjMesh) -> np.ndarray:
@@ -264,6 +381,9 @@ def read_obj_target(path: str | Path, neutral: ObjMesh) -> np.ndarray:
     """
     path = Path(path)
     data = _read_bytes(path)
+    verts = _target_vertices(data, neutral)
+    if verts is not None:
+        return verts
     verts = _parse_vertices(path, data)
     if len(verts) != len(neutral.vertices):
         raise RigInputError(f"{path}: has {len(verts)} vertices but the neutral has "

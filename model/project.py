@@ -120,6 +120,18 @@ def _npy_bytes(a: np.ndarray) -> bytes:
 ARRAY_DTYPES = ("<f8", "<f4", "<i4", "<i8", "<u4", "<u8", "|b1", "|u1", "<i2", "<u2")
 
 
+def _read_into(f, buf: memoryview, chunk: int = 16 << 20) -> int:
+    """Fill ``buf`` from ``f`` in chunks; returns the bytes read. (A zip member's ``readinto`` reads the whole
+    request as one bytes object and then copies it: twice the array's memory at the peak.)"""
+    got = 0
+    while got < len(buf):
+        n = f.readinto(buf[got:got + chunk])
+        if not n:
+            break
+        got += n
+    return got
+
+
 def read_npy_member(z: zipfile.ZipFile, name: str, path: Path, key: str) -> np.ndarray:
     """One ``.npy`` member, checked before anything is allocated: a plain numeric dtype, and the header's
     shape matching the bytes the member holds (so a declared 10¹² elements or a member that inflates far
@@ -148,7 +160,7 @@ def read_npy_member(z: zipfile.ZipFile, name: str, path: Path, key: str) -> np.n
                 raise RigInputError(f"{path}: the array '{key}' declares {count} values but holds "
                                     f"{max(info.file_size - header, 0) // max(dtype.itemsize, 1)}; it is damaged.")
             a = np.empty(shape, dtype=dtype, order="F" if fortran else "C")   # read straight into it: one copy
-            got = f.readinto(memoryview(a.reshape(-1, order="A")).cast("B")) if nbytes else 0
+            got = _read_into(f, memoryview(a.reshape(-1, order="A")).cast("B")) if nbytes else 0
             extra = f.read(1)
     except RigInputError:
         raise

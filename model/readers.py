@@ -55,8 +55,7 @@ def load_obj_folder(folder: str | Path, neutral: str | None = None, units: str =
     for k, p in enumerate(targets):
         if progress:
             progress(k + 1, total, p.name)
-        deltas[k] = read_obj_target(p, base)
-        deltas[k] -= base.vertices
+        np.subtract(read_obj_target(p, base), base.vertices, out=deltas[k])
     if progress:
         progress(total, total, "done")
     rig = Rig(neutral=base.vertices, face_counts=base.face_counts, face_indices=base.face_indices,

@@ -263,8 +263,8 @@ class SegmentationCache:
 
     def support(self) -> np.ndarray:
         """(V, K) where each shape acts: its displacement over its own 99% quantile, at most 1."""
-        return self._get("support", lambda: np.minimum(
-            self.maps().per_shape_displacement / self.scales("displacement")[None, :], 1.0))
+        return self._get("support", lambda: np.minimum(   # along the maps' (K, V) rows (see shape_moves)
+            self.maps().per_shape_displacement.T / self.scales("displacement")[:, None], 1.0).T)
 
     def shape_groups(self) -> np.ndarray:
         """(K,) groups of shapes that act on the same part of the face."""

@@ -119,19 +119,21 @@ def deformation_maps(laplacian: sp.spmatrix, deltas: np.ndarray) -> DeformationM
         raise RigInputError("The rig has no blendshapes, so there is no deformation map to compute.")
     # (K, V) rows written contiguously; handed out as their (V, K) transposes (column-major views)
     per_shape = np.empty((K, V))
-    disp = np.empty((K, V))
-    combined = np.full(V, -1.0)
-    arg = np.zeros(V, dtype=np.int64)
-    vector = np.zeros((V, 3))
-    for k in range(K):  # one (V, 3) product per shape, the running arg-max kept as it goes
+    for k in range(K):  # one (V, 3) product per shape
         y = L @ d[k]
-        m = per_shape[k]
-        m[:] = _norm3(y)
-        disp[k] = _norm3(d[k])
-        better = m > combined
-        combined[better] = m[better]
-        arg[better] = k
-        vector[better] = y[better]
+        np.sqrt(np.einsum("vc,vc->v", y, y), out=per_shape[k])
+    disp = np.sqrt(np.einsum("kvc,kvc->kv", d, d))
+    # the arg-max shape of every vertex (the first of equal maxima) and its Laplacian vector, recomputed over
+    # the rows each shape wins (the same row sums as the full product): no per-shape running update over V
+    combined = per_shape.max(axis=0)
+    arg = per_shape.argmax(axis=0)
+    vector = np.zeros((V, 3))
+    order = np.argsort(arg, kind="stable")
+    bounds = np.searchsorted(arg[order], np.arange(K + 1))
+    L_won = L[order]
+    for k in np.flatnonzero(np.diff(bounds)):
+        a, b = bounds[k], bounds[k + 1]
+        vector[order[a:b]] = L_won[a:b] @ d[k]
     return DeformationMaps(per_shape=per_shape.T, combined=combined, argmax_shape=arg, vector=vector,
                            displacement=disp.max(axis=0), per_shape_displacement=disp.T)
 
@@ -141,7 +143,9 @@ def shape_moves(per_shape_displacement: np.ndarray, fraction: float = MOVING_FRA
     nothing moves no vertex)."""
     D = np.asarray(per_shape_displacement)
     top = D.max(axis=0)
-    return (D > fraction * top) & (top > 0)
+    # along the shapes' rows of D's (K, V) memory (the maps are (K, V) arrays handed out transposed): a (V, K)
+    # broadcast would walk them across, one page per element on a large rig
+    return ((D.T > (fraction * top)[:, None]) & (top > 0)[:, None]).T
 
 
 def shape_scales(per_shape: np.ndarray, moves: np.ndarray, quantile: float = NORMALISE_QUANTILE) -> np.ndarray:
@@ -160,8 +164,16 @@ def shape_scales(per_shape: np.ndarray, moves: np.ndarray, quantile: float = NOR
 
 
 def normalised_map(per_shape: np.ndarray, scales: np.ndarray) -> np.ndarray:
-    """(V,) ``max_k m_k(v) / s_k``: every shape's map on its own scale before the maximum (see module doc)."""
-    return (np.asarray(per_shape) / np.asarray(scales)[None, :]).max(axis=1)
+    """(V,) ``max_k m_k(v) / s_k``: every shape's map on its own scale before the maximum (see module doc).
+    One shape at a time into a (V,) running maximum: no (V, K) temporary."""
+    P = np.asarray(per_shape)
+    s = np.asarray(scales, dtype=np.float64)
+    out = P[:, 0] / s[0]
+    col = np.empty_like(out)
+    for k in range(1, P.shape[1]):
+        np.divide(P[:, k], s[k], out=col)
+        np.maximum(out, col, out=out)
+    return out
 
 
 def smooth_map(values: np.ndarray, adjacency: sp.spmatrix, iterations: int) -> np.ndarray:

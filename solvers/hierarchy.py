@@ -20,7 +20,6 @@ import math
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from .errors import RigInputError
 
@@ -66,7 +65,7 @@ def region_contacts(labels: np.ndarray, adjacency: sp.spmatrix) -> tuple[np.ndar
         return gap, bnd
     A = sp.csr_matrix(adjacency)
     src = np.flatnonzero(labels >= 0)
-    dist, _, sources = csgraph.dijkstra(A, directed=False, indices=src, unweighted=True,
+    dist, _, sources = sp.csgraph.dijkstra(A, directed=False, indices=src, unweighted=True,
                                         min_only=True, return_predecessors=True)
     cell = np.where(sources >= 0, labels[np.maximum(sources, 0)], -1)
     rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from .errors import RigInputError
 
@@ -35,7 +34,7 @@ def grow_regions(values: np.ndarray, adjacency: sp.spmatrix, ratio: float = 0.75
         if v[seed] <= 0:
             break
         cand = np.flatnonzero((v >= ratio * v[seed]) & (labels < 0))
-        _, comp = csgraph.connected_components(A[cand][:, cand], directed=False)
+        _, comp = sp.csgraph.connected_components(A[cand][:, cand], directed=False)
         seed_comp = comp[np.searchsorted(cand, seed)]
         labels[cand[comp == seed_comp]] = g
     return labels

@@ -9,7 +9,6 @@ import math
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
 
 from .errors import RigInputError
 
@@ -53,7 +52,7 @@ def connected_regions(mask: np.ndarray, adjacency: sp.spmatrix) -> np.ndarray:
     if idx.size == 0:
         return labels
     A = sp.csr_matrix(adjacency)[idx][:, idx]
-    _, comp = csgraph.connected_components(A, directed=False)
+    _, comp = sp.csgraph.connected_components(A, directed=False)
     labels[idx] = comp
     return relabel(labels)
 
@@ -168,7 +167,7 @@ def fill_background_holes(labels: np.ndarray, adjacency: sp.spmatrix) -> np.ndar
     if bg.size == 0 or bg.size == lab.size:
         return lab
     A = sp.csr_matrix(adjacency)
-    ncomp, comp = csgraph.connected_components(A[bg][:, bg], directed=False)
+    ncomp, comp = sp.csgraph.connected_components(A[bg][:, bg], directed=False)
     comp_of = np.full(lab.size, -1, dtype=np.int64)
     comp_of[bg] = comp
     csize = np.bincount(comp, minlength=ncomp)
@@ -225,7 +224,7 @@ def mesh_pieces(adjacency: sp.spmatrix, main_fraction: float = 0.5) -> tuple[np.
     """(piece, main): the connected component of every vertex, and which vertices lie on the main surface
     (the largest piece and any piece at least ``main_fraction`` of its size). The other pieces are the rig's
     separate meshes (eyeballs, teeth, tongue, eyelashes in ICT FaceKit)."""
-    _, piece = csgraph.connected_components(sp.csr_matrix(adjacency), directed=False)
+    _, piece = sp.csgraph.connected_components(sp.csr_matrix(adjacency), directed=False)
     sizes = np.bincount(piece)
     main = sizes[piece] >= main_fraction * sizes.max()
     return piece.astype(np.int64), main

@@ -330,7 +330,13 @@ class TakeSolution:
                 n, P = C.shape[0], C.shape[1]
                 E = s.rbf.eval_matrix_as(np.float32)                                 # (N, M+P)
                 r = E @ C.transpose(1, 0, 2).reshape(P, n * 3).astype(np.float32)   # (N, 3n)
-                x[:, s.residual_vertices] += r.reshape(-1, n, 3).transpose(1, 0, 2)
+                r = np.ascontiguousarray(r.reshape(-1, n, 3).transpose(1, 0, 2))    # (n, N, 3)
+                runs = s.residual_runs()
+                if runs is None:
+                    x[:, s.residual_vertices] += r
+                else:       # runs of consecutive vertices: slices, no gather and scatter of the whole block
+                    for a, b, v0, v1 in runs:
+                        x[:, v0:v1] += r[:, a:b]
             yield x
 
 
@@ -791,6 +797,20 @@ class TakeSolver:
             if report is not None:
                 report(i)
         return W, Rs, ts, solved
+
+    def residual_runs(self) -> list[tuple[int, int, int, int]] | None:
+        """The residual vertices as runs of consecutive indices, (a, b, v0, v1): ``residual_vertices[a:b]`` is
+        ``v0 .. v1 − 1``; None when they repeat a vertex. Built once (the dense frames add the residual per run)."""
+        if getattr(self, "_residual_runs", False) is False:
+            rv = np.asarray(self.residual_vertices, dtype=np.int64)
+            runs = None
+            if rv.size and np.unique(rv).size == rv.size:
+                cut = np.flatnonzero(np.diff(rv) != 1) + 1
+                a = np.concatenate(([0], cut))
+                b = np.concatenate((cut, [rv.size]))
+                runs = list(zip(a.tolist(), b.tolist(), rv[a].tolist(), (rv[b - 1] + 1).tolist()))
+            self._residual_runs = runs
+        return self._residual_runs
 
     def _pass_compiled(self, Y, order, w, R, t, cancel, report, W, Rs, ts, solved) -> None:
         """``_pass`` in the compiled kernel (``solvers.take_kernel.solve_pass``, same QP and pivot rules),

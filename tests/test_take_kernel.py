@@ -25,6 +25,27 @@ def test_numba_kernel_is_available():
     assert take_kernel.available(), "numba is a dependency (pyproject.toml): the take solve needs its kernel"
 
 
+def test_kernel_is_the_ahead_of_time_build_and_a_fresh_solve_does_not_import_numba(ict_dir, take_dir):
+    """The sweep runs in the extension module built from take_kernel_jit (numba.pycc), so a fresh process that
+    solves a take never pays for importing numba (about 0.5 s of CPU: more than the solve)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+    module = take_kernel.kernel()
+    assert module.__name__ == "_take_kernel_aot" and Path(module.__file__) == take_kernel._built_path()
+    code = ("import sys\n"
+            "from model.readers import load_rig\n"
+            "from model.take_workspace import TakeWorkspace\n"
+            f"ws = TakeWorkspace(load_rig({str(ict_dir)!r}))\n"
+            f"ws.load_take({str(take_dir / 'take.c3d')!r}); ws.load_map({str(take_dir / 'marker_map.json')!r})\n"
+            "sol = ws.solve({'mode': 'global'})\n"
+            "print(sol.n_frames, sorted(m for m in sys.modules if m.split('.')[0] in ('numba', 'llvmlite')))\n")
+    root = Path(__file__).resolve().parents[1]
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, check=True,
+                         env={**__import__("os").environ, "PYTHONPATH": str(root)})
+    assert out.stdout.split() == ["358", "[]"], out.stdout + out.stderr
+
+
 def test_box_qp_matches_the_python_active_set_on_random_problems():
     rng = np.random.default_rng(3)
     K = 40
