@@ -56,6 +56,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.last_error: str | None = None
         self.shortcuts_dialog: QtWidgets.QDialog | None = None   # Help ▸ Keyboard Shortcuts, once opened
         self._worker: LoadWorker | None = None
+        self._after_open: list = []   # what a drop opens once its rig is open (a take, a marker map)
+        self.setAcceptDrops(True)     # files dropped on the window open (open_dropped)
         self._progress: QtWidgets.QProgressDialog | None = None
         self._drag_old: np.ndarray | None = None
         self._redraw_pending = False
@@ -209,7 +211,12 @@ class MainWindow(QtWidgets.QMainWindow):
                                            ("right", "&Right Side"), ("three-quarter", "&Three-Quarter")]):
             act("view", f"{label} Camera", lambda _=False, n=name: self.viewport.set_camera(n), str(i + 1),
                 f"Look at the face from the {name.replace('-', ' ')}")
-        act("view", "Reset &View", self.viewport.reset_view, "F", "Frame the face again")
+        act("view", "&Frame Selected", self.frame_selected, "F",
+            "Frame the selected marker (Marker mode) or region (Segmentation panel), else the face")
+        self.frame_all_action = act("view", "Frame &All", lambda: self.viewport.frame_points(), "A",
+                                    "Frame the whole face from where the camera looks now (also Home)")
+        self.frame_all_action.setShortcuts([QtGui.QKeySequence("A"), QtGui.QKeySequence("Home")])
+        act("view", "Reset &View", self.viewport.reset_view, None, "Back to the camera preset, framing the face")
         self.add_separator("view")
         self.add_menu("panels", "&Panels", parent="view")
 
@@ -387,6 +394,34 @@ class MainWindow(QtWidgets.QMainWindow):
         rig = self.document.rig
         self.set_pose(rig.weights_from_dict(rig.presets[name]), f"Preset {name}")
 
+    def selection_points(self) -> tuple[str, np.ndarray] | None:
+        """What F frames: (what, points) of the selected marker (in Marker mode) or the selected region, else
+        None (the face)."""
+        if self.document.project is None:
+            return None
+        surface = self.document.surface()
+        m = self.markers.selected_marker
+        if self.markers.mode and m is not None and self.markers.markers is not None and m < len(self.markers.markers):
+            p = self.markers.marker_positions()[m]
+            r = 0.08 * float(np.linalg.norm(np.ptp(self.viewport.focus_points(), axis=0)))
+            return f"marker {self.markers.markers.names[m]}", p + np.array([[-r, -r, -r], [r, r, r]])
+        seg, region = self.segmentation.segmentation, self.segmentation_panel.selected_region()
+        if seg is not None and region >= 0 and self.segmentation.level < len(seg.levels):
+            labels = seg.levels[self.segmentation.level].core_labels(len(surface))
+            if (labels == region).any():
+                return f"region {region}", surface[labels == region]
+        return None
+
+    def frame_selected(self) -> None:
+        """View ▸ Frame Selected (F): frame the selected marker or region from where the camera looks now."""
+        sel = self.selection_points()
+        if sel is None:
+            self.viewport.frame_points()
+            self.show_status("Framed the face (select a region or, in Marker mode, a marker to frame it).", 4000)
+        else:
+            self.viewport.frame_points(sel[1])
+            self.show_status(f"Framed {sel[0]}.", 3000)
+
     # --- files -------------------------------------------------------------------------------------
     def open_sample(self) -> None:
         from resources.sample_rig import build_sample_rig, sample_project_sections
@@ -437,10 +472,60 @@ class MainWindow(QtWidgets.QMainWindow):
         app_settings.add_recent_file(str(path))
         self._rebuild_recent_menu()
         self.show_status(f"Opened {path}")
+        after, self._after_open = self._after_open, []
+        for step in after:
+            step()
 
     def _on_load_failed(self, message: str) -> None:
+        self._after_open = []
         self.show_error("Could not open", message)
         self.load_failed.emit(message)
+
+    # --- files dropped on the window ---------------------------------------------------------------
+    def dragEnterEvent(self, event: QtGui.QDragEnterEvent) -> None:  # Qt override
+        urls = event.mimeData().urls() if event.mimeData().hasUrls() else []
+        if urls and all(u.isLocalFile() for u in urls):
+            event.acceptProposedAction()
+
+    def dragMoveEvent(self, event) -> None:  # Qt override
+        self.dragEnterEvent(event)
+
+    def dropEvent(self, event: QtGui.QDropEvent) -> None:  # Qt override
+        paths = [u.toLocalFile() for u in event.mimeData().urls() if u.isLocalFile()]
+        if paths:
+            event.acceptProposedAction()
+            self.open_dropped(paths)
+
+    def open_dropped(self, paths) -> bool:
+        """Open dropped files through the menus' paths: a rig folder, project, glTF or OBJ as File ▸ Open, a take
+        and a marker map as the Mocap panel's Load (after the rig when both are dropped). A file that is none of
+        these is one sentence, and nothing is opened."""
+        from app.loading import sort_dropped
+        try:
+            items = sort_dropped(paths)
+        except RigInputError as exc:
+            self.show_error("Could not open", str(exc))
+            return False
+        rigs = [p for kind, p in items if kind == "rig"]
+        if len(rigs) > 1:
+            self.show_error("Could not open", f"{len(rigs)} rigs or projects were dropped ({rigs[0].name}, "
+                                              f"{rigs[1].name}, …): drop one at a time.")
+            return False
+        steps = [(lambda p=p: self.mocap.load_take(p)) if kind == "take" else (lambda p=p: self.mocap.load_map(p))
+                 for kind, p in items if kind != "rig"]
+        if rigs:
+            if self.is_loading:
+                return False
+            self.open_path(rigs[0])
+            if self.is_loading:        # opening (not cancelled at the unsaved-changes question)
+                self._after_open = steps
+            return self.is_loading
+        if self.document.project is None:
+            self.show_error("Could not open", f"{items[0][1].name} needs a rig: open or drop a rig first.")
+            return False
+        for step in steps:
+            step()
+        return True
 
     def _on_worker_finished(self) -> None:
         if self._progress is not None:

@@ -255,6 +255,11 @@ class MarkerController(QtCore.QObject):
     def _on_lam_reg_change(self, value: float) -> None:
         self.lam_reg = float(value)
 
+    @property
+    def selected_marker(self) -> int | None:
+        """The index of the marker selected in the Markers panel or by a drag, or None."""
+        return self._selected
+
     def _on_marker_selected(self, index: int) -> None:
         self._selected = index if index >= 0 else None
         self.refresh_overlay(render=True)

@@ -171,3 +171,119 @@ def test_period_and_comma_go_to_the_next_and_previous_key(qtbot, tmp_path):
     _key(qtbot, canvas, QtCore.Qt.Key_Comma)
     assert kf.time == 0.5
     assert w.document.undo_stack.count() == steps     # navigation, not an edit
+
+
+# --- frame selected / frame all -------------------------------------------------------------------------------------
+def _view_extent(w, points) -> float:
+    """How much of the view ``points`` fill: their on-screen bounding box's larger side over the view's."""
+    d = w.viewport.world_to_display(points)
+    wx, wy = w.viewport.plotter.window_size
+    return float(max(np.ptp(d[:, 0]) / wx, np.ptp(d[:, 1]) / wy))
+
+
+def test_f_frames_the_selected_region_and_a_frames_the_face(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    w.segmentation.wait()
+    seg = w.segmentation.segmentation
+    labels = seg.levels[w.segmentation.level].core_labels(w.document.rig.n_vertices)
+    region = int(np.argmin(np.bincount(labels[labels >= 0])))      # the smallest region
+    w.segmentation_panel.select_region(region)
+    w.segmentation_panel.region_selected.emit(region)
+    pts = w.document.surface()[labels == region]
+    face = w.viewport.focus_points()
+    whole = _view_extent(w, face)           # as the window opened: the face framed
+    before = _view_extent(w, pts)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_F)
+    after = _view_extent(w, pts)
+    assert after > 3 * before and 0.35 < after <= 1.0, (before, after)
+    centre = w.viewport.world_to_display(pts.mean(axis=0, keepdims=True))[0]
+    wx, wy = w.viewport.plotter.window_size
+    assert abs(centre[0] - wx / 2) < 0.15 * wx and abs(centre[1] - wy / 2) < 0.15 * wy
+    assert "region" in w.statusBar().currentMessage()
+    assert _view_extent(w, face) > 1.2
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_A)
+    assert _view_extent(w, face) == pytest.approx(whole, abs=0.01) and 0.45 < whole <= 1.0
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_F)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_Home)        # Home frames all too
+    assert _view_extent(w, face) == pytest.approx(whole, abs=0.01)
+
+
+def test_f_frames_the_selected_marker_in_marker_mode(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    mk = w.markers
+    mk.mode_action.setChecked(True)
+    rig = w.document.rig
+    v = int(np.argmax(np.abs(rig.deltas[rig.shape_index("jawOpen")]).sum(axis=1)))
+    assert mk.add_marker_at(v)
+    mk.panel.marker_selected.emit(len(mk.markers) - 1)
+    assert mk.selected_marker == len(mk.markers) - 1
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_F)
+    p = mk.marker_positions()[-1]
+    d = w.viewport.world_to_display(p[None])[0]
+    wx, wy = w.viewport.plotter.window_size
+    assert abs(d[0] - wx / 2) < 2 and abs(d[1] - wy / 2) < 2          # the marker in the middle of the view
+    assert _view_extent(w, w.viewport.focus_points()) > 1.3          # zoomed in past the whole face
+    assert "marker" in w.statusBar().currentMessage()
+
+
+# --- files dropped on the window ------------------------------------------------------------------------------------
+def _drop(w, paths) -> bool:
+    """Drag ``paths`` over the window and drop them (real mime data with file URLs); returns whether the
+    window took the drag."""
+    mime = QtCore.QMimeData()
+    mime.setUrls([QtCore.QUrl.fromLocalFile(str(p)) for p in paths])
+    pos = QtCore.QPoint(w.width() // 2, w.height() // 2)
+    enter = QtGui.QDragEnterEvent(pos, QtCore.Qt.CopyAction, mime, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier)
+    QtWidgets.QApplication.sendEvent(w, enter)
+    if not enter.isAccepted():
+        return False
+    drop = QtGui.QDropEvent(QtCore.QPointF(pos), QtCore.Qt.CopyAction, mime, QtCore.Qt.LeftButton,
+                            QtCore.Qt.NoModifier)
+    QtWidgets.QApplication.sendEvent(w, drop)
+    QtWidgets.QApplication.processEvents()
+    return drop.isAccepted()
+
+
+def test_a_rig_folder_take_and_marker_map_dropped_together_open(qtbot, tmp_path, ict_dir, take_dir):
+    w = make_window(qtbot, tmp_path)
+    assert _drop(w, [take_dir / "marker_map.json", take_dir / "take.c3d", ict_dir])
+    qtbot.waitUntil(lambda: not w.is_loading, timeout=60000)
+    QtWidgets.QApplication.processEvents()
+    assert w.document.rig.n_vertices == 26719
+    assert w.mocap.workspace.take_path == take_dir / "take.c3d"
+    assert w.mocap.marker_map is not None and len(w.mocap.marker_map.markers) == 60
+    assert w.last_error is None
+
+
+def test_a_dropped_project_gltf_or_take_opens_and_anything_else_is_one_sentence(qtbot, tmp_path, llf_csv):
+    from model.project import Project, save_project
+    from resources.sample_rig import build_sample_rig
+    w = make_window(qtbot, tmp_path)
+    rig = build_sample_rig()
+    project = tmp_path / "face.bsproj"
+    save_project(Project(rig=rig), project)
+    assert _drop(w, [project])
+    qtbot.waitUntil(lambda: not w.is_loading, timeout=60000)
+    assert w.document.path == project
+    note = tmp_path / "notes.txt"
+    note.write_text("not a rig")
+    assert _drop(w, [note])
+    assert w.last_error.startswith(f"{note}: is not something Blendshape Studio opens")
+    assert w.last_error.endswith(".") and ". " not in w.last_error and w.document.path == project   # one sentence
+    w.last_error = None
+    assert _drop(w, [llf_csv])                 # a Live Link Face take on the open rig
+    assert w.mocap.workspace.take_path == llf_csv
+    from model.export import export_rig
+    gltf = tmp_path / "face.glb"
+    export_rig(rig, gltf)
+    assert _drop(w, [gltf])
+    qtbot.waitUntil(lambda: not w.is_loading, timeout=60000)
+    QtWidgets.QApplication.processEvents()
+    assert w.document.path is None and w.document.rig.n_vertices == rig.n_vertices and w.last_error is None
+    assert w.windowTitle().startswith(w.document.rig.name)
+    http = QtCore.QMimeData()
+    http.setUrls([QtCore.QUrl("https://example.com/face.glb")])
+    enter = QtGui.QDragEnterEvent(QtCore.QPoint(5, 5), QtCore.Qt.CopyAction, http, QtCore.Qt.LeftButton,
+                                  QtCore.Qt.NoModifier)
+    QtWidgets.QApplication.sendEvent(w, enter)
+    assert not enter.isAccepted()              # only local files are taken

@@ -187,14 +187,14 @@ def camera_direction(name: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float = 30.0,
-               size: tuple[int, int] | None = None) -> None:
-    """Frame ``focus_points`` (e.g. the face area) from a preset direction, for the plotter's window
-    size or the given (w, h)."""
+               size: tuple[int, int] | None = None, direction: tuple | None = None) -> None:
+    """Frame ``focus_points`` (e.g. the face area) from a preset direction (or ``direction``: (focus-to-eye,
+    view up), e.g. where the camera looks now), for the plotter's window size or the given (w, h)."""
     pts = np.asarray(focus_points, dtype=np.float64)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     center = (lo + hi) / 2
     radius = 0.5 * np.linalg.norm(hi - lo)
-    d, up = camera_direction(name)
+    d, up = camera_direction(name) if direction is None else (np.asarray(direction[0]), np.asarray(direction[1]))
     dist = radius / np.tan(np.radians(view_angle / 2)) * 1.05
     w, h = size or plotter.window_size
     if 0 < w < h:  # the view angle is vertical: a tall, narrow view must step back to fit the width
@@ -208,13 +208,19 @@ def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float =
 
 
 def focus_vertices(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
-    """The points a camera should frame: the vertices any shape moves (the face), else all."""
+    """The points a camera should frame: where the shapes act (the face), else all vertices.
+
+    A vertex counts when some shape moves it by at least a tenth of what the shapes typically move the most
+    (the 99th percentile of each vertex's largest displacement): on ICT FaceKit a few shapes drag the scalp
+    and neck by a fraction of a millimetre, and framing every vertex that moves at all showed a small head
+    and shoulders instead of the face. Interior parts that move (teeth, tongue) lie inside the face's box.
+    """
     if deltas.size:
-        moving = np.abs(deltas).max(axis=(0, 2)) > 1e-6 * max(1.0, np.abs(neutral).max())
+        reach = np.sqrt((np.asarray(deltas, dtype=np.float64) ** 2).sum(axis=2)).max(axis=0)   # (V,)
+        moving = reach > 1e-6 * max(1.0, float(np.abs(neutral).max()))
         if moving.sum() >= 3:
-            pts = neutral[moving]
-            # Interior parts that move (teeth, tongue, eyeballs) are kept: they lie inside the face's box.
-            return pts
+            acts = reach >= 0.1 * float(np.percentile(reach[moving], 99))
+            return neutral[acts if acts.sum() >= 3 else moving]
     return neutral
 
 

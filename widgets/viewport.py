@@ -355,6 +355,19 @@ class Viewport(QtWidgets.QWidget):
     def reset_view(self) -> None:
         self.set_camera(self._camera)
 
+    def focus_points(self) -> np.ndarray | None:
+        """The points the camera presets frame (the face: the vertices the shapes move)."""
+        return self._focus
+
+    def frame_points(self, points: np.ndarray | None = None) -> None:
+        """Frame ``points`` (default: the face) from where the camera looks now (Maya's F and A)."""
+        pts = self._focus if points is None else np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if pts is None or not len(pts):
+            return
+        cam = self.camera_frame()
+        set_camera(self.plotter, self._camera, pts, direction=(-cam.forward, cam.up))
+        self.render()
+
     def render(self) -> None:
         self.plotter.render()
 
