@@ -55,6 +55,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.confirm_discard = True   # tests turn the unsaved-changes question off
         self.last_error: str | None = None
         self.shortcuts_dialog: QtWidgets.QDialog | None = None   # Help ▸ Keyboard Shortcuts, once opened
+        self.image_size_dialog: QtWidgets.QDialog | None = None  # File ▸ Export Image's size, while open
         self._worker: LoadWorker | None = None
         self._after_open: list = []   # what a drop opens once its rig is open (a take, a marker map)
         self.setAcceptDrops(True)     # files dropped on the window open (open_dropped)
@@ -186,8 +187,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.add_separator("file")
         act("file", "&Export Pose as OBJ…", self.export_pose, "Ctrl+E",
             "Write the posed surface as an OBJ, vertex order kept")
-        act("file", "Save Viewport &Image…", self.save_image_dialog, "Ctrl+Shift+E",
-            "Write what the viewport shows (with its colour bar) as a PNG")
+        act("file", "Export &Image…", self.save_image_dialog, "Ctrl+Shift+E",
+            "Write what the viewport shows (with its colour bar) as a PNG, at a width and height you choose")
         self.add_separator("file")
         self._menu_ends["file"] = act("file", "&Quit", self.close, QtGui.QKeySequence.Quit)
 
@@ -609,24 +610,48 @@ class MainWindow(QtWidgets.QMainWindow):
                                lambda message: self.show_error("Could not export", message))
 
     def save_image_dialog(self) -> None:
-        if self.document.project is not None:
-            self.save_dialog("Save Viewport Image", f"{self.document.rig.name}.png", "PNG image (*.png)",
-                             self.save_image)
+        """File ▸ Export Image…: the width and height (the view's size at first, then the last ones chosen; the
+        ``render`` command's 16..8192 pixels), then where to write the PNG."""
+        if self.document.project is None:
+            return
+        dialog = QtWidgets.QDialog(self)
+        dialog.setWindowTitle("Export Image")
+        form = QtWidgets.QFormLayout(dialog)
+        vw, vh = self.viewport.plotter.window_size
+        boxes = []
+        for label, value, key in (("Width", vw, "export/imageWidth"), ("Height", vh, "export/imageHeight")):
+            box = QtWidgets.QSpinBox()
+            box.setRange(16, 8192)
+            box.setSuffix(" px")
+            box.setValue(int(value))
+            app_settings.remember(box, key)
+            form.addRow(label, box)
+            boxes.append(box)
+        view_size = QtWidgets.QPushButton(f"The view's size ({vw} × {vh})")
+        view_size.clicked.connect(lambda: (boxes[0].setValue(vw), boxes[1].setValue(vh)))
+        form.addRow("", view_size)
+        buttons = QtWidgets.QDialogButtonBox(QtWidgets.QDialogButtonBox.Ok | QtWidgets.QDialogButtonBox.Cancel)
+        buttons.accepted.connect(dialog.accept)
+        buttons.rejected.connect(dialog.reject)
+        form.addRow(buttons)
+        dialog.setAttribute(QtCore.Qt.WA_DeleteOnClose)
+        self.image_size_dialog = dialog   # tests answer it
 
-    def save_image(self, path: str | Path) -> bool:
-        """Write the viewport as it is shown (camera, colour map and bar, wireframe) as a PNG."""
-        from model.atomic import atomic_write
+        def chosen() -> None:
+            size = (boxes[0].value(), boxes[1].value())
+            self.save_dialog("Export Image", f"{self.document.rig.name}.png", "PNG image (*.png)",
+                             lambda path: self.save_image(path, size))
+        dialog.accepted.connect(chosen)
+        dialog.open()
+
+    def save_image(self, path: str | Path, size: tuple[int, int] | None = None) -> bool:
+        """Write the viewport as it is shown (camera, colour map and bar, wireframe) as a PNG at ``size`` (w, h)
+        pixels (default: the view's), through the writer of the ``render`` command (``Viewport.write_image``)."""
         path = Path(path)
         if path.suffix.lower() != ".png":
             path = path.with_suffix(path.suffix + ".png") if path.suffix else path.with_suffix(".png")
-        rgb = np.ascontiguousarray(self.viewport.grab_image())
-        h, w = rgb.shape[:2]
-        image = QtGui.QImage(rgb.data, w, h, 3 * w, QtGui.QImage.Format_RGB888)
-        buf = QtCore.QBuffer()
-        buf.open(QtCore.QIODevice.WriteOnly)
-        image.save(buf, "PNG")
         try:
-            atomic_write(path, bytes(buf.data()))
+            w, h = self.viewport.write_image(path, size)
         except OSError as exc:
             self.show_error("Could not save the image", f"{path}: could not be written ({exc.strerror or exc}).")
             return False

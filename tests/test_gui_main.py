@@ -202,6 +202,7 @@ def test_save_viewport_image(qtbot, tmp_path, monkeypatch):
     answers = iter([(str(tmp_path / "menu.png"), ""), (str(tmp_path / "menu.obj"), "")])
     monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", lambda *a, **k: next(answers))
     w.save_image_dialog()
+    w.image_size_dialog.accept()                         # File > Export Image asks the size first
     w.export_pose()
     w.jobs.wait()                                        # the export runs in the background
     assert (tmp_path / "menu.png").stat().st_size > 0 and (tmp_path / "menu.obj").stat().st_size > 0

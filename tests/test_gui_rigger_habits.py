@@ -287,3 +287,48 @@ def test_a_dropped_project_gltf_or_take_opens_and_anything_else_is_one_sentence(
                                   QtCore.Qt.NoModifier)
     QtWidgets.QApplication.sendEvent(w, enter)
     assert not enter.isAccepted()              # only local files are taken
+
+
+# --- File ▸ Export Image at a chosen size ---------------------------------------------------------------------------
+def _skin_extent(rgb, axis: int) -> float:
+    """The fraction of the picture's width (axis 1) or height (axis 0) the face covers (skin: red well above blue)."""
+    rgb = np.asarray(rgb, dtype=np.int32)
+    idx = np.flatnonzero(((rgb[:, :, 0] - rgb[:, :, 2]) > 30).any(axis=1 - axis))
+    return (idx[-1] - idx[0] + 1) / rgb.shape[axis]
+
+
+def test_export_image_at_a_chosen_size_keeps_the_view(qtbot, tmp_path, monkeypatch):
+    """Ctrl+Shift+E asks the size, then writes the view as shown at that size: a narrower picture keeps what is
+    seen across (the view angle widens), a wider one keeps what is seen top to bottom."""
+    from PIL import Image
+    w = make_window(qtbot, tmp_path)
+    vw, vh = w.viewport.plotter.window_size
+    shown = w.viewport.grab_image()
+    out = tmp_path / "tall"
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", lambda *a, **k: (str(out), ""))
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_E, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    dialog = w.image_size_dialog
+    qtbot.waitUntil(dialog.isVisible, timeout=3000)
+    width, height = dialog.findChildren(QtWidgets.QSpinBox)
+    assert (width.value(), height.value()) == (vw, vh)
+    size = (vw, 2 * vh)                         # narrower than the view
+    for box, value in zip((width, height), size):
+        _focus(qtbot, box)
+        qtbot.keyClick(box.lineEdit(), QtCore.Qt.Key_A, QtCore.Qt.ControlModifier)
+        qtbot.keyClicks(box.lineEdit(), str(value))
+    qtbot.keyClick(height.lineEdit(), QtCore.Qt.Key_Return)
+    img = np.asarray(Image.open(tmp_path / "tall.png").convert("RGB"))
+    assert img.shape[:2] == (size[1], size[0])
+    assert _skin_extent(img, 1) == pytest.approx(_skin_extent(shown, 1), abs=0.03)   # the same view across
+    assert _skin_extent(img, 0) < 0.7 * _skin_extent(shown, 0)
+    assert f"{size[0]}x{size[1]}" in w.statusBar().currentMessage()
+    assert w.viewport.plotter.camera.view_angle == 30.0                             # the view itself unchanged
+    # wider than the view: the same view top to bottom
+    assert w.save_image(tmp_path / "wide.png", (3 * vw, vh))
+    img = np.asarray(Image.open(tmp_path / "wide.png").convert("RGB"))
+    assert img.shape[:2] == (vh, 3 * vw)
+    assert _skin_extent(img, 0) == pytest.approx(_skin_extent(shown, 0), abs=0.03)
+    # the size is remembered for the next export
+    w.save_image_dialog()
+    assert [b.value() for b in w.image_size_dialog.findChildren(QtWidgets.QSpinBox)] == list(size)
+    w.image_size_dialog.reject()

@@ -245,8 +245,9 @@ def render_png(points, face_counts, face_indices, out_path, *, focus=None, color
         plotter.close()
 
 
-def write_image_atomically(plotter, out_path) -> None:
-    """``plotter.screenshot`` to a temporary of the same extension beside ``out_path``, then ``os.replace``."""
+def write_image_atomically(plotter, out_path, size: tuple[int, int] | None = None) -> None:
+    """``plotter.screenshot`` (at ``size`` (w, h) pixels if given) to a temporary of the same extension beside
+    ``out_path``, then ``os.replace``. The ``render`` command and the GUI's File ▸ Export Image write through it."""
     import os
     from pathlib import Path
 
@@ -256,7 +257,7 @@ def write_image_atomically(plotter, out_path) -> None:
     remove_stale_temporaries(out.parent)
     tmp = temp_path(out, suffix=out.suffix or ".png")
     try:
-        plotter.screenshot(str(tmp))
+        plotter.screenshot(str(tmp), window_size=list(size) if size else None)
         os.replace(tmp, out)
     finally:
         tmp.unlink(missing_ok=True)
