@@ -265,6 +265,7 @@ class MainWindow(QtWidgets.QMainWindow):
     # --- document signals --------------------------------------------------------------------------
     def _on_rig_change(self) -> None:
         rig = self.document.rig
+        self.mocap.views_dock.hide()   # a fresh rig has no solve to show (a solve shows the dock again)
         self.shapes_panel.set_shapes(rig.shape_names, sorted(rig.presets))
         self.viewport.set_surface(self.document.surface(), rig.face_counts, rig.face_indices,
                                   focus=focus_vertices(rig.neutral, rig.deltas))
@@ -746,13 +747,23 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # --- window state ------------------------------------------------------------------------------
     def _restore_layout(self) -> None:
+        """The last session's window and docks; on first start the window maximised, the side panels narrow and
+        the timeline low so the viewport is the largest part. The Mocap Views dock never comes back empty: it
+        shows a solve, and there is none at start."""
         s = app_settings.settings()
         geo = s.value("window/geometry")
         if geo is not None:
             self.restoreGeometry(geo)
+        else:   # the screen's size (without a window manager, maximising alone changes nothing), maximised
+            screen = self.screen() or QtGui.QGuiApplication.primaryScreen()
+            if screen is not None:
+                self.setGeometry(screen.availableGeometry())
+            self.setWindowState(self.windowState() | QtCore.Qt.WindowMaximized)
         state = s.value("window/state")
-        if state is not None:
-            self.restoreState(state)
+        if state is None or not self.restoreState(state):
+            self.resizeDocks([self.segmentation_dock, self.shapes_dock], [350, 330], QtCore.Qt.Horizontal)
+            self.resizeDocks([self.keyframes.dock], [60], QtCore.Qt.Vertical)
+        self.mocap.views_dock.hide()
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
         if not self._maybe_discard():

@@ -332,3 +332,39 @@ def test_export_image_at_a_chosen_size_keeps_the_view(qtbot, tmp_path, monkeypat
     w.save_image_dialog()
     assert [b.value() for b in w.image_size_dialog.findChildren(QtWidgets.QSpinBox)] == list(size)
     w.image_size_dialog.reject()
+
+
+# --- first start ----------------------------------------------------------------------------------------------------
+def test_first_start_fills_the_screen_frames_the_face_and_never_restores_empty_mocap_views(qtbot, tmp_path, ict_dir):
+    from app.main_window import MainWindow
+    from tests.gui_helpers import isolate_settings
+    isolate_settings(tmp_path)
+    w = MainWindow()
+    w.confirm_discard = False
+    qtbot.addWidget(w)
+    w.show()
+    qtbot.waitExposed(w)
+    screen = w.screen().availableGeometry()
+    assert w.isMaximized() or (w.width() >= 0.95 * screen.width() and w.height() >= 0.95 * screen.height())
+    area = w.viewport.width() * w.viewport.height()
+    assert area > 0.45 * w.width() * w.height()
+    docks = [d for d in w.findChildren(QtWidgets.QDockWidget) if d.isVisible()]
+    assert all(d.width() * d.height() < area for d in docks)
+    assert not w.mocap.views_dock.isVisible()
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.wait(200)
+    face = w.viewport.focus_points()
+    assert len(face) < 0.6 * w.document.rig.n_vertices          # where the shapes act, not the whole head
+    assert _view_extent(w, face) > 0.8                           # the face fills the view
+    assert _view_extent(w, w.document.rig.neutral) > 1.1          # head and shoulders go past its edges
+    # a layout saved with the Mocap Views dock open does not bring it back empty
+    w.mocap.views_dock.show()
+    w.close()
+    w2 = MainWindow()
+    w2.confirm_discard = False
+    qtbot.addWidget(w2)
+    w2.show()
+    qtbot.waitExposed(w2)
+    assert not w2.mocap.views_dock.isVisible()
+    w2.open_sample()
+    assert not w2.mocap.views_dock.isVisible()

@@ -189,21 +189,34 @@ def camera_direction(name: str) -> tuple[np.ndarray, np.ndarray]:
 def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float = 30.0,
                size: tuple[int, int] | None = None, direction: tuple | None = None) -> None:
     """Frame ``focus_points`` (e.g. the face area) from a preset direction (or ``direction``: (focus-to-eye,
-    view up), e.g. where the camera looks now), for the plotter's window size or the given (w, h)."""
-    pts = np.asarray(focus_points, dtype=np.float64)
+    view up), e.g. where the camera looks now), for the plotter's window size or the given (w, h).
+
+    The camera looks at the centre of the points' box and stands as close as it can with every point inside
+    the view (each at its own depth: the nose nearer than the ears), with a margin of 6%: a box's bounding
+    sphere wasted a third of the view on a face, which is much deeper and narrower than it is tall."""
+    pts = np.asarray(focus_points, dtype=np.float64).reshape(-1, 3)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     center = (lo + hi) / 2
-    radius = 0.5 * np.linalg.norm(hi - lo)
-    d, up = camera_direction(name) if direction is None else (np.asarray(direction[0]), np.asarray(direction[1]))
-    dist = radius / np.tan(np.radians(view_angle / 2)) * 1.05
+    d, up = camera_direction(name) if direction is None else (np.asarray(direction[0], dtype=np.float64),
+                                                              np.asarray(direction[1], dtype=np.float64))
+    d = d / np.linalg.norm(d)
+    right = np.cross(up, d)
+    if np.linalg.norm(right) < 1e-9:   # looking along the up vector: any perpendicular will do
+        right = np.cross(np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0]), d)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(d, right)
+    rel = pts - center
+    x, y, z = np.abs(rel @ right) * 1.06, np.abs(rel @ true_up) * 1.06, rel @ d   # z: towards the eye
     w, h = size or plotter.window_size
-    if 0 < w < h:  # the view angle is vertical: a tall, narrow view must step back to fit the width
-        dist *= h / w
+    t = np.tan(np.radians(view_angle / 2))
+    aspect = w / h if w > 0 and h > 0 else 1.0
+    dist = float(np.max(z + np.maximum(y / t, x / (t * aspect)))) if len(pts) else 1.0
+    dist = max(dist, 1e-6 + float(z.max(initial=0.0)), 1e-6)
     cam = plotter.camera
     cam.view_angle = view_angle
     cam.focal_point = center.tolist()
     cam.position = (center + d * dist).tolist()
-    cam.up = up.tolist()
+    cam.up = true_up.tolist()
     plotter.reset_camera_clipping_range()
 
 
