@@ -94,6 +94,7 @@ class MainWindow(QtWidgets.QMainWindow):
             lambda on: self.correctives.stop_sculpting() if on and self.correctives.sculpting else None)
         # a saved project's view, take and marker map come back once every controller has the new rig
         self.document.rig_changed.connect(lambda: session_state.restore(self))
+        self._build_toolbar()
         self._arrange_docks()
         self._restore_layout()
 
@@ -224,6 +225,39 @@ class MainWindow(QtWidgets.QMainWindow):
         act("help", "&Keyboard Shortcuts", self.show_shortcuts, "F1")
         act("help", "&About Blendshape Studio", self.show_about)
         self._rebuild_recent_menu()
+
+    def _build_toolbar(self) -> None:
+        """The viewport's tools above it: Marker mode (a toggle that is orange and bold while on), Frame Selected
+        and Frame All."""
+        bar = self.addToolBar("Tools")
+        bar.setObjectName("toolbar_tools")
+        bar.setMovable(False)
+        bar.setToolButtonStyle(QtCore.Qt.ToolButtonTextOnly)
+        button = QtWidgets.QToolButton()     # its own button (not the action's): its text says the state
+        button.setCheckable(True)
+        button.setFocusPolicy(QtCore.Qt.NoFocus)
+        button.toggled.connect(self.markers.mode_action.setChecked)
+        bar.addWidget(button)
+        self.marker_mode_button = button
+        self.marker_mode_button.setObjectName("marker_mode_button")
+        self.marker_mode_button.setStyleSheet(
+            "QToolButton { padding: 3px 12px; border: 1px solid #8a8a8a; border-radius: 4px; }"
+            "QToolButton:checked { background: #f0a030; color: #141414; font-weight: bold; border: 1px solid #ffd080; }")
+        self.markers.mode_action.toggled.connect(self._on_marker_mode_toggled)
+        self._on_marker_mode_toggled(self.markers.mode_action.isChecked())
+        bar.addSeparator()
+        for act in self.actions():
+            if act.text() in ("&Frame Selected", "Frame &All"):
+                bar.addAction(act)
+        self.tools_bar = bar
+
+    def _on_marker_mode_toggled(self, on: bool) -> None:
+        self.marker_mode_button.blockSignals(True)
+        self.marker_mode_button.setChecked(on)
+        self.marker_mode_button.blockSignals(False)
+        self.marker_mode_button.setText("● Marker Mode: On" if on else "Marker Mode")
+        self.marker_mode_button.setToolTip("Marker mode is on: clicks add markers, drags pose (M turns it off)" if on
+                                           else "Marker mode (M): click the face to add markers, drag them to pose")
 
     def _arrange_docks(self) -> None:
         """Left: Segmentation, Correctives, Markers as tabs. Right: Shapes, History, Mocap. Bottom: the

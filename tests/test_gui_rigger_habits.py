@@ -368,3 +368,44 @@ def test_first_start_fills_the_screen_frames_the_face_and_never_restores_empty_m
     assert not w2.mocap.views_dock.isVisible()
     w2.open_sample()
     assert not w2.mocap.views_dock.isVisible()
+
+
+# --- Marker mode's button, status messages in the user's words ------------------------------------------------------
+def _mean_colour(widget) -> np.ndarray:
+    img = widget.grab().toImage().convertToFormat(QtGui.QImage.Format_RGB888)
+    a = np.frombuffer(img.constBits(), dtype=np.uint8, count=img.sizeInBytes())
+    a = a.reshape(img.height(), img.bytesPerLine())[:, :img.width() * 3].reshape(img.height(), img.width(), 3)
+    return a.reshape(-1, 3).mean(axis=0)
+
+
+def test_marker_mode_button_shows_when_it_is_on(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    button = w.marker_mode_button
+    assert button.isVisible() and not button.isChecked() and not w.markers.mode
+    off = _mean_colour(button)
+    qtbot.mouseClick(button, QtCore.Qt.LeftButton)
+    assert w.markers.mode and button.isChecked() and "On" in button.text()
+    on = _mean_colour(button)
+    assert on[0] - on[2] > 60 and on[0] - on[2] > off[0] - off[2] + 50      # orange while on
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_M)                       # M turns it off: the button follows
+    assert not w.markers.mode and not button.isChecked() and "On" not in button.text()
+    assert np.abs(_mean_colour(button) - off).max() < 8
+
+
+def test_added_marker_is_described_in_the_users_words(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    mk = w.markers
+    mk.mode_action.setChecked(True)
+    rig = w.document.rig
+    jaw = rig.shape_index("jawOpen")
+    v = int(np.argmax(np.linalg.norm(rig.deltas[jaw], axis=1)))
+    # a click on the face where jawOpen acts most (through the viewport's pick, as a click does)
+    d = w.viewport.world_to_display(w.document.surface()[v][None])[0]
+    pos = w.viewport.display_to_qt(d[0], d[1]).toPoint()
+    qtbot.mouseClick(w.viewport.canvas, QtCore.Qt.LeftButton, pos=pos)
+    QtWidgets.QApplication.processEvents()
+    assert len(mk.markers) == 1
+    text = w.statusBar().currentMessage()
+    assert text.startswith(f"Added marker {mk.markers.names[0]} on the face")
+    assert "triangle" not in text and "vertex" not in text
+    assert "moved most by" in text

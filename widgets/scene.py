@@ -108,8 +108,9 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
     if colormap.legend:
         entries = colormap.legend if len(colormap.legend) <= 10 else \
             colormap.legend[:9] + [(f"… {len(colormap.legend) - 9} more", (0.7, 0.7, 0.7))]
-        plotter.add_legend(entries, bcolor=(0.1, 0.1, 0.12), border=False, face="rectangle", name="legend",
-                           size=(0.24, 0.035 * len(entries)), loc="upper left")
+        legend = plotter.add_legend(entries, bcolor=(0.1, 0.1, 0.12), border=False, face="rectangle", name="legend",
+                                    size=(0.24, 0.035 * len(entries)), loc="upper left")
+        _legend_white_text(legend, entries)
         if colormap.title:
             plotter.add_text(colormap.title, position="lower_right", font_size=10, color="white", name="legend_title")
     if colormap.rgb:
@@ -131,6 +132,20 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
             plotter.scalar_bars[bar["title"]].SetVerticalTitleSeparation(8)  # pixels between title and top label
     _map_directly(actor, mesh, "values")
     return actor
+
+
+def _legend_white_text(legend, entries) -> None:
+    """White text beside each swatch: a legend's text took its swatch's colour (a dark blue region's name was
+    unreadable on the dark box). Each swatch is a square carrying its colour as cell scalars."""
+    import pyvista as pv
+    square = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    for i, (_text, color) in enumerate(entries):
+        swatch = pv.PolyData(square, faces=[4, 0, 1, 2, 3])
+        swatch.cell_data["rgb"] = np.array([[int(round(255 * c)) for c in color]], dtype=np.uint8)
+        legend.SetEntrySymbol(i, swatch)
+        legend.SetEntryColor(i, 1.0, 1.0, 1.0)
+    legend.ScalarVisibilityOn()
+    legend.SetPadding(4)
 
 
 def _map_directly(actor, mesh, name: str) -> None:
