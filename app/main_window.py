@@ -747,7 +747,8 @@ class MainWindow(QtWidgets.QMainWindow):
         ordered += [("", a) for a in self.findChildren(QtGui.QAction) if a not in seen]
         rows = []
         for where, act in ordered:
-            keys = ", ".join(k.toString(QtGui.QKeySequence.NativeText) for k in act.shortcuts() if not k.isEmpty())
+            keys = ", ".join(dict.fromkeys(k.toString(QtGui.QKeySequence.NativeText) for k in act.shortcuts()
+                                           if not k.isEmpty()))
             if keys:
                 rows.append((where or "Window", act.text().replace("&", ""), keys))
         for sc in self.findChildren(QtGui.QShortcut):   # panel keys that are not menu actions (region nudges)
@@ -795,7 +796,7 @@ class MainWindow(QtWidgets.QMainWindow):
             self.setWindowState(self.windowState() | QtCore.Qt.WindowMaximized)
         state = s.value("window/state")
         if state is None or not self.restoreState(state):
-            self.resizeDocks([self.segmentation_dock, self.shapes_dock], [350, 330], QtCore.Qt.Horizontal)
+            self.resizeDocks([self.segmentation_dock, self.shapes_dock], [370, 330], QtCore.Qt.Horizontal)
             self.resizeDocks([self.keyframes.dock], [60], QtCore.Qt.Vertical)
         self.mocap.views_dock.hide()
 

@@ -409,3 +409,17 @@ def test_added_marker_is_described_in_the_users_words(qtbot, tmp_path):
     assert text.startswith(f"Added marker {mk.markers.names[0]} on the face")
     assert "triangle" not in text and "vertex" not in text
     assert "moved most by" in text
+
+
+def test_help_lists_the_new_keys(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_F1)
+    table = w.shortcuts_dialog.findChild(QtWidgets.QTreeWidget)
+    rows = {(table.topLevelItem(i).text(1), table.topLevelItem(i).text(0)) for i in range(table.topLevelItemCount())}
+    for name, keys in (("Frame Selected", "F"), ("Frame All", "A, Home"), ("Next Key", "."),
+                       ("Previous Key", ","), ("Graph Editor", "Ctrl+G"), ("Set Key", "S"),
+                       ("Export Image…", "Ctrl+Shift+E"), ("Delete the Selected Key (Graph Editor)", "Del")):
+        assert (name, keys) in rows, name
+    shortcuts = [k for _n, k in rows]
+    singles = [k for ks in shortcuts for k in ks.split(", ")]
+    assert len([k for k in singles if k == "F"]) == 1                   # F is Frame Selected alone

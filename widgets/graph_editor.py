@@ -37,6 +37,10 @@ class GraphPlot(CurvePlot):
         self.active: int | None = None                    # the active curve's shape
         self.selected_key: tuple[int, float] | None = None
         self._drag: tuple[int, float, float, float] | None = None   # shape, old time, new time, new weight
+        delete = QtGui.QShortcut(QtGui.QKeySequence(QtGui.QKeySequence.Delete), self)
+        delete.setContext(QtCore.Qt.WidgetShortcut)      # while the plot has the focus (a click gives it)
+        delete.setWhatsThis("Delete the Selected Key (Graph Editor)")
+        delete.activated.connect(self.delete_selected_key)
 
     def set_graph(self, names: list[str], shapes: list[int], curves: np.ndarray, keys: dict, fps: float,
                   y_range: tuple[float, float], active: int | None) -> None:
@@ -158,13 +162,11 @@ class GraphPlot(CurvePlot):
             self.key_moved.emit(k, t0, t, v)
         self._refresh()
 
-    def keyPressEvent(self, event) -> None:  # Qt override
-        if event.key() in (QtCore.Qt.Key_Delete, QtCore.Qt.Key_Backspace) and self.selected_key is not None:
+    def delete_selected_key(self) -> None:
+        if self.selected_key is not None:
             k, t = self.selected_key
             self.selected_key = None
             self.key_deleted.emit(k, t)
-            return
-        super().keyPressEvent(event)
 
 
 class GraphEditor(QtWidgets.QWidget):
