@@ -15,6 +15,7 @@ import pytest
 from PySide6 import QtCore
 
 from tests.gui_helpers import make_window, open_and_wait
+from tests.test_gui_editor_habits import _focus
 
 
 @pytest.mark.parametrize("fps", [24.0, 60.0])
@@ -37,9 +38,10 @@ def test_keyed_playback_keeps_real_time_on_ict(benchmark, qtbot, tmp_path, ict_d
     def play() -> float:
         drawn.clear()
         kf.scrub(0.0)
-        w.viewport.canvas.setFocus()
+        _focus(qtbot, w.viewport.canvas)
         t0 = time.perf_counter()
         qtbot.keyClick(w.viewport.canvas, QtCore.Qt.Key_Space)
+        assert kf.playing
         qtbot.waitUntil(lambda: not kf.playing, timeout=20000)
         return time.perf_counter() - t0
 
