@@ -216,8 +216,11 @@ class MainWindow(QtWidgets.QMainWindow):
         act("view", "&Frame Selected", self.frame_selected, "F",
             "Frame the selected marker (Marker mode) or region (Segmentation panel), else the face")
         self.frame_all_action = act("view", "Frame &All", lambda: self.viewport.frame_points(), "A",
-                                    "Frame the whole face from where the camera looks now (also Home)")
-        self.frame_all_action.setShortcuts([QtGui.QKeySequence("A"), QtGui.QKeySequence("Home")])
+                                    "Frame the whole face from where the camera looks now (also Home in the view)")
+        # Home too, but only in the viewport: lists, sliders and boxes keep Home for their first item
+        home = QtGui.QShortcut(QtGui.QKeySequence("Home"), self.viewport, lambda: self.viewport.frame_points())
+        home.setContext(QtCore.Qt.WidgetWithChildrenShortcut)
+        home.setWhatsThis("Frame All (in the viewport)")
         act("view", "Reset &View", self.viewport.reset_view, None, "Back to the camera preset, framing the face")
         self.add_separator("view")
         self.add_menu("panels", "&Panels", parent="view")

@@ -416,7 +416,8 @@ def test_help_lists_the_new_keys(qtbot, tmp_path):
     _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_F1)
     table = w.shortcuts_dialog.findChild(QtWidgets.QTreeWidget)
     rows = {(table.topLevelItem(i).text(1), table.topLevelItem(i).text(0)) for i in range(table.topLevelItemCount())}
-    for name, keys in (("Frame Selected", "F"), ("Frame All", "A, Home"), ("Next Key", "."),
+    for name, keys in (("Frame Selected", "F"), ("Frame All", "A"), ("Frame All (in the viewport)", "Home"),
+                       ("Next Key", "."),
                        ("Previous Key", ","), ("Graph Editor", "Ctrl+G"), ("Set Key", "S"),
                        ("Export Image…", "Ctrl+Shift+E"), ("Delete the Selected Key (Graph Editor)", "Del")):
         assert (name, keys) in rows, name
