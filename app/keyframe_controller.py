@@ -113,6 +113,7 @@ class KeyframeController(QtCore.QObject):
         p.time_changed.connect(self.scrub)
         p.play_toggled.connect(self.set_playing)
         p.set_key_requested.connect(self.key_pressed)
+        p.key_step_requested.connect(self.jump_to_key)
         p.remove_key_requested.connect(self.remove_key)
         p.interpolation_changed.connect(lambda v: self.set_settings(interpolation=v))
         p.fps_changed.connect(lambda v: self.set_settings(fps=v))
@@ -187,8 +188,12 @@ class KeyframeController(QtCore.QObject):
 
     # --- edits ----------------------------------------------------------------------------------------
     def show_graph_editor(self) -> None:
+        """Animation ▸ Graph Editor (Ctrl+G): above the timeline, a third of the window high the first time."""
+        first = not self.graph_dock.isVisible() and self.graph_dock.height() < 150
         self.graph_dock.show()
         self.graph_dock.raise_()
+        if first and not self.graph_dock.isFloating():
+            self.window.resizeDocks([self.graph_dock], [max(240, self.window.height() // 3)], QtCore.Qt.Vertical)
 
     def selected_shapes(self) -> list[int]:
         """The shapes S keys alone: those selected in the Graph Editor while it is shown (else none: the pose)."""

@@ -270,6 +270,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.tabifyDockWidget(self.segmentation_dock, self.markers.dock)
         self.tabifyDockWidget(self.history_dock, self.mocap.dock)
         self.splitDockWidget(self.mocap.views_dock, self.keyframes.dock, QtCore.Qt.Vertical)
+        self.tabifyDockWidget(self.mocap.views_dock, self.keyframes.graph_dock)   # above the timeline, full width
         self.segmentation_dock.raise_()
         self.shapes_dock.raise_()
 

@@ -170,6 +170,11 @@ def test_period_and_comma_go_to_the_next_and_previous_key(qtbot, tmp_path):
     assert kf.time == 1.25
     _key(qtbot, canvas, QtCore.Qt.Key_Comma)
     assert kf.time == 0.5
+    qtbot.mouseClick(kf.panel.next_key, QtCore.Qt.LeftButton)      # the timeline's buttons do the same
+    assert kf.time == 1.25
+    qtbot.mouseClick(kf.panel.previous_key, QtCore.Qt.LeftButton)
+    qtbot.mouseClick(kf.panel.previous_key, QtCore.Qt.LeftButton)
+    assert kf.time == 0.0
     assert w.document.undo_stack.count() == steps     # navigation, not an edit
 
 
