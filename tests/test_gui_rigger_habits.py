@@ -429,3 +429,23 @@ def test_help_lists_the_new_keys(qtbot, tmp_path):
     shortcuts = [k for _n, k in rows]
     singles = [k for ks in shortcuts for k in ks.split(", ")]
     assert len([k for k in singles if k == "F"]) == 1                   # F is Frame Selected alone
+
+
+def test_region_legend_is_white_text_at_a_readable_size_in_the_corner(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    w.segmentation.wait()
+    combo = w.segmentation_panel.view
+    _key(qtbot, combo, QtCore.Qt.Key_End)                       # the Segmentation view
+    assert combo.currentData() == "segmentation"
+    legend = w.viewport.plotter.legend
+    n = legend.GetNumberOfEntries()
+    assert n >= 3
+    colours = {tuple(np.round(legend.GetEntryColor(i), 3)) for i in range(n)}
+    assert colours == {(1.0, 1.0, 1.0)}                          # the text: white on the dark box
+    swatches = [legend.GetEntrySymbol(i).GetCellData().GetArray("rgb").GetTuple(0) for i in range(n)]
+    assert len(set(swatches)) >= n - 1                            # the region colours are on the swatches
+    vw, vh = w.viewport.plotter.window_size
+    x, y = legend.GetPosition()
+    lw, lh = legend.GetPosition2()
+    assert lw * vw == pytest.approx(min(220, 0.26 * vw), abs=1) and lh * vh / n >= 15   # rows ≥ 15 px high
+    assert (x + lw) * vw < 0.5 * vw and y * vh > 0.5 * vh         # in the upper left, clear of the lower-right title

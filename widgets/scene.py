@@ -108,10 +108,11 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
     if colormap.legend:
         entries = colormap.legend if len(colormap.legend) <= 10 else \
             colormap.legend[:9] + [(f"… {len(colormap.legend) - 9} more", (0.7, 0.7, 0.7))]
-        # a fixed size in pixels (the text scales to its box): 19 px a row, 220 px wide, in the upper left corner
-        # (the colour bar is on the right, the legend's title in the lower right)
+        # a fixed size in pixels (the text scales to its box): 220 px wide and 19 px a row, at most a quarter of
+        # a small picture's width, in the upper left corner (the colour bar is right, the legend's title lower right)
         w, h = plotter.window_size
-        size = (min(0.45, 220 / max(w, 1)), min(0.9, 19 * len(entries) / max(h, 1)))
+        width = min(220.0, 0.26 * max(w, 1))
+        size = (width / max(w, 1), min(0.9, width * 19 / 220 * len(entries) / max(h, 1)))
         legend = plotter.add_legend(entries, bcolor=(0.1, 0.1, 0.12), border=False, face="rectangle", name="legend",
                                     size=size, loc="upper left")
         _legend_white_text(legend, entries)
