@@ -213,8 +213,9 @@ class MainWindow(QtWidgets.QMainWindow):
                                            ("right", "&Right Side"), ("three-quarter", "&Three-Quarter")]):
             act("view", f"{label} Camera", lambda _=False, n=name: self.viewport.set_camera(n), str(i + 1),
                 f"Look at the face from the {name.replace('-', ' ')}")
-        act("view", "&Frame Selected", self.frame_selected, "F",
-            "Frame the selected marker (Marker mode) or region (Segmentation panel), else the face")
+        self.frame_selected_action = act("view", "&Frame Selected", self.frame_selected, "F",
+                                         "Frame the selected marker (Marker mode) or region (Segmentation panel), "
+                                         "else the face")
         self.frame_all_action = act("view", "Frame &All", lambda: self.viewport.frame_points(), "A",
                                     "Frame the whole face from where the camera looks now (also Home in the view)")
         # Home too, but only in the viewport: lists, sliders and boxes keep Home for their first item
@@ -249,9 +250,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.markers.mode_action.toggled.connect(self._on_marker_mode_toggled)
         self._on_marker_mode_toggled(self.markers.mode_action.isChecked())
         bar.addSeparator()
-        for act in self.actions():
-            if act.text() in ("&Frame Selected", "Frame &All"):
-                bar.addAction(act)
+        bar.addAction(self.frame_selected_action)
+        bar.addAction(self.frame_all_action)
         self.tools_bar = bar
 
     def _on_marker_mode_toggled(self, on: bool) -> None:

@@ -432,7 +432,7 @@ def test_help_lists_the_new_keys(qtbot, tmp_path):
 
 
 def test_region_legend_is_white_text_at_a_readable_size_in_the_corner(qtbot, tmp_path):
-    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    w = make_window(qtbot, tmp_path, size=(1920, 1200))        # the window as it opens (the screen's size)
     w.segmentation.wait()
     combo = w.segmentation_panel.view
     _key(qtbot, combo, QtCore.Qt.Key_End)                       # the Segmentation view
@@ -447,5 +447,5 @@ def test_region_legend_is_white_text_at_a_readable_size_in_the_corner(qtbot, tmp
     vw, vh = w.viewport.plotter.window_size
     x, y = legend.GetPosition()
     lw, lh = legend.GetPosition2()
-    assert lw * vw == pytest.approx(min(220, 0.26 * vw), abs=1) and lh * vh / n >= 15   # rows ≥ 15 px high
+    assert vw > 846 and lw * vw == pytest.approx(220, abs=1) and lh * vh / n >= 18   # rows of 19 px
     assert (x + lw) * vw < 0.5 * vw and y * vh > 0.5 * vh         # in the upper left, clear of the lower-right title
