@@ -154,6 +154,25 @@ def test_graph_editor_moves_and_deletes_a_key_undoably_and_the_viewport_follows(
     assert kf.time == 1.5 and w.document.weights[jaw] == pytest.approx(0.3125)   # smooth between 0.5 and 0
 
 
+def test_a_click_on_a_curve_makes_it_the_graph_editors_active_curve(qtbot, tmp_path):
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    kf, rig = w.keyframes, w.document.rig
+    jaw, smile = rig.shape_index("jawOpen"), rig.shape_index("mouthSmile_L")
+    kf.set_key(0.0)
+    _pose(w, jawOpen=0.2, mouthSmile_L=0.9)
+    kf.set_key(1.0)
+    kf.show_graph_editor()
+    qtbot.waitUntil(lambda: kf.graph.plot.isVisible() and kf.graph.plot.height() > 120, timeout=3000)
+    plot = kf.graph.plot
+    assert kf.graph.selected_shapes() == [] and set(plot.shapes) == {jaw, smile}   # the shapes that move
+    f = int(round(0.8 * kf.fps))                                  # a frame on the smile's curve, off its keys
+    value = float(plot.curves[plot.shapes.index(smile)][1][f])
+    assert abs(value - float(plot.curves[plot.shapes.index(jaw)][1][f])) > 0.3
+    qtbot.mouseClick(plot, QtCore.Qt.LeftButton, pos=plot.key_point(f / kf.fps, value).toPoint())
+    assert kf.graph.selected_shapes() == [smile] and plot.active == smile and plot.shapes == [smile]
+    assert kf.time == 0.0                                         # a click on a curve selects, it does not scrub
+
+
 def test_period_and_comma_go_to_the_next_and_previous_key(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path)
     kf = w.keyframes
@@ -192,8 +211,12 @@ def test_f_frames_the_selected_region_and_a_frames_the_face(qtbot, tmp_path):
     seg = w.segmentation.segmentation
     labels = seg.levels[w.segmentation.level].core_labels(w.document.rig.n_vertices)
     region = int(np.argmin(np.bincount(labels[labels >= 0])))      # the smallest region
-    w.segmentation_panel.select_region(region)
-    w.segmentation_panel.region_selected.emit(region)
+    tree = w.segmentation_panel.regions                               # click the region in the list
+    item = next(tree.topLevelItem(i) for i in range(tree.topLevelItemCount())
+                if int(tree.topLevelItem(i).data(0, QtCore.Qt.UserRole)) == region)
+    tree.scrollToItem(item)
+    qtbot.mouseClick(tree.viewport(), QtCore.Qt.LeftButton, pos=tree.visualItemRect(item).center())
+    assert w.segmentation_panel.selected_region() == region
     pts = w.document.surface()[labels == region]
     face = w.viewport.focus_points()
     whole = _view_extent(w, face)           # as the window opened: the face framed
