@@ -5,8 +5,12 @@ A key stores the whole pose: a global weight vector, or per-region weights of on
 keys of a project share one form; a global key set on a regional timeline is the same vector in every region,
 and a regional timeline keeps its level's partition of unity with it, so it plays back exactly after the
 segmentation changes or the project is reopened. Saved in the project: ``sections['keyframes']`` (times,
-interpolation, frame rate, length, level) and ``arrays['keyframes/...']`` (the key weights and the blend).
-Setting or removing a key and changing the settings are undo steps; scrubbing and playing are not edits.
+interpolation, frame rate, length, level) and ``arrays['keyframes/...']`` (the key weights, the blend, and
+``keyframes/keyed``, (N, K) bool, when some key keys only some shapes).
+A key may key one shape (the slider's context menu, or S with shapes selected in the Graph Editor): each shape
+is then a curve of its own, which the Graph Editor (widgets/graph_editor.py) shows and edits (move a key in time
+and value, delete it). Setting, moving or removing a key and changing the settings are undo steps; scrubbing,
+playing and jumping between keys (, and .) are not edits.
 """
 from __future__ import annotations
 
@@ -25,17 +29,37 @@ from model.keyframes import Keyframe, Timeline, keyed_frames, keyed_global_weigh
 from model.pose import PoseEvaluator
 from model.pc2 import write_pc2
 from model.weights_csv import write_weights_csv
+from model.wording import count
+from widgets.graph_editor import GraphEditor
 from widgets.timeline import TimelinePanel
 
 SECTION = "keyframes"
-ARRAY_KEYS = ("keyframes/weights", "keyframes/blend_data", "keyframes/blend_indices", "keyframes/blend_indptr")
+ARRAY_KEYS = ("keyframes/weights", "keyframes/blend_data", "keyframes/blend_indices", "keyframes/blend_indptr",
+              "keyframes/keyed")
 DEFAULTS = {"interpolation": "smooth", "fps": 24.0, "duration": 2.0}
 
 
+class _KeyEditCommand(SetSectionArraysCommand):
+    """A key edit whose undo and redo also show the animation's pose at the current time again (the Graph
+    Editor's moves and deletes, one-shape keys): the viewport follows the curves."""
+
+    def __init__(self, controller: "KeyframeController", *args) -> None:
+        super().__init__(controller.document, *args)
+        self.controller = controller
+
+    def redo(self) -> None:
+        super().redo()
+        self.controller.scrub(self.controller.time)
+
+    def undo(self) -> None:
+        super().undo()
+        self.controller.scrub(self.controller.time)
+
+
 class KeyframeController(QtCore.QObject):
-    """The keyed animation; owns the Timeline panel (``panel``, in ``dock``, under the viewport) and the
-    Animation menu's Set Key (S, ``set_key_action``), Play / Pause (Space, ``play_action``) and Remove Key, and
-    the File menu's keyed exports."""
+    """The keyed animation; owns the Timeline panel (``panel``, in ``dock``, under the viewport), the Graph
+    Editor (``graph``, in ``graph_dock``) and the Animation menu's Set Key (S, ``set_key_action``), Play / Pause
+    (Space, ``play_action``), Remove Key, next/previous key (. and ,), and the File menu's keyed exports."""
 
     time_changed = QtCore.Signal(float)
 
@@ -44,12 +68,23 @@ class KeyframeController(QtCore.QObject):
         self.window, self.document = window, window.document
         self.panel = panel = TimelinePanel(window)
         self.dock = window.add_dock("Timeline", panel, QtCore.Qt.BottomDockWidgetArea)
-        self.set_key_action = window.add_action("animation", "&Set Key", lambda: self.set_key(), "S",
-                                                "Key the current pose at the current time")
+        self.set_key_action = window.add_action("animation", "&Set Key", self.key_pressed, "S",
+                                                "Key the current pose at the current time (only the shapes "
+                                                "selected in the Graph Editor, when it is shown)")
         self.play_action = window.add_action("animation", "&Play / Pause", self.toggle_play, "Space",
                                              "Play or pause the keyed animation")
         window.add_action("animation", "&Remove Key", lambda: self.remove_key(), None,
                           "Remove the key at the current time")
+        self.next_key_action = window.add_action("animation", "&Next Key", lambda: self.jump_to_key(1), ".",
+                                                 "Go to the next key (of the shapes selected in the Graph Editor, "
+                                                 "else of any shape)")
+        self.previous_key_action = window.add_action("animation", "P&revious Key", lambda: self.jump_to_key(-1),
+                                                     ",", "Go to the previous key")
+        self.graph = GraphEditor(window)
+        self.graph_dock = window.add_dock("Graph Editor", self.graph, QtCore.Qt.BottomDockWidgetArea)
+        self.graph_dock.hide()   # on demand: the viewport keeps the room on first start
+        window.add_action("animation", "&Graph Editor", self.show_graph_editor, "Ctrl+G",
+                          "Show the animation's weight curves with each shape's keys (also in View ▸ Panels)")
         window.add_action("file", "Export Keyed &Weights as CSV…", lambda: self.export_csv_dialog(), None,
                           "Write the keyed animation's weights per frame as CSV: one column per shape, the global "
                           "rig's weights that best reproduce each frame's surface")
@@ -77,13 +112,21 @@ class KeyframeController(QtCore.QObject):
         p = panel
         p.time_changed.connect(self.scrub)
         p.play_toggled.connect(self.set_playing)
-        p.set_key_requested.connect(self.set_key)
+        p.set_key_requested.connect(self.key_pressed)
+        p.key_step_requested.connect(self.jump_to_key)
         p.remove_key_requested.connect(self.remove_key)
         p.interpolation_changed.connect(lambda v: self.set_settings(interpolation=v))
         p.fps_changed.connect(lambda v: self.set_settings(fps=v))
         p.duration_changed.connect(lambda v: self.set_settings(duration=v))
         p.export_csv_requested.connect(lambda: self.export_csv_dialog())
         p.export_pc2_requested.connect(self.export_pc2_dialog)
+        window.shapes_panel.key_shape_requested.connect(self.set_shape_key)
+        g = self.graph
+        g.time_requested.connect(self.scrub)
+        g.key_moved.connect(self.move_shape_key)
+        g.key_deleted.connect(self.remove_shape_key)
+        g.selection_changed.connect(lambda _shapes: self._show_graph())
+        self.graph_dock.visibilityChanged.connect(lambda on: self._show_graph() if on else None)
         if d.project is not None:
             self._load()
 
@@ -103,7 +146,10 @@ class KeyframeController(QtCore.QObject):
         try:
             W = arrays["keyframes/weights"]
             if sec.get("times") and W is not None:
-                keys = [Keyframe(t, w) for t, w in zip(sec["times"], W)]
+                M = arrays["keyframes/keyed"]
+                if M is not None and np.shape(M) != (len(W), np.shape(W)[-1]):
+                    raise RigInputError(f"the keyed shapes are a {np.shape(M)} array for {len(W)} keys")
+                keys = [Keyframe(t, w, None if M is None else M[i]) for i, (t, w) in enumerate(zip(sec["times"], W))]
             if self.level is not None and arrays["keyframes/blend_data"] is not None:
                 shape = tuple(sec["blend_shape"])
                 self.blend = sp.csr_matrix((arrays["keyframes/blend_data"], arrays["keyframes/blend_indices"],
@@ -124,6 +170,8 @@ class KeyframeController(QtCore.QObject):
         arrays = {k: None for k in ARRAY_KEYS}
         if timeline.keys:
             arrays["keyframes/weights"] = np.stack([k.weights for k in timeline.keys])
+            if any(k.keyed is not None for k in timeline.keys):
+                arrays["keyframes/keyed"] = np.stack([k.mask for k in timeline.keys])
         if blend is not None:
             b = sp.csr_matrix(blend)
             sec["blend_shape"] = list(b.shape)
@@ -131,16 +179,36 @@ class KeyframeController(QtCore.QObject):
                            "keyframes/blend_indptr": b.indptr})
         return sec, arrays
 
-    def _push(self, new: tuple, text: str) -> None:
-        self.document.undo_stack.push(SetSectionArraysCommand(self.document, SECTION, self._stored(), new, text))
+    def _push(self, new: tuple, text: str, follow: bool = False) -> None:
+        """One undo step to the keyframes ``new``; ``follow``: the viewport shows the new animation's pose."""
+        if follow:
+            self.document.undo_stack.push(_KeyEditCommand(self, SECTION, self._stored(), new, text))
+        else:
+            self.document.undo_stack.push(SetSectionArraysCommand(self.document, SECTION, self._stored(), new, text))
 
     # --- edits ----------------------------------------------------------------------------------------
-    def set_key(self, time: float | None = None) -> None:
-        """Key the current pose at ``time`` (default: the current time); one undo step."""
+    def show_graph_editor(self) -> None:
+        """Animation ▸ Graph Editor (Ctrl+G): above the timeline, a third of the window high the first time."""
+        first = not self.graph_dock.isVisible() and self.graph_dock.height() < 150
+        self.graph_dock.show()
+        self.graph_dock.raise_()
+        if first and not self.graph_dock.isFloating():
+            self.window.resizeDocks([self.graph_dock], [max(240, self.window.height() // 3)], QtCore.Qt.Vertical)
+
+    def selected_shapes(self) -> list[int]:
+        """The shapes S keys alone: those selected in the Graph Editor while it is shown (else none: the pose)."""
+        return self.graph.selected_shapes() if self.graph_dock.isVisible() else []
+
+    def key_pressed(self) -> None:
+        """Animation ▸ Set Key (S): the shapes selected in the Graph Editor, else the whole pose."""
+        self.set_key(shapes=self.selected_shapes() or None)
+
+    def set_key(self, time: float | None = None, shapes: list[int] | None = None) -> None:
+        """Key the current pose at ``time`` (default: the current time); one undo step. ``shapes``: key only
+        those shapes (their current weights), the others keep their curves."""
         t = self.time if time is None else float(time)
         state = self.document.pose_state()
-        tl = Timeline([Keyframe(k.time, k.weights) for k in self.timeline.keys],
-                      interpolation=self.timeline.interpolation)
+        tl = self.timeline.copy()
         blend, level = self.blend, self.level
         note = ""
         if blend is None and state.is_regional:
@@ -162,19 +230,73 @@ class KeyframeController(QtCore.QObject):
             if state.is_regional and not same_blend(state.blend, blend):
                 note = f" (on the keys' finer level {level})"
             w = pose_at_level(state, blend)
-        tl.set_key(t, w)
+        if shapes:
+            mask = np.zeros(w.shape[-1], dtype=bool)
+            mask[list(shapes)] = True
+            tl.set_key(t, w, mask)
+            names = self.document.rig.shape_names
+            what = names[shapes[0]] if len(shapes) == 1 else count(len(shapes), "shape")
+        else:
+            tl.set_key(t, w)
+            what = "the pose"
         if t > self.duration:
             self.duration = t
-        self._push(self._snapshot(tl, blend, level), f"Set key at {t:.3g} s")
-        self.window.show_status(f"Key set at {t:.3f} s{note}.", 4000)
+        self._push(self._snapshot(tl, blend, level), f"Key {what} at {t:.3g} s")
+        self.window.show_status(f"Keyed {what} at {t:.3f} s{note}.", 4000)
+
+    def set_shape_key(self, k: int) -> None:
+        """Key shape ``k`` alone at the current time (a slider's context menu)."""
+        self.set_key(shapes=[int(k)])
+
+    def move_shape_key(self, k: int, time: float, new_time: float, value: float) -> bool:
+        """Move shape ``k``'s key at ``time`` to ``new_time`` with weight ``value`` (the Graph Editor's drag);
+        one undo step, the viewport shows the result."""
+        tl = self.timeline.copy()
+        try:
+            tl.move_shape_key(k, time, min(max(new_time, 0.0), self.duration), value)
+        except RigInputError as exc:
+            self.window.show_status(str(exc), 4000)
+            return False
+        name = self.document.rig.shape_names[k]
+        self._push(self._snapshot(tl, self.blend, self.level), f"Move key of {name}", follow=True)
+        self.window.show_status(f"Moved the key of {name} to {new_time:.3f} s, weight {value:.3g}.", 4000)
+        return True
+
+    def remove_shape_key(self, k: int, time: float) -> bool:
+        """Remove shape ``k``'s key at ``time`` (the Graph Editor's Delete); one undo step."""
+        tl = self.timeline.copy()
+        try:
+            tl.remove_shape_key(time, k)
+        except RigInputError as exc:
+            self.window.show_status(str(exc), 4000)
+            return False
+        keep = tl.keys and self.blend is not None
+        name = self.document.rig.shape_names[k]
+        self._push(self._snapshot(tl, self.blend if keep else None, self.level if keep else None),
+                   f"Delete key of {name}", follow=True)
+        self.window.show_status(f"Deleted the key of {name} at {time:.3f} s.", 4000)
+        return True
+
+    def jump_to_key(self, direction: int) -> bool:
+        """Go to the next (1) or previous (-1) key: of the shapes selected in the Graph Editor, else any."""
+        shapes = self.selected_shapes()
+        keys = self.timeline.keys if not shapes else [k for k in self.timeline.keys
+                                                       if any(k.keys_shape(s) for s in shapes)]
+        T = np.array([k.time for k in keys])
+        T = T[T > self.time + 1e-6] if direction > 0 else T[T < self.time - 1e-6][::-1]
+        if not T.size:
+            self.window.show_status("No key after this time." if direction > 0 else "No key before this time.", 3000)
+            return False
+        self.scrub(float(T[0]))
+        return True
 
     def remove_key(self, time: float | None = None) -> bool:
         t = self.time if time is None else float(time)
         if self.timeline.key_at(t) is None:
             self.window.show_status(f"There is no key at {t:.3f} s.", 4000)
             return False
-        tl = Timeline([Keyframe(k.time, k.weights) for k in self.timeline.keys if abs(k.time - t) >= 1e-6],
-                      interpolation=self.timeline.interpolation)
+        tl = self.timeline.copy()
+        tl.remove_key(t)
         keep = tl.keys and self.blend is not None
         self._push(self._snapshot(tl, self.blend if keep else None, self.level if keep else None),
                    f"Remove key at {t:.3g} s")
@@ -182,7 +304,7 @@ class KeyframeController(QtCore.QObject):
 
     def set_settings(self, *, interpolation: str | None = None, fps: float | None = None,
                      duration: float | None = None) -> None:
-        tl = Timeline(self.timeline.keys, interpolation=interpolation or self.timeline.interpolation)
+        tl = self.timeline.copy(interpolation=interpolation)
         new = self._snapshot(tl, self.blend, self.level, fps=fps, duration=duration)
         if new[0] != self._snapshot(self.timeline, self.blend, self.level)[0]:
             self._push(new, "Timeline settings")
@@ -226,6 +348,16 @@ class KeyframeController(QtCore.QObject):
     def _show(self) -> None:
         self.panel.set_state(self.time, self.duration, self.fps, [k.time for k in self.timeline.keys],
                              self.timeline.interpolation)
+        self._show_graph()
+
+    def _show_graph(self) -> None:
+        """The Graph Editor's curves (only while it is shown: sampling every frame is work) and its playhead."""
+        g = self.graph
+        if self.document.rig is not None and g.shape_names != list(self.document.rig.shape_names):
+            g.set_shapes(self.document.rig.shape_names)
+        if self.graph_dock.isVisible() and not self.playing:
+            g.set_animation(self.timeline, self.frame_times())
+        g.set_time(self.time)
 
     # --- export ---------------------------------------------------------------------------------------
     def frame_times(self) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Opening rigs and projects off the GUI thread, with progress."""
+"""Opening rigs and projects off the GUI thread, with progress; what a file dropped on the window is."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -16,6 +16,35 @@ def open_project_or_rig(path: str | Path, progress=None) -> Project:
     if path.suffix.lower() == ".bsproj":
         return load_project(path)
     return Project(rig=load_rig(path, progress=progress))
+
+
+RIG_SUFFIXES = (".bsproj", ".gltf", ".glb", ".obj")
+TAKE_SUFFIXES = (".c3d", ".trc", ".csv")
+MAP_SUFFIXES = (".json",)
+DROP_ORDER = ("rig", "take", "map")   # a rig first (the take and map need it), the take before its map
+
+
+def dropped_kind(path: str | Path) -> str:
+    """What a file or folder dropped on the window is: "rig" (a rig folder, project, glTF or OBJ: File ▸ Open),
+    "take" (C3D, TRC or CSV: Mocap ▸ Load Take) or "map" (a marker map, JSON); anything else is one sentence."""
+    path = Path(path)
+    if path.is_dir():
+        return "rig"
+    suffix = path.suffix.lower()
+    if not path.exists():
+        raise RigInputError(f"{path}: does not exist.")
+    for kind, suffixes in (("rig", RIG_SUFFIXES), ("take", TAKE_SUFFIXES), ("map", MAP_SUFFIXES)):
+        if suffix in suffixes:
+            return kind
+    raise RigInputError(f"{path}: is not something Blendshape Studio opens (a rig folder, a project, a glTF, "
+                        f"an OBJ, a take in C3D, TRC or CSV, or a marker map in JSON).")
+
+
+def sort_dropped(paths) -> list[tuple[str, Path]]:
+    """(kind, path) for dropped files in the order they must open (``DROP_ORDER``); raises on the first file
+    that is not a rig, project, take or marker map."""
+    items = [(dropped_kind(p), Path(p)) for p in paths]
+    return sorted(items, key=lambda item: DROP_ORDER.index(item[0]))
 
 
 class LoadWorker(QtCore.QThread):

@@ -55,7 +55,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.confirm_discard = True   # tests turn the unsaved-changes question off
         self.last_error: str | None = None
         self.shortcuts_dialog: QtWidgets.QDialog | None = None   # Help ▸ Keyboard Shortcuts, once opened
+        self.image_size_dialog: QtWidgets.QDialog | None = None  # File ▸ Export Image's size, while open
         self._worker: LoadWorker | None = None
+        self._after_open: list = []   # what a drop opens once its rig is open (a take, a marker map)
+        self.setAcceptDrops(True)     # files dropped on the window open (open_dropped)
         self._progress: QtWidgets.QProgressDialog | None = None
         self._drag_old: np.ndarray | None = None
         self._redraw_pending = False
@@ -92,6 +95,7 @@ class MainWindow(QtWidgets.QMainWindow):
             lambda on: self.correctives.stop_sculpting() if on and self.correctives.sculpting else None)
         # a saved project's view, take and marker map come back once every controller has the new rig
         self.document.rig_changed.connect(lambda: session_state.restore(self))
+        self._build_toolbar()
         self._arrange_docks()
         self._restore_layout()
 
@@ -185,8 +189,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.add_separator("file")
         act("file", "&Export Pose as OBJ…", self.export_pose, "Ctrl+E",
             "Write the posed surface as an OBJ, vertex order kept")
-        act("file", "Save Viewport &Image…", self.save_image_dialog, "Ctrl+Shift+E",
-            "Write what the viewport shows (with its colour bar) as a PNG")
+        act("file", "Export &Image…", self.save_image_dialog, "Ctrl+Shift+E",
+            "Write what the viewport shows (with its colour bar) as a PNG, at a width and height you choose")
         self.add_separator("file")
         self._menu_ends["file"] = act("file", "&Quit", self.close, QtGui.QKeySequence.Quit)
 
@@ -210,13 +214,54 @@ class MainWindow(QtWidgets.QMainWindow):
                                            ("right", "&Right Side"), ("three-quarter", "&Three-Quarter")]):
             act("view", f"{label} Camera", lambda _=False, n=name: self.viewport.set_camera(n), str(i + 1),
                 f"Look at the face from the {name.replace('-', ' ')}")
-        act("view", "Reset &View", self.viewport.reset_view, "F", "Frame the face again")
+        self.frame_selected_action = act("view", "&Frame Selected", self.frame_selected, "F",
+                                         "Frame the selected marker (Marker mode) or region (Segmentation panel), "
+                                         "else the face")
+        self.frame_all_action = act("view", "Frame &All", lambda: self.viewport.frame_points(), "A",
+                                    "Frame the whole face from where the camera looks now (also Home in the view)")
+        # Home too, but only in the viewport: lists, sliders and boxes keep Home for their first item
+        home = QtGui.QShortcut(QtGui.QKeySequence("Home"), self.viewport, lambda: self.viewport.frame_points())
+        home.setContext(QtCore.Qt.WidgetWithChildrenShortcut)
+        home.setWhatsThis("Frame All (in the viewport)")
+        act("view", "Reset &View", self.viewport.reset_view, None, "Back to the camera preset, framing the face")
         self.add_separator("view")
         self.add_menu("panels", "&Panels", parent="view")
 
         act("help", "&Keyboard Shortcuts", self.show_shortcuts, "F1")
         act("help", "&About Blendshape Studio", self.show_about)
         self._rebuild_recent_menu()
+
+    def _build_toolbar(self) -> None:
+        """The viewport's tools above it: Marker mode (a toggle that is orange and bold while on), Frame Selected
+        and Frame All."""
+        bar = self.addToolBar("Tools")
+        bar.setObjectName("toolbar_tools")
+        bar.setMovable(False)
+        bar.setToolButtonStyle(QtCore.Qt.ToolButtonTextOnly)
+        button = QtWidgets.QToolButton()     # its own button (not the action's): its text says the state
+        button.setCheckable(True)
+        button.setFocusPolicy(QtCore.Qt.NoFocus)
+        button.toggled.connect(self.markers.mode_action.setChecked)
+        bar.addWidget(button)
+        self.marker_mode_button = button
+        self.marker_mode_button.setObjectName("marker_mode_button")
+        self.marker_mode_button.setStyleSheet(
+            "QToolButton { padding: 3px 12px; border: 1px solid #8a8a8a; border-radius: 4px; }"
+            "QToolButton:checked { background: #f0a030; color: #141414; font-weight: bold; border: 1px solid #ffd080; }")
+        self.markers.mode_action.toggled.connect(self._on_marker_mode_toggled)
+        self._on_marker_mode_toggled(self.markers.mode_action.isChecked())
+        bar.addSeparator()
+        bar.addAction(self.frame_selected_action)
+        bar.addAction(self.frame_all_action)
+        self.tools_bar = bar
+
+    def _on_marker_mode_toggled(self, on: bool) -> None:
+        self.marker_mode_button.blockSignals(True)
+        self.marker_mode_button.setChecked(on)
+        self.marker_mode_button.blockSignals(False)
+        self.marker_mode_button.setText("● Marker Mode: On" if on else "Marker Mode")
+        self.marker_mode_button.setToolTip("Marker mode is on: clicks add markers, drags pose (M turns it off)" if on
+                                           else "Marker mode (M): click the face to add markers, drag them to pose")
 
     def _arrange_docks(self) -> None:
         """Left: Segmentation, Correctives, Markers as tabs. Right: Shapes, History, Mocap. Bottom: the
@@ -226,6 +271,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.tabifyDockWidget(self.segmentation_dock, self.markers.dock)
         self.tabifyDockWidget(self.history_dock, self.mocap.dock)
         self.splitDockWidget(self.mocap.views_dock, self.keyframes.dock, QtCore.Qt.Vertical)
+        self.tabifyDockWidget(self.mocap.views_dock, self.keyframes.graph_dock)   # above the timeline, full width
         self.segmentation_dock.raise_()
         self.shapes_dock.raise_()
 
@@ -258,6 +304,7 @@ class MainWindow(QtWidgets.QMainWindow):
     # --- document signals --------------------------------------------------------------------------
     def _on_rig_change(self) -> None:
         rig = self.document.rig
+        self.mocap.views_dock.hide()   # a fresh rig has no solve to show (a solve shows the dock again)
         self.shapes_panel.set_shapes(rig.shape_names, sorted(rig.presets))
         self.viewport.set_surface(self.document.surface(), rig.face_counts, rig.face_indices,
                                   focus=focus_vertices(rig.neutral, rig.deltas))
@@ -388,6 +435,34 @@ class MainWindow(QtWidgets.QMainWindow):
         rig = self.document.rig
         self.set_pose(rig.weights_from_dict(rig.presets[name]), f"Preset {name}")
 
+    def selection_points(self) -> tuple[str, np.ndarray] | None:
+        """What F frames: (what, points) of the selected marker (in Marker mode) or the selected region, else
+        None (the face)."""
+        if self.document.project is None:
+            return None
+        surface = self.document.surface()
+        m = self.markers.selected_marker
+        if self.markers.mode and m is not None and self.markers.markers is not None and m < len(self.markers.markers):
+            p = self.markers.marker_positions()[m]
+            r = 0.08 * float(np.linalg.norm(np.ptp(self.viewport.focus_points(), axis=0)))
+            return f"marker {self.markers.markers.names[m]}", p + np.array([[-r, -r, -r], [r, r, r]])
+        seg, region = self.segmentation.segmentation, self.segmentation_panel.selected_region()
+        if seg is not None and region >= 0 and self.segmentation.level < len(seg.levels):
+            labels = seg.levels[self.segmentation.level].core_labels(len(surface))
+            if (labels == region).any():
+                return f"region {region}", surface[labels == region]
+        return None
+
+    def frame_selected(self) -> None:
+        """View ▸ Frame Selected (F): frame the selected marker or region from where the camera looks now."""
+        sel = self.selection_points()
+        if sel is None:
+            self.viewport.frame_points()
+            self.show_status("Framed the face (select a region or, in Marker mode, a marker to frame it).", 4000)
+        else:
+            self.viewport.frame_points(sel[1])
+            self.show_status(f"Framed {sel[0]}.", 3000)
+
     # --- files -------------------------------------------------------------------------------------
     def open_sample(self) -> None:
         from resources.sample_rig import build_sample_rig, sample_project_sections
@@ -438,10 +513,60 @@ class MainWindow(QtWidgets.QMainWindow):
         app_settings.add_recent_file(str(path))
         self._rebuild_recent_menu()
         self.show_status(f"Opened {path}")
+        after, self._after_open = self._after_open, []
+        for step in after:
+            step()
 
     def _on_load_failed(self, message: str) -> None:
+        self._after_open = []
         self.show_error("Could not open", message)
         self.load_failed.emit(message)
+
+    # --- files dropped on the window ---------------------------------------------------------------
+    def dragEnterEvent(self, event: QtGui.QDragEnterEvent) -> None:  # Qt override
+        urls = event.mimeData().urls() if event.mimeData().hasUrls() else []
+        if urls and all(u.isLocalFile() for u in urls):
+            event.acceptProposedAction()
+
+    def dragMoveEvent(self, event) -> None:  # Qt override
+        self.dragEnterEvent(event)
+
+    def dropEvent(self, event: QtGui.QDropEvent) -> None:  # Qt override
+        paths = [u.toLocalFile() for u in event.mimeData().urls() if u.isLocalFile()]
+        if paths:
+            event.acceptProposedAction()
+            self.open_dropped(paths)
+
+    def open_dropped(self, paths) -> bool:
+        """Open dropped files through the menus' paths: a rig folder, project, glTF or OBJ as File ▸ Open, a take
+        and a marker map as the Mocap panel's Load (after the rig when both are dropped). A file that is none of
+        these is one sentence, and nothing is opened."""
+        from app.loading import sort_dropped
+        try:
+            items = sort_dropped(paths)
+        except RigInputError as exc:
+            self.show_error("Could not open", str(exc))
+            return False
+        rigs = [p for kind, p in items if kind == "rig"]
+        if len(rigs) > 1:
+            self.show_error("Could not open", f"{len(rigs)} rigs or projects were dropped ({rigs[0].name}, "
+                                              f"{rigs[1].name}, …): drop one at a time.")
+            return False
+        steps = [(lambda p=p: self.mocap.load_take(p)) if kind == "take" else (lambda p=p: self.mocap.load_map(p))
+                 for kind, p in items if kind != "rig"]
+        if rigs:
+            if self.is_loading:
+                return False
+            self.open_path(rigs[0])
+            if self.is_loading:        # opening (not cancelled at the unsaved-changes question)
+                self._after_open = steps
+            return self.is_loading
+        if self.document.project is None:
+            self.show_error("Could not open", f"{items[0][1].name} needs a rig: open or drop a rig first.")
+            return False
+        for step in steps:
+            step()
+        return True
 
     def _on_worker_finished(self) -> None:
         if self._progress is not None:
@@ -525,24 +650,48 @@ class MainWindow(QtWidgets.QMainWindow):
                                lambda message: self.show_error("Could not export", message))
 
     def save_image_dialog(self) -> None:
-        if self.document.project is not None:
-            self.save_dialog("Save Viewport Image", f"{self.document.rig.name}.png", "PNG image (*.png)",
-                             self.save_image)
+        """File ▸ Export Image…: the width and height (the view's size at first, then the last ones chosen; the
+        ``render`` command's 16..8192 pixels), then where to write the PNG."""
+        if self.document.project is None:
+            return
+        dialog = QtWidgets.QDialog(self)
+        dialog.setWindowTitle("Export Image")
+        form = QtWidgets.QFormLayout(dialog)
+        vw, vh = self.viewport.plotter.window_size
+        boxes = []
+        for label, value, key in (("Width", vw, "export/imageWidth"), ("Height", vh, "export/imageHeight")):
+            box = QtWidgets.QSpinBox()
+            box.setRange(16, 8192)
+            box.setSuffix(" px")
+            box.setValue(int(value))
+            app_settings.remember(box, key)
+            form.addRow(label, box)
+            boxes.append(box)
+        view_size = QtWidgets.QPushButton(f"The view's size ({vw} × {vh})")
+        view_size.clicked.connect(lambda: (boxes[0].setValue(vw), boxes[1].setValue(vh)))
+        form.addRow("", view_size)
+        buttons = QtWidgets.QDialogButtonBox(QtWidgets.QDialogButtonBox.Ok | QtWidgets.QDialogButtonBox.Cancel)
+        buttons.accepted.connect(dialog.accept)
+        buttons.rejected.connect(dialog.reject)
+        form.addRow(buttons)
+        dialog.setAttribute(QtCore.Qt.WA_DeleteOnClose)
+        self.image_size_dialog = dialog   # tests answer it
 
-    def save_image(self, path: str | Path) -> bool:
-        """Write the viewport as it is shown (camera, colour map and bar, wireframe) as a PNG."""
-        from model.atomic import atomic_write
+        def chosen() -> None:
+            size = (boxes[0].value(), boxes[1].value())
+            self.save_dialog("Export Image", f"{self.document.rig.name}.png", "PNG image (*.png)",
+                             lambda path: self.save_image(path, size))
+        dialog.accepted.connect(chosen)
+        dialog.open()
+
+    def save_image(self, path: str | Path, size: tuple[int, int] | None = None) -> bool:
+        """Write the viewport as it is shown (camera, colour map and bar, wireframe) as a PNG at ``size`` (w, h)
+        pixels (default: the view's), through the writer of the ``render`` command (``Viewport.write_image``)."""
         path = Path(path)
         if path.suffix.lower() != ".png":
             path = path.with_suffix(path.suffix + ".png") if path.suffix else path.with_suffix(".png")
-        rgb = np.ascontiguousarray(self.viewport.grab_image())
-        h, w = rgb.shape[:2]
-        image = QtGui.QImage(rgb.data, w, h, 3 * w, QtGui.QImage.Format_RGB888)
-        buf = QtCore.QBuffer()
-        buf.open(QtCore.QIODevice.WriteOnly)
-        image.save(buf, "PNG")
         try:
-            atomic_write(path, bytes(buf.data()))
+            w, h = self.viewport.write_image(path, size)
         except OSError as exc:
             self.show_error("Could not save the image", f"{path}: could not be written ({exc.strerror or exc}).")
             return False
@@ -603,7 +752,8 @@ class MainWindow(QtWidgets.QMainWindow):
         ordered += [("", a) for a in self.findChildren(QtGui.QAction) if a not in seen]
         rows = []
         for where, act in ordered:
-            keys = ", ".join(k.toString(QtGui.QKeySequence.NativeText) for k in act.shortcuts() if not k.isEmpty())
+            keys = ", ".join(dict.fromkeys(k.toString(QtGui.QKeySequence.NativeText) for k in act.shortcuts()
+                                           if not k.isEmpty()))
             if keys:
                 rows.append((where or "Window", act.text().replace("&", ""), keys))
         for sc in self.findChildren(QtGui.QShortcut):   # panel keys that are not menu actions (region nudges)
@@ -637,13 +787,23 @@ class MainWindow(QtWidgets.QMainWindow):
 
     # --- window state ------------------------------------------------------------------------------
     def _restore_layout(self) -> None:
+        """The last session's window and docks; on first start the window maximised, the side panels narrow and
+        the timeline low so the viewport is the largest part. The Mocap Views dock never comes back empty: it
+        shows a solve, and there is none at start."""
         s = app_settings.settings()
         geo = s.value("window/geometry")
         if geo is not None:
             self.restoreGeometry(geo)
+        else:   # the screen's size (without a window manager, maximising alone changes nothing), maximised
+            screen = self.screen() or QtGui.QGuiApplication.primaryScreen()
+            if screen is not None:
+                self.setGeometry(screen.availableGeometry())
+            self.setWindowState(self.windowState() | QtCore.Qt.WindowMaximized)
         state = s.value("window/state")
-        if state is not None:
-            self.restoreState(state)
+        if state is None or not self.restoreState(state):
+            self.resizeDocks([self.segmentation_dock, self.shapes_dock], [370, 330], QtCore.Qt.Horizontal)
+            self.resizeDocks([self.keyframes.dock], [60], QtCore.Qt.Vertical)
+        self.mocap.views_dock.hide()
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
         if not self._maybe_discard():

@@ -255,6 +255,11 @@ class MarkerController(QtCore.QObject):
     def _on_lam_reg_change(self, value: float) -> None:
         self.lam_reg = float(value)
 
+    @property
+    def selected_marker(self) -> int | None:
+        """The index of the marker selected in the Markers panel or by a drag, or None."""
+        return self._selected
+
     def _on_marker_selected(self, index: int) -> None:
         self._selected = index if index >= 0 else None
         self.refresh_overlay(render=True)
@@ -345,8 +350,10 @@ class MarkerController(QtCore.QObject):
             self.message(f"Marker {name} is on the background: no shape moves the surface there, so it stays "
                          f"pinned and cannot be dragged.")
         else:
-            where = f"vertex {marker.vertex}" if marker.vertex is not None else f"triangle {marker.face}"
-            self.message(f"Added marker {name} on {where}.", 4000)
+            rig = self.document.rig   # in the user's words: where on the face, not a triangle's index
+            moves = np.linalg.norm(rig.deltas[:, int(vertex)], axis=1) if rig.n_shapes else np.zeros(0)
+            most = f", moved most by {rig.shape_names[int(np.argmax(moves))]}" if moves.size and moves.max() > 0 else ""
+            self.message(f"Added marker {name} on the face{most}.", 4000)
         return True
 
     def remove_marker(self, name: str) -> bool:

@@ -403,6 +403,7 @@ class MocapController(QtCore.QObject):
         """Show the Mocap Views dock; the first time, split it as the user last did (else half views, half
         curves)."""
         self.views_dock.show()
+        self.views_dock.raise_()   # in front of the Graph Editor, which shares its place above the timeline
         splitter = self.views.parentWidget()
         if not self._views_split and isinstance(splitter, QtWidgets.QSplitter):
             self._views_split = True

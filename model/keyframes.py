@@ -12,6 +12,11 @@ the same shape). ``Timeline.evaluate(t)`` interpolates:
 Catmull–Rom can overshoot between keys, so every result is brought back into the weight constraints:
 clipped to ``[lower, upper]`` in box mode, projected onto ``{w ≥ 0, Σ w ≤ 1}`` (per region) in convex mode.
 Before the first key the first key holds, after the last the last.
+
+Per-shape keys (Maya's "key one attribute", Blender's keyed shape key): a key may key only some shapes
+(``Keyframe.keyed``, a (K,) mask; None keys every shape). Each shape is a channel of its own, interpolated
+through the keys that key it; a shape no key keys holds the first key's value. Keys that key every shape
+(the usual "set key on the pose") evaluate exactly as before.
 """
 from __future__ import annotations
 
@@ -26,10 +31,12 @@ INTERPOLATIONS = ("linear", "smooth")
 
 @dataclass
 class Keyframe:
-    """A pose at a time (seconds): weights (K,) or (R+1, K)."""
+    """A pose at a time (seconds): weights (K,) or (R+1, K); ``keyed`` (K,) bool: the shapes this key keys
+    (None: all of them). The weights of a shape it does not key are the pose it was set on, never evaluated."""
 
     time: float
     weights: np.ndarray
+    keyed: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         self.time = float(self.time)
@@ -38,15 +45,43 @@ class Keyframe:
         self.weights = np.array(self.weights, dtype=np.float64)
         if self.weights.ndim not in (1, 2) or not np.isfinite(self.weights).all():
             raise RigInputError("A keyframe's weights must be a finite (K,) or (R+1, K) array.")
+        if self.keyed is not None:
+            keyed = np.asarray(self.keyed)
+            if keyed.shape != self.weights.shape[-1:]:
+                raise RigInputError(f"A keyframe's keyed shapes must be a ({self.weights.shape[-1]},) mask, "
+                                    f"not {keyed.shape}.")
+            self.keyed = None if keyed.all() else keyed.astype(bool).copy()
+
+    @property
+    def mask(self) -> np.ndarray:
+        """(K,) bool: the shapes this key keys."""
+        return np.ones(self.weights.shape[-1], dtype=bool) if self.keyed is None else self.keyed
+
+    def keys_shape(self, k: int) -> bool:
+        return self.keyed is None or bool(self.keyed[k])
+
+    def copy(self) -> "Keyframe":
+        return Keyframe(self.time, self.weights, self.keyed)
 
     def to_dict(self) -> dict:
-        return {"time": self.time, "weights": self.weights.tolist()}
+        d = {"time": self.time, "weights": self.weights.tolist()}
+        if self.keyed is not None:
+            d["keyed"] = [int(i) for i in np.flatnonzero(self.keyed)]
+        return d
 
     @staticmethod
     def from_dict(d: dict) -> "Keyframe":
         if not isinstance(d, dict) or "time" not in d or "weights" not in d:
             raise RigInputError("A keyframe entry needs a time and weights.")
-        return Keyframe(d["time"], np.asarray(d["weights"], dtype=np.float64))
+        w = np.asarray(d["weights"], dtype=np.float64)
+        keyed = None
+        if d.get("keyed") is not None:
+            idx = np.asarray(d["keyed"], dtype=np.int64)
+            if w.ndim < 1 or idx.ndim != 1 or (idx.size and (idx.min() < 0 or idx.max() >= w.shape[-1])):
+                raise RigInputError("A keyframe's keyed shapes must be shape indices of its weights.")
+            keyed = np.zeros(w.shape[-1], dtype=bool)
+            keyed[idx] = True
+        return Keyframe(d["time"], w, keyed)
 
 
 class Timeline:
@@ -63,7 +98,12 @@ class Timeline:
         self.lower, self.upper = float(lower), float(upper)
         self.keys: list[Keyframe] = []
         for k in keys or []:
-            self.set_key(k.time, k.weights)
+            self.set_key(k.time, k.weights, k.keyed)
+
+    def copy(self, interpolation: str | None = None) -> "Timeline":
+        """An independent copy (keys copied), optionally with another interpolation."""
+        return Timeline([k.copy() for k in self.keys], interpolation=interpolation or self.interpolation,
+                        mode=self.mode, lower=self.lower, upper=self.upper)
 
     def __len__(self) -> int:
         return len(self.keys)
@@ -72,19 +112,83 @@ class Timeline:
     def times(self) -> np.ndarray:
         return np.array([k.time for k in self.keys])
 
-    def set_key(self, time: float, weights: np.ndarray) -> Keyframe:
-        """Add a key at ``time`` or replace the key already there (within a microsecond)."""
-        key = Keyframe(time, weights)
+    def set_key(self, time: float, weights: np.ndarray, keyed=None) -> Keyframe:
+        """Add a key at ``time`` or replace the key already there (within a microsecond). ``keyed`` ((K,) bool
+        or None: all): the shapes to key; on an existing key only those shapes' weights change (the others keep
+        their keys), a new key stores ``weights`` whole and keys only those shapes."""
+        key = Keyframe(time, weights, keyed)
         if self.keys and key.weights.shape != self.keys[0].weights.shape:
             raise RigInputError(f"A key of shape {key.weights.shape} does not match the timeline's "
                                 f"{self.keys[0].weights.shape}.")
         for i, k in enumerate(self.keys):
             if abs(k.time - key.time) < 1e-6:
+                if key.keyed is not None:   # key some shapes on a key that is there: the others stay keyed
+                    w = k.weights.copy()
+                    w[..., key.keyed] = key.weights[..., key.keyed]
+                    key = Keyframe(k.time, w, k.mask | key.keyed)
                 self.keys[i] = key
                 return key
         self.keys.append(key)
         self.keys.sort(key=lambda k: k.time)
         return key
+
+    def set_shape_key(self, time: float, k: int, value, pose: np.ndarray | None = None) -> Keyframe:
+        """Key shape ``k`` alone at ``time`` to ``value`` (a weight, or a (R+1,) column of a regional timeline).
+        A new key stores ``pose`` (default: the timeline's pose there) for its other shapes, unkeyed."""
+        self._check_shape(k)
+        base = self.key_at(time)
+        if base is not None:
+            w = base.weights.copy()
+        elif pose is not None:
+            w = np.array(pose, dtype=np.float64)
+        elif self.keys:
+            w = self.evaluate(time)
+        else:
+            raise RigInputError("A key of one shape on an empty timeline needs the pose it is set on.")
+        w[..., k] = value
+        mask = np.zeros(w.shape[-1], dtype=bool)
+        mask[k] = True
+        return self.set_key(time, w, mask)
+
+    def remove_shape_key(self, time: float, k: int) -> None:
+        """Stop keying shape ``k`` at ``time``; a key that then keys no shape goes."""
+        self._check_shape(k)
+        key = self.key_at(time)
+        if key is None or not key.keys_shape(k):
+            raise RigInputError(f"There is no key of shape {k} at {float(time):g} s.")
+        mask = key.mask.copy()
+        mask[k] = False
+        if not mask.any():
+            self.remove_key(key.time)
+        else:
+            self.keys[self.keys.index(key)] = Keyframe(key.time, key.weights, mask)
+
+    def move_shape_key(self, k: int, time: float, new_time: float, value: float) -> Keyframe:
+        """Move shape ``k``'s key at ``time`` to ``new_time`` with the displayed value ``value``
+        (``shape_value``: a regional column moves by the same amount in every region, within the bounds)."""
+        key = self.key_at(time)
+        if key is None or not key.keys_shape(k):
+            raise RigInputError(f"There is no key of shape {k} at {float(time):g} s.")
+        column = key.weights[..., k] + (float(value) - shape_value(key.weights, k))
+        column = np.clip(column, self.lower, self.upper)
+        self.remove_shape_key(time, k)
+        pose = key.weights if not self.keys else None
+        return self.set_shape_key(new_time, k, column, pose=pose)
+
+    def shape_keys(self, k: int) -> list[Keyframe]:
+        """The keys that key shape ``k``, in time order."""
+        self._check_shape(k)
+        return [key for key in self.keys if key.keys_shape(k)]
+
+    def _check_shape(self, k: int) -> None:
+        if self.keys and not 0 <= int(k) < self.keys[0].weights.shape[-1]:
+            raise RigInputError(f"There is no shape {k} in a timeline of {self.keys[0].weights.shape[-1]} shapes.")
+
+    def next_key_time(self, t: float, direction: int = 1) -> float | None:
+        """The time of the first key after ``t`` (``direction`` -1: before it), or None."""
+        T = self.times
+        T = T[T > t + 1e-6] if direction > 0 else T[T < t - 1e-6][::-1]
+        return float(T[0]) if T.size else None
 
     def remove_key(self, time: float) -> Keyframe:
         for i, k in enumerate(self.keys):
@@ -104,27 +208,18 @@ class Timeline:
             raise RigInputError(f"Unknown interpolation '{how}': use linear or smooth.")
         T = self.times
         P = [k.weights for k in self.keys]
-        n = len(P)
-        if n == 1 or t <= T[0]:
-            return self._constrain(P[0].copy())
-        if t >= T[-1]:
-            return self._constrain(P[-1].copy())
-        i = int(np.searchsorted(T, t, side="right")) - 1  # T[i] <= t < T[i+1]
-        h = T[i + 1] - T[i]
-        s = (t - T[i]) / h
-        if how == "linear":
-            return self._constrain((1 - s) * P[i] + s * P[i + 1])
-        m0 = self._tangent(T, P, i)
-        m1 = self._tangent(T, P, i + 1)
-        s2, s3 = s * s, s * s * s
-        h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
-        return self._constrain(h00 * P[i] + h10 * h * m0 + h01 * P[i + 1] + h11 * h * m1)
-
-    @staticmethod
-    def _tangent(T, P, i) -> np.ndarray:
-        n = len(P)
-        a, b = max(i - 1, 0), min(i + 1, n - 1)
-        return (P[b] - P[a]) / (T[b] - T[a])
+        if all(k.keyed is None for k in self.keys):
+            return self._constrain(_interpolate(T, P, t, how))
+        # per-shape keys: each group of shapes keyed by the same keys is a channel of its own
+        M = np.stack([k.mask for k in self.keys])               # (N, K)
+        out = P[0].copy()                                       # a shape no key keys holds the first key's value
+        patterns, group = np.unique(M.T, axis=0, return_inverse=True)
+        for g, pattern in enumerate(patterns):
+            idx = np.flatnonzero(pattern)
+            if idx.size:
+                cols = np.flatnonzero(group.ravel() == g)
+                out[..., cols] = _interpolate(T[idx], [P[i][..., cols] for i in idx], t, how)
+        return self._constrain(out)
 
     def _constrain(self, w: np.ndarray) -> np.ndarray:
         if self.mode == "box":
@@ -145,6 +240,34 @@ class Timeline:
                    lower=d.get("lower", 0.0), upper=d.get("upper", 1.0))
 
 
+def shape_value(weights: np.ndarray, k: int) -> float:
+    """Shape ``k``'s weight in a pose: its global weight, or a regional pose's largest over the regions (how
+    strongly the shape acts anywhere on the face)."""
+    return float(np.max(np.asarray(weights)[..., k]))
+
+
+def _interpolate(T: np.ndarray, P: list[np.ndarray], t: float, how: str) -> np.ndarray:
+    """The unconstrained value at ``t`` of keys ``P`` at sorted times ``T``, linear or Catmull–Rom."""
+    n = len(P)
+    if n == 1 or t <= T[0]:
+        return np.array(P[0], dtype=np.float64)
+    if t >= T[-1]:
+        return np.array(P[-1], dtype=np.float64)
+    i = int(np.searchsorted(T, t, side="right")) - 1  # T[i] <= t < T[i+1]
+    h = T[i + 1] - T[i]
+    s = (t - T[i]) / h
+    if how == "linear":
+        return (1 - s) * P[i] + s * P[i + 1]
+
+    def tangent(j: int) -> np.ndarray:
+        a, b = max(j - 1, 0), min(j + 1, n - 1)
+        return (P[b] - P[a]) / (T[b] - T[a])
+    m0, m1 = tangent(i), tangent(i + 1)
+    s2, s3 = s * s, s * s * s
+    h00, h10, h01, h11 = 2 * s3 - 3 * s2 + 1, s3 - 2 * s2 + s, -2 * s3 + 3 * s2, s3 - s2
+    return h00 * P[i] + h10 * h * m0 + h01 * P[i + 1] + h11 * h * m1
+
+
 def _project_capped_simplex(w: np.ndarray, lower: float) -> np.ndarray:
     """Euclidean projection onto {w ≥ lower, Σ w ≤ 1} (sort-based simplex projection when the sum is too big)."""
     x = np.maximum(w, lower)
@@ -162,6 +285,13 @@ def _project_capped_simplex(w: np.ndarray, lower: float) -> np.ndarray:
 def keyed_frames(timeline: Timeline, times: np.ndarray) -> np.ndarray:
     """The timeline's pose at each time: (F, K) or (F, R+1, K)."""
     return np.stack([timeline.evaluate(float(t)) for t in times])
+
+
+def shape_curves(timeline: Timeline, times: np.ndarray) -> np.ndarray:
+    """(F, K) each shape's weight at each time as the graph editor draws it (``shape_value``: a regional
+    timeline's largest over the regions)."""
+    W = keyed_frames(timeline, times)
+    return W.max(axis=1) if W.ndim == 3 else W
 
 
 def keyed_global_weights(timeline: Timeline, times: np.ndarray, deltas: np.ndarray, blend=None) -> np.ndarray:

@@ -202,6 +202,7 @@ def test_save_viewport_image(qtbot, tmp_path, monkeypatch):
     answers = iter([(str(tmp_path / "menu.png"), ""), (str(tmp_path / "menu.obj"), "")])
     monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", lambda *a, **k: next(answers))
     w.save_image_dialog()
+    w.image_size_dialog.accept()                         # File > Export Image asks the size first
     w.export_pose()
     w.jobs.wait()                                        # the export runs in the background
     assert (tmp_path / "menu.png").stat().st_size > 0 and (tmp_path / "menu.obj").stat().st_size > 0
@@ -219,8 +220,8 @@ def test_mirror_shape_replaces_or_adds_the_other_side(qtbot, tmp_path):
     n = w.document.undo_stack.count()
     w.shapes_panel.row("browInnerUp_L").label.customContextMenuRequested.emit(QtCore.QPoint(2, 2))
     menu = w.shapes_panel.row("browInnerUp_L").findChild(QtWidgets.QMenu)
-    assert [a.text() for a in menu.actions()] == ["Mirror to the Other Side"]
-    menu.actions()[0].trigger()                        # the right-click menu of the left shape's row
+    assert [a.text() for a in menu.actions()] == ["Key browInnerUp_L", "Mirror to the Other Side"]
+    menu.actions()[1].trigger()                        # the right-click menu of the left shape's row
     menu.close()
     mirrored = mirror_delta(rig.deltas[rig.shape_index("browInnerUp_L")], mirror_map(rig.neutral))
     np.testing.assert_allclose(rig.deltas[r], mirrored)

@@ -213,6 +213,40 @@ def test_convex_timeline_passes_through_its_keys_and_projects_between_them():
 
 
 # --- files --------------------------------------------------------------------------------------------
+def test_per_shape_keys_are_curves_of_their_own():
+    """A key of one shape (Maya's key on one attribute) moves that shape's curve only; keys of the whole pose
+    evaluate as before; moving, removing and saving keep each shape's keys."""
+    tl = Timeline(interpolation="linear")
+    tl.set_key(0.0, [0.0, 0.0, 0.0])
+    tl.set_key(2.0, [1.0, 1.0, 1.0])
+    tl.set_shape_key(1.0, 1, 0.0)                   # shape 1 held at 0 at 1 s; the pose there is not a key of 0 and 2
+    np.testing.assert_allclose(tl.evaluate(0.5), [0.25, 0.0, 0.25])
+    np.testing.assert_allclose(tl.evaluate(1.0), [0.5, 0.0, 0.5])
+    np.testing.assert_allclose(tl.evaluate(1.5), [0.75, 0.5, 0.75])
+    assert [k.time for k in tl.shape_keys(1)] == [0.0, 1.0, 2.0] and [k.time for k in tl.shape_keys(0)] == [0.0, 2.0]
+    tl.set_shape_key(1.0, 2, 0.9)                   # on the same key: now keys shapes 1 and 2, shape 1 unchanged
+    np.testing.assert_allclose(tl.evaluate(1.0), [0.5, 0.0, 0.9])
+    tl.move_shape_key(1, 1.0, 0.5, 0.4)             # shape 1's key to 0.5 s at 0.4; shape 2's stays at 1 s
+    np.testing.assert_allclose(tl.evaluate(0.5)[1], 0.4)
+    np.testing.assert_allclose(tl.evaluate(1.0)[2], 0.9)
+    assert [k.time for k in tl.shape_keys(1)] == [0.0, 0.5, 2.0]
+    back = Timeline.from_dict(json.loads(json.dumps(tl.to_dict())))
+    for t in np.linspace(0, 2, 9):
+        np.testing.assert_allclose(back.evaluate(t), tl.evaluate(t))
+    tl.remove_shape_key(1.0, 2)                     # the key at 1 s keyed only shape 2: it goes
+    assert [k.time for k in tl.keys] == [0.0, 0.5, 2.0]
+    assert tl.next_key_time(0.5) == 2.0 and tl.next_key_time(0.5, -1) == 0.0 and tl.next_key_time(2.0) is None
+    with pytest.raises(RigInputError):
+        tl.remove_shape_key(0.5, 0)                 # 0.5 s does not key shape 0
+    # a regional timeline: a shape's value is its largest over the regions; a move shifts every region
+    rt = Timeline()
+    rt.set_key(0.0, np.array([[0.2, 0.0], [0.6, 0.0]]))
+    rt.move_shape_key(0, 0.0, 0.0, 0.8)
+    np.testing.assert_allclose(rt.keys[0].weights[:, 0], [0.4, 0.8])
+    with pytest.raises(RigInputError):
+        Keyframe(0.0, [0.0, 1.0], keyed=[True])     # a mask of the wrong length
+
+
 def test_weights_csv_round_trip_and_bad_files(tmp_path, ict_rig):
     W = np.random.default_rng(0).random((5, ict_rig.n_shapes))
     path = tmp_path / "w.csv"

@@ -108,8 +108,14 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
     if colormap.legend:
         entries = colormap.legend if len(colormap.legend) <= 10 else \
             colormap.legend[:9] + [(f"… {len(colormap.legend) - 9} more", (0.7, 0.7, 0.7))]
-        plotter.add_legend(entries, bcolor=(0.1, 0.1, 0.12), border=False, face="rectangle", name="legend",
-                           size=(0.24, 0.035 * len(entries)), loc="upper left")
+        # a fixed size in pixels (the text scales to its box): 220 px wide and 19 px a row, at most a quarter of
+        # a small picture's width, in the upper left corner (the colour bar is right, the legend's title lower right)
+        w, h = plotter.window_size
+        width = min(220.0, 0.26 * max(w, 1))
+        size = (width / max(w, 1), min(0.9, width * 19 / 220 * len(entries) / max(h, 1)))
+        legend = plotter.add_legend(entries, bcolor=(0.1, 0.1, 0.12), border=False, face="rectangle", name="legend",
+                                    size=size, loc="upper left")
+        _legend_white_text(legend, entries)
         if colormap.title:
             plotter.add_text(colormap.title, position="lower_right", font_size=10, color="white", name="legend_title")
     if colormap.rgb:
@@ -131,6 +137,20 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
             plotter.scalar_bars[bar["title"]].SetVerticalTitleSeparation(8)  # pixels between title and top label
     _map_directly(actor, mesh, "values")
     return actor
+
+
+def _legend_white_text(legend, entries) -> None:
+    """White text beside each swatch: a legend's text took its swatch's colour (a dark blue region's name was
+    unreadable on the dark box). Each swatch is a square carrying its colour as cell scalars."""
+    import pyvista as pv
+    square = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    for i, (_text, color) in enumerate(entries):
+        swatch = pv.PolyData(square, faces=[4, 0, 1, 2, 3])
+        swatch.cell_data["rgb"] = np.array([[int(round(255 * c)) for c in color]], dtype=np.uint8)
+        legend.SetEntrySymbol(i, swatch)
+        legend.SetEntryColor(i, 1.0, 1.0, 1.0)
+    legend.ScalarVisibilityOn()
+    legend.SetPadding(4)
 
 
 def _map_directly(actor, mesh, name: str) -> None:
@@ -187,34 +207,53 @@ def camera_direction(name: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float = 30.0,
-               size: tuple[int, int] | None = None) -> None:
-    """Frame ``focus_points`` (e.g. the face area) from a preset direction, for the plotter's window
-    size or the given (w, h)."""
-    pts = np.asarray(focus_points, dtype=np.float64)
+               size: tuple[int, int] | None = None, direction: tuple | None = None) -> None:
+    """Frame ``focus_points`` (e.g. the face area) from a preset direction (or ``direction``: (focus-to-eye,
+    view up), e.g. where the camera looks now), for the plotter's window size or the given (w, h).
+
+    The camera looks at the centre of the points' box and stands as close as it can with every point inside
+    the view (each at its own depth: the nose nearer than the ears), with a margin of 6%: a box's bounding
+    sphere wasted a third of the view on a face, which is much deeper and narrower than it is tall."""
+    pts = np.asarray(focus_points, dtype=np.float64).reshape(-1, 3)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     center = (lo + hi) / 2
-    radius = 0.5 * np.linalg.norm(hi - lo)
-    d, up = camera_direction(name)
-    dist = radius / np.tan(np.radians(view_angle / 2)) * 1.05
+    d, up = camera_direction(name) if direction is None else (np.asarray(direction[0], dtype=np.float64),
+                                                              np.asarray(direction[1], dtype=np.float64))
+    d = d / np.linalg.norm(d)
+    right = np.cross(up, d)
+    if np.linalg.norm(right) < 1e-9:   # looking along the up vector: any perpendicular will do
+        right = np.cross(np.array([0.0, 0.0, 1.0]) if abs(d[2]) < 0.9 else np.array([1.0, 0.0, 0.0]), d)
+    right /= np.linalg.norm(right)
+    true_up = np.cross(d, right)
+    rel = pts - center
+    x, y, z = np.abs(rel @ right) * 1.06, np.abs(rel @ true_up) * 1.06, rel @ d   # z: towards the eye
     w, h = size or plotter.window_size
-    if 0 < w < h:  # the view angle is vertical: a tall, narrow view must step back to fit the width
-        dist *= h / w
+    t = np.tan(np.radians(view_angle / 2))
+    aspect = w / h if w > 0 and h > 0 else 1.0
+    dist = float(np.max(z + np.maximum(y / t, x / (t * aspect)))) if len(pts) else 1.0
+    dist = max(dist, 1e-6 + float(z.max(initial=0.0)), 1e-6)
     cam = plotter.camera
     cam.view_angle = view_angle
     cam.focal_point = center.tolist()
     cam.position = (center + d * dist).tolist()
-    cam.up = up.tolist()
+    cam.up = true_up.tolist()
     plotter.reset_camera_clipping_range()
 
 
 def focus_vertices(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
-    """The points a camera should frame: the vertices any shape moves (the face), else all."""
+    """The points a camera should frame: where the shapes act (the face), else all vertices.
+
+    A vertex counts when some shape moves it by at least a tenth of what the shapes typically move the most
+    (the 99th percentile of each vertex's largest displacement): on ICT FaceKit a few shapes drag the scalp
+    and neck by a fraction of a millimetre, and framing every vertex that moves at all showed a small head
+    and shoulders instead of the face. Interior parts that move (teeth, tongue) lie inside the face's box.
+    """
     if deltas.size:
-        moving = np.abs(deltas).max(axis=(0, 2)) > 1e-6 * max(1.0, np.abs(neutral).max())
+        reach = np.sqrt((np.asarray(deltas, dtype=np.float64) ** 2).sum(axis=2)).max(axis=0)   # (V,)
+        moving = reach > 1e-6 * max(1.0, float(np.abs(neutral).max()))
         if moving.sum() >= 3:
-            pts = neutral[moving]
-            # Interior parts that move (teeth, tongue, eyeballs) are kept: they lie inside the face's box.
-            return pts
+            acts = reach >= 0.1 * float(np.percentile(reach[moving], 99))
+            return neutral[acts if acts.sum() >= 3 else moving]
     return neutral
 
 
@@ -239,8 +278,9 @@ def render_png(points, face_counts, face_indices, out_path, *, focus=None, color
         plotter.close()
 
 
-def write_image_atomically(plotter, out_path) -> None:
-    """``plotter.screenshot`` to a temporary of the same extension beside ``out_path``, then ``os.replace``."""
+def write_image_atomically(plotter, out_path, size: tuple[int, int] | None = None) -> None:
+    """``plotter.screenshot`` (at ``size`` (w, h) pixels if given) to a temporary of the same extension beside
+    ``out_path``, then ``os.replace``. The ``render`` command and the GUI's File ▸ Export Image write through it."""
     import os
     from pathlib import Path
 
@@ -250,7 +290,7 @@ def write_image_atomically(plotter, out_path) -> None:
     remove_stale_temporaries(out.parent)
     tmp = temp_path(out, suffix=out.suffix or ".png")
     try:
-        plotter.screenshot(str(tmp))
+        plotter.screenshot(str(tmp), window_size=list(size) if size else None)
         os.replace(tmp, out)
     finally:
         tmp.unlink(missing_ok=True)

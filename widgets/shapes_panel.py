@@ -91,6 +91,8 @@ class _ShapeRow(QtWidgets.QWidget):
         self._bold = False
         self.label.setContextMenuPolicy(QtCore.Qt.CustomContextMenu)
         self.label.customContextMenuRequested.connect(self._menu)
+        self.slider.setContextMenuPolicy(QtCore.Qt.CustomContextMenu)   # the slider's menu too (Key <shape>)
+        self.slider.customContextMenuRequested.connect(lambda pos: self._menu(pos, self.slider))
         self.slider.sliderPressed.connect(self._pressed)
         self.slider.sliderReleased.connect(self._released)
         self.slider.valueChanged.connect(self._slider_moved)
@@ -108,12 +110,16 @@ class _ShapeRow(QtWidgets.QWidget):
             self._bold = active
             self.label.setStyleSheet("font-weight: bold;" if active else "")
 
-    def _menu(self, pos) -> None:
+    def _menu(self, pos, where=None) -> None:
         menu = QtWidgets.QMenu(self)
+        key = menu.addAction(f"Key {self.name}")
+        key.setToolTip("Key this shape alone at the current time (its own curve in the Graph Editor)")
+        key.triggered.connect(lambda: self.panel.key_shape_requested.emit(self.index))
         act = menu.addAction("Mirror to the Other Side")
         act.setToolTip("Make (or replace) the other side's shape as this one's mirror image across x = 0")
         act.triggered.connect(lambda: self.panel.mirror_shape_requested.emit(self.index))
-        menu.popup(self.label.mapToGlobal(pos))
+        self.context_menu = menu   # tests pick its actions
+        menu.popup((where or self.label).mapToGlobal(pos))
 
     def _pressed(self) -> None:
         self._dragging = True
@@ -141,6 +147,7 @@ class ShapesPanel(QtWidgets.QWidget):
 
     pose_edited = QtCore.Signal(object)           # a PoseEdit
     mirror_shape_requested = QtCore.Signal(int)   # make the other side's shape from this one (right-click)
+    key_shape_requested = QtCore.Signal(int)      # key this shape alone at the current time (right-click)
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)

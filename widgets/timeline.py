@@ -73,6 +73,7 @@ class TimelinePanel(QtWidgets.QWidget):
     time_changed = QtCore.Signal(float)
     play_toggled = QtCore.Signal(bool)
     set_key_requested = QtCore.Signal()
+    key_step_requested = QtCore.Signal(int)   # go to the next (1) or previous (-1) key
     remove_key_requested = QtCore.Signal()
     interpolation_changed = QtCore.Signal(str)
     fps_changed = QtCore.Signal(float)
@@ -90,7 +91,8 @@ class TimelinePanel(QtWidgets.QWidget):
         self.play.setToolTip("Play / pause the keyed animation (Space)")
         self.play.toggled.connect(self._play_toggled)
         self.set_key = QtWidgets.QPushButton("Set key")
-        self.set_key.setToolTip("Key the current pose at the current time (S)")
+        self.set_key.setToolTip("Key the current pose at the current time (S); while the Graph Editor is shown "
+                                "with shapes selected, only those shapes")
         self.set_key.clicked.connect(self.set_key_requested)
         self.remove_key = QtWidgets.QPushButton("Remove key")
         self.remove_key.setToolTip("Remove the key at the current time")
@@ -125,7 +127,15 @@ class TimelinePanel(QtWidgets.QWidget):
         self.export_pc2 = QtWidgets.QPushButton("PC2…")
         self.export_pc2.setToolTip("Export the keyed animation as a PC2 point cache")
         self.export_pc2.clicked.connect(self.export_pc2_requested)
-        for wdg in (self.play, self.set_key, self.remove_key):
+        self.previous_key = QtWidgets.QToolButton()
+        self.previous_key.setText("◆◀")
+        self.previous_key.setToolTip("Go to the previous key (,)")
+        self.previous_key.clicked.connect(lambda: self.key_step_requested.emit(-1))
+        self.next_key = QtWidgets.QToolButton()
+        self.next_key.setText("▶◆")
+        self.next_key.setToolTip("Go to the next key (.)")
+        self.next_key.clicked.connect(lambda: self.key_step_requested.emit(1))
+        for wdg in (self.play, self.previous_key, self.next_key, self.set_key, self.remove_key):
             lay.addWidget(wdg)
         lay.addWidget(self.ruler, 1)
         for wdg in (self.time_label, self.interp, self.fps, self.duration, self.export_csv, self.export_pc2):

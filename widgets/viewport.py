@@ -355,6 +355,19 @@ class Viewport(QtWidgets.QWidget):
     def reset_view(self) -> None:
         self.set_camera(self._camera)
 
+    def focus_points(self) -> np.ndarray | None:
+        """The points the camera presets frame (the face: the vertices the shapes move)."""
+        return self._focus
+
+    def frame_points(self, points: np.ndarray | None = None) -> None:
+        """Frame ``points`` (default: the face) from where the camera looks now (Maya's F and A)."""
+        pts = self._focus if points is None else np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        if pts is None or not len(pts):
+            return
+        cam = self.camera_frame()
+        set_camera(self.plotter, self._camera, pts, direction=(-cam.forward, cam.up))
+        self.render()
+
     def render(self) -> None:
         self.plotter.render()
 
@@ -372,6 +385,26 @@ class Viewport(QtWidgets.QWidget):
         finally:
             self.plotter.camera_position = saved
             self.render()
+
+    def write_image(self, path, size: tuple[int, int] | None = None) -> tuple[int, int]:
+        """Write the view as shown (camera, colour map and bar, wireframe) as an image at ``size`` (w, h) pixels
+        (default: the view's), through the ``render`` command's writer (``scene.write_image_atomically``). A size
+        narrower than the view widens the view angle so that what is seen across stays in the picture."""
+        from .scene import write_image_atomically
+        w, h = size or tuple(self.plotter.window_size)
+        vw, vh = self.plotter.window_size
+        cam = self.plotter.camera
+        angle = cam.view_angle
+        if vw > 0 and vh > 0 and w * vh < vw * h:      # narrower than the view: keep its horizontal field
+            half = np.arctan(np.tan(np.radians(angle) / 2) * (vw / vh) / (w / h))
+            cam.view_angle = float(np.degrees(2 * half))
+        try:
+            self.render()
+            write_image_atomically(self.plotter, path, (int(w), int(h)) if size else None)
+        finally:
+            cam.view_angle = angle
+            self.render()
+        return int(w), int(h)
 
     def close_viewport(self) -> None:
         self._tools.clear()

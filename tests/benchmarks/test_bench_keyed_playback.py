@@ -1,0 +1,61 @@
+"""Keyed playback keeps real time on ICT FaceKit (26,719 vertices) at 24 and 60 frames/s (issue 18).
+
+Run: python -m pytest tests/benchmarks/test_bench_keyed_playback.py --benchmark-only -s
+The measure is the clock, not the frame count: Space plays a 2-second keyed animation (no loop) in the main
+window at its default size, and it must end 2 seconds later (within a quarter of a second), showing the last
+frame; frames whose time passed while the previous one was drawn are dropped. Printed: the wall time, the
+frames drawn of the animation's frames, and the mean time to draw one frame.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from PySide6 import QtCore
+
+from tests.gui_helpers import make_window, open_and_wait
+from tests.test_gui_editor_habits import _focus
+
+
+@pytest.mark.parametrize("fps", [24.0, 60.0])
+def test_keyed_playback_keeps_real_time_on_ict(benchmark, qtbot, tmp_path, ict_dir, fps):
+    w = make_window(qtbot, tmp_path, size=(1400, 900))   # the window's size before it is maximised
+    open_and_wait(qtbot, w, ict_dir)
+    kf, rig = w.keyframes, w.document.rig
+    kf.set_settings(fps=fps)
+    for t, pose in ((0.0, {}), (1.0, {"jawOpen": 0.8, "mouthSmile_L": 0.6, "browInnerUp_L": 1.0}), (2.0, {})):
+        weights = np.zeros(rig.n_shapes)
+        for name, v in pose.items():
+            weights[rig.shape_index(name)] = v
+        w.set_pose(weights, "pose")
+        kf.set_key(t)
+    assert kf.duration == 2.0 and kf.fps == fps
+    kf.playback.loop = False
+    drawn: list[int] = []
+    kf.playback.ticked.connect(drawn.append)
+
+    def play() -> float:
+        drawn.clear()
+        kf.scrub(0.0)
+        _focus(qtbot, w.viewport.canvas)
+        t0 = time.perf_counter()
+        qtbot.keyClick(w.viewport.canvas, QtCore.Qt.Key_Space)
+        assert kf.playing
+        qtbot.waitUntil(lambda: not kf.playing, timeout=20000)
+        return time.perf_counter() - t0
+
+    elapsed = benchmark.pedantic(play, rounds=1, iterations=1)
+    n_frames = len(kf.frame_times())
+    # the cost of drawing one frame (pose + render), outside playback
+    t0 = time.perf_counter()
+    for f in range(0, n_frames, max(1, n_frames // 12)):
+        kf.scrub(f / fps)
+        w.redraw_now()
+    per_frame = (time.perf_counter() - t0) / len(range(0, n_frames, max(1, n_frames // 12)))
+    benchmark.extra_info.update(elapsed_s=round(elapsed, 3), frames_drawn=len(drawn), frames=n_frames,
+                                draw_ms=round(per_frame * 1000, 1))
+    print(f"\nkeyed playback at {fps:g} fps on ICT: a 2.000 s animation played in {elapsed:.3f} s, "
+          f"{len(drawn)} of {n_frames} frames drawn, {per_frame * 1000:.1f} ms to draw a frame")
+    assert kf.time == pytest.approx(2.0)                         # it ended on the last frame
+    assert abs(elapsed - 2.0) < 0.25, f"a 2 s animation took {elapsed:.2f} s"
