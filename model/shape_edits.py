@@ -115,15 +115,19 @@ def hierarchical_conflicts(rig: Rig, order) -> list[str]:
     return bad
 
 
-def reorder_shapes(project, order) -> list[int]:
-    """Put the shapes in ``order`` (old indices, new position by position). Returns the order that undoes it.
-    Refuses an order that would change a hierarchical three-way corrective (``hierarchical_conflicts``)."""
-    rig = project.rig
-    order = _check_order(order, rig.n_shapes)
+def reorder_check(rig: Rig, order) -> None:
+    """Refuse an order that would change a hierarchical three-way corrective (``hierarchical_conflicts``)."""
     bad = hierarchical_conflicts(rig, order)
     if bad:
         raise RigInputError(f"This order would change the corrective {shown(', '.join(bad), 80)}: its hierarchical "
                             "rule takes its three or more drivers in list order. Move them together or keep their order.")
+
+
+def reorder_shapes(project, order) -> list[int]:
+    """Put the shapes in ``order`` (old indices, new position by position). Returns the order that undoes it."""
+    rig = project.rig
+    order = _check_order(order, rig.n_shapes)
+    reorder_check(rig, order)
     rig.shape_names = [rig.shape_names[i] for i in order]
     rig.deltas = np.take(rig.deltas, order, axis=0)   # a new array: whatever kept the old one keeps it whole
     project.weights = project.weights[order]
