@@ -402,8 +402,9 @@ class ShapesPanel(QtWidgets.QWidget):
         self.scroll.setWidget(self._rows_host)
         lay.addWidget(self.scroll, 1)
         for key, kind, what in SHAPE_KEYS:
-            sc = QtGui.QShortcut(QtGui.QKeySequence(key), self.scroll)   # while the shape list has the focus
-            sc.setContext(QtCore.Qt.WidgetWithChildrenShortcut)
+            # while the list has the focus (a click on a shape's name gives it): a number box keeps its Delete
+            sc = QtGui.QShortcut(QtGui.QKeySequence(key), self._rows_host)
+            sc.setContext(QtCore.Qt.WidgetShortcut)
             sc.setWhatsThis(what)
             sc.activated.connect(lambda k=kind: self.request(k))
         self.rows: list[_ShapeRow] = []
@@ -555,7 +556,8 @@ class ShapesPanel(QtWidgets.QWidget):
 
     def shape_menu(self, row: _ShapeRow) -> QtWidgets.QMenu:
         """The right-click menu of a shape (Maya's Shape Editor's target menu)."""
-        menu = QtWidgets.QMenu(self)
+        menu = QtWidgets.QMenu(row)
+        menu.setAttribute(QtCore.Qt.WA_DeleteOnClose)
         name = row.name
 
         def add(text: str, tip: str, slot) -> QtGui.QAction:
