@@ -429,8 +429,8 @@ class MocapController(QtCore.QObject):
 
     def _show_frame(self, frame: int) -> None:
         if isinstance(self.take, WeightTake):
-            if self.take.weights.shape[1] == self.rig.n_shapes:
-                self.document.set_weights(self.take.weights[frame])
+            from model.shape_edits import columns_by_name   # by name: the shape list may have been reordered
+            self.document.set_weights(columns_by_name(self.take.weights[frame], self.take.names, self.rig.shape_names))
         elif self.cache is not None:
             proj, dense, res = self.cache.frame(frame)
             self.views.show_frame(proj, dense, res, self.cache.markers[frame], self.cache.fitted[frame],

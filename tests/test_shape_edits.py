@@ -298,3 +298,25 @@ def test_gltf_content_bakes_inbetweens_as_morph_targets_with_piecewise_weights(r
     assert len(content.names) == rig.n_shapes + 1 + len(rig.correctives)
     surface = content.neutral + np.einsum("k,kvc->vc", content.pose, content.deltas)
     np.testing.assert_allclose(surface, PoseEvaluator(rig, dtype=np.float64).evaluate(w), atol=1e-10)
+
+
+def test_a_take_solve_leaves_a_muted_shape_at_zero(rig):
+    from model.marker_map import MarkerMap
+    from model.take_workspace import solve_take
+    from model.takes import MarkerTake
+    ev = PoseEvaluator(rig, dtype=np.float64)
+    frames = np.stack([_w(rig, jawOpen=x, mouthSmile_L=0.5) for x in (0.2, 0.6, 0.9)])
+    truth = np.stack([ev.evaluate(w) for w in frames])
+    vertices = np.flatnonzero(np.abs(rig.deltas).max(axis=(0, 2)) > 0)[::40]
+    labels = [f"M{i:03d}" for i in range(vertices.size)]
+    mm = MarkerMap(markers=dict(zip(labels, vertices.tolist())), rig_units="cm")
+    take = MarkerTake(positions=truth[:, vertices], labels=labels, rate=30.0, units="cm")
+    options = dict(calibration_frames=0, head_motion=False, residual="none", two_pass=False)
+    k = rig.shape_index("jawOpen")
+    free = solve_take(rig, take, mm, **options).weights
+    assert free[:, k].min() > 0.15 and np.corrcoef(free[:, k], frames[:, k])[0, 1] > 0.99   # it is used
+    rig.muted = ["jawOpen"]
+    rig.validate()
+    sol = solve_take(rig, take, mm, **options)
+    assert np.abs(sol.weights[:, k]).max() < 1e-6
+    assert sol.weights.shape[1] == rig.n_shapes       # the CSV keeps its column

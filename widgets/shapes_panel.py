@@ -73,11 +73,11 @@ class _ShapeRow(QtWidgets.QWidget):
         lay.setContentsMargins(2, 0, 2, 0)
         lay.setSpacing(3)
         self.label = QtWidgets.QLabel()
-        self.label.setMinimumWidth(120)
-        self.label.setMaximumWidth(170)
+        self.label.setFixedWidth(150)        # the M and S buttons and the sliders line up
         self.editor: QtWidgets.QLineEdit | None = None
-        self.mute = self._toggle("M", "Mute {}: leave it out of the pose (its correctives too); undoable")
-        self.solo = self._toggle("S", "Solo {}: show only the soloed shapes (Ctrl+click: solo only this one); undoable")
+        self.mute = self._toggle("M", "Mute {}: leave it out of the pose (its correctives too); undoable", "#c9302c")
+        self.solo = self._toggle("S", "Solo {}: show only the soloed shapes (Ctrl+click: solo only this one); undoable",
+                                 "#d4a017")
         self.slider = _Slider(QtCore.Qt.Horizontal)
         self.slider.setFocusPolicy(QtCore.Qt.StrongFocus)
         self.slider.setRange(0, SLIDER_STEPS)
@@ -110,12 +110,14 @@ class _ShapeRow(QtWidgets.QWidget):
         self.slider.valueChanged.connect(self._slider_moved)
         self.box.valueChanged.connect(self._box_changed)
 
-    def _toggle(self, text: str, tip: str) -> QtWidgets.QToolButton:
+    def _toggle(self, text: str, tip: str, on_colour: str) -> QtWidgets.QToolButton:
         b = QtWidgets.QToolButton()
         b.setText(text)
         b.setCheckable(True)
         b.setAutoRaise(True)
         b.setFixedWidth(22)
+        b.setStyleSheet(f"QToolButton:checked {{ background: {on_colour}; color: white; font-weight: bold; "
+                        "border-radius: 3px; }")
         b.setProperty("tip", tip)
         return b
 
@@ -286,7 +288,7 @@ class ShapeEdit:
     exclusive: bool = False
 
 
-GROUPINGS = (("none", "No groups"), ("prefix", "Group by face part"), ("side", "Group by side"))
+GROUPINGS = (("none", "No groups"), ("prefix", "By face part"), ("side", "By side"))
 # the panel's own keys, live while the shape list has the focus: (key, kind, what Help ▸ Keyboard Shortcuts says)
 SHAPE_KEYS = (("F2", "rename", "Rename Shape"), ("Delete", "delete", "Delete Shape (with its correctives)"),
               ("Ctrl+D", "duplicate", "Duplicate Shape"), ("Alt+Up", "move-up", "Move Shape Up"),
@@ -342,12 +344,12 @@ class ShapesPanel(QtWidgets.QWidget):
         self.grouping = QtWidgets.QComboBox()
         for key, label in GROUPINGS:
             self.grouping.addItem(label, key)
+        self.grouping.setSizeAdjustPolicy(QtWidgets.QComboBox.AdjustToContents)
         self.grouping.setToolTip("Show the shapes in collapsible groups by face part (brow, eye, mouth...: the "
                                  "first word of the name) or by side (_L, _R, centre)")
         self.grouping.currentIndexChanged.connect(lambda _i: self._arrange())
         top.addWidget(self.filter, 1)
         top.addWidget(self.active_only)
-        top.addWidget(self.grouping)
         lay.addLayout(top)
         row = QtWidgets.QHBoxLayout()
         self.presets = QtWidgets.QComboBox()
@@ -391,6 +393,7 @@ class ShapesPanel(QtWidgets.QWidget):
         sort.setMenu(sort_menu)
         edit_row.addWidget(sort)
         edit_row.addStretch(1)
+        edit_row.addWidget(self.grouping)
         lay.addLayout(edit_row)
         self.scroll = QtWidgets.QScrollArea()
         self.scroll.setWidgetResizable(True)
