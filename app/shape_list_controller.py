@@ -49,6 +49,8 @@ class ShapeListController(QtCore.QObject):
                 self.delete(list(edit.names or (edit.shape,)))
             elif k in ("move-up", "move-down"):
                 self.move(list(edit.names or (edit.shape,)), -1 if k == "move-up" else 1)
+            elif k == "move-to":
+                self.move_to(list(edit.names or (edit.shape,)), int(edit.text))
             elif k == "sort":
                 self.sort(edit.text)
             elif k == "mute":
@@ -97,18 +99,24 @@ class ShapeListController(QtCore.QObject):
 
     def move(self, names: list[str], step: int) -> None:
         rig = self.document.rig
-        order = se.moved_order(rig.n_shapes, [rig.shape_index(n) for n in names], step)
-        if order != list(range(rig.n_shapes)):
-            se.reorder_check(rig, order)
-            what = names[0] if len(names) == 1 else count(len(names), "shape")
-            self._push(ReorderShapesCommand(self.document, order, f"Move {what} {'up' if step < 0 else 'down'}"))
+        what = names[0] if len(names) == 1 else count(len(names), "shape")
+        self._reorder(se.moved_order(rig.n_shapes, [rig.shape_index(n) for n in names], step),
+                      f"Move {what} {'up' if step < 0 else 'down'}")
+
+    def move_to(self, names: list[str], place: int) -> None:
+        """Move shapes to before list position ``place`` (a drag in the list)."""
+        rig = self.document.rig
+        self._reorder(se.moved_to_order(rig.n_shapes, [rig.shape_index(n) for n in names], place),
+                      f"Move {names[0] if len(names) == 1 else count(len(names), 'shape')}")
+
+    def _reorder(self, order: list[int], text: str) -> None:
+        if order != list(range(self.document.rig.n_shapes)):
+            se.reorder_check(self.document.rig, order)
+            self._push(ReorderShapesCommand(self.document, order, text))
 
     def sort(self, by: str) -> None:
         rig = self.document.rig
-        order = se.sorted_order(rig.shape_names, by)
-        if order != list(range(rig.n_shapes)):
-            se.reorder_check(rig, order)
-            self._push(ReorderShapesCommand(self.document, order, f"Sort shapes by {by}"))
+        self._reorder(se.sorted_order(rig.shape_names, by), f"Sort shapes by {by}")
 
     def _settings(self, new, text: str, takes_offset: bool = False) -> None:
         old = se.ShapeSettings.of(self.document.rig)

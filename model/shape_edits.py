@@ -88,6 +88,15 @@ def moved_order(n: int, indices: list[int], step: int) -> list[int]:
     return order
 
 
+def moved_to_order(n: int, indices: list[int], place: int) -> list[int]:
+    """The order after moving the shapes at ``indices`` (keeping their relative order) to just before list
+    position ``place`` (0..n, n: the end) of the current list -- a drag and drop in the list."""
+    chosen = sorted(set(indices))
+    rest = [i for i in range(n) if i not in set(chosen)]
+    at = sum(1 for i in rest if i < place)
+    return rest[:at] + chosen + rest[at:]
+
+
 # --- what refers to shapes by index -----------------------------------------------------------------------
 def _take(a: np.ndarray | None, idx: np.ndarray, axis: int = -1) -> np.ndarray | None:
     return None if a is None else np.take(a, idx, axis=axis)

@@ -212,3 +212,33 @@ def test_the_context_menu_lists_the_shape_actions_and_the_shortcuts_are_in_help(
     rows = {(name, keys) for _where, name, keys in window.shortcut_rows()}
     for name, keys in (("Rename Shape", "F2"), ("Duplicate Shape", "Ctrl+D"), ("Move Shape Up", "Alt+Up")):
         assert (name, keys) in rows
+
+
+def test_dragging_a_name_moves_the_shape_and_undo_puts_it_back(qtbot, window):
+    from tests.gui_helpers import mouse
+    doc, panel = window.document, window.shapes_panel
+    names = list(doc.rig.shape_names)
+    w = np.zeros(doc.rig.n_shapes)
+    w[doc.rig.shape_index("jawOpen")] = 0.6
+    window.set_pose(w, "pose")
+    surface = _surface(window)
+    src = panel.row("jawOpen")
+    panel.scroll.ensureWidgetVisible(panel.rows[0])
+    QtWidgets.QApplication.processEvents()
+    target = panel.row("eyeWide_L")                   # third in the list
+    start = src.label.rect().center()
+
+    def at_target(dy):
+        return src.label.mapFromGlobal(target.mapToGlobal(QtCore.QPoint(target.width() // 2, dy)))
+    mouse(src.label, "press", start)
+    mouse(src.label, "move", start + QtCore.QPoint(0, -30))
+    mouse(src.label, "move", at_target(2))            # the upper half of eyeWide_L: before it
+    assert panel.dragging
+    mouse(src.label, "release", at_target(2))
+    assert not panel.dragging
+    assert doc.rig.shape_names[:4] == ["eyeBlink_L", "eyeBlink_R", "jawOpen", "eyeWide_L"]
+    assert [r.name for r in panel.rows[:4]] == doc.rig.shape_names[:4]
+    assert panel.rows[2].box.value() == pytest.approx(0.6)          # its weight went with it
+    assert np.array_equal(_surface(window), surface)                # the face did not change
+    window.undo_action.trigger()
+    assert doc.rig.shape_names == names

@@ -240,6 +240,7 @@ def test_groups_of_ict_names(ict_rig):
     order = se.sorted_order(names, "group")
     assert [se.shape_prefix(names[i]) for i in order] == sorted(se.shape_prefix(n) for n in names)
     assert se.moved_order(4, [1, 2], -1) == [1, 2, 0, 3] and se.moved_order(4, [0], -1) == [0, 1, 2, 3]
+    assert se.moved_to_order(5, [3], 1) == [0, 3, 1, 2, 4] and se.moved_to_order(5, [0, 1], 5) == [2, 3, 4, 0, 1]
 
 
 def test_the_project_keeps_the_shape_settings(rig, tmp_path):
@@ -320,3 +321,27 @@ def test_a_take_solve_leaves_a_muted_shape_at_zero(rig):
     sol = solve_take(rig, take, mm, **options)
     assert np.abs(sol.weights[:, k]).max() < 1e-6
     assert sol.weights.shape[1] == rig.n_shapes       # the CSV keeps its column
+
+
+def test_a_glb_export_plays_the_inbetween_pose(rig, tmp_path):
+    """A glTF viewer blends morph targets linearly: the in-between is a target of its own and the file's default
+    weights give the evaluator's surface (to float32), not the straight-line pose."""
+    import struct
+    from model.export import export_rig
+    from model.readers import load_rig
+    k = rig.shape_index("jawOpen")
+    d = rig.deltas[k]
+    rig.inbetweens = {"jawOpen": [Inbetween(0.5, _bent(d))]}
+    rig.validate()
+    w = _w(rig, jawOpen=0.25)
+    export_rig(rig, tmp_path / "ib.glb", w)            # metres
+    back = load_rig(tmp_path / "ib.glb")
+    assert back.shape_names[rig.n_shapes:] == ["jawOpen@0.5"]
+    data = (tmp_path / "ib.glb").read_bytes()
+    n = struct.unpack("<I", data[12:16])[0]
+    weights = np.array(json.loads(data[20:20 + n])["meshes"][0]["weights"])
+    assert weights[k] == 0 and weights[-1] == 0.5
+    played = 100.0 * (back.neutral + np.einsum("k,kvc->vc", weights, back.deltas))
+    expected = PoseEvaluator(rig, dtype=np.float64).evaluate(w)
+    assert np.abs(played - expected).max() < 1e-5
+    assert np.abs(expected - (rig.neutral + 0.25 * d)).max() > 0.05

@@ -102,6 +102,9 @@ class _ShapeRow(QtWidgets.QWidget):
         self.label.setContextMenuPolicy(QtCore.Qt.CustomContextMenu)
         self.label.customContextMenuRequested.connect(self._menu)
         self.label.mousePressEvent = self._label_pressed
+        self.label.mouseMoveEvent = self._label_moved
+        self.label.mouseReleaseEvent = self._label_released
+        self._press_at: QtCore.QPoint | None = None
         self.label.mouseDoubleClickEvent = lambda _e: self.start_rename()
         self.mute.clicked.connect(lambda on: panel.shape_edited.emit(ShapeEdit("mute", self.name, on=on)))
         self.solo.clicked.connect(self._solo_clicked)
@@ -192,7 +195,29 @@ class _ShapeRow(QtWidgets.QWidget):
     # --- gestures ---------------------------------------------------------------------------------------
     def _label_pressed(self, event) -> None:
         if event.button() == QtCore.Qt.LeftButton:
-            self.panel.select(self.name, extend=bool(event.modifiers() & QtCore.Qt.ControlModifier))
+            extend = bool(event.modifiers() & QtCore.Qt.ControlModifier)
+            if extend or self.name not in self.panel.selected:
+                self.panel.select(self.name, extend=extend)
+            else:
+                self.panel._rows_host.setFocus()
+            self._press_at = event.position().toPoint()
+
+    def _label_moved(self, event) -> None:
+        """Dragging a name moves the selected shapes: a line shows where they will go."""
+        if self._press_at is None or not event.buttons() & QtCore.Qt.LeftButton:
+            return
+        if not self.panel.dragging and (event.position().toPoint() - self._press_at).manhattanLength() \
+                < QtWidgets.QApplication.startDragDistance():
+            return
+        self.panel.drag_to(self.label.mapToGlobal(event.position().toPoint()))
+
+    def _label_released(self, event) -> None:
+        self._press_at = None
+        if self.panel.dragging:
+            self.panel.drop(self.label.mapToGlobal(event.position().toPoint()))
+        elif event.button() == QtCore.Qt.LeftButton and not event.modifiers() & QtCore.Qt.ControlModifier \
+                and self.panel.selected != [self.name]:
+            self.panel.select(self.name)     # a click (no drag) on a selected shape selects it alone
 
     def _solo_clicked(self, on: bool) -> None:
         exclusive = bool(QtWidgets.QApplication.keyboardModifiers() & QtCore.Qt.ControlModifier)
@@ -275,7 +300,7 @@ class _NameEditor(QtWidgets.QLineEdit):
 @dataclass(frozen=True)
 class ShapeEdit:
     """One gesture of the Shapes panel on the shape list (each one undo step, made by the app): ``kind`` is
-    "rename" (``text``: the new name), "duplicate", "delete" (``names``), "move-up"/"move-down" (``names``),
+    "rename" (``text``: the new name), "duplicate", "delete" (``names``), "move-up"/"move-down" (``names``), "move-to" (``names`` before list position ``text``),
     "sort" (``text``: "name" or "group"), "mute"/"solo" (``on``; solo ``exclusive``: the only soloed one),
     "range" (ask for the slider range), "inbetween-pose"/"inbetween-obj" (add an in-between from the shown
     surface or an OBJ file), "remove-inbetweens", "mirror"."""
@@ -416,6 +441,7 @@ class ShapesPanel(QtWidgets.QWidget):
         self._groups: list[tuple[str, list[int]]] = []
         self._weights = np.zeros(0)
         self._arranged: tuple | None = None
+        self._drop_line: QtWidgets.QFrame | None = None
 
     # --- content ---------------------------------------------------------------------------------------
     def set_shapes(self, names: list[str], presets: list[str] | None = None) -> None:
@@ -546,6 +572,40 @@ class ShapesPanel(QtWidgets.QWidget):
         chosen = set(self.selected)
         for r in self.rows:
             r.set_selected(r.name in chosen)
+
+    @property
+    def dragging(self) -> bool:
+        return self._drop_line is not None and self._drop_line.isVisible()
+
+    def _drop_place(self, global_pos: QtCore.QPoint) -> tuple[int, int]:
+        """(list position the dragged shapes go before, y of the line in the list) for the pointer."""
+        y = self._rows_host.mapFromGlobal(global_pos).y()
+        shown = [r for r in self.rows if not r.isHidden()]
+        if not shown:
+            return 0, 0
+        for r in shown:
+            g = r.geometry()
+            if y < g.center().y():
+                return r.index, g.top()
+        last = shown[-1]
+        return last.index + 1, last.geometry().bottom()
+
+    def drag_to(self, global_pos: QtCore.QPoint) -> None:
+        if self._drop_line is None:
+            self._drop_line = QtWidgets.QFrame(self._rows_host)
+            self._drop_line.setFrameShape(QtWidgets.QFrame.HLine)
+            self._drop_line.setStyleSheet("color: palette(highlight); background: palette(highlight);")
+        _, y = self._drop_place(global_pos)
+        self._drop_line.setGeometry(0, max(0, y - 1), self._rows_host.width(), 3)
+        self._drop_line.raise_()
+        self._drop_line.show()
+
+    def drop(self, global_pos: QtCore.QPoint) -> None:
+        """End a drag: the selected shapes move (one undo step) to before the shape under the pointer."""
+        place, _ = self._drop_place(global_pos)
+        self._drop_line.hide()
+        if self.selected:
+            self.shape_edited.emit(ShapeEdit("move-to", self.selected[0], names=tuple(self.selected), text=str(place)))
 
     def request(self, kind: str) -> None:
         """A shape-list gesture on the selection (a button, a key, a menu entry): one ``shape_edited``."""
