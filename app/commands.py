@@ -221,7 +221,7 @@ class SetShapeSettingsCommand(_ShapeListCommand):
         if self.takes_offset:
             doc.edit_offset = offset_after
             doc.offset_changed.emit()
-        doc.rig_edited()
+        doc.shape_settings_edited()
 
     def redo(self) -> None:
         self._apply(self.new, None)

@@ -24,6 +24,7 @@ class ShapeListController(QtCore.QObject):
         self.panel.shape_edited.connect(self._on_shape_edit)
         self.document.rig_changed.connect(self.refresh)
         self.document.shapes_changed.connect(self.refresh)
+        self.document.shape_settings_changed.connect(self.refresh)
         if self.document.project is not None:
             self.refresh()
 

@@ -79,6 +79,24 @@ class PoseEvaluator:
         # (K+C, 3U) row-major: w @ D is a fast BLAS gemv.
         self._D = np.take(full.reshape(full.shape[0], V, 3), moving, axis=1).reshape(full.shape[0], -1).astype(dtype)
         self._blends: list[_BlendEntry] = []
+        self._inbetween_refs = _inbetween_refs(rig)   # the arrays themselves (kept alive), not their ids
+
+    def with_settings(self, rig: Rig) -> "PoseEvaluator":
+        """An evaluator of ``rig`` -- this one's rig with other mute, solo or ranges -- sharing this one's
+        matrices (no copy of the deltas); a new one built from scratch when the shapes, in-betweens or
+        correctives differ."""
+        same = (rig.deltas is self.rig.deltas and tuple(rig.shape_names) == self._names
+                and _same_objects(rig.correctives, self._correctives)
+                and all(c.muted == m for c, m in zip(rig.correctives, self._muted))
+                and _same_inbetweens(_inbetween_refs(rig), self._inbetween_refs))
+        if not same:
+            return PoseEvaluator(rig, self.dtype)
+        ev = object.__new__(PoseEvaluator)
+        ev.__dict__.update(self.__dict__)
+        ev.rig = rig
+        ev.shape_weights = ShapeWeights(rig)
+        ev._blends = []          # the per-blend set-up does not depend on the settings, but is cheap to redo
+        return ev
 
     # --- which correctives ------------------------------------------------------------------------
     def live(self, exclude: Iterable = (), include_muted: bool = False) -> np.ndarray:
@@ -207,6 +225,18 @@ class PoseEvaluator:
             cols = (verts[:, None] * 3 + np.arange(3)).reshape(-1)
             parts.append((cols, np.repeat(phi, 3).astype(self.dtype), Dr))
         return parts
+
+
+def _inbetween_refs(rig: Rig) -> list:
+    return [(n, i.weight, i.delta) for n in rig.shape_names for i in rig.inbetweens.get(n, ())]
+
+
+def _same_objects(a, b) -> bool:
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b))
+
+
+def _same_inbetweens(a, b) -> bool:
+    return len(a) == len(b) and all(x[0] == y[0] and x[1] == y[1] and x[2] is y[2] for x, y in zip(a, b))
 
 
 def evaluate(rig: Rig, weights: np.ndarray) -> np.ndarray:

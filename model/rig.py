@@ -92,7 +92,7 @@ class CornerAttributes:
     records: list[tuple[int, str]] = field(default_factory=list)
 
 
-@dataclass
+@dataclass(eq=False)   # compared by identity: an undo step keeps the very objects it restores
 class Inbetween:
     """An in-between target of a shape (Maya's in-between): the offset ``delta`` (V, 3) from the neutral that the
     shape reaches at ``weight`` (not 0 or 1). The shape's offset is piecewise linear in its weight through

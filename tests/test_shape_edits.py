@@ -345,3 +345,18 @@ def test_a_glb_export_plays_the_inbetween_pose(rig, tmp_path):
     expected = PoseEvaluator(rig, dtype=np.float64).evaluate(w)
     assert np.abs(played - expected).max() < 1e-5
     assert np.abs(expected - (rig.neutral + 0.25 * d)).max() > 0.05
+
+
+def test_a_mute_or_range_edit_reuses_the_evaluators_matrices_and_an_inbetween_does_not(rig):
+    ev = PoseEvaluator(rig, dtype=np.float64)
+    w = _w(rig, jawOpen=0.7, mouthSmile_L=0.4)
+    se.with_mute(rig, "mouthSmile_L", True).apply(rig)
+    se.with_range(rig, "jawOpen", 0.0, 0.5).apply(rig)
+    again = ev.with_settings(rig)
+    assert again._D is ev._D                                   # no copy of the deltas
+    assert np.array_equal(again.evaluate(w), PoseEvaluator(rig, dtype=np.float64).evaluate(w))
+    assert np.allclose(again.evaluate(w), rig.neutral + 0.5 * rig.deltas[rig.shape_index("jawOpen")], atol=1e-12)
+    se.with_inbetween(rig, "jawOpen", 0.5, _bent(rig.deltas[rig.shape_index("jawOpen")])).apply(rig)
+    rebuilt = again.with_settings(rig)
+    assert rebuilt._D is not ev._D and rebuilt._D.shape[0] == rig.n_shapes + 1
+    assert np.array_equal(rebuilt.evaluate(w), PoseEvaluator(rig, dtype=np.float64).evaluate(w))
