@@ -21,6 +21,7 @@ class ShapeListController(QtCore.QObject):
     def __init__(self, window) -> None:
         super().__init__(window)
         self.window, self.document, self.panel = window, window.document, window.shapes_panel
+        self.dialog: QtWidgets.QDialog | None = None   # the question a gesture asked last (range, weight)
         self.panel.shape_edited.connect(self._on_shape_edit)
         self.document.rig_changed.connect(self.refresh)
         self.document.shapes_changed.connect(self.refresh)
@@ -158,29 +159,39 @@ class ShapeListController(QtCore.QObject):
     def range_dialog(self, name: str) -> None:
         lo, hi = se.shape_range(self.document.rig, name)
         dialog = RangeDialog(name, lo, hi, self.window)
+        dialog.setAttribute(QtCore.Qt.WA_DeleteOnClose)
         dialog.accepted.connect(lambda: self._guarded(self.set_range, name, *dialog.values()))
+        self.dialog = dialog
         dialog.open()
 
     def _weight_now(self, name: str) -> float:
         w = float(self.document.weights[self.document.rig.shape_index(name)])
         return w if w not in (0.0, 1.0) else 0.5
 
+    def _ask_weight(self, text: str, value: float, then) -> QtWidgets.QInputDialog:
+        """A window-modal question for an in-between's weight; ``then(weight)`` on OK (``self.dialog`` meanwhile)."""
+        dlg = QtWidgets.QInputDialog(self.window)
+        dlg.setWindowTitle("Add In-between")
+        dlg.setInputMode(QtWidgets.QInputDialog.DoubleInput)
+        dlg.setDoubleRange(-10.0, 10.0)
+        dlg.setDoubleDecimals(3)
+        dlg.setDoubleValue(value)
+        dlg.setLabelText(text)
+        dlg.setAttribute(QtCore.Qt.WA_DeleteOnClose)
+        dlg.doubleValueSelected.connect(then)
+        self.dialog = dlg
+        dlg.open()
+        return dlg
+
     def inbetween_pose_dialog(self, name: str) -> None:
-        w, ok = QtWidgets.QInputDialog.getDouble(
-            self.window, "Add In-between", f"Weight at which {name} reaches the surface shown now:",
-            self._weight_now(name), -10.0, 10.0, 3)
-        if ok:
-            self._guarded(self.add_inbetween_from_pose, name, w)
+        self._ask_weight(f"Weight at which {name} reaches the surface shown now\n(not 0 or 1; e.g. 0.5):",
+                         self._weight_now(name), lambda w: self._guarded(self.add_inbetween_from_pose, name, w))
 
     def inbetween_obj_dialog(self, name: str) -> None:
         path, _ = QtWidgets.QFileDialog.getOpenFileName(self.window, f"In-between of {name}", "", "OBJ (*.obj)")
-        if not path:
-            return
-        w, ok = QtWidgets.QInputDialog.getDouble(self.window, "Add In-between",
-                                                 f"Weight at which {name} reaches {Path(path).name}:", 0.5,
-                                                 -10.0, 10.0, 3)
-        if ok:
-            self._guarded(self.add_inbetween_from_obj, name, w, path)
+        if path:
+            self._ask_weight(f"Weight at which {name} reaches {Path(path).name}:", 0.5,
+                             lambda w: self._guarded(self.add_inbetween_from_obj, name, w, path))
 
     def _guarded(self, fn, *args) -> None:
         try:

@@ -242,3 +242,57 @@ def test_dragging_a_name_moves_the_shape_and_undo_puts_it_back(qtbot, window):
     assert np.array_equal(_surface(window), surface)                # the face did not change
     window.undo_action.trigger()
     assert doc.rig.shape_names == names
+
+
+def _menu_action(window, name, text):
+    menu = window.shapes_panel.shape_menu(window.shapes_panel.row(name))
+    act = next(a for a in menu.actions() if a.text().split("\t")[0] == text)
+    act.trigger()
+    QtWidgets.QApplication.processEvents()
+
+
+def test_set_range_from_the_menu_asks_and_applies(qtbot, window):
+    _menu_action(window, "jawOpen", "Set Range…")
+    dialog = window.shape_list.dialog
+    assert dialog.isVisible()
+    dialog.lo.setValue(-0.5)
+    dialog.hi.setValue(2.0)
+    QTest.mouseClick(dialog.findChild(QtWidgets.QDialogButtonBox).button(QtWidgets.QDialogButtonBox.Ok),
+                     QtCore.Qt.LeftButton)
+    assert window.document.rig.ranges == {"jawOpen": (-0.5, 2.0)}
+    row = window.shapes_panel.row("jawOpen")
+    assert (row.box.minimum(), row.box.maximum()) == (-0.5, 2.0)
+    window.undo_action.trigger()
+    assert window.document.rig.ranges == {} and row.box.maximum() == 1.0
+
+
+def test_inbetween_from_the_menu_asks_for_the_weight(qtbot, window, tmp_path):
+    from model.obj_io import write_obj
+    doc = window.document
+    rig = doc.rig
+    k = rig.shape_index("mouthFunnel")
+    w = np.zeros(rig.n_shapes)
+    w[k] = 0.4
+    window.set_pose(w, "pose")
+    _menu_action(window, "mouthFunnel", "Add In-between from Current Pose…")
+    dialog = window.shape_list.dialog
+    assert dialog.doubleValue() == pytest.approx(0.4)     # the shape's weight now, suggested
+    dialog.setDoubleValue(0.5)
+    dialog.accept()
+    QtWidgets.QApplication.processEvents()
+    ib = rig.inbetweens["mouthFunnel"]
+    assert [i.weight for i in ib] == [0.5]
+    np.testing.assert_allclose(ib[0].delta, 0.4 * rig.deltas[k], atol=1e-12)
+    # from an OBJ in the neutral's vertex order: a second in-between at 0.25
+    target = rig.neutral + 0.1 * rig.deltas[k]
+    write_obj(tmp_path / "quarter.obj", target, rig.face_counts, rig.face_indices)
+    window.shape_list.add_inbetween_from_obj("mouthFunnel", 0.25, tmp_path / "quarter.obj")
+    assert [i.weight for i in rig.inbetweens["mouthFunnel"]] == [0.25, 0.5]
+    w[k] = 0.25
+    window.set_pose(w, "quarter")
+    np.testing.assert_allclose(_surface(window), target, atol=1e-5)     # the OBJ's six decimals
+    # one with the wrong vertex count is refused in one sentence naming the file; nothing changes
+    write_obj(tmp_path / "few.obj", rig.neutral[:100], np.array([3]), np.array([0, 1, 2]))
+    window.shape_list._guarded(window.shape_list.add_inbetween_from_obj, "mouthFunnel", 0.75, tmp_path / "few.obj")
+    assert "few.obj" in window.last_error and "vertices" in window.last_error
+    assert [i.weight for i in rig.inbetweens["mouthFunnel"]] == [0.25, 0.5]
