@@ -95,6 +95,8 @@ class MocapController(QtCore.QObject):
         weight_plot.frame_requested.connect(self.set_frame)
         error_plot.frame_requested.connect(self.set_frame)
         self.document.rig_changed.connect(self._on_rig_change)
+        self.document.shapes_changed.connect(self._on_shapes_change)
+        self._shape_names: list[str] | None = None    # the shape list the take and solve line up with
         self._sync_panel()
 
     # --- state ------------------------------------------------------------------------------------
@@ -429,8 +431,8 @@ class MocapController(QtCore.QObject):
 
     def _show_frame(self, frame: int) -> None:
         if isinstance(self.take, WeightTake):
-            from model.shape_edits import columns_by_name   # by name: the shape list may have been reordered
-            self.document.set_weights(columns_by_name(self.take.weights[frame], self.take.names, self.rig.shape_names))
+            if self.take.weights.shape[1] == self.rig.n_shapes:
+                self.document.set_weights(self.take.weights[frame])
         elif self.cache is not None:
             proj, dense, res = self.cache.frame(frame)
             self.views.show_frame(proj, dense, res, self.cache.markers[frame], self.cache.fitted[frame],
@@ -459,7 +461,14 @@ class MocapController(QtCore.QObject):
         self.playback.step(frames)
 
     # --- rig changes ------------------------------------------------------------------------------
+    def _on_shapes_change(self) -> None:
+        """Shapes renamed, moved, added or deleted (the Shapes list): a solve or a weight take of the old list no
+        longer lines up with the shapes, so it is handled as a new rig (the take re-mapped, the solve dropped)."""
+        if self.document.rig is not None and list(self.document.rig.shape_names) != self._shape_names:
+            self._on_rig_change()
+
     def _on_rig_change(self) -> None:
+        self._shape_names = list(self.document.rig.shape_names)
         self.panel.set_units(self.document.rig.units)
         self._drop_solution()
         for message in self.workspace.set_rig(self.document.rig):

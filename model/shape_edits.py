@@ -445,16 +445,3 @@ def inbetween_from_obj(rig: Rig, path) -> np.ndarray:
                             "(an in-between must share the neutral's vertex order and count).")
     return mesh.vertices - rig.neutral
 
-
-def columns_by_name(weights: np.ndarray, names: list[str], shape_names: list[str]) -> np.ndarray:
-    """Weights (..., len(names)) given for ``names`` placed in the order of ``shape_names`` (0 for a shape not
-    named): a weight take or CSV recorded before the list was reordered or edited poses the right shapes."""
-    weights = np.asarray(weights, dtype=np.float64)
-    if list(names) == list(shape_names):
-        return weights
-    where = {n: i for i, n in enumerate(names)}
-    out = np.zeros(weights.shape[:-1] + (len(shape_names),))
-    for k, n in enumerate(shape_names):
-        if n in where:
-            out[..., k] = weights[..., where[n]]
-    return out

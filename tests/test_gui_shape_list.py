@@ -296,3 +296,21 @@ def test_inbetween_from_the_menu_asks_for_the_weight(qtbot, window, tmp_path):
     window.shape_list._guarded(window.shape_list.add_inbetween_from_obj, "mouthFunnel", 0.75, tmp_path / "few.obj")
     assert "few.obj" in window.last_error and "vertices" in window.last_error
     assert [i.weight for i in rig.inbetweens["mouthFunnel"]] == [0.25, 0.5]
+
+
+def test_a_live_link_take_keeps_posing_the_right_shapes_after_a_move(qtbot, window, llf_csv):
+    """A weight take lines up with the shape list: moving or renaming shapes re-maps it by name."""
+    doc, mc = window.document, window.mocap
+    assert mc.load_take(llf_csv)
+    mc.set_frame(40)
+    QtWidgets.QApplication.processEvents()
+    before = dict(zip(doc.rig.shape_names, doc.weights))
+    assert before["jawOpen"] > 0.01 and before["eyeBlink_L"] != before["jawOpen"]
+    window.shape_list.move_to(["jawOpen"], 0)
+    window.shape_list.rename("eyeBlink_L", "blinkLeft")
+    mc.set_frame(40)
+    QtWidgets.QApplication.processEvents()
+    after = dict(zip(doc.rig.shape_names, doc.weights))
+    assert doc.rig.shape_names[0] == "jawOpen" and after["jawOpen"] == before["jawOpen"]
+    assert after["eyeWide_L"] == before["eyeWide_L"]
+    assert after["blinkLeft"] == 0.0    # the take names eyeBlink_L, which the rig no longer has
