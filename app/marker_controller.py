@@ -402,7 +402,8 @@ class MarkerController(QtCore.QObject):
             level, blend, regions, region_max = None, None, [], np.zeros((0, rig.n_shapes))
         W0 = pose_at_level(old, blend)
         ms = self.markers
-        solver = RegionalSolver(regions, ms.S, ms.delta_rows(rig.deltas), region_max=region_max,
+        from model.shape_weights import live_mask   # a muted shape does not follow the markers
+        solver = RegionalSolver(regions, ms.S, ms.delta_rows(rig.deltas) * live_mask(rig), region_max=region_max,
                                 solve_background=True, lam_reg=self.lam_reg, antagonists=self._antagonists(rig))
         if blend is not None and not (old.is_regional and same_blend(old.blend, blend)):
             doc.set_pose_state(PoseState(old.weights, W0, blend, level))  # same pose, now per region

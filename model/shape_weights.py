@@ -21,6 +21,18 @@ import numpy as np
 from .rig import Rig
 
 
+def live_mask(rig: Rig) -> np.ndarray:
+    """(K,) 1.0 for the shapes that take part, 0.0 for the muted ones and, while any shape is soloed, the unsoloed
+    ones. Solves multiply the shapes' columns by it: a muted shape explains no marker, so its weight goes to 0."""
+    index = {n: i for i, n in enumerate(rig.shape_names)}
+    live = np.ones(rig.n_shapes)
+    if rig.solo:
+        live[:] = 0.0
+        live[[index[n] for n in rig.solo]] = 1.0
+    live[[index[n] for n in rig.muted]] = 0.0
+    return live
+
+
 class ShapeWeights:
     """The per-shape settings of one rig as arrays: ``effective(W)`` and ``coefficients(W)`` for weight rows
     (..., K). ``trivial`` when nothing changes the weights (no range, mute, solo or in-between)."""
@@ -34,12 +46,7 @@ class ShapeWeights:
         for name, (lo, hi) in rig.ranges.items():
             self.lo[index[name]], self.hi[index[name]] = lo, hi
         self.clamped = bool(rig.ranges)
-        live = np.ones(K)
-        if rig.solo:
-            live[:] = 0.0
-            live[[index[n] for n in rig.solo]] = 1.0
-        live[[index[n] for n in rig.muted]] = 0.0
-        self.live = live
+        self.live = live_mask(rig)
         self.masked = bool(rig.solo or rig.muted)
         # per shape with in-betweens: (k, knots (m+2,) sorted with 0 and 1, row of each knot (-1: the zero knot))
         self.curves = []

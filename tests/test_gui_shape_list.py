@@ -314,3 +314,28 @@ def test_a_live_link_take_keeps_posing_the_right_shapes_after_a_move(qtbot, wind
     assert doc.rig.shape_names[0] == "jawOpen" and after["jawOpen"] == before["jawOpen"]
     assert after["eyeWide_L"] == before["eyeWide_L"]
     assert after["blinkLeft"] == 0.0    # the take names eyeBlink_L, which the rig no longer has
+
+
+def test_a_muted_shape_does_not_follow_a_marker_drag(qtbot, window):
+    from resources.sample_rig import sample_geometry
+    geometry = sample_geometry()
+    qtbot.waitUntil(lambda: window.segmentation.segmentation is not None, timeout=30000)
+    c, doc = window.markers, window.document
+    corner = int(geometry.mouth.upper[0])
+    assert c.add_marker_at(corner), c.last_message
+
+    def drag():
+        c.begin_drag(0)
+        c.drag_by(np.array([0.0, 0.6, 0.0]))
+        c.end_drag()
+        s = doc.pose_state()
+        return s.region_weights if s.is_regional else s.weights[None]
+    W = drag()
+    top = int(np.argmax(np.abs(W).max(axis=0)))
+    name = doc.rig.shape_names[top]
+    assert np.abs(W[:, top]).max() > 0.05
+    doc.undo_stack.undo()
+    window.shape_list.set_mute(name, True)
+    W = drag()
+    assert np.abs(W[:, top]).max() == 0.0, name
+    assert np.abs(W).max() > 0.05          # other shapes follow the marker instead
