@@ -339,3 +339,30 @@ def test_a_muted_shape_does_not_follow_a_marker_drag(qtbot, window):
     W = drag()
     assert np.abs(W[:, top]).max() == 0.0, name
     assert np.abs(W).max() > 0.05          # other shapes follow the marker instead
+
+
+def test_a_rename_keeps_the_segmentation_and_remove_inbetweens_undoes(qtbot, window):
+    qtbot.waitUntil(lambda: window.segmentation.segmentation is not None, timeout=30000)
+    seg = window.segmentation.segmentation
+    window.shape_list.rename("jawOpen", "jawDrop")
+    QtWidgets.QApplication.processEvents()
+    assert window.segmentation.segmentation is seg          # not re-segmented: the same shapes, renamed
+    panel_names = [window.segmentation_panel.shape.itemText(i) for i in range(window.segmentation_panel.shape.count())]
+    assert "jawDrop" in panel_names and "jawOpen" not in panel_names
+    doc = window.document
+    d = doc.rig.deltas[doc.rig.shape_index("jawDrop")]
+    from model import shape_edits as se
+    from app.commands import SetShapeSettingsCommand
+    doc.undo_stack.push(SetShapeSettingsCommand(doc, se.ShapeSettings.of(doc.rig),
+                                                se.with_inbetween(doc.rig, "jawDrop", 0.5, 0.7 * d), "ib"))
+    _menu_action(window, "jawDrop", "Remove In-betweens")
+    assert doc.rig.inbetweens == {} and "◆" not in window.shapes_panel.row("jawDrop").label.text()
+    window.undo_action.trigger()
+    assert [i.weight for i in doc.rig.inbetweens["jawDrop"]] == [0.5]
+    # Ctrl+click on S solos only that shape
+    QTest.mouseClick(window.shapes_panel.row("mouthClose").solo, QtCore.Qt.LeftButton)
+    QTest.mouseClick(window.shapes_panel.row("mouthFunnel").solo, QtCore.Qt.LeftButton)
+    assert sorted(doc.rig.solo) == ["mouthClose", "mouthFunnel"]
+    QTest.mouseClick(window.shapes_panel.row("jawDrop").solo, QtCore.Qt.LeftButton, QtCore.Qt.ControlModifier)
+    assert doc.rig.solo == ["jawDrop"]
+    assert [r.name for r in window.shapes_panel.rows if r.solo.isChecked()] == ["jawDrop"]
