@@ -132,7 +132,8 @@ class _ShapeListCommand(QUndoCommand):
     def _edit(self, fn, *args):
         doc = self.document
         p = doc.project
-        p.region_weights = doc.region_weights        # the document holds the live regional pose
+        # the document holds the live regional pose; the project gets all of it, as Document.save does
+        p.region_weights, p.region_blend, p.region_level = doc.region_weights, doc.region_blend, doc.region_level
         try:
             result = fn(p, *args)
         finally:
