@@ -360,3 +360,21 @@ def test_a_mute_or_range_edit_reuses_the_evaluators_matrices_and_an_inbetween_do
     rebuilt = again.with_settings(rig)
     assert rebuilt._D is not ev._D and rebuilt._D.shape[0] == rig.n_shapes + 1
     assert np.array_equal(rebuilt.evaluate(w), PoseEvaluator(rig, dtype=np.float64).evaluate(w))
+
+
+def test_a_usd_export_keys_the_inbetween_as_a_blend_shape_of_its_own(rig, tmp_path):
+    pytest.importorskip("pxr")
+    from pxr import Usd, UsdSkel
+    from model.export import export_rig
+    k = rig.shape_index("jawOpen")
+    rig.inbetweens = {"jawOpen": [Inbetween(0.5, _bent(rig.deltas[k]))]}
+    rig.muted = ["mouthClose"]
+    rig.validate()
+    w = _w(rig, jawOpen=0.75, mouthClose=1.0)
+    export_rig(rig, tmp_path / "ib.usda", w)
+    stage = Usd.Stage.Open(str(tmp_path / "ib.usda"))
+    anim = next(UsdSkel.Animation(p) for p in stage.Traverse() if p.IsA(UsdSkel.Animation))
+    names = list(anim.GetBlendShapesAttr().Get())
+    weights = dict(zip(names, anim.GetBlendShapeWeightsAttr().Get()))
+    assert weights["jawOpen"] == pytest.approx(0.5) and weights["jawOpen_0_5"] == pytest.approx(0.5)
+    assert weights["mouthClose"] == 0.0            # muted
