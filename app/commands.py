@@ -118,3 +118,114 @@ class SetShapeDeltaCommand(QUndoCommand):
 
     def undo(self) -> None:
         self._set(self.old)
+
+
+# --- the Shapes list (model.shape_edits) ------------------------------------------------------------------
+class _ShapeListCommand(QUndoCommand):
+    """Runs a ``model.shape_edits`` edit on the document's project with the live regional pose in it, then
+    tells every view: the evaluator is rebuilt and the keyed animation reloaded (its columns follow the shapes)."""
+
+    def __init__(self, document, text: str) -> None:
+        super().__init__(text)
+        self.document = document
+
+    def _edit(self, fn, *args):
+        doc = self.document
+        p = doc.project
+        # the document holds the live regional pose; the project gets all of it, as Document.save does
+        p.region_weights, p.region_blend, p.region_level = doc.region_weights, doc.region_blend, doc.region_level
+        try:
+            result = fn(p, *args)
+        finally:
+            doc.region_weights = p.region_weights
+        doc.rig_edited()
+        doc.section_changed.emit("keyframes")
+        return result
+
+
+class ReorderShapesCommand(_ShapeListCommand):
+    """Move or sort shapes: ``order`` lists the old indices in their new places."""
+
+    def __init__(self, document, order, text: str) -> None:
+        super().__init__(document, text)
+        self.order = list(order)
+        self.inverse: list[int] | None = None
+
+    def redo(self) -> None:
+        from model.shape_edits import reorder_shapes
+        self.inverse = self._edit(reorder_shapes, self.order)
+
+    def undo(self) -> None:
+        from model.shape_edits import reorder_shapes
+        self._edit(reorder_shapes, self.inverse)
+
+
+class RenameShapeCommand(_ShapeListCommand):
+    def __init__(self, document, old: str, new: str) -> None:
+        super().__init__(document, f"Rename {old} to {new}")
+        self.old, self.new = old, new
+        self.record = None
+
+    def redo(self) -> None:
+        from model.shape_edits import rename_shape
+        self.record = self._edit(rename_shape, self.old, self.new)
+
+    def undo(self) -> None:
+        from model.shape_edits import undo_rename
+        self._edit(undo_rename, self.record)
+
+
+class DeleteShapesCommand(_ShapeListCommand):
+    """Delete shapes with the correctives that need them; undo puts all of it back bit for bit."""
+
+    def __init__(self, document, names: list[str], text: str) -> None:
+        super().__init__(document, text)
+        self.names = list(names)
+        self.record = None
+
+    def redo(self) -> None:
+        from model.shape_edits import delete_shapes
+        self.record = self._edit(delete_shapes, self.names)
+
+    def undo(self) -> None:
+        from model.shape_edits import restore_shapes
+        self._edit(restore_shapes, self.record)
+
+
+class DuplicateShapeCommand(_ShapeListCommand):
+    def __init__(self, document, name: str, new_name: str) -> None:
+        super().__init__(document, f"Duplicate {name} as {new_name}")
+        self.name, self.new_name = name, new_name
+
+    def redo(self) -> None:
+        from model.shape_edits import duplicate_shape
+        self._edit(duplicate_shape, self.name, self.new_name)
+
+    def undo(self) -> None:
+        from model.shape_edits import delete_shapes
+        self._edit(delete_shapes, [self.new_name])
+
+
+class SetShapeSettingsCommand(_ShapeListCommand):
+    """Mute, solo, a slider range or an in-between (``model.shape_edits.ShapeSettings`` before and after);
+    ``takes_offset``: an in-between made from the shown surface takes the pending sculpt with it."""
+
+    def __init__(self, document, old, new, text: str, takes_offset: bool = False) -> None:
+        super().__init__(document, text)
+        self.old, self.new = old, new
+        self.takes_offset = takes_offset
+        self.offset = None if document.edit_offset is None else document.edit_offset.copy()
+
+    def _apply(self, settings, offset_after) -> None:
+        doc = self.document
+        settings.apply(doc.rig)
+        if self.takes_offset:
+            doc.edit_offset = offset_after
+            doc.offset_changed.emit()
+        doc.shape_settings_edited()
+
+    def redo(self) -> None:
+        self._apply(self.new, None)
+
+    def undo(self) -> None:
+        self._apply(self.old, self.offset)

@@ -52,6 +52,7 @@ class Document(QtCore.QObject):
     path_changed = QtCore.Signal()
     section_changed = QtCore.Signal(str)   # a project section (e.g. 'segmentation') was edited
     offset_changed = QtCore.Signal()       # the pending sculpt/nudge offset changed
+    shape_settings_changed = QtCore.Signal()   # mute, solo, ranges or in-betweens edited: same shapes and deltas
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
@@ -245,6 +246,15 @@ class Document(QtCore.QObject):
         else:
             self.project.sections[name] = copy.deepcopy(value)
         self.section_changed.emit(name)
+
+    def shape_settings_edited(self) -> None:
+        """The shapes' mute, solo, ranges or in-betweens changed (names and deltas did not): a new evaluator,
+        reusing the old one's matrices when the in-betweens are the same, and a new pose."""
+        self.evaluator = self.evaluator.with_settings(self.project.rig)
+        self.rig_version += 1
+        self._surface = None
+        self.shape_settings_changed.emit()
+        self.pose_changed.emit()
 
     def rig_edited(self, evaluator: PoseEvaluator | None = None) -> None:
         """Shapes or correctives changed in place (same topology): rebuild the evaluator (or take ``evaluator``,

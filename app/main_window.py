@@ -21,6 +21,7 @@ from app.keyframe_controller import KeyframeController
 from app.loading import LoadWorker
 from app.marker_controller import MarkerController
 from app.segmentation_controller import SegmentationController
+from app.shape_list_controller import ShapeListController
 from model.errors import RigInputError
 from model.project import Project
 from model.wording import count
@@ -84,6 +85,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.markers = MarkerController(self)
         self.keyframes = KeyframeController(self)
         self.correctives = corrective_controller.install(self)
+        self.shape_list = ShapeListController(self)   # the Shapes list's edits (rename, reorder, mute, in-betweens...)
         self.mocap = mocap_controller.install(self)
         self.exports = ExportController(self)
         self.batch = batch_controller.install(self)

@@ -100,6 +100,8 @@ class MocapController(QtCore.QObject):
         weight_plot.frame_requested.connect(self.set_frame)
         error_plot.frame_requested.connect(self.set_frame)
         self.document.rig_changed.connect(self._on_rig_change)
+        self.document.shapes_changed.connect(self._on_shapes_change)
+        self._shape_names: list[str] | None = None    # the shape list the take and solve line up with
         self._sync_panel()
 
     # --- state ------------------------------------------------------------------------------------
@@ -519,7 +521,14 @@ class MocapController(QtCore.QObject):
         self.playback.step(frames)
 
     # --- rig changes ------------------------------------------------------------------------------
+    def _on_shapes_change(self) -> None:
+        """Shapes renamed, moved, added or deleted (the Shapes list): a solve or a weight take of the old list no
+        longer lines up with the shapes, so it is handled as a new rig (the take re-mapped, the solve dropped)."""
+        if self.document.rig is not None and list(self.document.rig.shape_names) != self._shape_names:
+            self._on_rig_change()
+
     def _on_rig_change(self) -> None:
+        self._shape_names = list(self.document.rig.shape_names)
         self.panel.set_units(self.document.rig.units)
         self._drop_solution()
         for message in self.workspace.set_rig(self.document.rig):

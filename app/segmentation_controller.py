@@ -97,6 +97,12 @@ class SegmentationController(QtCore.QObject):
         if (rig is not None and seen is not None and self.segmentation is not None and rig.neutral is seen[0]
                 and rig.deltas is seen[1] and list(rig.shape_names) == seen[2]):
             return
+        if (rig is not None and seen is not None and self.segmentation is not None and rig.neutral is seen[0]
+                and rig.deltas is seen[1] and len(rig.shape_names) == len(seen[2])):
+            # shapes renamed (the Shapes list): the same arrays, so the same regions and maps
+            self._segmented = (rig.neutral, rig.deltas, list(rig.shape_names))
+            self.panel.set_shapes(rig.shape_names)
+            return
         if rig is not None and seen is not None and self.segmentation is not None and _appended(rig, seen):
             # a shape added at the end (Save as new shape, Mirror to a new side) or its undo: the regions stay,
             # with the selection (re-segmenting changed 39 regions to 29 and dropped the region being nudged)

@@ -98,11 +98,14 @@ def load_animation(path: str | Path, rig: Rig) -> WeightAnimation:
 class ExportContent:
     """What glTF and USD exports hold, in the export's units and axes.
 
-    names    K shape names then C corrective names (unique).
+    names    K shape names, N in-between names ("<shape>@<weight>"), then C corrective names (unique).
     neutral  (V, 3) rest surface.
-    deltas   (K + C, V, 3) blend shape offsets (shapes, then correctives).
-    pose     (K + C,) default weights: the current pose and its corrective activations.
-    times    (F,) seconds and ``frames`` (F, K + C) weights per frame, or None without an animation.
+    deltas   (K + N + C, V, 3) blend shape offsets (shapes, in-betweens, then correctives).
+    pose     (K + N + C,) default weights: the current pose, its in-betweens' and correctives' weights.
+    times    (F,) seconds and ``frames`` (F, K + N + C) weights per frame, or None without an animation.
+    A shape's in-betweens are morph targets of their own, keyed with piecewise linear weights (a glTF or USD
+    viewer blends them linearly, so every keyed frame is the evaluator's surface exactly; between keys the
+    viewer interpolates the coefficients). Muted and unsoloed shapes are keyed at 0.
     """
 
     names: list[str]
@@ -119,13 +122,12 @@ class ExportContent:
 
 
 def full_weights(rig: Rig, weights: np.ndarray) -> np.ndarray:
-    """(K + C,) blend shape weights of one pose: the shape weights, then each corrective's activation."""
+    """(K + N + C,) blend shape weights of one pose: the shape weights, the in-betweens' (each a morph target of
+    its own, weighted piecewise linearly), then each corrective's activation -- the pose evaluator's rows
+    (``model.shape_weights``: ranges, mute and solo applied)."""
+    from .shape_weights import ShapeWeights
     w = np.asarray(weights, dtype=np.float64).reshape(-1)
-    if not rig.correctives:
-        return w.copy()
-    from .correctives import corrective_activations
-    live = np.array([0.0 if c.muted else 1.0 for c in rig.correctives])
-    return np.concatenate([w, corrective_activations(rig.correctives, rig.shape_names, w) * live])
+    return np.array(ShapeWeights(rig).row_weights(w, rig.correctives, rig.shape_names), dtype=np.float64)
 
 
 def export_content(rig: Rig, weights: np.ndarray | None = None, animation: WeightAnimation | None = None,
@@ -135,15 +137,22 @@ def export_content(rig: Rig, weights: np.ndarray | None = None, animation: Weigh
         raise RigInputError(f"Unknown up axis '{up}': use one of {', '.join(UP_AXES)}.")
     s = unit_scale(rig.units, units)
     A = s * (_Y_TO_Z if up == "z" else np.eye(3))
+    from .shape_weights import ShapeWeights
+    sw = ShapeWeights(rig)
     names = list(rig.shape_names)
     taken = set(names)
+    for n in sw.inbetween_names:   # in-betweens as morph targets of their own, "<shape>@<weight>"
+        while n in taken:
+            n += "_"
+        names.append(n)
+        taken.add(n)
     for c in rig.correctives:
         n, i = c.name or "+".join(c.drivers), 2
         while n in taken:
             n, i = f"{c.name}_{i}", i + 1
         names.append(n)
         taken.add(n)
-    blocks = [rig.deltas] + ([np.stack([c.delta for c in rig.correctives])] if rig.correctives else [])
+    blocks = [rig.deltas, sw.inbetween_deltas] + ([np.stack([c.delta for c in rig.correctives])] if rig.correctives else [])
     deltas = np.concatenate(blocks) @ A.T
     w = np.zeros(rig.n_shapes) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
     if w.shape != (rig.n_shapes,):

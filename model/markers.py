@@ -181,8 +181,9 @@ class MarkerSet:
         per-shape displacement, ``lam_reg`` the pull toward the pose at the press in cm² (a physical weight,
         converted to the rig's units by ``model.units``, so a drag poses a face in m, cm or mm alike)."""
         from solvers.regional_solve import RegionalSolver
+        from .shape_weights import live_mask       # a muted shape does not follow the markers
         from .units import area
-        return RegionalSolver(regions, self.S, self.delta_rows(rig.deltas), region_max=region_max,
+        return RegionalSolver(regions, self.S, self.delta_rows(rig.deltas) * live_mask(rig), region_max=region_max,
                               solve_background=True, lam_reg=area(lam_reg, rig.units), antagonists=antagonists)
 
     # --- editing (returns new sets; markers are immutable) ----------------------------------------

@@ -116,16 +116,26 @@ def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, m
         summary["neutral"] = "re-estimated from the pose scans"
     triangles = rig.triangles()
     result = personalize(rig.neutral, rig.deltas, triangles, poses, neutral, **options)
+
+    def carried(deltas: list) -> np.ndarray:
+        """Offsets that are not fitted to scans (correctives, in-betweens) carried onto the actor's face."""
+        return personalize(rig.neutral, np.stack(deltas), triangles, np.zeros((0, rig.n_vertices, 3)),
+                           result.neutral, lam_r=options.get("lam_r", 0.1), lam_d=options.get("lam_d", 0.05)).deltas
     correctives = []
     live = [c for c in rig.correctives]
     if live:
-        moved = personalize(rig.neutral, np.stack([c.delta for c in live]), triangles, np.zeros((0, rig.n_vertices, 3)),
-                            result.neutral, lam_r=options.get("lam_r", 0.1), lam_d=options.get("lam_d", 0.05))
-        correctives = [dataclasses.replace(c, delta=d) for c, d in zip(live, moved.deltas)]
+        correctives = [dataclasses.replace(c, delta=d) for c, d in zip(live, carried([c.delta for c in live]))]
+    inbetweens = {}
+    items = [(n, ib) for n, v in rig.inbetweens.items() for ib in v]
+    if items:   # the shape list's in-betweens move to the actor as the correctives do
+        from .rig import Inbetween
+        for (n, ib), d in zip(items, carried([ib.delta for _, ib in items])):
+            inbetweens.setdefault(n, []).append(Inbetween(ib.weight, d))
     out = Rig(neutral=result.neutral, face_counts=rig.face_counts.copy(), face_indices=rig.face_indices.copy(),
               shape_names=list(rig.shape_names), deltas=result.deltas, units=rig.units,
               name=name or f"{rig.name}_actor", source="", correctives=correctives,
-              presets={k: dict(v) for k, v in rig.presets.items()})
+              presets={k: dict(v) for k, v in rig.presets.items()}, inbetweens=inbetweens,
+              muted=list(rig.muted), solo=list(rig.solo), ranges=dict(rig.ranges))
     summary.update(unknowns=result.unknowns, seconds=round(result.seconds, 3),
                    delta_seconds=[round(s, 3) for s in result.delta_seconds], cg_iterations=result.cg_iterations,
                    fit_rms=[float(f) for f in result.fit_rms], units=rig.units)

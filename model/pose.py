@@ -4,6 +4,12 @@ computed: the viewport, exports, take solves (through a callable), marker drags,
 Global pose:   x = b0 + Σ_k w_k d_k + Σ_c a_c(w) e_c   (muted correctives left out)
 Regional pose: x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v) (+ correctives activated per vertex)
 
+The Shapes list's per-shape settings take part in every evaluation (``model.shape_weights``): weights are
+clamped to a shape's slider range, muted (and, while any shape is soloed, unsoloed) shapes count as 0 -- for
+the correctives too -- and a shape with in-betweens contributes its piecewise linear curve through them: the
+in-betweens are extra rows of the delta matrix, [shapes (K), in-betweens (N), correctives (C)], so a pose is
+still one product. A regional pose takes the coefficients of each region's weights, then blends them.
+
 ``PoseEvaluator`` is built once per rig content (rebuild it when shapes or correctives change; the document
 does so on every rig edit): it keeps the shape and corrective deltas as one (K+C, 3U) matrix over the U
 vertices that any of them moves, so a global pose is a single matrix-vector product plus a copy of the
@@ -22,6 +28,7 @@ import scipy.sparse as sp
 
 from .correctives import corrective_activations, corrective_activations_per_vertex
 from .rig import Rig
+from .shape_weights import ShapeWeights
 
 _BLEND_CACHE = 4     # blends whose per-region set-up is kept (levels the user switches between)
 
@@ -51,6 +58,8 @@ class PoseEvaluator:
         self._D_full: np.ndarray | None = None   # the deltas over every vertex, made on the first evaluate_many
         V = rig.n_vertices
         self.K = rig.n_shapes
+        self.shape_weights = sw = ShapeWeights(rig)
+        self._nk = self.K + sw.N   # shape rows then in-between rows
         self._neutral = rig.neutral.astype(dtype).reshape(-1)
         corr = list(rig.correctives)
         self._correctives = corr
@@ -58,6 +67,8 @@ class PoseEvaluator:
         self._corr_names = [c.name for c in corr]
         self._muted = np.array([c.muted for c in corr], dtype=bool)
         blocks = [rig.deltas.reshape(rig.n_shapes, -1)]
+        if sw.N:
+            blocks.append(sw.inbetween_deltas.reshape(sw.N, -1))
         if corr:
             blocks.append(np.stack([c.delta for c in corr]).reshape(len(corr), -1))
         full = np.concatenate(blocks, axis=0) if len(blocks) > 1 else blocks[0]
@@ -68,6 +79,24 @@ class PoseEvaluator:
         # (K+C, 3U) row-major: w @ D is a fast BLAS gemv.
         self._D = np.take(full.reshape(full.shape[0], V, 3), moving, axis=1).reshape(full.shape[0], -1).astype(dtype)
         self._blends: list[_BlendEntry] = []
+        self._inbetween_refs = _inbetween_refs(rig)   # the arrays themselves (kept alive), not their ids
+
+    def with_settings(self, rig: Rig) -> "PoseEvaluator":
+        """An evaluator of ``rig`` -- this one's rig with other mute, solo or ranges -- sharing this one's
+        matrices (no copy of the deltas); a new one built from scratch when the shapes, in-betweens or
+        correctives differ."""
+        same = (rig.deltas is self.rig.deltas and tuple(rig.shape_names) == self._names
+                and _same_objects(rig.correctives, self._correctives)
+                and all(c.muted == m for c, m in zip(rig.correctives, self._muted))
+                and _same_inbetweens(_inbetween_refs(rig), self._inbetween_refs))
+        if not same:
+            return PoseEvaluator(rig, self.dtype)
+        ev = object.__new__(PoseEvaluator)
+        ev.__dict__.update(self.__dict__)
+        ev.rig = rig
+        ev.shape_weights = ShapeWeights(rig)
+        ev._blends = []          # the per-blend set-up does not depend on the settings, but is cheap to redo
+        return ev
 
     # --- which correctives ------------------------------------------------------------------------
     def live(self, exclude: Iterable = (), include_muted: bool = False) -> np.ndarray:
@@ -82,18 +111,22 @@ class PoseEvaluator:
         return on
 
     def activations(self, weights: np.ndarray) -> np.ndarray:
-        """Corrective activations a_c(w) (Smith §4.5) of every corrective, muted or not; empty when none."""
+        """Corrective activations a_c(w) (Smith §4.5) of every corrective, muted or not, at the effective weights
+        (ranges, mute and solo applied); empty when none."""
         if not self._correctives:
             return np.zeros(0)
-        return corrective_activations(self._correctives, self._names, weights)
+        return corrective_activations(self._correctives, self._names, self.shape_weights.effective(weights))
+
+    def _rows(self, W: np.ndarray, exclude: Iterable = (), include_muted: bool = False) -> np.ndarray:
+        """(..., K+N+C) the weight of every delta row for weight rows (..., K) (``ShapeWeights.row_weights``)."""
+        live = self.live(exclude, include_muted) if self._correctives else None
+        return self.shape_weights.row_weights(W, self._correctives, self._names, live)
 
     # --- evaluation -------------------------------------------------------------------------------
     def evaluate(self, weights: np.ndarray, out: np.ndarray | None = None, *, exclude: Iterable = (),
                  include_muted: bool = False) -> np.ndarray:
         """(V, 3) surface for a global weight vector (K,)."""
-        w = np.asarray(weights, dtype=np.float64)
-        if self._correctives:
-            w = np.concatenate([w, self.activations(w) * self.live(exclude, include_muted)])
+        w = self._rows(np.asarray(weights, dtype=np.float64), exclude, include_muted)
         if out is None:
             out = self._neutral.copy()
         else:
@@ -107,10 +140,7 @@ class PoseEvaluator:
         in ``dtype``. Uses a copy of the deltas over all 3V columns (zero where nothing moves) in ``dtype``, made
         on first use and kept: one GEMM and one add, no scatter (a scatter into the moving columns costs more
         than the product)."""
-        W = np.atleast_2d(np.asarray(weights, dtype=np.float64))
-        if self._correctives:
-            a = corrective_activations_per_vertex(self._correctives, self._names, W) * self.live()
-            W = np.concatenate([W, a], axis=1)
+        W = self._rows(np.atleast_2d(np.asarray(weights, dtype=np.float64)))
         dtype = np.dtype(dtype)
         full = self._D_full
         if full is None or full.dtype != dtype:
@@ -129,17 +159,18 @@ class PoseEvaluator:
         blended weights. Without a corrective to apply, one gemv per region over that region's own vertices
         (set up once per blend), so a drag step costs about one global evaluation.
         """
-        W = np.asarray(region_weights, dtype=np.float64)
+        sw = self.shape_weights
+        We = sw.effective(np.asarray(region_weights, dtype=np.float64))
+        C = sw.coefficients(We)        # (R+1, K+N): each region's own pose, blended below
         entry = self._blend_entry(blend)
         live = self.live(exclude, include_muted)
         if not live.any():
-            return self._regional_gemv(W, entry)
+            return self._regional_gemv(C, entry)
         if entry.moving_rows is None:
             entry.moving_rows = sp.csr_matrix(blend)[self.moving_vertices]
-        per_vertex = np.asarray(entry.moving_rows @ W)  # (U, K)
-        a = corrective_activations_per_vertex(self._correctives, self._names, per_vertex)
+        a = corrective_activations_per_vertex(self._correctives, self._names, np.asarray(entry.moving_rows @ We))
         a *= live
-        per_vertex = np.concatenate([per_vertex, a], axis=1)
+        per_vertex = np.concatenate([np.asarray(entry.moving_rows @ C), a], axis=1)
         D = self._D.reshape(self._D.shape[0], -1, 3)  # (K+C, U, 3)
         out = self._neutral.copy().reshape(-1, 3)
         out[self.moving_vertices] += np.einsum("uk,kuc->uc", per_vertex.astype(self.dtype), D)
@@ -176,8 +207,8 @@ class PoseEvaluator:
 
     def _region_parts(self, blend: sp.csr_matrix) -> list:
         """Per region r: the columns (3 per vertex) of the vertices it covers that a shape moves, φ_r there,
-        and the shapes' deltas at those vertices as (K, 3n)."""
-        K, U = self.K, self.moving_vertices.size
+        and the shapes' (and in-betweens') deltas at those vertices as (K+N, 3n)."""
+        K, U = self._nk, self.moving_vertices.size
         D = self._D[:K].reshape(K, U, 3)
         shape_moving = np.abs(D).max(axis=(0, 2)) > 0 if U else np.zeros(0, bool)
         pos = np.full(self.rig.n_vertices, -1, dtype=np.int64)
@@ -194,6 +225,18 @@ class PoseEvaluator:
             cols = (verts[:, None] * 3 + np.arange(3)).reshape(-1)
             parts.append((cols, np.repeat(phi, 3).astype(self.dtype), Dr))
         return parts
+
+
+def _inbetween_refs(rig: Rig) -> list:
+    return [(n, i.weight, i.delta) for n in rig.shape_names for i in rig.inbetweens.get(n, ())]
+
+
+def _same_objects(a, b) -> bool:
+    return len(a) == len(b) and all(x is y for x, y in zip(a, b))
+
+
+def _same_inbetweens(a, b) -> bool:
+    return len(a) == len(b) and all(x[0] == y[0] and x[1] == y[1] and x[2] is y[2] for x, y in zip(a, b))
 
 
 def evaluate(rig: Rig, weights: np.ndarray) -> np.ndarray:

@@ -174,6 +174,53 @@ def read_npy_member(z: zipfile.ZipFile, name: str, path: Path, key: str) -> np.n
     return a
 
 
+def _shape_settings_entry(rig: Rig, arrays: dict) -> dict:
+    """The Shapes list's per-shape settings for the manifest (``rig.shapes``; absent when none, so projects
+    without them are written as before): muted, solo, ranges and in-betweens (their offsets as arrays)."""
+    entry: dict = {}
+    if rig.muted:
+        entry["muted"] = list(rig.muted)
+    if rig.solo:
+        entry["solo"] = list(rig.solo)
+    if rig.ranges:
+        entry["ranges"] = {n: [float(lo), float(hi)] for n, (lo, hi) in rig.ranges.items()}
+    if rig.inbetweens:
+        inb, i = {}, 0
+        for name, items in rig.inbetweens.items():
+            inb[name] = []
+            for ib in items:
+                key = f"inbetweens/{i}"
+                arrays[key] = np.asarray(ib.delta, dtype=np.float64)
+                inb[name].append({"weight": float(ib.weight), "array": key})
+                i += 1
+        entry["inbetweens"] = inb
+    return entry
+
+
+def _read_shape_settings(rig: Rig, entry, array, declared) -> None:
+    """Put a manifest's ``rig.shapes`` on ``rig`` (checked by ``Rig.validate``): a wrong type is one sentence."""
+    from .rig import Inbetween
+    if not isinstance(entry, dict):
+        raise RigInputError("the shape settings are not an object.")
+    ranges = entry.get("ranges", {})
+    inb = entry.get("inbetweens", {})
+    if not isinstance(ranges, dict) or not isinstance(inb, dict):
+        raise RigInputError("the shape ranges and in-betweens must be objects keyed by shape name.")
+    if any(not isinstance(r, list) or len(r) != 2 for r in ranges.values()):
+        raise RigInputError("a shape's range is not a [min, max] pair.")
+    rig.muted, rig.solo = entry.get("muted", []), entry.get("solo", [])
+    rig.ranges = dict(ranges)
+    inbetweens = {}
+    for name, items in inb.items():
+        if not isinstance(items, list) or not all(isinstance(i, dict) and isinstance(i.get("array"), str)
+                                                  and i["array"].startswith("inbetweens/") and i["array"] in declared
+                                                  for i in items):
+            raise RigInputError(f"the in-betweens of {shown(name, 40)} do not name their stored arrays.")
+        inbetweens[name] = [Inbetween(weight=i.get("weight"), delta=array(i["array"])) for i in items]
+    rig.inbetweens = inbetweens
+    rig.validate()
+
+
 def save_project(project: Project, path: str | Path) -> None:
     """Write the project to ``path`` atomically."""
     rig = project.rig
@@ -189,6 +236,7 @@ def save_project(project: Project, path: str | Path) -> None:
         for key in ("uvs", "corner_uv", "normals", "corner_normal"):
             if getattr(corners, key) is not None:
                 arrays[f"rig/{key}"] = getattr(corners, key)
+    shapes = _shape_settings_entry(rig, arrays)
     correctives = []
     for i, c in enumerate(rig.correctives):
         key = f"correctives/{i}"
@@ -210,7 +258,8 @@ def save_project(project: Project, path: str | Path) -> None:
         "version": VERSION,
         "rig": {"name": rig.name, "units": rig.units, "shape_names": rig.shape_names,
                 "presets": rig.presets, "source": rig.source,
-                "records": [list(r) for r in corners.records] if corners is not None else None},
+                "records": [list(r) for r in corners.records] if corners is not None else None,
+                **({"shapes": shapes} if shapes else {})},
         "correctives": correctives,
         "pose": pose,
         **({} if antagonists is None else {"antagonists": antagonists}),
@@ -276,6 +325,8 @@ def load_project(path: str | Path) -> Project:
                     **{k: array(f"rig/{k}") if f"rig/{k}" in declared else None
                        for k in ("uvs", "corner_uv", "normals", "corner_normal")})
                 rig.validate()
+            if meta.get("shapes") is not None:
+                _read_shape_settings(rig, meta["shapes"], array, declared)
             if manifest.get("correctives"):
                 from .correctives import Corrective, set_correctives
                 set_correctives(rig, [Corrective.from_entry(c, array) for c in manifest["correctives"]])

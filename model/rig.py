@@ -16,6 +16,7 @@ from .units import UNIT_IN_METRES, UNITS, unit_scale  # noqa: F401  (the units o
 
 MAX_COORDINATE = 1e9   # in any unit: no face is a thousand kilometres across; beyond it a file is damaged
 MAX_WEIGHT = 1e3       # presets and poses: overdrive and negative weights exist, a weight of 10⁴ does not
+INBETWEEN_MAX_WEIGHT = 10.0   # Maya keeps in-between weights within ±10
 
 
 def _float_array(a, where: str, what: str) -> np.ndarray:
@@ -82,6 +83,16 @@ class CornerAttributes:
     records: list[tuple[int, str]] = field(default_factory=list)
 
 
+@dataclass(eq=False)   # compared by identity: an undo step keeps the very objects it restores
+class Inbetween:
+    """An in-between target of a shape (Maya's in-between): the offset ``delta`` (V, 3) from the neutral that the
+    shape reaches at ``weight`` (not 0 or 1). The shape's offset is piecewise linear in its weight through
+    (0, 0), each in-between (weight, delta) and (1, d_k); ``model.shape_weights`` evaluates it."""
+
+    weight: float
+    delta: np.ndarray
+
+
 @dataclass
 class Rig:
     """A blendshape rig.
@@ -94,6 +105,13 @@ class Rig:
     units        'cm', 'mm' or 'm'.
     correctives  list of ``model.correctives.Corrective`` (drivers, rule, delta).
     presets      named weight sets, e.g. {"happy": {"mouthSmile_L": 1.0, ...}}.
+    The Shapes list's per-shape settings, by shape name (Maya's Shape Editor; ``model.shape_weights`` applies
+    them in every pose evaluation):
+    inbetweens   {shape: [Inbetween, ...]} sorted by weight.
+    muted        shapes left out of the pose (their weight counts as 0, for correctives too).
+    solo         if any: only these shapes take part (Blender's solo); muted wins over solo.
+    ranges       {shape: (min, max)} slider range; the weight is clamped to it (overdrive beyond 1, negative
+                 weights where the rig allows). A shape without one has a 0..1 slider and is not clamped.
     """
 
     neutral: np.ndarray
@@ -107,6 +125,10 @@ class Rig:
     correctives: list = field(default_factory=list)
     presets: dict[str, dict[str, float]] = field(default_factory=dict)
     corners: CornerAttributes | None = None  # the source OBJ's UVs, normals and groups (export only)
+    inbetweens: dict[str, list[Inbetween]] = field(default_factory=dict)
+    muted: list[str] = field(default_factory=list)
+    solo: list[str] = field(default_factory=list)
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         where = self.source or self.name
@@ -168,11 +190,61 @@ class Rig:
         if not isinstance(self.units, str) or self.units not in UNITS:
             raise RigInputError(f"{where}: unknown units '{shown(self.units, 20)}'.")
         self.presets = checked_presets(self.presets, self.shape_names, where)
+        self._validate_shape_settings(where)
         c = self.corners
         for table, idx in ((None, None),) if c is None else ((c.uvs, c.corner_uv), (c.normals, c.corner_normal)):
             if idx is not None and (idx.shape != self.face_indices.shape or table is None
                                     or (idx.size and (idx.min() < -1 or idx.max() >= len(table)))):
                 raise RigInputError(f"{where}: the UV or normal indices of the faces do not fit the rig.")
+
+    def _validate_shape_settings(self, where: str) -> None:
+        """In-betweens, mute, solo and ranges name shapes the rig has and hold sane numbers."""
+        names = set(self.shape_names)
+        if not isinstance(self.inbetweens, dict) or not isinstance(self.ranges, dict):
+            raise RigInputError(f"{where}: the shapes' in-betweens and ranges must be objects keyed by shape name.")
+        for what, listed in (("muted", self.muted), ("solo", self.solo)):
+            if not isinstance(listed, list) or not all(isinstance(n, str) for n in listed):
+                raise RigInputError(f"{where}: the {what} shapes must be a list of shape names.")
+            unknown = sorted(set(listed) - names)
+            if unknown:
+                raise RigInputError(f"{where}: {what} shapes the rig does not have: {shown(', '.join(unknown), 120)}.")
+        clean = {}
+        for name, rng in self.ranges.items():
+            if name not in names:
+                raise RigInputError(f"{where}: a slider range for '{shown(name, 40)}', a shape the rig does not have.")
+            try:
+                lo, hi = (float(x) for x in rng)
+            except (TypeError, ValueError):
+                raise RigInputError(f"{where}: the slider range of {shown(name, 40)} is not two numbers.") from None
+            if not (np.isfinite(lo) and np.isfinite(hi) and -MAX_WEIGHT <= lo < hi <= MAX_WEIGHT):
+                raise RigInputError(f"{where}: the slider range of {shown(name, 40)} ({shown(lo, 12)} to "
+                                    f"{shown(hi, 12)}) must have min < max within ±{MAX_WEIGHT:g}.")
+            clean[name] = (lo, hi)
+        self.ranges = clean
+        for name, items in self.inbetweens.items():
+            if name not in names:
+                raise RigInputError(f"{where}: in-betweens for '{shown(name, 40)}', a shape the rig does not have.")
+            if not isinstance(items, list) or not all(isinstance(i, Inbetween) for i in items):
+                raise RigInputError(f"{where}: the in-betweens of {shown(name, 40)} are not a list of targets.")
+            weights = [i.weight for i in items]
+            for ib in items:
+                w = ib.weight
+                if isinstance(w, bool) or not isinstance(w, (int, float, np.floating, np.integer)) \
+                        or not np.isfinite(w) or w in (0.0, 1.0) or abs(w) > INBETWEEN_MAX_WEIGHT:
+                    raise RigInputError(f"{where}: an in-between of {shown(name, 40)} is at weight {shown(w, 12)}; "
+                                        f"it must be a number other than 0 and 1 within ±{INBETWEEN_MAX_WEIGHT:g}.")
+                ib.weight = float(w)
+                ib.delta = _float_array(ib.delta, where, f"the in-between of {name}")
+                if ib.delta.shape != self.neutral.shape:
+                    raise RigInputError(f"{where}: the in-between of {shown(name, 40)} at {w:g} has "
+                                        f"{ib.delta.size // 3} vertices, the rig has {self.n_vertices}.")
+                if not np.isfinite(ib.delta).all() or (ib.delta.size and np.abs(ib.delta).max() > MAX_COORDINATE):
+                    raise RigInputError(f"{where}: the in-between of {shown(name, 40)} at {w:g} has NaN, infinite "
+                                        "or absurd coordinates.")
+            if len(set(weights)) != len(weights):
+                raise RigInputError(f"{where}: {shown(name, 40)} has two in-betweens at the same weight.")
+            items.sort(key=lambda i: i.weight)
+        self.inbetweens = {k: v for k, v in self.inbetweens.items() if v}
 
     # --- names and weights -----------------------------------------------------------------------
     def shape_index(self, name: str) -> int:

@@ -169,7 +169,10 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
         evaluator = PoseEvaluator(rig, dtype=np.float64)
     surface = partial(evaluator.pose, blend=options.get("blend"))
     many = evaluator.evaluate_many if options.get("blend") is None else None
-    solver = TakeSolver(rig.neutral, rig.deltas, binding, correctives=solver_correctives(rig), surface=surface,
+    from .shape_weights import live_mask
+    live = live_mask(rig)     # muted (and unsoloed) shapes do not explain markers: their weights go to 0
+    deltas = rig.deltas if live.all() else rig.deltas * live[:, None, None]
+    solver = TakeSolver(rig.neutral, deltas, binding, correctives=solver_correctives(rig), surface=surface,
                         surface_many=many, **options)
     try:
         sol = solver.solve(take.positions[:, cols], unit_factor=unit_scale(take.units, rig.units),

@@ -162,6 +162,26 @@ def test_personalize_rig_keeps_names_presets_and_correctives(sample_rig):
     assert summary["unknowns"] == result.unknowns > 0 and len(summary["fit_rms"]) == 4
 
 
+def test_personalize_rig_keeps_the_shape_lists_settings_and_moves_its_inbetweens(sample_rig):
+    from model.rig import Inbetween
+    rig = sample_rig.copy()
+    k = rig.shape_index("jawOpen")
+    half = 0.6 * rig.deltas[k]
+    rig.inbetweens = {"jawOpen": [Inbetween(0.5, half)]}
+    rig.muted, rig.ranges = ["eyeBlink_L"], {"jawOpen": (0.0, 1.4)}
+    from model.correctives import Corrective
+    rig.correctives = [Corrective(drivers=["jawOpen", "mouthClose"], delta=half)]   # the same offset, as a fix
+    rig.validate()
+    _, scans = _scans_of(rig, 8)
+    actor, _, _ = personalize_rig_detailed(rig, rig.neutral * 1.1, list(scans * 1.1))
+    assert actor.muted == ["eyeBlink_L"] and actor.ranges == {"jawOpen": (0.0, 1.4)}
+    (ib,) = actor.inbetweens["jawOpen"]
+    assert ib.weight == 0.5
+    # carried onto the actor's face exactly as a corrective with the same offset is
+    np.testing.assert_allclose(ib.delta, actor.correctives[0].delta, atol=1e-9)
+    assert np.abs(ib.delta - half).max() > 1e-3
+
+
 def test_bad_input_is_one_sentence(sample_rig, tmp_path):
     rig = sample_rig
     with pytest.raises(RigInputError, match="none was given"):

@@ -121,3 +121,48 @@ def test_every_entry_point_gives_the_evaluators_arrays(qtbot, posed, tmp_path):
     written = read_obj(tmp_path / "pose.obj").vertices
     expected = np.array([[float(f"{x:.6f}") for x in row] for row in ev64.evaluate(w).tolist()])
     assert np.array_equal(written, expected)
+
+
+def test_inbetweens_mute_and_ranges_reach_every_entry_point(qtbot, sample_rig, tmp_path):
+    """The Shapes list's settings (issue 18) change the posed mesh everywhere: the document (viewport), a take's
+    PC2 export and the command line's OBJ export all give the evaluator's piecewise in-between surface, with the
+    muted shape left out and the ranged shape clamped."""
+    from app.document import Document
+    from model.obj_io import read_obj
+    from model.rig import Inbetween
+    rig = sample_rig.copy()
+    k = rig.shape_index("jawOpen")
+    d = rig.deltas[k]
+    D = 0.5 * d + 0.2 * np.roll(d, 1, axis=1)
+    rig.inbetweens = {"jawOpen": [Inbetween(0.5, D)]}
+    rig.muted = ["mouthSmile_L"]
+    rig.ranges = {"mouthFunnel": (0.0, 0.5)}
+    rig.validate()
+    f = rig.shape_index("mouthFunnel")
+    w = np.zeros(rig.n_shapes)
+    w[[k, rig.shape_index("mouthSmile_L"), f]] = [0.25, 1.0, 0.9]
+    by_hand = rig.neutral + 0.5 * D + 0.5 * rig.deltas[f]      # jaw at 0.25 on its curve, smile muted, funnel clamped
+    ev64 = PoseEvaluator(rig, dtype=np.float64)
+    np.testing.assert_allclose(ev64.evaluate(w), by_hand, atol=1e-12)
+
+    doc = Document()
+    doc.set_project(Project(rig=rig, weights=w), None)
+    assert np.array_equal(doc.posed_surface(), PoseEvaluator(rig).evaluate(w))
+    assert np.array_equal(doc.evaluate_state(doc.pose_state(), dtype=np.float64), ev64.evaluate(w))
+
+    frames_w = np.stack([w * s for s in (0.5, 1.0, 1.5)])
+    ws = TakeWorkspace(rig)
+    ws.take = WeightTake(weights=frames_w, names=list(rig.shape_names), rate=30.0)
+    export_pc2(ws, tmp_path / "take.pc2")
+    data, _, _ = read_pc2(tmp_path / "take.pc2")
+    per_frame = np.stack([ev64.evaluate(x) for x in frames_w])
+    assert np.abs(data - per_frame).max() < 4e-7 * max(1.0, float(np.abs(per_frame).max()))
+
+    save_project(Project(rig=rig), tmp_path / "rig.bsproj")
+    text = ",".join(f"{n}={v!r}" for n, v in zip(rig.shape_names, w.tolist()) if v)
+    run_cli("export", tmp_path / "rig.bsproj", "--weights", text, "-o", tmp_path / "pose.obj")
+    written = read_obj(tmp_path / "pose.obj").vertices
+    expected = np.array([[float(f"{x:.6f}") for x in row] for row in by_hand.tolist()])
+    np.testing.assert_allclose(written, expected, atol=1.5e-6)
+    assert np.abs(written - (rig.neutral + 0.25 * d + rig.deltas[rig.shape_index("mouthSmile_L")]
+                             + 0.9 * rig.deltas[f])).max() > 0.05   # the plain linear pose is far from it

@@ -138,6 +138,15 @@ def build_targets(work: Path) -> dict[str, Target]:
     proj = work / "sample.bsproj"
     if not proj.exists():
         save_project(Project(rig=sample), proj)
+    proj_shapes = work / "sample_shapes.bsproj"     # with the shape list's settings (mute, ranges, in-betweens)
+    if not proj_shapes.exists():
+        from model.rig import Inbetween
+        rig = sample.copy()
+        k = rig.shape_index("jawOpen")
+        rig.inbetweens = {"jawOpen": [Inbetween(0.5, 0.6 * rig.deltas[k])]}
+        rig.ranges, rig.muted, rig.solo = {"mouthSmile_L": (-0.5, 1.5)}, ["eyeBlink_L"], ["jawOpen"]
+        rig.validate()
+        save_project(Project(rig=rig), proj_shapes)
     gltf_seed = work / "sample.glb"
     if not gltf_seed.exists():
         write_gltf(sample, gltf_seed)
@@ -176,7 +185,7 @@ def build_targets(work: Path) -> dict[str, Target]:
         "obj-folder": Target("obj-folder", sorted(small.iterdir()), M.TEXT, lambda p: load_obj_folder(p), check_rig,
                              obj_layout),
         "gltf": Target("gltf", [gltf_seed] + sorted((tp / "gltf").glob("*")), M.BINARY, load_gltf, check_rig),
-        "bsproj": Target("bsproj", [proj], M.BINARY, load_project, check_project),
+        "bsproj": Target("bsproj", [proj, proj_shapes], M.BINARY, load_project, check_project),
         "c3d": Target("c3d", [takes / "take.c3d"] + c3d_small, M.BINARY, load_take, check_take),
         "trc": Target("trc", trc_small + [takes / "take.trc"], M.TEXT, load_take, check_take),
         "marker-csv": Target("marker-csv", [csv_seed], M.TEXT, load_take, check_take),
