@@ -106,7 +106,7 @@ def _wrinkles(name: str, x, y, g: FaceGeometry) -> np.ndarray:
     base = name[:-2]
     if base in ("browInnerUp", "browOuterUp"):
         cx = 1.3 if base == "browInnerUp" else 4.2
-        env = _envelope(sx, y, cx, ye + 3.6, 3.0, 1.7) * (sx > -0.6)
+        env = _envelope(sx, y, cx, ye + 3.6, 3.0, 1.7) * smoothstep(sx / 0.3)   # each side its own half
         bend = 0.04 * (x ** 2) / 4.0          # the lines follow the brow, higher at the sides
         return 0.55 * env * _lines(y - bend, ye + 2.7, 0.45, 5, 0.055)
     if base == "browDown":

@@ -50,8 +50,9 @@ def split_bands(image: np.ndarray, sigma: float) -> tuple[np.ndarray, np.ndarray
 
 
 def default_sigma(size: int) -> float:
-    """The low band's blur for a texture ``size`` texels across: 4 texels at 1024 (wrinkles are finer)."""
-    return max(1.0, size / 256.0)
+    """The low band's blur for a texture ``size`` texels across: 8 texels at 1024 (about 2 mm on a face; a
+    wrinkle line is finer, the spacing of forehead lines coarser)."""
+    return max(1.0, size / 128.0)
 
 
 def support(shape: np.ndarray, neutral: np.ndarray, sigma: float) -> np.ndarray:
