@@ -93,7 +93,7 @@ def _crows_feet(x, y, cx, cy, side: float, strength: float) -> np.ndarray:
     ang = np.arctan2(dy, dx)
     fan = np.zeros_like(x)
     for a in np.radians((-32, -14, 4, 22, 40)):
-        fan = np.maximum(fan, np.exp(-((ang - a) * r / 0.05) ** 2))
+        fan = np.maximum(fan, np.exp(-((ang - a) * r / 0.065) ** 2))
     return strength * fan * (dx > 0.1) * smoothstep((r - 0.2) / 0.3) * np.clip(1 - ((r - 1.0) / 0.9) ** 2, 0, None)
 
 
@@ -108,21 +108,21 @@ def _wrinkles(name: str, x, y, g: FaceGeometry) -> np.ndarray:
         cx = 1.3 if base == "browInnerUp" else 4.2
         env = _envelope(sx, y, cx, ye + 3.6, 3.0, 1.7) * smoothstep(sx / 0.3)   # each side its own half
         bend = 0.04 * (x ** 2) / 4.0          # the lines follow the brow, higher at the sides
-        return 0.55 * env * _lines(y - bend, ye + 2.7, 0.45, 5, 0.055)
+        return 0.8 * env * _lines(y - bend, ye + 2.7, 0.5, 5, 0.075)
     if base == "browDown":
         env = _envelope(sx, y, 0.55, ye + 1.9, 0.6, 1.0) * (sx > 0)
-        return 0.6 * env * _lines(sx, 0.35, 0.28, 2, 0.05)
+        return 0.8 * env * _lines(sx, 0.35, 0.3, 2, 0.065)
     if base == "noseSneer":
         env = _envelope(sx, y, 0.45, ye - 1.1, 0.85, 0.55) * (sx > -0.2)
-        return 0.55 * env * _lines(y + 0.15 * sx, ye - 1.45, 0.28, 3, 0.045)
+        return 0.75 * env * _lines(y + 0.15 * sx, ye - 1.45, 0.3, 3, 0.06)
     if base == "mouthSmile":
         # the nasolabial fold from the nose wing to beside the mouth corner, then the crow's feet
         t = np.clip((ym + 2.6 - y) / 3.0, 0, 1)
         fold_x = 1.6 + t * (mh + 0.9 - 1.6) + 0.35 * np.sin(np.pi * t)
         fold = np.exp(-((sx - fold_x) / 0.09) ** 2) * (y < ym + 2.7) * (y > ym - 0.6) * (sx > 0)
-        return 0.5 * fold + _crows_feet(x, y, side * 4.9, ye - 0.05, side, 0.35)
+        return 0.7 * fold + _crows_feet(x, y, side * 4.9, ye - 0.05, side, 0.5)
     if base in ("eyeSquint", "cheekSquint"):
-        feet = _crows_feet(x, y, side * 4.9, ye - 0.05, side, 0.55)
+        feet = _crows_feet(x, y, side * 4.9, ye - 0.05, side, 0.7)
         if base == "cheekSquint":  # lines under the lower lid too
             env = _envelope(sx, y, 3.4, ye - 1.35, 1.3, 0.45) * (sx > 0)
             feet = np.maximum(feet, 0.4 * env * _lines(y - 0.08 * (sx - 3.4) ** 2, ye - 1.55, 0.22, 3, 0.04))
@@ -182,7 +182,7 @@ def sample_textures(size: int = TEXTURE_SIZE) -> tuple[np.ndarray, dict[str, np.
             box = (slice(max(rows[0] * step - 2 * step, 0), (rows[-1] + 3) * step),
                    slice(max(cols[0] * step - 2 * step, 0), (cols[-1] + 3) * step))
             dark = np.clip(_wrinkles(name, x[box], y[box], g), 0, 1) * skin[box] * (1.0 - hair[box])
-            img[box] *= 1.0 - dark[..., None] * np.float32(0.75)
+            img[box] *= 1.0 - dark[..., None] * np.float32(0.8)
         shapes[name] = img
     theta = (u - 0.5 * (SKIN_U[0] + SKIN_U[1])) / (SKIN_U[1] - SKIN_U[0]) * 2 * THETA_MAX * 1.02
     sides = smoothstep((np.abs(theta) - np.radians(70.0)) / np.radians(12.0))   # ears and behind them
