@@ -66,7 +66,9 @@ def cmd_render(args) -> int:
     texture = None
     if args.texture != "none":
         from app.texture_controller import render_texture
-        texture = render_texture(rig, weights, args.rig, args.texture, args.texture_detail, args.view)
+        from widgets.texture_view import textured_surface
+        texture = textured_surface(*render_texture(rig, weights, args.rig, args.texture, args.texture_detail, args.view),
+                                   rig.face_counts)
     from widgets.scene import render_png
     render_png(view.points, rig.face_counts, rig.face_indices, args.output, focus=view.focus,
                colormap=view.colormap, camera=args.camera, size=size, wireframe=args.wireframe,
@@ -150,7 +152,9 @@ def cmd_take_info(args) -> int:
 
 def cmd_sample(args) -> int:
     from resources.sample_rig import write_sample
+    from resources.sample_textures import write_sample_textures
     out = write_sample(args.output)
+    write_sample_textures(out)
     print(f"wrote the sample rig to {out}")
     return 0
 
@@ -248,7 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_personalize.add_parser(sub, rig_arg)
     cli_batch.add_parser(sub, rig_arg)
 
-    sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder")
+    sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder, with its UVs and generated textures")
     sp.add_argument("-o", "--output", required=True, help="folder to write")
     sp.set_defaults(func=cmd_sample)
 

@@ -19,7 +19,7 @@ from model.obj_io import write_obj
 from model.rig import CornerAttributes, Rig
 
 from .sample_face_geometry import (EYE_SIDES, FaceGeometry, build_face_geometry, compact, ellipse_d2,
-                                   eye_opening, lip_span, smoothstep)
+                                   eye_opening, lip_span, sample_uvs, smoothstep)
 
 SIDES = EYE_SIDES  # "L" -> +1 (x > 0), "R" -> -1
 
@@ -233,7 +233,6 @@ def _build() -> tuple[Rig, FaceGeometry]:
     fields = _shape_fields(_Fields(g))
     deltas = np.stack([fields[n] for n in SHAPE_ORDER])
     deltas[np.abs(deltas) < 1e-9] = 0.0
-    from .sample_textures import sample_uvs
     rig = Rig(neutral=g.points, face_counts=g.face_counts, face_indices=g.face_indices,
               shape_names=list(SHAPE_ORDER), deltas=deltas, units="cm", name="sample",
               source=SAMPLE_SOURCE, presets={k: dict(v) for k, v in PRESETS.items()},
@@ -262,10 +261,9 @@ def sample_geometry() -> FaceGeometry:
     return _build()[1]
 
 
-def write_sample(folder: str | Path, *, textures: bool = True) -> Path:
-    """Write the sample rig as an OBJ folder (neutral.obj + one <shape>.obj each + presets.json, with UVs), and
-    with ``textures`` its generated textures beside them (neutral.png, <shape>.png for the shapes that
-    wrinkle, texture_mask.png), found by name when the folder is opened."""
+def write_sample(folder: str | Path) -> Path:
+    """Write the sample rig as an OBJ folder (neutral.obj + one <shape>.obj each with its UVs + presets.json);
+    ``resources.sample_textures.write_sample_textures`` adds its textures."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rig = _build()[0]
@@ -274,12 +272,4 @@ def write_sample(folder: str | Path, *, textures: bool = True) -> Path:
     for name, d in zip(rig.shape_names, rig.deltas):
         write_obj(folder / f"{name}.obj", rig.neutral + d, rig.face_counts, rig.face_indices, corners=rig.corners)
     (folder / "presets.json").write_text(json.dumps(rig.presets, indent=2, sort_keys=True) + "\n")
-    if textures:
-        from model.textures import MASK_NAME, write_texture
-        from .sample_textures import sample_textures
-        neutral, shapes, keep = sample_textures()
-        write_texture(folder / "neutral.png", neutral)
-        for name, img in shapes.items():
-            write_texture(folder / f"{name}.png", img)
-        write_texture(folder / f"{MASK_NAME}.png", keep)
     return folder

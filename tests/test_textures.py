@@ -235,7 +235,7 @@ def test_obj_uvs_survive_obj_project_obj_exactly(tmp_path, sample_rig_module):
     from model.project import Project, load_project, save_project
     from model.readers import load_rig
     from resources.sample_rig import write_sample
-    folder = write_sample(tmp_path / "face", textures=False)
+    folder = write_sample(tmp_path / "face")
     rig = load_rig(folder)
     save_project(Project(rig=rig), tmp_path / "p.bsproj")
     back = load_project(tmp_path / "p.bsproj").rig
@@ -305,7 +305,10 @@ def test_ict_uv_corners_are_read_without_touching_its_vertices(ict_dir, ict_rig)
 @pytest.fixture(scope="module")
 def written_sample(tmp_path_factory):
     from resources.sample_rig import write_sample
-    return write_sample(tmp_path_factory.mktemp("sample") / "face")
+    from resources.sample_textures import write_sample_textures
+    folder = write_sample(tmp_path_factory.mktemp("sample") / "face")
+    write_sample_textures(folder)
+    return folder
 
 
 @pytest.fixture()

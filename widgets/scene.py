@@ -222,8 +222,8 @@ def render_png(points, face_counts, face_indices, out_path, *, focus=None, color
                camera: str = "front", size=(1024, 768), wireframe=False, overlays=None, title: str = "",
                texture=None) -> None:
     """Render the surface off screen to a PNG file, atomically (a temporary beside it, then moved into place:
-    a killed render never leaves a truncated PNG under the final name). ``texture``: (display split, (H, W, 3)
-    uint8 image) drawn on the surface (see widgets.texture_view)."""
+    a killed render never leaves a truncated PNG under the final name). ``texture(plotter, mesh, wireframe)``
+    adds the surface instead, textured (widgets.texture_view.textured_surface)."""
     use_offscreen_backend_if_headless()
     import pyvista as pv
     plotter = pv.Plotter(off_screen=True, window_size=list(size))
@@ -231,8 +231,7 @@ def render_png(points, face_counts, face_indices, out_path, *, focus=None, color
         style_plotter(plotter)
         mesh = rig_mesh(points, face_counts, face_indices)
         if texture is not None and colormap is None:
-            from .texture_view import TexturedSurface
-            TexturedSurface(mesh.points, mesh.point_data["Normals"], face_counts, *texture).add_to(plotter, wireframe=wireframe)
+            texture(plotter, mesh, wireframe)
         else:
             add_surface(plotter, mesh, colormap, wireframe=wireframe)
         for add in overlays or ():

@@ -65,3 +65,11 @@ class TexturedSurface:
                                 interpolation="gouraud", name=name, show_edges=wireframe,
                                 edge_color=(0.15, 0.15, 0.18), line_width=0.5, specular=specular,
                                 specular_power=20, diffuse=0.85, ambient=0.15, reset_camera=False)
+
+
+def textured_surface(split, image8: np.ndarray, face_counts: np.ndarray):
+    """For ``scene.render_png(texture=...)``: adds the rig mesh's surface textured by ``image8`` through ``split``."""
+    def add(plotter, mesh, wireframe: bool) -> None:
+        TexturedSurface(mesh.points, mesh.point_data["Normals"], face_counts, split, image8).add_to(
+            plotter, wireframe=wireframe)
+    return add

@@ -45,8 +45,9 @@ def _flush_maps(folder, rig, neutral, shapes) -> int:
 @pytest.fixture(scope="module")
 def textured_sample(tmp_path_factory):
     from resources.sample_rig import build_sample_rig, write_sample
-    from resources.sample_textures import sample_textures
+    from resources.sample_textures import sample_textures, write_sample_textures
     folder = write_sample(tmp_path_factory.mktemp("bench") / "face")
+    write_sample_textures(folder)
     rig = build_sample_rig()
     neutral, shapes, _ = sample_textures()
     assert _flush_maps(folder, rig, neutral, shapes) == 20
