@@ -16,14 +16,20 @@ from PySide6 import QtCore
 
 from model.errors import RigInputError
 from model.rig import Rig
-from model.textures import (SECTION, TextureFiles, TextureSet, display_split, files_from_section,
-                            find_texture_files, load_texture_set, uv_problems)
+from model.textures import (SECTION, TextureSet, display_split, files_from_section, find_texture_files,
+                            load_texture_set, section_from_files, uv_problems)
 from solvers.texture_blend import TextureBlender
 
 
 def rig_textures(rig: Rig, sections: dict | None = None, project_path: str | Path | None = None
                  ) -> tuple[TextureSet | None, list[str]]:
     """The textures of ``rig`` (module docstring) and one sentence per problem met."""
+    tex, problems, _ = _rig_textures(rig, sections, project_path)
+    return tex, problems
+
+
+def _rig_textures(rig: Rig, sections, project_path):
+    """(texture set, problems, the files found by name beside the rig or None)."""
     from resources.sample_rig import SAMPLE_SOURCE
     if rig.source == SAMPLE_SOURCE:
         from resources.sample_textures import sample_textures
@@ -31,15 +37,18 @@ def rig_textures(rig: Rig, sections: dict | None = None, project_path: str | Pat
         known = {k: v for k, v in shapes.items() if k in rig.shape_names}
         problems = uv_problems(rig)
         if rig.corners is None or rig.corners.uvs is None:
-            return None, problems
-        return TextureSet(neutral, known, keep, {}, problems, "generated (the bundled sample)"), problems
+            return None, problems, None
+        return TextureSet(neutral, known, keep, {}, problems, "generated (the bundled sample)"), problems, None
     section = (sections or {}).get(SECTION)
-    if section is not None and project_path is not None:
-        files, listed = files_from_section(section, Path(project_path).parent, rig.shape_names)
+    found = None
+    if section is not None:
+        base = Path(project_path).parent if project_path is not None else Path.cwd()
+        files, listed = files_from_section(section, base, rig.shape_names)
     else:
         files, listed = find_texture_files(rig), []
+        found = None if files.empty else files
     tex, problems = load_texture_set(rig, files)
-    return tex, listed + problems
+    return tex, listed + problems, found
 
 
 def build_blender(tex: TextureSet, rig: Rig, mode: str, detail: str, masked: bool) -> TextureBlender:
@@ -129,9 +138,9 @@ class TextureController(QtCore.QObject):
         self.panel.set_source("reading…", False)
 
         def job():
-            tex, problems = rig_textures(rig, sections, path)
+            tex, problems, found = _rig_textures(rig, sections, path)
             blender = build_blender(tex, rig, "band-pass" if mode == "none" else mode, detail, masked) if tex else None
-            return generation, tex, problems, blender, display_split(rig) if tex else None
+            return generation, tex, problems, blender, display_split(rig) if tex else None, found
 
         self.runner.submit(job, self._loaded, self._failed)
 
@@ -141,9 +150,13 @@ class TextureController(QtCore.QObject):
         self.panel.set_source("none", False)
 
     def _loaded(self, result) -> None:
-        generation, tex, problems, blender, split = result
+        generation, tex, problems, blender, split, found = result
         if generation != self._generation:
             return   # another rig came meanwhile
+        if found is not None and tex is not None and SECTION not in self.document.project.sections:
+            # textures found beside the rig's files: a project saved from it lists them (absolute paths), so
+            # they come back wherever the project is saved; view state like the view and the take, no undo step
+            self.document.project.sections[SECTION] = section_from_files(found)
         self.textures, self.problems, self.blender, self.split = tex, problems, blender, split
         self.panel.set_problems(problems)
         if tex is None:

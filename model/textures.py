@@ -178,16 +178,16 @@ def files_from_section(section, base: str | Path, shape_names: list[str]) -> tup
     return files, problems
 
 
-def section_from_files(files: TextureFiles, base: str | Path) -> dict:
-    """The ``textures`` project section listing ``files`` (relative to ``base`` where they lie under it)."""
-    base = Path(base).resolve()
+def section_from_files(files: TextureFiles, base: str | Path | None = None) -> dict:
+    """The ``textures`` project section listing ``files``: relative to ``base`` where they lie under it, else
+    (and without ``base``) absolute paths."""
+    base = Path(base).resolve() if base is not None else None
 
     def rel(p: Path) -> str:
         p = Path(p).resolve()
-        try:
+        if base is not None and p.is_relative_to(base):
             return p.relative_to(base).as_posix()
-        except ValueError:
-            return str(p)
+        return str(p)
 
     out: dict = {"shapes": {k: rel(p) for k, p in files.shapes.items()},
                  "normal_maps": {k: rel(p) for k, p in files.normal_maps.items()}}

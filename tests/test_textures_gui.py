@@ -106,3 +106,31 @@ def test_picking_on_the_textured_surface_gives_rig_vertices(qtbot, tmp_path):
     p = vp.pick(int(round(x)), int(round(y)))
     assert p is not None and 0 <= p.vertex < rig.n_vertices
     assert np.linalg.norm(rig.neutral[p.vertex] - rig.neutral[tip]) < 0.5
+
+
+def test_textures_found_beside_a_folder_come_back_with_its_project(qtbot, tmp_path):
+    """Opened from a folder, its textures are found by name; a project saved from it lists them, so they come
+    back when the project is opened from another folder. A wrong-size texture is a sentence in the panel."""
+    import shutil
+
+    from model.textures import write_texture
+    from resources.sample_rig import write_sample
+    from resources.sample_textures import write_sample_textures
+    from tests.gui_helpers import open_and_wait
+    folder = write_sample(tmp_path / "face")
+    write_sample_textures(folder)
+    write_texture(folder / "noseSneer_R.png", np.zeros((64, 64, 3)))
+    w = make_window(qtbot, tmp_path)
+    open_and_wait(qtbot, w, folder)
+    _choose(qtbot, w, "band-pass")
+    assert w.viewport.textured and "13 shape textures" in w.textures.panel.source.text()
+    assert any("noseSneer_R.png" in p and "64x64" in p for p in w.textures.problems)
+    assert "noseSneer_R.png" in w.textures.panel.problems.text()
+    assert w.save_to(tmp_path / "p.bsproj")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    shutil.copy(tmp_path / "p.bsproj", elsewhere / "p.bsproj")
+    with qtbot.waitSignal(w.textures.textures_ready, timeout=120000):
+        open_and_wait(qtbot, w, elsewhere / "p.bsproj")
+    assert w.viewport.textured and "13 shape textures" in w.textures.panel.source.text()
+    assert str(folder / "neutral.png") in str(w.document.project.sections["textures"]["neutral"])
