@@ -134,3 +134,31 @@ def test_textures_found_beside_a_folder_come_back_with_its_project(qtbot, tmp_pa
         open_and_wait(qtbot, w, elsewhere / "p.bsproj")
     assert w.viewport.textured and "13 shape textures" in w.textures.panel.source.text()
     assert str(folder / "neutral.png") in str(w.document.project.sections["textures"]["neutral"])
+
+
+def test_texture_follows_a_live_link_face_take_as_it_plays(qtbot, tmp_path, llf_csv):
+    from resources.sample_textures import sample_textures
+    w = make_window(qtbot, tmp_path)
+    _choose(qtbot, w, "band-pass")
+    mc = w.mocap
+    assert mc.load_take(llf_csv)
+    neutral, shapes, keep = sample_textures()
+    rig = w.document.rig
+    seen = set()
+    for frame in (0, 120, 240):
+        mc.set_frame(frame)
+        qtbot.waitUntil(lambda: not w.redraw_pending)
+        w.redraw_now()
+        expected = blend_once(neutral, [shapes.get(n) for n in rig.shape_names], w.document.weights, keep=keep)
+        shown = _shown_texture(w)
+        assert np.abs(shown.astype(int) - np.clip(np.round(expected * 255), 0, 255)).max() <= 1
+        seen.add(shown.tobytes())
+    assert len(seen) == 3   # the texture changed with the frames
+
+
+def test_texture_weights_of_a_regional_pose_are_each_shapes_largest():
+    from app.texture_controller import texture_weights
+    g = np.array([0.1, 0.2, 0.0])
+    np.testing.assert_array_equal(texture_weights(g), g)
+    W = np.array([[0.9, 0.0, 0.1], [0.0, 0.4, 0.0], [0.1, 0.2, 0.0]])
+    np.testing.assert_array_equal(texture_weights(g, W), [0.9, 0.4, 0.1])
