@@ -96,9 +96,11 @@ class TextureController(QtCore.QObject):
         self.split = None
         self.problems: list[str] = []
         self._loaded_for = None    # the rig object the textures were read for
+        self._names: list[str] = []   # its shape names then
         self._generation = 0
         d = self.document
         d.rig_changed.connect(self._on_rig_change)
+        d.shapes_changed.connect(self._on_shapes_change)
         d.pose_changed.connect(self._on_pose_change)
         panel.mode_changed.connect(self._on_mode_change)
         panel.detail_changed.connect(self._on_mode_change)
@@ -125,12 +127,24 @@ class TextureController(QtCore.QObject):
         if self.mode != "none":
             self._load()
 
+    def _on_shapes_change(self) -> None:
+        """Shapes added, removed or renamed: the blend is rebuilt for the new list (the texture shown stays until
+        then); a corrective edit, which also reports the shapes, keeps the blend."""
+        rig = self.document.rig
+        if self._loaded_for is not None and rig is not None and self._names != list(rig.shape_names):
+            self._generation += 1
+            self._loaded_for = None
+            self.blender = None
+            if self.mode != "none":
+                self._load()
+
     def _load(self) -> None:
         doc = self.document
         rig = doc.rig
         if rig is None or self._loaded_for is rig:
             return
         self._loaded_for = rig
+        self._names = list(rig.shape_names)
         generation = self._generation
         sections = dict(doc.project.sections)
         path = doc.path
