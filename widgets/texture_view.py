@@ -40,10 +40,8 @@ class TexturedSurface:
 
     def update_points(self, points: np.ndarray, normals: np.ndarray) -> None:
         """The rig surface's points and normals (V, 3), gathered to the display points."""
-        np.take(points, self.vertex, axis=0, out=self._points) if points.dtype == np.float32 else \
-            self._points.__setitem__(slice(None), points[self.vertex])
-        np.take(normals, self.vertex, axis=0, out=self._normals) if normals.dtype == np.float32 else \
-            self._normals.__setitem__(slice(None), normals[self.vertex])
+        self._points[:] = points[self.vertex]
+        self._normals[:] = normals[self.vertex]
         for obj in self._vtk:
             obj.Modified()
 
