@@ -63,10 +63,16 @@ def cmd_render(args) -> int:
     from model.segmentation import SegmentationSettings
     t = SegmentationSettings().t if args.threshold is None else args.threshold
     view = build_view(rig, weights, args.view, threshold=t, level=args.level)
+    texture = None
+    if args.texture != "none":
+        from app.texture_controller import render_texture
+        from widgets.texture_view import textured_surface
+        texture = textured_surface(*render_texture(rig, weights, args.rig, args.texture, args.texture_detail, args.view),
+                                   rig.face_counts)
     from widgets.scene import render_png
     render_png(view.points, rig.face_counts, rig.face_indices, args.output, focus=view.focus,
                colormap=view.colormap, camera=args.camera, size=size, wireframe=args.wireframe,
-               title=view.title if args.label else "")
+               title=view.title if args.label else "", texture=texture)
     print(f"wrote {args.output}")
     return 0
 
@@ -146,7 +152,9 @@ def cmd_take_info(args) -> int:
 
 def cmd_sample(args) -> int:
     from resources.sample_rig import write_sample
+    from resources.sample_textures import write_sample_textures
     out = write_sample(args.output)
+    write_sample_textures(out)
     print(f"wrote the sample rig to {out}")
     return 0
 
@@ -188,6 +196,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--camera", default="front", choices=["front", "left", "right", "three-quarter"])
     sp.add_argument("--wireframe", action="store_true", help="draw polygon edges")
     sp.add_argument("--label", action="store_true", help="write the view's name in the corner")
+    sp.add_argument("--texture", default="none", choices=["band-pass", "linear", "none"],
+                    help="draw the rig's textures blended by the pose (shaded view; textures found beside the rig)")
+    sp.add_argument("--texture-detail", default="regional", choices=["regional", "dominant", "neutral"],
+                    help="band-pass: whose detail band shows (default: per region, the strongest shape there)")
     sp.set_defaults(func=cmd_render)
 
     sp = sub.add_parser("export", help="write the rig for other tools: glTF/USD blend shapes and animation, or a posed OBJ")
@@ -240,7 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_personalize.add_parser(sub, rig_arg)
     cli_batch.add_parser(sub, rig_arg)
 
-    sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder")
+    sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder, with its UVs and generated textures")
     sp.add_argument("-o", "--output", required=True, help="folder to write")
     sp.set_defaults(func=cmd_sample)
 

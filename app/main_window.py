@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from app import batch_controller, corrective_controller, mocap_controller, personalize_controller
+from app import batch_controller, corrective_controller, mocap_controller, personalize_controller, \
+    texture_controller
 from app import session_state
 from app import settings as app_settings
 from app.autosave import AutosaveController
@@ -90,6 +91,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.exports = ExportController(self)
         self.batch = batch_controller.install(self)
         self.actor = personalize_controller.install(self)   # personalisation, its heat map, antagonist pairs
+        self.textures = texture_controller.install(self)
         self.autosave = AutosaveController(self)
         # one viewport tool at a time: sculpting turns marker mode off, marker mode (M) stops sculpting
         self.correctives.sculpting_changed.connect(lambda on: self.markers.mode_action.setChecked(False) if on else None)
@@ -829,3 +831,4 @@ class MainWindow(QtWidgets.QMainWindow):
         self.mocap.shutdown()
         self.exports.shutdown()
         self.batch.shutdown()
+        self.textures.shutdown()

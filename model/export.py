@@ -119,6 +119,7 @@ class ExportContent:
     name: str
     times: np.ndarray | None = None
     frames: np.ndarray | None = None
+    uvs: np.ndarray | None = None   # (V, 2) one UV per vertex (v up, as OBJ), when the rig has them so
 
 
 def full_weights(rig: Rig, weights: np.ndarray) -> np.ndarray:
@@ -160,6 +161,8 @@ def export_content(rig: Rig, weights: np.ndarray | None = None, animation: Weigh
     content = ExportContent(names=names, neutral=rig.neutral @ A.T, deltas=deltas, pose=full_weights(rig, w),
                             face_counts=rig.face_counts, face_indices=rig.face_indices, units=units, up=up,
                             name=rig.name or "rig")
+    from .textures import per_vertex_uvs
+    content.uvs = per_vertex_uvs(rig)
     if animation is not None:
         if animation.weights.shape[1] != rig.n_shapes:
             raise RigInputError(f"{animation.source or 'the animation'}: has {animation.weights.shape[1]} "

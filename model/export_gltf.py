@@ -1,6 +1,8 @@
 """glTF 2.0 writer (``.glb`` binary or ``.gltf`` with the buffer embedded), numpy + json, Qt-free.
 
-One mesh, one node, one primitive: POSITION (float32, with min/max), fan-triangulated uint32 indices and
+One mesh, one node, one primitive: POSITION (float32, with min/max), TEXCOORD_0 when the rig has one UV
+per vertex (an OBJ rig with UV seams exports without: splitting its vertices would break the vertex order),
+fan-triangulated uint32 indices and
 one morph target per blend shape of ``model.export.ExportContent`` (the rig's shapes, then its correctives),
 named in ``mesh.extras.targetNames`` (the de facto convention of Blender, three.js, Babylon.js and Unreal).
 The current pose is the mesh's default ``weights``; an animation is one LINEAR sampler on the node's
@@ -76,6 +78,11 @@ def gltf_document(content) -> tuple[dict, bytes]:
                     ELEMENT_ARRAY_BUFFER)
     targets = [{"POSITION": buf.floats(d, "VEC3", bounds=True, target=ARRAY_BUFFER)} for d in content.deltas]
     primitive = {"attributes": {"POSITION": i_pos}, "indices": i_idx, "mode": 4}
+    if content.uvs is not None:   # TEXCOORD_0: glTF's v runs down the image (the rig's, as OBJ's, up)
+        uv = np.asarray(content.uvs, dtype=np.float64)
+        primitive["attributes"]["TEXCOORD_0"] = buf.add(
+            np.stack([uv[:, 0], 1.0 - uv[:, 1]], axis=1).astype("<f4"),
+            {"componentType": FLOAT, "count": int(uv.shape[0]), "type": "VEC2"}, ARRAY_BUFFER)
     if targets:
         primitive["targets"] = targets
     mesh = {"name": content.name, "primitives": [primitive]}

@@ -4,7 +4,8 @@ Reads the mesh the user means: the one named by ``mesh`` (``--mesh NAME``), else
 morph targets and then the most vertices (a Ready Player Me avatar opens its head, not an eyeball). All its
 primitives with POSITION are concatenated in primitive order (vertex order kept, no welding), triangle
 indices as faces, each morph target's POSITION as a shape delta (zero on primitives without targets).
-Target names come from ``mesh.extras.targetNames`` (else ``target_0``, ...).
+Target names come from ``mesh.extras.targetNames`` (else ``target_0``, ...). TEXCOORD_0, when every
+primitive has it, becomes the rig's UVs (one per vertex, ``Rig.corners``; v flipped to OBJ's upward v).
 
 The node hierarchy's world matrix of the first node (in scene order) that instances the mesh is applied:
 ``M p`` to positions and its linear part (no translation) to morph deltas, which is exact because a
@@ -28,7 +29,7 @@ import numpy as np
 from .errors import RigInputError, shown
 from .input_files import read_input_bytes, regular_file
 from .json_file import parse_json_text
-from .rig import Rig
+from .rig import CornerAttributes, Rig
 
 from .export_gltf import CHUNK_BIN as _CHUNK_BIN, CHUNK_JSON as _CHUNK_JSON, GLB_MAGIC as _GLB_MAGIC
 _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
@@ -448,11 +449,13 @@ def _load(path: Path, units: str, mesh: str | None) -> Rig:
     if K == 0:
         raise doc.fail(f"has no morph targets (blendshapes) on its mesh '{label}'.")
     positions, deltas, tris, offset = [], [], [], 0
+    uvs: list | None = []
     for p in prims:
         pos = doc.accessor(p["attributes"]["POSITION"])
         if pos.shape[1] != 3:
             raise doc.fail("a POSITION accessor is not VEC3.")
         n = pos.shape[0]
+        uvs = _texcoords(doc, p, n, uvs)
         d = np.zeros((K, n, 3))
         for k, t in enumerate(p.get("targets") or []):
             if "POSITION" in t:
@@ -482,8 +485,34 @@ def _load(path: Path, units: str, mesh: str | None) -> Rig:
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
         raise doc.fail(f"has duplicate morph target names: {', '.join(dup)}.")
-    return Rig(neutral=neutral, face_counts=np.full(T.shape[0], 3, np.int32), face_indices=T.reshape(-1),
-               shape_names=names, deltas=D, units=units, name=mesh.get("name") or path.stem, source=str(path))
+    rig = Rig(neutral=neutral, face_counts=np.full(T.shape[0], 3, np.int32), face_indices=T.reshape(-1),
+              shape_names=names, deltas=D, units=units, name=mesh.get("name") or path.stem, source=str(path))
+    if isinstance(uvs, list) and uvs:
+        rig.corners = CornerAttributes(uvs=np.concatenate(uvs), corner_uv=rig.face_indices.copy())
+    elif isinstance(uvs, str):
+        rig.corners = CornerAttributes(notes=[f"{path}: {uvs}"])
+    return rig
+
+
+def _texcoords(doc: _Doc, prim: dict, n: int, uvs: list | str | None) -> list | str | None:
+    """Add a primitive's TEXCOORD_0 (n, 2) to ``uvs``: None once a primitive has none (the mesh has no UVs),
+    a sentence once they cannot be used (the geometry loads without them)."""
+    if not isinstance(uvs, list):
+        return uvs
+    index = (prim.get("attributes") or {}).get("TEXCOORD_0")
+    if index is None:
+        return ("some of its primitives have no texture coordinates (TEXCOORD_0); textures cannot be shown."
+                if uvs else None)
+    try:
+        uv = doc.accessor(index)
+    except RigInputError as exc:
+        return f"its texture coordinates cannot be read ({shown(str(exc).split(': ', 1)[-1], 120)}); they are left out."
+    if uv.shape != (n, 2):
+        return f"a TEXCOORD_0 accessor holds {uv.shape[0]} {'VEC2' if uv.shape[1] == 2 else 'non-VEC2'} values for {n} vertices; the UVs are left out."
+    if not np.isfinite(uv).all():
+        return "its texture coordinates (TEXCOORD_0) hold NaN or infinite values; they are left out."
+    uv[:, 1] = 1.0 - uv[:, 1]   # glTF's v runs down the image, OBJ's (the rig's) up
+    return uvs + [uv]
 
 
 # --- writer -------------------------------------------------------------------------------------

@@ -297,7 +297,11 @@ def _parse_corners(path: Path, data: bytes, n_corners: int, faces: list[bytes], 
     uvs = _parse_table(path, data, _VT_LINE, "texture coordinate ('vt')", (2, 3))
     normals = _parse_table(path, data, _VN_LINE, "normal ('vn')", (3, 3))
     records = _records(data)
-    if uvs is None and normals is None and not records:
+    notes = []
+    if uvs is not None and not np.isfinite(uvs).all():   # the geometry still loads; the texture cannot
+        notes.append(f"{path}: its texture coordinates ('vt') hold NaN or infinite values; they are left out.")
+        uvs = None
+    if uvs is None and normals is None and not records and not notes:
         return None
     corner_uv = corner_normal = None
     tokens = b" ".join(faces).split() if tokens is None else tokens
@@ -309,7 +313,7 @@ def _parse_corners(path: Path, data: bytes, n_corners: int, faces: list[bytes], 
             corner_normal = _corner_index(path, vn, len(normals), "normal")
     at = _faces_before(data, [pos for pos, _ in records])   # the face number of each record
     return CornerAttributes(uvs=uvs, corner_uv=corner_uv, normals=normals, corner_normal=corner_normal,
-                            records=[(f, line) for f, (_, line) in zip(at, records)])
+                            records=[(f, line) for f, (_, line) in zip(at, records)], notes=notes)
 
 
 def _face_section(data: bytes) -> bytes:

@@ -73,6 +73,7 @@ class CornerAttributes:
     uvs, normals    the file's own ``vt`` (T, 2|3) and ``vn`` (N, 3) lists, or None.
     corner_uv/_normal  per polygon corner (parallel to ``Rig.face_indices``), an index into them, -1 for none.
     records         (face number, line): ``g``/``o``/``usemtl``/``s`` lines before that face, ``mtllib`` at 0.
+    notes           what a reader left out and why (e.g. UVs that were not numbers), shown with the textures.
     Vertices are never split at UV seams: the corner indices carry the seams.
     """
 
@@ -81,6 +82,7 @@ class CornerAttributes:
     normals: np.ndarray | None = None
     corner_normal: np.ndarray | None = None
     records: list[tuple[int, str]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
 
 
 @dataclass(eq=False)   # compared by identity: an undo step keeps the very objects it restores
@@ -196,6 +198,8 @@ class Rig:
             if idx is not None and (idx.shape != self.face_indices.shape or table is None
                                     or (idx.size and (idx.min() < -1 or idx.max() >= len(table)))):
                 raise RigInputError(f"{where}: the UV or normal indices of the faces do not fit the rig.")
+            if table is not None and (table.ndim != 2 or not 2 <= table.shape[1] <= 3):
+                raise RigInputError(f"{where}: the UV or normal list is not a table of 2 or 3 numbers a row.")
 
     def _validate_shape_settings(self, where: str) -> None:
         """In-betweens, mute, solo and ranges name shapes the rig has and hold sane numbers."""

@@ -16,6 +16,10 @@ ICT FaceKit). The surface is built in this order:
 4. Rings of vertices continue each opening inward: two for each eye (the lid thickness, hidden behind the
    eyeball) and a closed bag for the mouth (its interior).
 5. Two UV-sphere eyeballs with a cornea bulge and a recessed pupil are appended (separate components).
+
+UVs (``sample_uvs``): the skin is unrolled around the vertical axis (``u`` from the angle about Y, ``v`` from
+the height), one UV per vertex (the mask has no seam); each eyeball is a disc island below the skin, seen
+from the front.
 """
 from __future__ import annotations
 
@@ -442,3 +446,28 @@ def _eyeball(centre: np.ndarray, n_lat: int = 14, n_lon: int = 24) -> tuple[np.n
     last = len(pts) - 1
     tri_b = np.stack([idx[-1], np.full(n_lon, last), nxt[-1]], axis=1)
     return pts, [tri_f, quads, tri_b]
+
+
+# --- UVs ------------------------------------------------------------------------------------------------
+SKIN_U = (0.02, 0.98)      # the skin's island: u from the angle about Y, v from the height
+SKIN_V = (0.15, 0.99)
+EYE_ISLAND = {"L": (0.75, 0.075), "R": (0.25, 0.075)}   # (u, v) centre of each eyeball's disc
+EYE_ISLAND_RADIUS = 0.06
+
+
+def sample_uvs(g: FaceGeometry) -> np.ndarray:
+    """(V, 2) UV per vertex of the sample face."""
+    p = g.points
+    uv = np.zeros((len(p), 2))
+    theta = np.arctan2(p[:, 0], p[:, 2])
+    y = p[:, 1]
+    ylo, yhi = y[g.skin].min(), y[g.skin].max()
+    uv[:, 0] = SKIN_U[0] + (SKIN_U[1] - SKIN_U[0]) * (0.5 + theta / (2 * THETA_MAX * 1.02))
+    uv[:, 1] = SKIN_V[0] + (SKIN_V[1] - SKIN_V[0]) * (y - ylo) / (yhi - ylo)
+    for side, ids in g.eyeball.items():
+        rel = p[ids] - g.eye_centre[side]
+        r = np.linalg.norm(rel, axis=1).max()
+        cu, cv = EYE_ISLAND[side]
+        uv[ids, 0] = cu + EYE_ISLAND_RADIUS * rel[:, 0] / r
+        uv[ids, 1] = cv + EYE_ISLAND_RADIUS * rel[:, 1] / r
+    return np.clip(uv, 0.0, 1.0)

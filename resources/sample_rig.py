@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from model.obj_io import write_obj
-from model.rig import Rig
+from model.rig import CornerAttributes, Rig
 
 from .sample_face_geometry import (EYE_SIDES, FaceGeometry, build_face_geometry, compact, ellipse_d2,
-                                   eye_opening, lip_span, smoothstep)
+                                   eye_opening, lip_span, sample_uvs, smoothstep)
 
 SIDES = EYE_SIDES  # "L" -> +1 (x > 0), "R" -> -1
 
@@ -224,6 +224,9 @@ SHAPE_ORDER = [
 ]
 
 
+SAMPLE_SOURCE = "bundled sample"
+
+
 @functools.lru_cache(maxsize=1)
 def _build() -> tuple[Rig, FaceGeometry]:
     g = build_face_geometry()
@@ -232,7 +235,8 @@ def _build() -> tuple[Rig, FaceGeometry]:
     deltas[np.abs(deltas) < 1e-9] = 0.0
     rig = Rig(neutral=g.points, face_counts=g.face_counts, face_indices=g.face_indices,
               shape_names=list(SHAPE_ORDER), deltas=deltas, units="cm", name="sample",
-              source="bundled sample", presets={k: dict(v) for k, v in PRESETS.items()})
+              source=SAMPLE_SOURCE, presets={k: dict(v) for k, v in PRESETS.items()},
+              corners=CornerAttributes(uvs=sample_uvs(g), corner_uv=g.face_indices.copy()))
     return rig, g
 
 
@@ -258,13 +262,14 @@ def sample_geometry() -> FaceGeometry:
 
 
 def write_sample(folder: str | Path) -> Path:
-    """Write the sample rig as an OBJ folder (neutral.obj + one <shape>.obj each + presets.json)."""
+    """Write the sample rig as an OBJ folder (neutral.obj + one <shape>.obj each with its UVs + presets.json);
+    ``resources.sample_textures.write_sample_textures`` adds its textures."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rig = _build()[0]
     write_obj(folder / "neutral.obj", rig.neutral, rig.face_counts, rig.face_indices,
-              header="Blendshape Studio sample face (procedural), units cm")
+              header="Blendshape Studio sample face (procedural), units cm", corners=rig.corners)
     for name, d in zip(rig.shape_names, rig.deltas):
-        write_obj(folder / f"{name}.obj", rig.neutral + d, rig.face_counts, rig.face_indices)
+        write_obj(folder / f"{name}.obj", rig.neutral + d, rig.face_counts, rig.face_indices, corners=rig.corners)
     (folder / "presets.json").write_text(json.dumps(rig.presets, indent=2, sort_keys=True) + "\n")
     return folder

@@ -258,16 +258,21 @@ def focus_vertices(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
 
 
 def render_png(points, face_counts, face_indices, out_path, *, focus=None, colormap: ColorMap | None = None,
-               camera: str = "front", size=(1024, 768), wireframe=False, overlays=None, title: str = "") -> None:
+               camera: str = "front", size=(1024, 768), wireframe=False, overlays=None, title: str = "",
+               texture=None) -> None:
     """Render the surface off screen to a PNG file, atomically (a temporary beside it, then moved into place:
-    a killed render never leaves a truncated PNG under the final name)."""
+    a killed render never leaves a truncated PNG under the final name). ``texture(plotter, mesh, wireframe)``
+    adds the surface instead, textured (widgets.texture_view.textured_surface)."""
     use_offscreen_backend_if_headless()
     import pyvista as pv
     plotter = pv.Plotter(off_screen=True, window_size=list(size))
     try:
         style_plotter(plotter)
         mesh = rig_mesh(points, face_counts, face_indices)
-        add_surface(plotter, mesh, colormap, wireframe=wireframe)
+        if texture is not None and colormap is None:
+            texture(plotter, mesh, wireframe)
+        else:
+            add_surface(plotter, mesh, colormap, wireframe=wireframe)
         for add in overlays or ():
             add(plotter)
         if title:

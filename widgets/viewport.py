@@ -123,6 +123,8 @@ class Viewport(QtWidgets.QWidget):
         self._focus = None
         self._colormap: ColorMap | None = None
         self._wireframe = False
+        self._textured = None   # widgets.texture_view.TexturedSurface while a texture is shown
+        self._face_counts: np.ndarray | None = None
         self._camera = "front"
         self._tools: list[ViewportTool] = []
         self._owner: ViewportTool | None = None      # the tool whose gesture is under way
@@ -143,7 +145,9 @@ class Viewport(QtWidgets.QWidget):
         if self._colormap is not None and len(self._colormap.scalars) != len(points):
             self._colormap = None   # the last rig's colours: its owner sets the new rig's when they are ready
         self.mesh = rig_mesh(points, face_counts, face_indices)
+        self._face_counts = np.asarray(face_counts)
         self._arrays = SurfaceArrays(self.mesh)
+        self._textured = None   # a new rig: its owner sets its texture when it is ready
         self._redraw_surface()
         if reset_camera:
             self.set_camera(self._camera)
@@ -154,6 +158,8 @@ class Viewport(QtWidgets.QWidget):
         if self.mesh is None:
             return
         self._arrays.update(points)
+        if self._textured is not None:
+            self._textured.update_points(self._arrays.points, self._arrays.normals)
         self.render()
 
     def points(self) -> np.ndarray | None:
@@ -170,6 +176,27 @@ class Viewport(QtWidgets.QWidget):
         if self.mesh is not None:
             self._redraw_surface()
             self.render()
+
+    def set_texture(self, split, image8: np.ndarray | None) -> None:
+        """Show ``image8`` ((H, W, 3) uint8, row 0 the top) on the surface through ``split``
+        (``model.textures.DisplaySplit``); None: plain shading again. A colour map, while set, is shown instead."""
+        from .texture_view import TexturedSurface
+        self._textured = None if image8 is None or self.mesh is None else TexturedSurface(
+            self._arrays.points, self._arrays.normals, self._face_counts, split, image8)
+        if self.mesh is not None:
+            self._redraw_surface()
+            self.render()
+
+    def update_texture(self, image8: np.ndarray, boxes=None) -> None:
+        """New texels for the shown texture (only ``boxes``, (row slice, column slice) pairs, when given);
+        drawn at the next render."""
+        if self._textured is not None:
+            self._textured.update_image(image8, boxes)
+
+    @property
+    def textured(self) -> bool:
+        """Whether the surface shows a texture (set and not covered by a colour map)."""
+        return self._textured is not None and self._colormap is None
 
     def set_wireframe(self, on: bool) -> None:
         self._wireframe = bool(on)
@@ -190,7 +217,10 @@ class Viewport(QtWidgets.QWidget):
         for key in ("values", "colors"):
             if key in self.mesh.point_data:
                 del self.mesh.point_data[key]
-        add_surface(self.plotter, self.mesh, self._colormap, wireframe=self._wireframe)
+        if self._textured is not None and self._colormap is None:
+            self._textured.add_to(self.plotter, wireframe=self._wireframe)
+        else:
+            add_surface(self.plotter, self.mesh, self._colormap, wireframe=self._wireframe)
 
     # --- overlays ----------------------------------------------------------------------------------
     def add_overlay(self, name: str, mesh, **style):
@@ -214,13 +244,15 @@ class Viewport(QtWidgets.QWidget):
         picker.SetTolerance(0.0005)
         if not picker.Pick(x, y, 0, self.plotter.renderer) or picker.GetCellId() < 0:
             return None
-        if picker.GetDataSet() is None or picker.GetDataSet().GetNumberOfPoints() != self.mesh.n_points:
+        shown = self._textured.mesh if self.textured else self.mesh
+        if picker.GetDataSet() is None or picker.GetDataSet().GetNumberOfPoints() != shown.n_points:
             return None
         point = np.array(picker.GetPickPosition())
         face = int(picker.GetCellId())
-        ids = np.asarray(self.mesh.get_cell(face).point_ids)
-        pts = np.asarray(self.mesh.points)[ids]
-        return SurfacePoint(int(ids[np.argmin(np.linalg.norm(pts - point, axis=1))]), face, point)
+        ids = np.asarray(shown.get_cell(face).point_ids)
+        pts = np.asarray(shown.points)[ids]
+        nearest = int(ids[np.argmin(np.linalg.norm(pts - point, axis=1))])
+        return SurfacePoint(int(self._textured.vertex[nearest]) if shown is not self.mesh else nearest, face, point)
 
     # --- tools: the gesture API --------------------------------------------------------------------
     def push_tool(self, tool: ViewportTool) -> None:
