@@ -212,7 +212,7 @@ def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float =
     view up), e.g. where the camera looks now), for the plotter's window size or the given (w, h).
 
     The camera looks at the centre of the points' box and stands as close as it can with every point inside
-    the view (each at its own depth: the nose nearer than the ears), with a margin of 6%: a box's bounding
+    the view (each at its own depth: the nose nearer than the ears), with a margin of 10%: a box's bounding
     sphere wasted a third of the view on a face, which is much deeper and narrower than it is tall."""
     pts = np.asarray(focus_points, dtype=np.float64).reshape(-1, 3)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
@@ -226,7 +226,7 @@ def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float =
     right /= np.linalg.norm(right)
     true_up = np.cross(d, right)
     rel = pts - center
-    x, y, z = np.abs(rel @ right) * 1.06, np.abs(rel @ true_up) * 1.06, rel @ d   # z: towards the eye
+    x, y, z = np.abs(rel @ right) * 1.1, np.abs(rel @ true_up) * 1.1, rel @ d   # z: towards the eye
     w, h = size or plotter.window_size
     t = np.tan(np.radians(view_angle / 2))
     aspect = w / h if w > 0 and h > 0 else 1.0
