@@ -181,6 +181,7 @@ def rename_shape(project, old: str, new: str) -> RenameRecord:
     if new == old:
         return rec
     _rename(rig, k, old, new)
+    _rename_pairs(project, old, new)
     for i, c in enumerate(rig.correctives):
         if old in c.drivers:
             default = "+".join(c.drivers)
@@ -201,11 +202,19 @@ def _rename(rig: Rig, k: int, old: str, new: str) -> None:
     rig.solo = [new if n == old else n for n in rig.solo]
 
 
+def _rename_pairs(project, old: str, new: str) -> None:
+    """The project's edited antagonist pairs follow a rename (None: the rig's own pairs, found by index)."""
+    pairs = getattr(project, "antagonists", None)
+    if pairs is not None:
+        project.antagonists = [tuple(new if n == old else n for n in pair) for pair in pairs]
+
+
 def undo_rename(project, rec: RenameRecord) -> None:
     rig = project.rig
     if rec.new == rec.old:
         return
     _rename(rig, rig.shape_index(rec.new), rec.new, rec.old)
+    _rename_pairs(project, rec.new, rec.old)
     for c in rig.correctives:
         c.drivers = [rec.old if d == rec.new else d for d in c.drivers]
     for i, old_name, _ in rec.corrective_names:
@@ -230,6 +239,7 @@ class RemovedShapes:
     ranges: dict[str, tuple[float, float]]
     muted: list[str]
     solo: list[str]
+    antagonists: list | None = None         # the project's edited antagonist pairs before the delete
 
 
 def correctives_needing(rig: Rig, names) -> list[str]:
@@ -255,7 +265,10 @@ def delete_shapes(project, names: list[str]) -> RemovedShapes:
         presets=copy.deepcopy(rig.presets),
         inbetweens={n: rig.inbetweens[n] for n in gone if n in rig.inbetweens},
         ranges={n: rig.ranges[n] for n in gone if n in rig.ranges},
-        muted=list(rig.muted), solo=list(rig.solo))
+        muted=list(rig.muted), solo=list(rig.solo),
+        antagonists=None if getattr(project, "antagonists", None) is None else list(project.antagonists))
+    if rec.antagonists is not None:          # a pair that names a deleted shape goes with it
+        project.antagonists = [pair for pair in rec.antagonists if not gone & set(pair)]
     rig.correctives = [c for c in rig.correctives if not gone & set(c.drivers)]
     rig.shape_names = [rig.shape_names[i] for i in keep]
     rig.deltas = rig.deltas[keep]
@@ -308,6 +321,8 @@ def restore_shapes(project, rec: RemovedShapes) -> None:
                       if rig.inbetweens.get(n) or rec.inbetweens.get(n)}
     rig.ranges = {**rig.ranges, **rec.ranges}
     rig.muted, rig.solo = list(rec.muted), list(rec.solo)
+    if rec.antagonists is not None:
+        project.antagonists = list(rec.antagonists)
 
 
 def unique_name(rig: Rig, base: str) -> str:

@@ -378,3 +378,20 @@ def test_a_usd_export_keys_the_inbetween_as_a_blend_shape_of_its_own(rig, tmp_pa
     weights = dict(zip(names, anim.GetBlendShapeWeightsAttr().Get()))
     assert weights["jawOpen"] == pytest.approx(0.5) and weights["jawOpen_0_5"] == pytest.approx(0.5)
     assert weights["mouthClose"] == 0.0            # muted
+
+
+def test_the_projects_antagonist_pairs_follow_a_rename_and_a_delete_and_come_back_on_undo(rig):
+    """Edited pairs name shapes: a rename renames them (the pair is still held apart), a delete drops the pairs
+    of the deleted shape, and undoing either gives the list back exactly."""
+    p = _project(rig)
+    p.antagonists = [("jawOpen", "mouthClose"), ("eyeBlink_L", "eyeWide_L"), ("mouthFunnel", "mouthPucker")]
+    before = list(p.antagonists)
+    rec = se.rename_shape(p, "jawOpen", "jawDrop")
+    assert p.antagonists[0] == ("jawDrop", "mouthClose") and p.antagonists[1:] == before[1:]
+    assert p.antagonist_pairs()[0] == ("jawDrop", "mouthClose")
+    se.undo_rename(p, rec)
+    assert p.antagonists == before
+    removed = se.delete_shapes(p, ["eyeWide_L"])
+    assert p.antagonists == [before[0], before[2]]
+    se.restore_shapes(p, removed)
+    assert p.antagonists == before
