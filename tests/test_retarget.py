@@ -76,20 +76,22 @@ def test_actor_take_with_its_map_meets_the_accuracy(ict_rig, actor, actor_soluti
 
 
 def test_without_the_map_automatic_mapping_finds_the_places(ict_rig, actor, evaluator):
-    """Automatic mapping of the actor (similarity, then the rig warped toward the markers), then the same solve.
-    Measured 0.137 weights RMS and 0.81 mm (the issue asks 0.09 and 0.50: not reached); the similarity alone
-    gave 0.17 / 0.81 mm and mapped vertices 2.8 mm from the true ones, the warp 1.4 mm."""
+    """Automatic mapping of the actor (similarity, the rig warped toward the markers, then each marker's vertex
+    re-fitted from the take's motion), then the same solve: the issue's 0.09 weights RMS and 0.50 mm. Measured
+    0.076 / 0.44 mm; the registration alone (no re-fit) gave 0.137 / 0.80 mm, its vertices 1.5 mm (mean) from the
+    marker map's, and the places that explain the motion best are not all the map's own vertices (the actor's
+    expressions are ICT's scaled by smooth per-shape fields)."""
     from model.antagonists import pair_indices, rig_antagonists, strong_pairs
     take, mm, T, moving, frames = actor
     ws = TakeWorkspace(ict_rig)
     ws.take = take
     ws.auto_map()
-    d = [np.linalg.norm(ict_rig.neutral[ws.marker_map.markers[lab]] - ict_rig.neutral[mm.markers[lab]])
-         for lab in take.labels]
-    assert np.mean(d) < 0.2                                   # cm: the similarity alone was 0.28
+    d = np.array([np.linalg.norm(ict_rig.neutral[ws.marker_map.markers[lab]] - ict_rig.neutral[mm.markers[lab]])
+                  for lab in take.labels])
+    assert len(d) == 60 and d.max() < 0.8 and np.mean(d) < 0.3, (d.max(), d.mean())     # cm
     sol = ws.solve({"mode": "global"}, evaluator=evaluator)
-    assert np.sqrt(np.mean((sol.weights[PERF] - T[PERF]) ** 2)) < 0.15
-    assert posed_rms_mm(evaluator, sol.weights, T, moving, frames) < 0.9
+    assert np.sqrt(np.mean((sol.weights[PERF] - T[PERF]) ** 2)) < 0.09
+    assert posed_rms_mm(evaluator, sol.weights, T, moving, frames) < 0.50
     assert strong_pairs(sol.weights, pair_indices(ict_rig, rig_antagonists(ict_rig))) == []
 
 
