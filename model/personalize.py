@@ -8,10 +8,11 @@ deformation transfer as the shapes, with no data: they keep their drivers, rule 
 * Scans (the main path): the neutral is the neutral scan (or, without one, re-estimated from the pose
   scans by the row of ones of Ma's W); the deltas are refined by ``solvers.personalize.personalize``.
 * A marker take alone: the template neutral is aligned to the actor's neutral markers (the mean of the
-  calibration frames): scaled to the actor's size by the similarity (Umeyama 1991) between the rig's
-  marker points and the actor's, then warped onto the markers by a Gaussian RBF (``solvers.rbf``) in the
-  rig's frame; the deltas are the template's transferred onto that neutral (the
-  deformation-gradient and closeness terms of Ma's energy, no data term).
+  calibration frames). The actor's markers are placed rigidly on the rig's marker points (Kabsch: the actor's
+  face where the rig's is, at the actor's size), the template is scaled to them by the similarity (Umeyama 1991)
+  and warped onto them by a Gaussian RBF (``solvers.rbf``); the deltas are the template's transferred onto that
+  neutral (the deformation-gradient and closeness terms of Ma's energy, no data term). Scaling the template
+  about the rig's origin instead put the face 5.5 mm from the actor's (a placement, not a shape, error).
 
 ``shape_change_report`` measures how far each shape moved from the template (for the CLI's report and the
 GUI's heat map, ``solvers.personalize.shape_change``).
@@ -71,7 +72,7 @@ def read_scan(scan, rig: Rig, label: str = "scan") -> np.ndarray:
 def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tuple[np.ndarray, dict]:
     """The template neutral rigidly aligned and RBF-warped onto the actor's neutral markers."""
     from solvers.rbf import RBFResidual
-    from solvers.rigid import umeyama
+    from solvers.rigid import kabsch, umeyama
 
     from .marker_map import auto_marker_map, calibration_cloud
 
@@ -82,11 +83,13 @@ def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tupl
     binding = marker_map.binding(rig, labels)
     cloud = calibration_cloud(take, calibration_frames, rig.units)[cols]
     rest = binding @ rig.neutral
-    s, R, t = umeyama(rest, cloud, scale=True)       # cloud ≈ s R rest + t
-    aligned = (cloud - t) @ R                        # the actor's markers in the rig's frame, size kept
-    base = s * rig.neutral                           # the template at the actor's size (the whole head)
-    rbf = RBFResidual(s * rest, points=base, kernel="gaussian", scale=RBF_SCALE * s * _cm(rig), lam=RBF_LAMBDA)
-    neutral = base + rbf.evaluate(rbf.coefficients(aligned - s * rest))
+    R, t = kabsch(cloud, rest)                       # rest ≈ R cloud + t
+    aligned = cloud @ R.T + t                        # the actor's markers placed rigidly on the rig's, size kept
+    s, Rs, ts = umeyama(rest, aligned, scale=True)   # aligned ≈ s Rs rest + ts
+    base = s * rig.neutral @ Rs.T + ts               # the template at the actor's size and place (the whole head)
+    moved = s * rest @ Rs.T + ts
+    rbf = RBFResidual(moved, points=base, kernel="gaussian", scale=RBF_SCALE * s * _cm(rig), lam=RBF_LAMBDA)
+    neutral = base + rbf.evaluate(rbf.coefficients(aligned - moved))
     fit = float(np.sqrt(((binding @ neutral - aligned) ** 2).sum(axis=1).mean()))
     return neutral, {"markers": len(labels), "marker_fit": fit, "scale": float(s)}
 
@@ -131,7 +134,8 @@ def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, m
               name=name or f"{rig.name}_actor", source="", correctives=correctives,
               presets={k: dict(v) for k, v in rig.presets.items()})
     summary.update(unknowns=result.unknowns, seconds=round(result.seconds, 3),
-                   delta_seconds=[round(s, 3) for s in result.delta_seconds], cg_iterations=result.cg_iterations,
+                   delta_seconds=[round(s, 3) for s in result.delta_seconds],
+                   delta_cpu_seconds=[round(s, 3) for s in result.delta_cpu_seconds], cg_iterations=result.cg_iterations,
                    fit_rms=[float(f) for f in result.fit_rms], units=rig.units)
     return out, result, summary
 
