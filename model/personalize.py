@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from solvers.personalize import PersonalizeResult, ShapeChange, personalize, shape_change
+from solvers.personalize import LAM_D, LAM_R, PersonalizeResult, ShapeChange, personalize, shape_change
 
 from .errors import RigInputError
 from .rig import Rig
@@ -127,7 +127,7 @@ def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, m
     live = [c for c in rig.correctives]
     if live:
         moved = personalize(rig.neutral, np.stack([c.delta for c in live]), triangles, np.zeros((0, rig.n_vertices, 3)),
-                            result.neutral, lam_r=options.get("lam_r", 0.1), lam_d=options.get("lam_d", 0.05))
+                            result.neutral, lam_r=options.get("lam_r", LAM_R), lam_d=options.get("lam_d", LAM_D))
         correctives = [dataclasses.replace(c, delta=d) for c, d in zip(live, moved.deltas)]
     out = Rig(neutral=result.neutral, face_counts=rig.face_counts.copy(), face_indices=rig.face_indices.copy(),
               shape_names=list(rig.shape_names), deltas=result.deltas, units=rig.units,

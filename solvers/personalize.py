@@ -35,10 +35,11 @@ Choices made here (the paper's summary leaves them open):
   as against 50.
 * λ_s is relative: it multiplies the mean squared norm of a shape (``trace(BᵀB)/K``), so the sparsity
   ``(Σw)²`` weighs the same for a dense scan as for 60 markers. Default 0.01 by measurement on
-  ``mocap/actor_take`` (the take solved on the result: 0.212 mm with it, 0.257 mm without). It shrinks the
-  scans' weights, and the energy leaves each shape's scale against its weight free, so the shapes grow to
-  match (posed with the performance's true weights: 0.80 mm with it, 0.264 mm without); ``gauge=True``
-  rescales each shape to the template's size (``template_gauge``).
+  ``mocap/actor_take`` (the take solved on the result: 0.212 mm with it, 0.257 mm without, at λ_d 0.05). It
+  shrinks the scans' weights, and the energy leaves each shape's scale against its weight free, so the shapes
+  grow to match (posed with the performance's true weights: 0.80 mm with it, 0.264 mm without); ``gauge=True``
+  rescales each shape to the template's size (``template_gauge``: posed with the true weights 0.57 mm, but the
+  take solved on it 0.222 mm, so it is not the default).
 
 The deltas are solved for x, y and z at once (the matrix is the same for the three coordinates) by
 conjugate gradients on the normal equations, preconditioned by the exact per-vertex blocks of the data term
@@ -60,7 +61,9 @@ from .rigid import kabsch
 from .weight_solve import WeightSolver
 
 LAM_R = 0.1          # Ma et al. 2016, §3.2: deformation-gradient regulariser
-LAM_D = 0.05         # Ma et al. 2016, §3.2: closeness to the template deltas
+LAM_D = 0.02         # Ma et al. 2016, §3.2: closeness to the template deltas (they use 0.05; measured on
+                     # mocap/actor_take, the take solved on the rig personalised from its 24 scans: 0.05 gave
+                     # 0.212 mm, 0.02 0.209 mm, 0.01 0.209 mm; λ_r 0.05 instead of 0.1 0.212 mm)
 LAM_S = 0.01         # Ma et al. 2016, Eq. 3: sparsity (Σw)², relative to a shape's mean squared norm (measured)
 ITERATIONS = 3       # alternations of (a) weights and (b) deltas
 MIN_AREA = 1e-12     # relative to the mean triangle area: below it a triangle has no gradient

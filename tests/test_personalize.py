@@ -232,9 +232,9 @@ def test_actor_take_on_the_personalised_rig_is_within_target(actor_rig, ict_rig,
     print(f"\nactor_take solved on the personalised rig: {10 * solved:.3f} mm; posed with the true weights: "
           f"{10 * dense_error_true_weights(rig, actor_dir):.3f} mm; {summary['unknowns']} unknowns, "
           f"{summary['seconds']:.1f} s, scan fit {summary['fit_rms']}")
-    # Issue 15 asks for 0.21 mm; measured 0.212 mm (the ICT shapes on the actor's neutral scan: 0.243 mm; the
-    # rig personalised with the scans' true weights, an oracle: 0.211 mm; the take solver's own floor).
-    assert solved < 0.0215                                    # cm
+    # Issue 15 asks for 0.21 mm; measured 0.209 mm (λ_d 0.05, Ma's: 0.212 mm; the ICT shapes on the actor's
+    # neutral scan: 0.243 mm; the actor's own linear shapes posed with the true weights: 0.17 mm)
+    assert solved < 0.021                                     # cm
     _, rows = shape_change_report(ict_rig, rig)
     assert rows[0]["rms"] > 0.005 and rows[0]["max"] > rows[0]["rms"]   # the shapes did change
 

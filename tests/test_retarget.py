@@ -228,3 +228,21 @@ def test_a_mouth_corner_drag_on_ict_leaves_no_antagonist_pair_both_on(ict_rig):
         found[name] = (strong_pairs(W, pairs), np.linalg.norm(A @ W[-1] - b))
     assert found["plain"][0], "the drag no longer trades antagonists: the test lost its point"
     assert found["antagonists"][0] == [] and found["antagonists"][1] < 0.01
+
+
+def test_refit_points_moves_a_marker_to_the_point_that_explains_its_motion_unless_the_prior_says_no():
+    """``refit_points``: three candidate vertices with different motions; the marker moved like vertex 2. It moves
+    there from vertex 0, unless vertex 2 is many σ from where the registration put it and the gain is small."""
+    from solvers.retarget import refit_points
+    rng = np.random.default_rng(5)
+    deltas = rng.normal(size=(4, 3, 3))                      # 4 shapes, 3 vertices
+    W = rng.uniform(0, 1, (50, 4))
+    motion = np.einsum("fk,kc->fc", W, deltas[:, 2])[:, None] + rng.normal(scale=0.01, size=(50, 1, 3))
+    motion[::7] = np.nan                                      # missing samples are skipped
+    cand = [np.array([0, 1, 2])]
+    assert refit_points(motion, W, deltas, cand, [np.array([0.0, 1.0, 1.0])], lam=0.05).tolist() == [2]
+    # a candidate a little worse (its motion 1 % off) wins when the better one is 10 σ away, loses without a prior
+    near = deltas.copy()
+    near[:, 0] = deltas[:, 2] * 1.01
+    assert refit_points(motion, W, near, cand, [np.array([0.0, 1.0, 100.0])], lam=0.05).tolist() == [0]
+    assert refit_points(motion, W, near, cand, [np.array([0.0, 1.0, 100.0])], lam=0.0).tolist() == [2]
