@@ -199,8 +199,9 @@ OFF_FACE_CM = 1.0
 # plus the distance left): ~0.03 mm on the rig's own face, where no point moves, 1–5 mm on the actor take.
 # Measured on the actor take (automatic mapping, then the default solve): no re-fit 0.137 weights RMS / 0.80 mm,
 # λ 0 0.073 / 0.44 mm (but 14 of the same-face take's 59 exact points moved: 0.236 mm dense RMS instead of 0.205),
-# λ 0.05 0.072 / 0.40 mm with the same-face points kept, λ 0.2 0.082 / 0.40 mm.
-REFINE_ROUNDS, REFINE_RADIUS_CM, REFINE_LAMBDA, REFINE_SIGMA_FLOOR_CM, REFINE_FRAMES = 6, 0.8, 0.05, 0.005, 180
+# λ 0.05 0.072 / 0.40 mm with the same-face points kept, λ 0.2 0.082 / 0.40 mm. Solving every 2nd frame gave
+# 0.076 / 0.44 mm; all 358 frames, 6 rounds: 4 s of CPU (2 s and 3 rounds on the same-face take).
+REFINE_ROUNDS, REFINE_RADIUS_CM, REFINE_LAMBDA, REFINE_SIGMA_FLOOR_CM, REFINE_FRAMES = 8, 0.8, 0.05, 0.005, 1000
 
 
 def auto_marker_map(rig: Rig, take: MarkerTake, *, calibration_frames: int | slice = 30,

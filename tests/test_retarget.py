@@ -78,7 +78,7 @@ def test_actor_take_with_its_map_meets_the_accuracy(ict_rig, actor, actor_soluti
 def test_without_the_map_automatic_mapping_finds_the_places(ict_rig, actor, evaluator):
     """Automatic mapping of the actor (similarity, the rig warped toward the markers, then each marker's vertex
     re-fitted from the take's motion), then the same solve: the issue's 0.09 weights RMS and 0.50 mm. Measured
-    0.076 / 0.44 mm; the registration alone (no re-fit) gave 0.137 / 0.80 mm, its vertices 1.5 mm (mean) from the
+    0.072 / 0.40 mm; the registration alone (no re-fit) gave 0.137 / 0.80 mm, its vertices 1.5 mm (mean) from the
     marker map's, and the places that explain the motion best are not all the map's own vertices (the actor's
     expressions are ICT's scaled by smooth per-shape fields)."""
     from model.antagonists import pair_indices, rig_antagonists, strong_pairs
@@ -88,7 +88,8 @@ def test_without_the_map_automatic_mapping_finds_the_places(ict_rig, actor, eval
     ws.auto_map()
     d = np.array([np.linalg.norm(ict_rig.neutral[ws.marker_map.markers[lab]] - ict_rig.neutral[mm.markers[lab]])
                   for lab in take.labels])
-    assert len(d) == 60 and d.max() < 0.8 and np.mean(d) < 0.3, (d.max(), d.mean())     # cm
+    # cm: the re-fit searches 8 mm around the registered place (1.8 mm mean from the map's vertices, 8.2 mm at most)
+    assert len(d) == 60 and d.max() < 1.0 and np.mean(d) < 0.25, (d.max(), d.mean())
     sol = ws.solve({"mode": "global"}, evaluator=evaluator)
     assert np.sqrt(np.mean((sol.weights[PERF] - T[PERF]) ** 2)) < 0.09
     assert posed_rms_mm(evaluator, sol.weights, T, moving, frames) < 0.50
