@@ -196,7 +196,7 @@ OFF_FACE_CM = 1.0
 # re-fit (it stops early when no point moves), the search radius around the registered point (cm), the prior's λ,
 # the uncertainty floor (cm) and how many frames besides the neutral the rounds solve (every n-th frame of a longer
 # take). The uncertainty σ_j of a registered point is how far the registration had to move it (the warp's offset
-# plus the distance left): ~0.03 mm on the rig's own face, where no point moves, 1–5 mm on the actor take.
+# plus the distance left): about 0.1 mm on the rig's own face, where no point moves, 1–5 mm on the actor take.
 # Measured on the actor take (automatic mapping, then the default solve): no re-fit 0.137 weights RMS / 0.80 mm,
 # λ 0 0.073 / 0.44 mm (but 14 of the same-face take's 59 exact points moved: 0.236 mm dense RMS instead of 0.205),
 # λ 0.05 0.072 / 0.40 mm with the same-face points kept, λ 0.2 0.082 / 0.40 mm. Solving every 2nd frame gave
@@ -338,10 +338,11 @@ def refine_by_motion(rig: Rig, take: MarkerTake, labels: list[str], registered: 
                      lam: float = REFINE_LAMBDA) -> tuple[np.ndarray, int]:
     """Re-fit the vertex of each marker (``labels``, registered on ``registered`` (M,) vertices with uncertainty
     ``sigma`` (M,) rig units) from the take's motion (ALGORITHMS.md §12 (b)): alternately solve the take (markers
-    only, no residual, the rig's antagonists, ``neutral`` the actor's neutral frames; the neutral and at most
-    ``REFINE_FRAMES`` frames of the rest) and move each marker to the vertex of ``vertices`` within
+    only, no residual or correctives, the rig's antagonists, ``neutral`` the actor's neutral frames; the neutral and
+    at most ``REFINE_FRAMES`` frames of the rest) and move each marker to the vertex of ``vertices`` within
     ``REFINE_RADIUS_CM`` of its registered place whose motion best explains the marker's
-    (``solvers.retarget.refit_points``, prior ‖p − p₀‖² / σ² with ``lam``). Stops when no marker moves.
+    (``solvers.retarget.refit_points``, prior ‖p − p₀‖² / σ² with ``lam``). Stops when no marker moves, or keeps
+    the points it has when the take cannot be solved (the solve proper then says why).
     Returns ((M,) vertices, rounds run)."""
     from scipy.spatial import cKDTree
     from solvers.retarget import refit_points
@@ -364,7 +365,10 @@ def refine_by_motion(rig: Rig, take: MarkerTake, labels: list[str], registered: 
     for n in range(1, int(rounds) + 1):
         binding = sp.csr_matrix((np.ones(found.size), (np.arange(found.size), found)), shape=(found.size, rig.n_vertices))
         solver = TakeSolver(rig.neutral, rig.deltas, binding, residual="none", antagonists=pairs)
-        sol = solver.solve(X, unit_factor=unit_scale(take.units, rig.units), neutral=(0, b - a))
+        try:
+            sol = solver.solve(X, unit_factor=unit_scale(take.units, rig.units), neutral=(0, b - a))
+        except ValueError:
+            break
         new = refit_points(sol.markers_rig - solver.rest, sol.weights, rig.deltas, candidates, prior, lam)
         if np.array_equal(new, found):
             break
