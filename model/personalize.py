@@ -8,10 +8,11 @@ deformation transfer as the shapes, with no data: they keep their drivers, rule 
 * Scans (the main path): the neutral is the neutral scan (or, without one, re-estimated from the pose
   scans by the row of ones of Ma's W); the deltas are refined by ``solvers.personalize.personalize``.
 * A marker take alone: the template neutral is aligned to the actor's neutral markers (the mean of the
-  calibration frames): scaled to the actor's size by the similarity (Umeyama 1991) between the rig's
-  marker points and the actor's, then warped onto the markers by a Gaussian RBF (``solvers.rbf``) in the
-  rig's frame; the deltas are the template's transferred onto that neutral (the
-  deformation-gradient and closeness terms of Ma's energy, no data term).
+  calibration frames). The actor's markers are placed rigidly on the rig's marker points (Kabsch: the actor's
+  face where the rig's is, at the actor's size), the template is scaled to them by the similarity (Umeyama 1991)
+  and warped onto them by a Gaussian RBF (``solvers.rbf``); the deltas are the template's transferred onto that
+  neutral (the deformation-gradient and closeness terms of Ma's energy, no data term). Scaling the template
+  about the rig's origin instead put the face 5.5 mm from the actor's (a placement, not a shape, error).
 
 ``shape_change_report`` measures how far each shape moved from the template (for the CLI's report and the
 GUI's heat map, ``solvers.personalize.shape_change``).
@@ -23,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from solvers.personalize import PersonalizeResult, ShapeChange, personalize, shape_change
+from solvers.personalize import LAM_D, LAM_R, PersonalizeResult, ShapeChange, personalize, shape_change
 
 from .errors import RigInputError
 from .rig import Rig
@@ -72,7 +73,7 @@ def read_scan(scan, rig: Rig, label: str = "scan") -> np.ndarray:
 def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tuple[np.ndarray, dict]:
     """The template neutral rigidly aligned and RBF-warped onto the actor's neutral markers."""
     from solvers.rbf import RBFResidual
-    from solvers.rigid import umeyama
+    from solvers.rigid import kabsch, umeyama
 
     from .marker_map import auto_marker_map, calibration_cloud
 
@@ -83,11 +84,13 @@ def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tupl
     binding = marker_map.binding(rig, labels)
     cloud = calibration_cloud(take, calibration_frames, rig.units)[cols]
     rest = binding @ rig.neutral
-    s, R, t = umeyama(rest, cloud, scale=True)       # cloud ≈ s R rest + t
-    aligned = (cloud - t) @ R                        # the actor's markers in the rig's frame, size kept
-    base = s * rig.neutral                           # the template at the actor's size (the whole head)
-    rbf = RBFResidual(s * rest, points=base, kernel="gaussian", scale=s * length(RBF_SCALE, rig.units), lam=RBF_LAMBDA)
-    neutral = base + rbf.evaluate(rbf.coefficients(aligned - s * rest))
+    R, t = kabsch(cloud, rest)                       # rest ≈ R cloud + t
+    aligned = cloud @ R.T + t                        # the actor's markers placed rigidly on the rig's, size kept
+    s, Rs, ts = umeyama(rest, aligned, scale=True)   # aligned ≈ s Rs rest + ts
+    base = s * rig.neutral @ Rs.T + ts               # the template at the actor's size and place (the whole head)
+    moved = s * rest @ Rs.T + ts
+    rbf = RBFResidual(moved, points=base, kernel="gaussian", scale=s * length(RBF_SCALE, rig.units), lam=RBF_LAMBDA)
+    neutral = base + rbf.evaluate(rbf.coefficients(aligned - moved))
     fit = float(np.sqrt(((binding @ neutral - aligned) ** 2).sum(axis=1).mean()))
     return neutral, {"markers": len(labels), "marker_fit": fit, "scale": float(s)}
 
@@ -120,7 +123,7 @@ def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, m
     def carried(deltas: list) -> np.ndarray:
         """Offsets that are not fitted to scans (correctives, in-betweens) carried onto the actor's face."""
         return personalize(rig.neutral, np.stack(deltas), triangles, np.zeros((0, rig.n_vertices, 3)),
-                           result.neutral, lam_r=options.get("lam_r", 0.1), lam_d=options.get("lam_d", 0.05)).deltas
+                           result.neutral, lam_r=options.get("lam_r", LAM_R), lam_d=options.get("lam_d", LAM_D)).deltas
     correctives = []
     live = [c for c in rig.correctives]
     if live:
@@ -137,7 +140,8 @@ def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, m
               presets={k: dict(v) for k, v in rig.presets.items()}, inbetweens=inbetweens,
               muted=list(rig.muted), solo=list(rig.solo), ranges=dict(rig.ranges))
     summary.update(unknowns=result.unknowns, seconds=round(result.seconds, 3),
-                   delta_seconds=[round(s, 3) for s in result.delta_seconds], cg_iterations=result.cg_iterations,
+                   delta_seconds=[round(s, 3) for s in result.delta_seconds],
+                   delta_cpu_seconds=[round(s, 3) for s in result.delta_cpu_seconds], cg_iterations=result.cg_iterations,
                    fit_rms=[float(f) for f in result.fit_rms], units=rig.units)
     return out, result, summary
 

@@ -371,7 +371,7 @@ class TakeWorkspace:
         elif neutral == "auto":
             # a first map from the whole take finds the most neutral stretch, which is then mapped again
             from solvers.retarget import neutral_stretch
-            mm, _ = auto_marker_map(self.rig, take, calibration_frames=slice(None))
+            mm, _ = auto_marker_map(self.rig, take, calibration_frames=slice(None), refine=0)
             labels, cols = mm.match(take)
             rest = mm.binding(self.rig, labels) @ self.rig.neutral
             a, b, _ = neutral_stretch(take.positions[:, cols] * unit_scale(take.units, self.rig.units), rest, n)

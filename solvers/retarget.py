@@ -8,6 +8,9 @@ motion into the rig's frame.
   Eq. 1–5; Joshi et al. 2003, Eq. 3), with its Jacobian: fitted from the rig's marker points to the actor's
   neutral markers (after the Umeyama similarity), it gives per marker the local linear map J_φ that takes a
   rig displacement to the actor's (§12 (b)–(c)).
+* ``refit_points`` re-fits each marker's rig point from the take's motion: among the rig points near where the
+  registration put it, the one whose motion under the solved weights best explains the marker's motion, against a
+  prior that keeps it near the registration (§12 (b), a calibration step of production facial solvers).
 """
 from __future__ import annotations
 
@@ -99,3 +102,32 @@ def neutral_stretch(positions: np.ndarray, rest: np.ndarray, length: int) -> tup
     why = {"distance_to_rig_neutral": float(np.mean(far[a:a + length]) / max(med_far, 1e-12)),
            "stillness": float(np.mean(speed[a:a + length]) / med_speed)}
     return a, a + length - 1, why
+
+
+def refit_points(motion: np.ndarray, weights: np.ndarray, deltas: np.ndarray, candidates: list[np.ndarray],
+                 prior: list[np.ndarray], lam: float) -> np.ndarray:
+    """The rig point (a vertex) each marker sits on, re-fitted from its motion over a take (ALGORITHMS.md §12 (b)).
+
+    ``motion`` (F, M, 3) the markers' head-stabilised motion from the actor's neutral carried into the rig's frame
+    (NaN where missing), ``weights`` (F, K) the weights solved with the current points, ``deltas`` (K, V, 3) the
+    rig's shapes, ``candidates[j]`` the vertices marker j may sit on and ``prior[j]`` their squared distance from
+    where the registration put it, in units of that placement's uncertainty (‖p − p₀‖² / σ_j²). Marker j takes the
+    candidate v minimising ``r_j(v) / min_u r_j(u) + lam · prior[j][v]`` with r_j(v) = Σ_t ‖m_jt − Σ_k w_tk d_kv‖²:
+    the residual relative to the best candidate's, so ``lam`` reads as "a move of one σ must explain ``lam`` of the
+    marker's residual". Geometry alone cannot say where along the surface a marker of another face sits (the
+    registration's tangential error); the shapes' motion can, once the weights are roughly right, so this
+    alternates with the solve. Returns (M,) vertex indices."""
+    X = np.asarray(motion, dtype=np.float64)
+    W = np.asarray(weights, dtype=np.float64)
+    chosen = np.empty(X.shape[1], dtype=np.int64)
+    for j, (cand, pr) in enumerate(zip(candidates, prior)):
+        cand = np.asarray(cand, dtype=np.int64)
+        ok = np.isfinite(X[:, j]).all(axis=1)
+        if cand.size == 1 or not ok.any():
+            chosen[j] = cand[np.argmin(pr)]
+            continue
+        pred = np.einsum("fk,kvc->vfc", W[ok], deltas[:, cand])              # (C, F, 3) each candidate's motion
+        r = np.einsum("vfc,vfc->v", pred - X[ok, j][None], pred - X[ok, j][None])
+        cost = r / max(float(r.min()), 1e-300) + lam * np.asarray(pr, dtype=np.float64)
+        chosen[j] = cand[np.argmin(cost)]
+    return chosen

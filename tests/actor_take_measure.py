@@ -4,7 +4,8 @@ issue 15's personalisation target, kept in one place so that a change of the tak
 ``dense_error_solved``: solve the take with its marker map on the rig (``model.take_workspace.solve_take``)
 and compare the dense head-stabilised result with ``truth_dense_face.npz`` over its ``moving`` vertices.
 ``dense_error_true_weights``: pose the rig with ``truth_weights.csv`` (no solve) and compare the same way.
-Both: RMS distance per frame over the moving vertices, averaged over the truth's frames, in rig units.
+Both: RMS distance per frame over the moving vertices, averaged over the truth's frames, in rig units. With
+``within`` (rig units) only the moving vertices that near a marker (the face the markers cover) are measured.
 """
 from __future__ import annotations
 
@@ -42,12 +43,38 @@ def dense_error_true_weights(rig, take_dir: Path) -> float:
     return _rms(surfaces, positions, moving)
 
 
-def dense_error_solved(rig, take_dir: Path) -> float:
-    """The take solved on the rig with its marker map, dense result against the actor's true face (rig units)."""
+def covered(rig, take_dir: Path, within: float) -> np.ndarray:
+    """The truth's moving vertices within ``within`` (rig units) of one of the marker map's points on ``rig``."""
+    from scipy.spatial import cKDTree
     from model.marker_map import load_marker_map
+    mm = load_marker_map(take_dir / "marker_map.json")
+    moving = truth(take_dir)[2]
+    d, _ = cKDTree(mm.binding(rig) @ rig.neutral).query(rig.neutral[moving])
+    return moving[d < within]
+
+
+def dense_error_solved(rig, take_dir: Path, *, within: float | None = None, placed: bool = False):
+    """The take solved on the rig with its marker map, dense result against the actor's true face (rig units);
+    with ``within``, the pair (all moving vertices, those within ``within`` of a marker: ``covered``). With
+    ``placed`` the rig's neutral is first put where the actor's is (one rigid transform, Kabsch, from the rig's
+    neutral to ``actor_neutral.obj`` over the vertices measured, applied to every frame): for a rig built from a
+    take alone, whose markers cannot say where the actor's face sits in the truth's frame."""
+    from model.marker_map import load_marker_map
+    from model.obj_io import read_obj
     from model.takes import load_take
     from model.take_workspace import solve_take
+    from solvers.rigid import kabsch
     frames, positions, moving, _, _ = truth(take_dir)
     sol = solve_take(rig, load_take(take_dir / "take.c3d"), load_marker_map(take_dir / "marker_map.json"))
     n = positions.shape[1]
-    return _rms((sol.dense(int(f))[:n] for f in frames), positions, moving)
+    surfaces = [sol.dense(int(f))[:n] for f in frames]
+    actor = read_obj(take_dir / "actor_neutral.obj").vertices[:n]
+
+    def error(vertices):
+        if not placed:
+            return _rms(surfaces, positions, vertices)
+        R, t = kabsch(rig.neutral[vertices], actor[vertices])
+        return _rms((x @ R.T + t for x in surfaces), positions, vertices)
+    if within is None:
+        return error(moving)
+    return error(moving), error(covered(rig, take_dir, within))

@@ -76,20 +76,23 @@ def test_actor_take_with_its_map_meets_the_accuracy(ict_rig, actor, actor_soluti
 
 
 def test_without_the_map_automatic_mapping_finds_the_places(ict_rig, actor, evaluator):
-    """Automatic mapping of the actor (similarity, then the rig warped toward the markers), then the same solve.
-    Measured 0.137 weights RMS and 0.81 mm (the issue asks 0.09 and 0.50: not reached); the similarity alone
-    gave 0.17 / 0.81 mm and mapped vertices 2.8 mm from the true ones, the warp 1.4 mm."""
+    """Automatic mapping of the actor (similarity, the rig warped toward the markers, then each marker's vertex
+    re-fitted from the take's motion), then the same solve: the issue's 0.09 weights RMS and 0.50 mm. Measured
+    0.072 / 0.40 mm; the registration alone (no re-fit) gave 0.137 / 0.80 mm, its vertices 1.5 mm (mean) from the
+    marker map's, and the places that explain the motion best are not all the map's own vertices (the actor's
+    expressions are ICT's scaled by smooth per-shape fields)."""
     from model.antagonists import pair_indices, rig_antagonists, strong_pairs
     take, mm, T, moving, frames = actor
     ws = TakeWorkspace(ict_rig)
     ws.take = take
     ws.auto_map()
-    d = [np.linalg.norm(ict_rig.neutral[ws.marker_map.markers[lab]] - ict_rig.neutral[mm.markers[lab]])
-         for lab in take.labels]
-    assert np.mean(d) < 0.2                                   # cm: the similarity alone was 0.28
+    d = np.array([np.linalg.norm(ict_rig.neutral[ws.marker_map.markers[lab]] - ict_rig.neutral[mm.markers[lab]])
+                  for lab in take.labels])
+    # cm: the re-fit searches 8 mm around the registered place (1.8 mm mean from the map's vertices, 8.2 mm at most)
+    assert len(d) == 60 and d.max() < 1.0 and np.mean(d) < 0.25, (d.max(), d.mean())
     sol = ws.solve({"mode": "global"}, evaluator=evaluator)
-    assert np.sqrt(np.mean((sol.weights[PERF] - T[PERF]) ** 2)) < 0.15
-    assert posed_rms_mm(evaluator, sol.weights, T, moving, frames) < 0.9
+    assert np.sqrt(np.mean((sol.weights[PERF] - T[PERF]) ** 2)) < 0.09
+    assert posed_rms_mm(evaluator, sol.weights, T, moving, frames) < 0.50
     assert strong_pairs(sol.weights, pair_indices(ict_rig, rig_antagonists(ict_rig))) == []
 
 
@@ -226,3 +229,21 @@ def test_a_mouth_corner_drag_on_ict_leaves_no_antagonist_pair_both_on(ict_rig):
         found[name] = (strong_pairs(W, pairs), np.linalg.norm(A @ W[-1] - b))
     assert found["plain"][0], "the drag no longer trades antagonists: the test lost its point"
     assert found["antagonists"][0] == [] and found["antagonists"][1] < 0.01
+
+
+def test_refit_points_moves_a_marker_to_the_point_that_explains_its_motion_unless_the_prior_says_no():
+    """``refit_points``: three candidate vertices with different motions; the marker moved like vertex 2. It moves
+    there from vertex 0, unless vertex 2 is many σ from where the registration put it and the gain is small."""
+    from solvers.retarget import refit_points
+    rng = np.random.default_rng(5)
+    deltas = rng.normal(size=(4, 3, 3))                      # 4 shapes, 3 vertices
+    W = rng.uniform(0, 1, (50, 4))
+    motion = np.einsum("fk,kc->fc", W, deltas[:, 2])[:, None] + rng.normal(scale=0.01, size=(50, 1, 3))
+    motion[::7] = np.nan                                      # missing samples are skipped
+    cand = [np.array([0, 1, 2])]
+    assert refit_points(motion, W, deltas, cand, [np.array([0.0, 1.0, 1.0])], lam=0.05).tolist() == [2]
+    # a candidate a little worse (its motion 1 % off) wins when the better one is 10 σ away, loses without a prior
+    near = deltas.copy()
+    near[:, 0] = deltas[:, 2] * 1.01
+    assert refit_points(motion, W, near, cand, [np.array([0.0, 1.0, 100.0])], lam=0.05).tolist() == [0]
+    assert refit_points(motion, W, near, cand, [np.array([0.0, 1.0, 100.0])], lam=0.0).tolist() == [2]
