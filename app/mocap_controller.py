@@ -50,6 +50,7 @@ class _ProgressRelay(QtCore.QObject):
 class MocapController(QtCore.QObject):
     solved = QtCore.Signal()          # a solve finished and is shown
     solve_failed = QtCore.Signal(str)
+    map_found = QtCore.Signal()       # Auto Map's map arrived and is used
     frame_shown = QtCore.Signal(int)
 
     def __init__(self, window, panel: MocapPanel, views: SideBySideView, weight_plot: CurvePlot,
@@ -239,18 +240,36 @@ class MocapController(QtCore.QObject):
         return self._write("marker map", path, lambda: self.marker_map.save(path))
 
     def auto_map(self) -> bool:
-        try:
-            st = self.panel.settings()
-            rms = self.workspace.auto_map(st["calibration_frames"], neutral_frames=st["neutral_frames"],
-                                          stable=st["stable"])
-        except RigInputError as exc:
-            self._error("Could not map markers", str(exc))
+        """Auto Map: the take's markers mapped onto the rig in the background (a few seconds: the registration,
+        then the re-fit from the take's motion); the map is used when it arrives, unless the take or the rig
+        changed meanwhile. False when the settings are refused at once."""
+        ws = self.workspace
+        if ws.marker_take is None or ws.rig is None:
+            self._error("Could not map markers", "Load a marker take (and open a rig) before mapping its markers.")
             return False
-        self._drop_solution()
-        mm = self.workspace.marker_map
-        self._describe_map(mm)
-        self.panel.set_status(f"Automatic map: {len(mm.labels)} markers, fit RMS "
-                              f"{rms * unit_scale(self.rig.units, 'mm'):.2f} mm.")
+        st = self.panel.settings()
+        take, rig = ws.take, ws.rig
+        finder = TakeWorkspace(rig)
+        finder.take = take
+
+        def done(result) -> None:
+            if ws.take is not take or ws.rig is not rig:
+                return                      # another take or rig since: this map belongs to neither
+            mm, rms = result
+            ws.marker_map, ws.solution = mm, None
+            self._drop_solution()
+            self._describe_map(mm)
+            self.panel.set_status(f"Automatic map: {len(mm.labels)} markers, fit RMS "
+                                  f"{rms * unit_scale(rig.units, 'mm'):.2f} mm.")
+            self.map_found.emit()
+
+        def failed(message: str) -> None:
+            self.panel.set_status("")
+            self._error("Could not map markers", message)
+
+        self.panel.set_status("Mapping the markers onto the rig…")
+        self.window.run_in_background("Mapping markers…", lambda: finder.find_auto_map(
+            st["calibration_frames"], neutral_frames=st["neutral_frames"], stable=st["stable"]), done, failed)
         return True
 
     # --- the actor's neutral ----------------------------------------------------------------------

@@ -352,10 +352,19 @@ class TakeWorkspace:
 
     def auto_map(self, calibration_frames: int = DEFAULTS["calibration_frames"], *, neutral_frames=None,
                  stable=None) -> float:
-        """Map the take's markers onto the rig from its neutral frames (the first ``calibration_frames``, a range
-        or 'auto': ``parse_neutral_frames``); returns the fit RMS (rig units). ``stable`` (``resolve_stable``) is
-        checked here so that a bad list is refused before any work; stable markers off the face (a head band) and
-        markers never seen in the neutral are not mapped."""
+        """Map the take's markers onto the rig (``find_auto_map``) and use that map; returns the fit RMS (rig
+        units)."""
+        mm, rms = self.find_auto_map(calibration_frames, neutral_frames=neutral_frames, stable=stable)
+        self.marker_map, self.solution = mm, None
+        return rms
+
+    def find_auto_map(self, calibration_frames: int = DEFAULTS["calibration_frames"], *, neutral_frames=None,
+                      stable=None) -> tuple[MarkerMap, float]:
+        """(map, fit RMS in rig units): the take's markers mapped onto the rig from its neutral frames (the first
+        ``calibration_frames``, a range or 'auto': ``parse_neutral_frames``) and re-fitted from its motion, without
+        changing the workspace (seconds of work: the GUI runs it in the background). ``stable``
+        (``resolve_stable``) is checked first so that a bad list is refused before any work; stable markers off
+        the face (a head band) and markers never seen in the neutral are not mapped."""
         if self.marker_take is None or self.rig is None:
             raise RigInputError("Load a marker take (and open a rig) before mapping its markers.")
         if stable:
@@ -377,8 +386,7 @@ class TakeWorkspace:
             a, b, _ = neutral_stretch(take.positions[:, cols] * unit_scale(take.units, self.rig.units), rest, n)
             frames = slice(a, b + 1)
         mm, info = auto_marker_map(self.rig, take, calibration_frames=frames)
-        self.marker_map, self.solution = mm, None
-        return float(info.get("rms", float("nan")))
+        return mm, float(info.get("rms", float("nan")))
 
     def set_rig(self, rig: Rig) -> list[str]:
         """A new rig: the solution goes, a weight take is mapped onto the new shapes and the marker map

@@ -249,3 +249,24 @@ def test_a_30_fps_live_link_face_take_plays_in_real_time(qtbot, tmp_path, monkey
     write_weights_csv(tmp_path / "w.csv", take.weights, take.names, rate=30.0)
     assert mc.load_take(tmp_path / "w.csv")
     assert mc.take.rate == 30.0 and np.array_equal(mc.take.weights, take.weights) and mc.playback.rate == 30.0
+
+
+def test_auto_map_runs_in_the_background_and_gives_the_models_map(qtbot, tmp_path, ict_dir, take_dir):
+    """Auto Map (a few seconds: registration, then the re-fit from the take's motion) returns control at once and
+    uses the map when it arrives: the same map the model finds (``TakeWorkspace.find_auto_map``), the same place
+    for every marker as ``solve`` without ``--map``."""
+    from PySide6 import QtCore
+
+    from model.take_workspace import TakeWorkspace
+    w, mc = _install(qtbot, tmp_path, size=(1100, 800))
+    open_and_wait(qtbot, w, ict_dir)
+    assert mc.load_take(take_dir / "take.c3d")
+    qtbot.mouseClick(mc.panel.auto_map_button, QtCore.Qt.LeftButton)
+    assert mc.marker_map is None and "Mapping" in mc.panel.status_label.text()   # the click did not wait
+    with qtbot.waitSignal(mc.map_found, timeout=120000):
+        pass
+    ws = TakeWorkspace(w.document.rig)
+    ws.load_take(take_dir / "take.c3d")
+    expected, _ = ws.find_auto_map()
+    assert mc.marker_map.markers == expected.markers and len(expected.markers) == 60
+    assert "Automatic map: 60 markers" in mc.panel.status_label.text()
