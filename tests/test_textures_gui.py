@@ -59,10 +59,11 @@ def test_band_pass_texture_follows_a_slider_drag_and_undo(qtbot, tmp_path):
 
 def test_linear_differs_from_band_pass_on_the_face_and_none_is_plain(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path)
-    plain = w.viewport.grab_image(size=(640, 480))
-    _choose(qtbot, w, "band-pass")
     w.set_pose(w.document.rig.weights_from_dict({"browInnerUp_L": 0.5, "browInnerUp_R": 0.5,
                                                   "mouthSmile_L": 0.5, "mouthSmile_R": 0.5}), "pose")
+    qtbot.waitUntil(lambda: not w.redraw_pending)
+    plain = w.viewport.grab_image(size=(640, 480))           # the same pose, untextured
+    _choose(qtbot, w, "band-pass")
     qtbot.waitUntil(lambda: not w.redraw_pending)
     band = w.viewport.grab_image(size=(640, 480))
     detail_band = w.textures.blender.bands()[1]

@@ -137,3 +137,50 @@ def test_bench_batch_overhead_per_take(benchmark, ict_rig, take_dir, bench_takes
           f"(overhead {batch_s - plain_s:+.2f} s: preview, set writing, Dask); a `solve` command also loads the rig "
           f"({as_solve['rig_s']:.1f} s) each time; batch run wall {wall:.1f} s for {len(takes)} takes, "
           f"load average {os.getloadavg()[0]:.1f}")
+
+
+_SIDE_BY_SIDE = """
+import argparse, json, os, sys, tempfile, time
+os.environ["LP_NUM_THREADS"] = "1"              # as the local cluster's workers
+from app.runtime import limit_blas_threads
+limit_blas_threads()
+from app.cli_batch import prepare_job
+from app.cli_solve import add_solve_options
+from model.batch import solve_take_file
+from model.readers import load_rig
+rig_dir, map_path, start, *takes = sys.argv[1:]
+p = argparse.ArgumentParser()
+add_solve_options(p)
+job = prepare_job(load_rig(rig_dir), p.parse_args(["--map", map_path]))
+out = tempfile.mkdtemp()
+solve_take_file(job, takes[0], out + "/warm")
+while time.time() < float(start):
+    time.sleep(0.005)
+t0 = time.perf_counter()
+for i, t in enumerate(takes):
+    solve_take_file(job, t, f"{out}/t{i}")
+print(json.dumps({"per_take_s": (time.perf_counter() - t0) / len(takes)}))
+"""
+
+
+def test_bench_batch_machine_ceiling(benchmark, take_dir, bench_takes):
+    """What two cores give for the batch's own per-take work without Dask: ``solve_take_file`` (solve, outputs,
+    preview) in one process, then in two processes side by side; the ratio bounds any 2-worker speed-up here."""
+    import json
+    import subprocess
+    import sys
+
+    def run(n: int) -> float:
+        start = time.time() + 25.0            # both processes loaded and warm before the clock starts
+        procs = [subprocess.Popen([sys.executable, "-c", _SIDE_BY_SIDE, str(take_dir.parent.parent / "ict-facekit"),
+                                   str(take_dir / "marker_map.json"), str(start), *map(str, bench_takes[:8])],
+                                  stdout=subprocess.PIPE, text=True) for _ in range(n)]
+        outs = [json.loads(p.communicate(timeout=900)[0].strip().splitlines()[-1]) for p in procs]
+        return max(o["per_take_s"] for o in outs)
+
+    alone = run(1)
+    together = benchmark.pedantic(run, args=(2,), rounds=1, iterations=1)
+    ceiling = 2 * alone / together
+    benchmark.extra_info.update(per_take_alone_s=alone, per_take_side_by_side_s=together, ceiling=ceiling)
+    print(f"\nthe batch's per-take work without Dask: {alone:.3f} s a take alone, {together:.3f} s side by side in two "
+          f"processes: two cores give at most {ceiling:.2f}x here; load average {os.getloadavg()[0]:.1f}")
