@@ -18,6 +18,7 @@ from app.background import BackgroundRunner
 from app.mocap_frames import FrameCache, captured_area_faces
 from app.mocap_playback import TakePlayback
 from model.errors import RigInputError
+from model.marker_map import load_marker_map
 from model.rig import unit_scale
 from model.wording import count
 from model.take_exports import export_pc2, export_report, export_weights_csv, take_surfaces
@@ -194,14 +195,11 @@ class MocapController(QtCore.QObject):
 
     def load_map(self, path: str | Path) -> bool:
         try:
-            mm = self.workspace.load_map(path)
+            mm = load_marker_map(path)
         except RigInputError as exc:
             self._error("Could not use the marker map", str(exc))
             return False
-        self._drop_solution()
-        self._describe_map(mm)
-        self._say_next_step()
-        return True
+        return self.use_map(mm)
 
     def use_map(self, marker_map) -> bool:
         """Use a marker map already read (a saved project's); on failure keep what was loaded and say why."""
