@@ -32,8 +32,6 @@ from typing import Callable
 
 import numpy as np
 
-from solvers.take_solve import DEFAULTS
-
 from .atomic import process_alive
 from .errors import RigInputError
 from .marker_map import MarkerMap
@@ -141,13 +139,7 @@ class BatchJob:
     preview: Callable | None = None       # preview(points, face_counts, face_indices, path, focus=...) or None
     focus: np.ndarray | None = None       # the points the preview frames
     signature: dict = field(default_factory=dict)
-    antagonists: list | None = None       # the rig's antagonist pairs, derived once when the settings use them
-
-    def take_settings(self) -> dict:
-        """The solve settings of every take: the job's, with the antagonist pairs found once for the batch."""
-        if self.antagonists is None:
-            return self.settings
-        return dict(self.settings, antagonists=self.antagonists)
+    antagonists: list | None = None       # the pairs the solves keep apart (``solve_pairs``), found once
 
     @classmethod
     def prepare(cls, rig: Rig, settings: dict, *, segmentation=None, marker_map: MarkerMap | None = None,
@@ -158,13 +150,11 @@ class BatchJob:
         signature = {"settings": {k: settings[k] for k in sorted(settings)}, "marker_map": map_id,
                      "rig": _digest(rig.neutral, rig.deltas, *[c.delta for c in rig.correctives]),
                      "rig_units": rig.units, "cache": bool(cache), "preview": preview is not None}
-        antagonists = None
-        if settings.get("lam_antagonist", DEFAULTS["lam_antagonist"]) and settings.get("antagonists") is None:
-            from .antagonists import rig_antagonists      # ~0.07 s on ICT: once per batch, not once per take
-            antagonists = rig_antagonists(rig)
+        from .antagonists import solve_pairs
         return cls(rig=rig, settings=dict(settings), evaluator=PoseEvaluator(rig, dtype=np.float64),
                    segmentation=segmentation, marker_map=marker_map, cache=cache, preview=preview,
-                   focus=focus, signature=json.loads(json.dumps(signature)), antagonists=antagonists)
+                   focus=focus, signature=json.loads(json.dumps(signature)),
+                   antagonists=solve_pairs(rig, settings))   # once per batch, not once per take
 
 
 # --- one take ---------------------------------------------------------------------------------------
@@ -255,8 +245,8 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
         ws = TakeWorkspace(job.rig)
         solved = ws.prepare_solve(take_path, job.marker_map, job.settings)   # False: a weight take, played as it is
         identity = _take_identity(take_path)
-        sol = ws.solve(job.take_settings(), segmentation=job.segmentation, evaluator=job.evaluator) if solved \
-            else None
+        sol = ws.solve(job.settings, segmentation=job.segmentation, evaluator=job.evaluator,
+                       antagonists=job.antagonists) if solved else None
     except RigInputError as exc:
         return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
     out_dir.mkdir(parents=True, exist_ok=True)

@@ -159,12 +159,10 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
                                 else "not in the marker map")
     binding = marker_map.binding(rig, labels)
     options = take_solver_options(options, rig.units)      # physical lengths (cm, cm²) -> the rig's units
-    if options["lam_antagonist"] and options.get("antagonists") is None:
-        from .antagonists import rig_antagonists
-        options["antagonists"] = rig_antagonists(rig)
-    if options.get("antagonists") is not None:
-        from .antagonists import pair_indices
-        options["antagonists"] = pair_indices(rig, options["antagonists"])
+    from .antagonists import pair_indices, solve_pairs
+    pairs = solve_pairs(rig, options)
+    if pairs is not None:
+        options["antagonists"] = pair_indices(rig, pairs)
     if evaluator is None or evaluator.dtype != np.float64:
         evaluator = PoseEvaluator(rig, dtype=np.float64)
     surface = partial(evaluator.pose, blend=options.get("blend"))
@@ -414,19 +412,23 @@ class TakeWorkspace:
         self.check_map(self.marker_map)
 
     def solve(self, settings: dict, *, segmentation=None, evaluator: PoseEvaluator | None = None,
-              progress: Progress = None, cancel=None) -> TakeSolution:
-        """Solve the take with ``settings`` (see the module docstring); ``segmentation`` for a per-region solve.
-        Keeps and returns the solution (``solvers.take_solve.SolveCancelled`` propagates)."""
+              progress: Progress = None, cancel=None, antagonists: list | None = None) -> TakeSolution:
+        """Solve the take with ``settings`` (see the module docstring); ``segmentation`` for a per-region solve;
+        ``antagonists`` the pairs ``model.antagonists.solve_pairs`` already found for these settings and rig (a
+        batch finds them once), not a setting: the report still says whose pairs they are. Keeps and returns the
+        solution (``solvers.take_solve.SolveCancelled`` propagates)."""
         self.check_ready()
         solution = self.solve_detached(settings, segmentation=segmentation, evaluator=evaluator,
-                                       progress=progress, cancel=cancel)
+                                       progress=progress, cancel=cancel, antagonists=antagonists)
         self.accept(solution, settings)
         return solution
 
     def solve_detached(self, settings: dict, *, segmentation=None, evaluator=None, progress=None,
-                       cancel=None) -> TakeSolution:
+                       cancel=None, antagonists: list | None = None) -> TakeSolution:
         """``solve`` without keeping the result (for a worker thread; ``accept`` keeps it)."""
         options, calibration = solver_options(settings, self.take, segmentation)
+        if antagonists is not None and options.get("antagonists") is None:
+            options["antagonists"] = antagonists
         try:
             return solve_take(self.rig, self.take, self.marker_map, evaluator=evaluator, progress=progress,
                               cancel=cancel, calibration_frames=calibration, **options)

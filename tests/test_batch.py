@@ -289,6 +289,8 @@ def test_a_killed_writers_private_folder_is_removed_by_the_next_write(tmp_path, 
     assert not stale.exists(), "the dead writer's folder was left behind"
     assert live.exists(), "a live writer's folder was removed"
     assert (out / "weights.csv").read_text().startswith("frame,time,")
+    # the rig's own pairs, found once for the batch, are reported as solve reports them: not as a project's list
+    assert job.antagonists and json.loads((out / "report.json").read_text())["antagonists"] is None
 
 
 def test_a_weight_take_in_a_batch_writes_what_solve_writes(tmp_path, ict_dir, ict_rig, llf_csv, take_dir):
