@@ -10,7 +10,8 @@ deformation transfer as the shapes, with no data: they keep their drivers, rule 
 * A marker take alone: the template neutral is aligned to the actor's neutral markers (the mean of the
   calibration frames). The actor's markers are placed rigidly on the rig's marker points (Kabsch: the actor's
   face where the rig's is, at the actor's size), the template is scaled to them by the similarity (Umeyama 1991)
-  and warped onto them by a Gaussian RBF (``solvers.rbf``); the deltas are the template's transferred onto that
+  and bent onto them by the thin-plate surface warp (``solvers.surface_warp``: smooth over the surface, so a
+  lower-lip marker does not pull the upper lip as the Euclidean Gaussian RBF used before did); the deltas are the template's transferred onto that
   neutral (the deformation-gradient and closeness terms of Ma's energy, no data term). Scaling the template
   about the rig's origin instead put the face 5.5 mm from the actor's (a placement, not a shape, error).
 
@@ -30,8 +31,9 @@ from .errors import RigInputError
 from .rig import Rig
 from .units import length
 
-RBF_SCALE = 3.0      # Gaussian kernel length of the marker warp, cm (the spacing of a 60-marker face layout)
-RBF_LAMBDA = 1e-3    # Tikhonov λ of the marker warp: the markers are met to a few µm
+# How far a marker's displacement carries over the surface (cm, ℓ of ``solvers.surface_warp``): measured on
+# actor_take, the moving face 2.61 / 2.52 / 2.67 mm from the truth at 6 / 10 / 14 cm (a Gaussian RBF of 3 cm: 3.2)
+WARP_LENGTH = 10.0
 
 
 def scan_paths(items) -> list[Path]:
@@ -72,8 +74,8 @@ def read_scan(scan, rig: Rig, label: str = "scan") -> np.ndarray:
 
 def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tuple[np.ndarray, dict]:
     """The template neutral rigidly aligned and RBF-warped onto the actor's neutral markers."""
-    from solvers.rbf import RBFResidual
     from solvers.rigid import kabsch, umeyama
+    from solvers.surface_warp import biharmonic_warp
 
     from .marker_map import auto_marker_map, calibration_cloud
 
@@ -89,8 +91,8 @@ def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tupl
     s, Rs, ts = umeyama(rest, aligned, scale=True)   # aligned ≈ s Rs rest + ts
     base = s * rig.neutral @ Rs.T + ts               # the template at the actor's size and place (the whole head)
     moved = s * rest @ Rs.T + ts
-    rbf = RBFResidual(moved, points=base, kernel="gaussian", scale=s * length(RBF_SCALE, rig.units), lam=RBF_LAMBDA)
-    neutral = base + rbf.evaluate(rbf.coefficients(aligned - moved))
+    neutral = base + biharmonic_warp(base, rig.triangles(), binding, aligned - moved,
+                                     length=s * length(WARP_LENGTH, rig.units))
     fit = float(np.sqrt(((binding @ neutral - aligned) ** 2).sum(axis=1).mean()))
     return neutral, {"markers": len(labels), "marker_fit": fit, "scale": float(s)}
 

@@ -264,12 +264,15 @@ def test_actor_take_on_the_personalised_rig_is_within_target(actor_rig, ict_rig,
 
 def test_a_marker_take_alone_personalises_the_face_the_markers_cover(ict_rig, actor_dir):
     """No scans: the template warped onto the actor's neutral markers (placed rigidly on the rig's marker points,
-    at the actor's size) with its shapes transferred, then the take solved on it. Markers cannot say where the
-    actor's face sits in the truth's frame, so the result is measured placed there by one rigid transform
-    (``dense_error_solved(placed=True)``; unplaced: 1.9 mm covered, 5.2 mm everywhere). What 60 markers measure is
-    the face they cover: within 2 cm of a marker (5,374 of the 9,005 moving vertices) the result is within the
-    issue's 1.0 mm of the actor's true face; over every moving vertex the identity far from any marker (the
-    face's sides, jaw line and scalp edge, which no marker touches) dominates."""
+    at the actor's size; bent onto them by the thin-plate surface warp) with its shapes transferred, then the take
+    solved on it. Markers cannot say where the actor's face sits in the truth's frame, so the result is measured
+    placed there by one rigid transform (``dense_error_solved(placed=True)``).
+
+    Issue 15 asks for 1.0 mm over every moving vertex; measured 2.52 mm (the Gaussian RBF warp before: 3.2 mm).
+    Within 2 cm of a marker (5,374 of the 9,005 moving vertices) it is 0.66 mm. What 60 markers cannot measure is
+    the identity far from them: 2,221 moving vertices lie over 6 cm from any marker (the sides of the head, under
+    the jaw) and carry three quarters of the error; ``test_what_sixty_markers_can_say_of_the_actors_neutral``
+    measures the bound."""
     from model.marker_map import load_marker_map
     from model.takes import load_take
     from tests.actor_take_measure import dense_error_solved
@@ -280,5 +283,38 @@ def test_a_marker_take_alone_personalises_the_face_the_markers_cover(ict_rig, ac
     everywhere, covered = dense_error_solved(rig, actor_dir, within=2.0, placed=True)
     print(f"\nactor_take solved on the rig personalised from the take alone: {10 * covered:.3f} mm within 2 cm of a "
           f"marker, {10 * everywhere:.3f} mm over every moving vertex")
-    assert covered < 0.10                                     # cm
-    assert everywhere < 0.40
+    assert covered < 0.08                                     # cm
+    assert everywhere < 0.27
+
+
+def test_what_sixty_markers_can_say_of_the_actors_neutral(ict_rig, actor_dir):
+    """The ceiling of any marker-only personalisation on actor_take, measured on the truth: the actor's TRUE neutral
+    at the 60 marker vertices (no noise, no calibration) warped onto the template after the similarity, against the
+    actor's neutral over the moving vertices (placed by one rigid transform, as above). The surface warp: 2.51 mm;
+    the best fit of the whole true neutral by the similarity plus an affine map and all 57 of ICT's shapes (an
+    oracle that sees every vertex) still leaves 1.94 mm. Below 1.0 mm needs a prior on faces (an identity model
+    such as ICT FaceKit's identity modes, which the shared data does not hold)."""
+    from model.marker_map import load_marker_map
+    from model.obj_io import read_obj
+    from solvers.rigid import kabsch, umeyama
+    from solvers.surface_warp import biharmonic_warp
+    from model.personalize import WARP_LENGTH
+    actor = read_obj(actor_dir / "actor_neutral.obj").vertices
+    moving = np.load(actor_dir / "truth_dense_face.npz")["moving"]
+    B = load_marker_map(actor_dir / "marker_map.json").binding(ict_rig)
+    s, R, t = umeyama(B @ ict_rig.neutral, B @ actor, scale=True)
+    base = s * ict_rig.neutral @ R.T + t
+
+    def placed_rms(Y):
+        Rp, tp = kabsch(Y[moving], actor[moving])
+        return 10 * float(np.sqrt((((Y[moving] @ Rp.T + tp) - actor[moving]) ** 2).sum(axis=1).mean()))
+    warped = base + biharmonic_warp(base, ict_rig.triangles(), B, B @ actor - B @ base, length=s * WARP_LENGTH)
+    oracle = np.column_stack([ict_rig.deltas[:, moving].reshape(ict_rig.n_shapes, -1).T] +
+                             [np.kron(np.column_stack([base[moving], np.ones(len(moving))]), np.eye(3))])
+    rest = (actor[moving] - base[moving]).ravel()
+    fitted = base.copy()
+    fitted[moving] += (oracle @ np.linalg.lstsq(oracle, rest, rcond=None)[0]).reshape(-1, 3)
+    print(f"\nmarker-only ceiling: similarity {placed_rms(base):.2f} mm, surface warp of the true marker points "
+          f"{placed_rms(warped):.2f} mm, oracle fit of every vertex by affine + 57 shapes {placed_rms(fitted):.2f} mm")
+    assert 2.3 < placed_rms(warped) < 2.7 and placed_rms(warped) < placed_rms(base) - 1.0
+    assert 1.0 < placed_rms(fitted) < 2.2
