@@ -2,8 +2,9 @@
 
 Per-shape Laplacian magnitude ``m_k(v) = ‖L d_k(v)‖``, combined map ``M(v) = max_k m_k(v)``, the arg-max
 shape and its Laplacian vector (the RGB view), and the plain displacement map ``max_k ‖d_k(v)‖``.
-The shapes go through the Laplacian one (V, 3) sparse product each, on the (K, V, 3) deltas as stored (no
-transposed copy), so the cost is linear in vertices and shapes.
+Each shape goes through the Laplacian as three (V,) sparse matrix-vector products, one per coordinate, on a
+(3, V) copy of its deltas (a (V, 3) product runs a length-3 loop per matrix entry and is twice as slow), so the
+cost is linear in vertices and shapes and no (V, 3K) transposed copy of all shapes is made.
 
 Per-shape normalisation (``normalised_map``): Joshi's maximum lets shapes with sharp local bending (lips,
 lids) outvote shapes that move a broad area smoothly (a brow raise). Dividing each shape's map by a high
@@ -84,18 +85,39 @@ def laplacian_vectors(laplacian: sp.spmatrix, deltas: np.ndarray) -> np.ndarray:
     return out
 
 
-def _norm3(x: np.ndarray) -> np.ndarray:
-    return np.sqrt(np.einsum("vc,vc->v", x, x))
+def _norm_rows(x: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> None:
+    """``out = ‖x‖`` of the columns of a (3, V) array, as ``sqrt((x0² + x2²) + x1²)`` (the order numpy's einsum
+    sums a length-3 axis in, so the maps keep their values to the last bit), with no temporary arrays."""
+    np.multiply(x[0], x[0], out=out)
+    np.multiply(x[2], x[2], out=tmp)
+    out += tmp
+    np.multiply(x[1], x[1], out=tmp)
+    out += tmp
+    np.sqrt(out, out=out)
+
+
+def _shape_maps(L: sp.csr_matrix, d: np.ndarray, displacement: bool = True
+                ) -> tuple[np.ndarray, np.ndarray | None]:
+    """(K, V) ``m_k(v) = ‖L d_k(v)‖`` (Joshi et al. 2003, §2) and, with ``displacement``, (K, V) ``‖d_k(v)‖``:
+    per shape, its deltas copied to (3, V) rows and one sparse matrix-vector product per coordinate."""
+    K, V = d.shape[0], L.shape[0]
+    per_shape = np.empty((K, V))
+    disp = np.empty((K, V)) if displacement else None
+    dt, y, tmp = np.empty((3, V)), np.empty((3, V)), np.empty(V)
+    for k in range(K):
+        np.copyto(dt, d[k].T)
+        for c in range(3):
+            y[c] = L @ dt[c]
+        _norm_rows(y, per_shape[k], tmp)
+        if displacement:
+            _norm_rows(dt, disp[k], tmp)
+    return per_shape, disp
 
 
 def laplacian_magnitudes(laplacian: sp.spmatrix, deltas: np.ndarray) -> np.ndarray:
     """(V, K) per-shape deformation maps ``m_k(v) = ‖L d_k(v)‖`` (Joshi et al. 2003, §2)."""
     L = sp.csr_matrix(laplacian)
-    d = _check_deltas(deltas, L.shape[0])
-    out = np.empty((L.shape[0], d.shape[0]))
-    for k in range(d.shape[0]):
-        out[:, k] = _norm3(L @ d[k])
-    return out
+    return _shape_maps(L, _check_deltas(deltas, L.shape[0]), displacement=False)[0].T
 
 
 def displacement_map(deltas: np.ndarray) -> np.ndarray:
@@ -118,15 +140,17 @@ def deformation_maps(laplacian: sp.spmatrix, deltas: np.ndarray) -> DeformationM
     if K == 0:
         raise RigInputError("The rig has no blendshapes, so there is no deformation map to compute.")
     # (K, V) rows written contiguously; handed out as their (V, K) transposes (column-major views)
-    per_shape = np.empty((K, V))
-    for k in range(K):  # one (V, 3) product per shape
-        y = L @ d[k]
-        np.sqrt(np.einsum("vc,vc->v", y, y), out=per_shape[k])
-    disp = np.sqrt(np.einsum("kvc,kvc->kv", d, d))
-    # the arg-max shape of every vertex (the first of equal maxima) and its Laplacian vector, recomputed over
-    # the rows each shape wins (the same row sums as the full product): no per-shape running update over V
+    per_shape, disp = _shape_maps(L, d)
+    # the arg-max shape of every vertex (the first of equal maxima, as np.argmax) and its Laplacian vector,
+    # recomputed over the rows each shape wins (the same row sums as the full product): no per-shape running
+    # update over V, and no argmax across the (K, V) rows (numpy copies them to (V, K) for that)
     combined = per_shape.max(axis=0)
-    arg = per_shape.argmax(axis=0)
+    arg = np.zeros(V, dtype=np.int64)
+    for k in range(K - 1, -1, -1):  # the last write is the smallest k at the maximum
+        np.copyto(arg, k, where=per_shape[k] == combined)
+    nan = np.isnan(combined)
+    if nan.any():  # np.argmax's answer there: the first NaN
+        arg[nan] = np.argmax(per_shape[:, nan], axis=0)
     vector = np.zeros((V, 3))
     order = np.argsort(arg, kind="stable")
     bounds = np.searchsorted(arg[order], np.arange(K + 1))
