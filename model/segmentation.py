@@ -275,10 +275,16 @@ class SegmentationCache:
         return self._get("split", lambda: _seg.split_graph(
             self.adjacency, _seg.dominant_group(self.support(), self.shape_groups())))
 
-    def vertex_mirror(self) -> np.ndarray:
-        """(V,) each vertex's mirror image across x = 0 (``solvers.symmetry.mirror_map``)."""
-        from solvers.symmetry import mirror_map
-        return self._get("mirror", lambda: mirror_map(self._neutral))
+    def vertex_mirror(self, vertices: np.ndarray) -> np.ndarray:
+        """(V,) each vertex's mirror image across x = 0 (``solvers.symmetry.mirror_map``), looked up for
+        ``vertices`` (and any asked for before) only: -1 at the others. The k-d tree is built once per rig."""
+        from solvers.symmetry import MirrorLookup
+        lookup = self._get("mirror-lookup", lambda: MirrorLookup(self._neutral))
+        mirror = self._get("mirror", lambda: np.full(self._neutral.shape[0], -1, dtype=np.int64))
+        todo = vertices[mirror[vertices] < 0]
+        if todo.size:
+            mirror[todo] = lookup(todo)[1]
+        return mirror
 
     def mirror_partners(self) -> np.ndarray:
         return self._get("partners", lambda: _hier.mirror_partners(self._neutral, self.maps().per_shape_displacement))
@@ -365,7 +371,7 @@ def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.n
         per_level = [labels]
     else:
         activity = _hier.region_activity(labels, cache.support(), cache.mirror_partners())
-        mirrors = _hier.region_mirrors(labels, cache.vertex_mirror())
+        mirrors = _hier.region_mirrors(labels, cache.vertex_mirror(np.flatnonzero(labels >= 0)))
         per_level = _hier.hierarchy_labels(labels, A, cache.neutral, s.levels, activity, mirrors)
     secs["hierarchy"] = time.perf_counter() - t0
 

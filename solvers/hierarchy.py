@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import RigInputError
+from .segmentation import group_sums
 
 
 def level_targets(n_regions: int, levels: int | None = None) -> list[int]:
@@ -111,8 +112,7 @@ def region_activity(labels: np.ndarray, support: np.ndarray, partners: np.ndarra
     S = np.asarray(support, dtype=np.float64)
     R = int(lab.max()) + 1 if (lab >= 0).any() else 0
     fg = np.flatnonzero(lab >= 0)
-    act = np.zeros((R, S.shape[1]))
-    np.add.at(act, lab[fg], S[fg])
+    act = group_sums(S, fg, lab[fg], R)
     if partners is not None:
         act = act + act[:, partners]
     return act
@@ -120,7 +120,8 @@ def region_activity(labels: np.ndarray, support: np.ndarray, partners: np.ndarra
 
 def region_mirrors(labels: np.ndarray, mirror: np.ndarray) -> np.ndarray:
     """(R,) each region's mirror-image region (itself for a region on the midline), -1 if it has none: the
-    region holding most of the mirror vertices (``solvers.symmetry.mirror_map``) of its core, both ways."""
+    region holding most of the mirror vertices (``solvers.symmetry.mirror_map``) of its core, both ways.
+    Only the core vertices' entries of ``mirror`` are read."""
     lab = np.asarray(labels, dtype=np.int64)
     R = int(lab.max()) + 1 if (lab >= 0).any() else 0
     fg = np.flatnonzero(lab >= 0)

@@ -72,6 +72,26 @@ def relabel(labels: np.ndarray) -> np.ndarray:
     return out
 
 
+def group_sums(values: np.ndarray, vertices: np.ndarray, groups: np.ndarray, n_groups: int) -> np.ndarray:
+    """(n_groups, K) ``Σ_{i: groups[i] = g} values[vertices[i], k]`` of a (V, K) per-vertex, per-shape array.
+
+    One bincount over each shape's values along that shape's row of ``values.T`` (the maps are (K, V) arrays
+    handed out as (V, K) views: gathering (V, K) rows would walk across them); every sum is taken in the order
+    of ``vertices``, as a sparse indicator product or ``np.add.at`` over the same vertices takes it."""
+    VT = np.asarray(values).T
+    K = VT.shape[0]
+    g = np.asarray(groups, dtype=np.int64)
+    keys = (np.arange(K, dtype=np.int64)[:, None] * n_groups + g[None, :]).ravel()
+    sums = np.bincount(keys, weights=VT[:, vertices].ravel(), minlength=K * n_groups)
+    return sums.reshape(K, n_groups).T
+
+
+def _sorted_unique(keys: np.ndarray) -> np.ndarray:
+    """The distinct values of an int array, sorted (sort and mask: numpy's hash-based unique is slower here)."""
+    k = np.sort(keys)
+    return k[np.concatenate(([True], k[1:] != k[:-1]))] if k.size else k
+
+
 def _rows_cols(adjacency: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
     A = sp.csr_matrix(adjacency)
     return np.repeat(np.arange(A.shape[0]), np.diff(A.indptr)), A.indices
@@ -285,10 +305,10 @@ def attach_separate_meshes(labels: np.ndarray, piece: np.ndarray, main: np.ndarr
     if R == 0 or off.size == 0:
         return lab
     fg = np.flatnonzero(lab >= 0)
-    act = sp.csr_matrix((np.ones(fg.size), (lab[fg], fg)), shape=(R, lab.size)) @ S  # (R, K) per region
+    act = group_sums(S, fg, lab[fg], R)  # (R, K) per region
     act /= np.maximum(np.linalg.norm(act, axis=1, keepdims=True), 1e-300)
     ids, pid = np.unique(piece[off], return_inverse=True)
-    pact = sp.csr_matrix((np.ones(off.size), (pid, off)), shape=(ids.size, lab.size)) @ S  # (P, K) per piece
+    pact = group_sums(S, off, pid, ids.size)  # (P, K) per piece
     norm = np.linalg.norm(pact, axis=1)
     sim = (pact / np.maximum(norm, 1e-300)[:, None]) @ act.T
     best = sim.argmax(axis=1)
@@ -327,32 +347,46 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int
     A = sp.csr_matrix(adjacency)
     cores = region_cores(labels)
     R = len(cores)
+    M = R + 1  # a (vertex, column) pair as one key v·M + c, so that sorted keys are CSR order; column R = background
+    C = rings + 2  # a pair's key with its kind in the low digit: 0 core, d ring d, rings + 1 background
     fg = np.flatnonzero(labels >= 0)
-    # (V, R) indicators, all regions at once: ring d = (A @ ring d-1) minus everything reached so far.
-    core_ind = sp.csr_matrix((np.ones(fg.size), (fg, labels[fg])), shape=(V, R))
-    raw = core_ind.copy()
-    reach = core_ind.copy()
-    frontier = core_ind
+    reach = fg * M + labels[fg]          # sorted: one core pair per foreground vertex
+    keys = [reach * C]
+    weight = np.ones(C)
+    # ring 1 of every region at once: the far ends of the mesh edges that leave its core; ring d: the neighbours
+    # of ring d-1 not reached before
+    rows, cols = _rows_cols(A)
+    lr = labels[rows]
+    leave = (lr >= 0) & (lr != labels[cols])
+    new = _sorted_unique(cols[leave] * M + lr[leave])
+    deg = np.diff(A.indptr)
     for d in range(1, rings + 1):
-        nb = A @ frontier
-        nb.data[:] = 1.0
-        new = nb - nb.multiply(reach)
-        new.eliminate_zeros()
-        if new.nnz == 0:
+        if d > 1:
+            v, r = np.divmod(new, M)
+            n = deg[v]
+            first = np.repeat(A.indptr[v] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
+            cand = _sorted_unique(A.indices[first] * M + np.repeat(r, n))
+            pos = np.minimum(np.searchsorted(reach, cand), reach.size - 1)
+            new = cand[reach[pos] != cand] if reach.size else cand
+        if new.size == 0:
             break
-        raw = raw + new * ((rings + 1.0 - d) / (rings + 1.0))
-        reach = reach + new
-        frontier = new
-    reach = reach.tocsc()
-    reach.sort_indices()
-    verts = [reach.indices[reach.indptr[r]:reach.indptr[r + 1]].astype(np.int64) for r in range(R)]
+        keys.append(new * C + d)
+        weight[d] = (rings + 1.0 - d) / (rings + 1.0)
+        reach = np.sort(np.concatenate((reach, new)))
     bg = np.flatnonzero(labels < 0)
-    bg_col = sp.csr_matrix((np.ones(bg.size), (bg, np.zeros(bg.size, dtype=np.int64))), shape=(V, 1))
-    W = sp.csr_matrix(sp.hstack([raw, bg_col], format="csr"))
-    W.sum_duplicates()
+    keys.append((bg * M + R) * C + (C - 1))
+    keys = np.sort(np.concatenate(keys))
+    pair, kind = np.divmod(keys, C)
+    rows_w, cols_w = np.divmod(pair, M)
+    indptr = np.concatenate(([0], np.cumsum(np.bincount(rows_w, minlength=V))))
+    W = sp.csr_matrix((weight[kind], cols_w, indptr), shape=(V, M))
+    W.has_sorted_indices = True
     s = np.asarray(W.sum(axis=1)).ravel()  # ≥ 1: every vertex is in a core or the background
     W.data /= np.repeat(s, np.diff(W.indptr))
-    W.sort_indices()
+    # each region's core and overlap vertices, sorted: the reached pairs by region, then vertex
+    v, r = np.divmod(reach, M)
+    rv = np.sort(r * V + v)
+    verts = np.split(rv % V, np.cumsum(np.bincount(r, minlength=R))[:-1]) if R else []
     return cores, verts, W
 
 

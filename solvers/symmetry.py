@@ -13,14 +13,27 @@ from scipy.spatial import cKDTree
 REFLECT_X = np.array([-1.0, 1.0, 1.0])  # M = diag(−1, 1, 1), the reflection across x = 0
 
 
+class MirrorLookup:
+    """``mirror_map`` of one mesh for any of its vertices: the k-d tree of the neutral is built once, and
+    ``lookup(vertices)`` queries the reflections of those vertices only (``mirror_map(neutral)[vertices]``)."""
+
+    def __init__(self, neutral):
+        self.points = np.asarray(neutral, dtype=np.float64)
+        self.tree = cKDTree(self.points)
+
+    def __call__(self, vertices=None) -> tuple[np.ndarray, np.ndarray]:
+        """(distance, index) of the nearest vertex to the reflection of each of ``vertices`` (all if None)."""
+        p = self.points if vertices is None else self.points[np.asarray(vertices, dtype=np.int64)]
+        dist, idx = self.tree.query(p * REFLECT_X)
+        return dist, idx.astype(np.int64)
+
+
 def mirror_map(neutral, tolerance: float | None = None) -> np.ndarray:
     """(V,) index of each vertex's mirror image across x = 0: the nearest neutral vertex to (−x, y, z).
 
     With ``tolerance``, vertices whose reflection is farther than that from any vertex map to themselves.
     """
-    p = np.asarray(neutral, dtype=np.float64)
-    dist, idx = cKDTree(p).query(p * REFLECT_X)
-    idx = idx.astype(np.int64)
+    dist, idx = MirrorLookup(neutral)()
     if tolerance is not None:
         idx[dist > tolerance] = np.flatnonzero(dist > tolerance)
     return idx
