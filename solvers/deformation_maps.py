@@ -12,6 +12,7 @@ quantile of itself, taken over the vertices that shape moves, gives every shape 
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -178,13 +179,30 @@ def shape_scales(per_shape: np.ndarray, moves: np.ndarray, quantile: float = NOR
     P = np.asarray(per_shape)
     K = P.shape[1]
     out = np.ones(K)
+    PT, MT = P.T, np.asarray(moves).T  # the shapes' rows of the (K, V) maps
     for k in range(K):
-        vals = P[:, k][moves[:, k]]
+        vals = PT[k][MT[k]]
         if vals.size:
-            q = float(np.quantile(vals, quantile))
+            q = _quantile(vals, quantile)
             if q > 0:
                 out[k] = q
     return out
+
+
+def _quantile(values: np.ndarray, q: float) -> float:
+    """``np.quantile(values, q)`` (its default 'linear' method, the same arithmetic to the last bit) of a
+    1-D array: one partition at the two order statistics around ``(n − 1)·q`` and numpy's interpolation between
+    them, without np.quantile's general-case overhead (a tenth of a millisecond a call, 114 calls on ICT)."""
+    n = values.size
+    v = (n - 1) * q
+    if n < 2 or v >= n - 1 or v < 0 or np.isnan(values).any():
+        return float(np.quantile(values, q))
+    lo = math.floor(v)
+    part = np.partition(values, (lo, lo + 1))
+    a, b = float(part[lo]), float(part[lo + 1])
+    t = v - lo
+    diff = b - a
+    return b - diff * (1 - t) if t >= 0.5 else a + diff * t
 
 
 def normalised_map(per_shape: np.ndarray, scales: np.ndarray) -> np.ndarray:

@@ -75,15 +75,16 @@ def relabel(labels: np.ndarray) -> np.ndarray:
 def group_sums(values: np.ndarray, vertices: np.ndarray, groups: np.ndarray, n_groups: int) -> np.ndarray:
     """(n_groups, K) ``Σ_{i: groups[i] = g} values[vertices[i], k]`` of a (V, K) per-vertex, per-shape array.
 
-    One bincount over each shape's values along that shape's row of ``values.T`` (the maps are (K, V) arrays
-    handed out as (V, K) views: gathering (V, K) rows would walk across them); every sum is taken in the order
-    of ``vertices``, as a sparse indicator product or ``np.add.at`` over the same vertices takes it."""
+    One bincount per shape along that shape's row of ``values.T`` (the maps are (K, V) arrays handed out as
+    (V, K) views: gathering (V, K) rows would walk across them); every sum is taken in the order of
+    ``vertices``, as a sparse indicator product or ``np.add.at`` over the same vertices takes it."""
     VT = np.asarray(values).T
-    K = VT.shape[0]
+    vertices = np.asarray(vertices, dtype=np.int64)
     g = np.asarray(groups, dtype=np.int64)
-    keys = (np.arange(K, dtype=np.int64)[:, None] * n_groups + g[None, :]).ravel()
-    sums = np.bincount(keys, weights=VT[:, vertices].ravel(), minlength=K * n_groups)
-    return sums.reshape(K, n_groups).T
+    out = np.empty((VT.shape[0], n_groups))
+    for k in range(VT.shape[0]):
+        out[k] = np.bincount(g, weights=VT[k].take(vertices), minlength=n_groups)
+    return np.ascontiguousarray(out.T)
 
 
 def _sorted_unique(keys: np.ndarray) -> np.ndarray:

@@ -14,18 +14,54 @@ REFLECT_X = np.array([-1.0, 1.0, 1.0])  # M = diag(−1, 1, 1), the reflection a
 
 
 class MirrorLookup:
-    """``mirror_map`` of one mesh for any of its vertices: the k-d tree of the neutral is built once, and
-    ``lookup(vertices)`` queries the reflections of those vertices only (``mirror_map(neutral)[vertices]``)."""
+    """``mirror_map`` of one mesh for any of its vertices: ``lookup(vertices)`` is ``mirror_map(neutral)[vertices]``
+    (and the distances), built once per mesh.
+
+    A vertex whose reflection is exactly the position of one vertex, and of no other, has that vertex as its
+    nearest (at distance 0): those are found by hashing the positions (most of a symmetric mesh). The others
+    (no exact image, or an image shared by several vertices) go to the k-d tree, built on first need."""
+
+    _MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9], dtype=np.uint64)
 
     def __init__(self, neutral):
         self.points = np.asarray(neutral, dtype=np.float64)
-        self.tree = cKDTree(self.points)
+        self._tree = None
+        h = self._hash(self.points)
+        self._order = np.argsort(h)
+        self._sorted = h[self._order]
+
+    @classmethod
+    def _hash(cls, p: np.ndarray) -> np.ndarray:
+        bits = np.ascontiguousarray(p + 0.0).view(np.uint64)  # + 0.0: -0.0 and 0.0 hash alike
+        return (bits * cls._MIX).sum(axis=1, dtype=np.uint64) if bits.size else np.zeros(0, dtype=np.uint64)
+
+    @property
+    def tree(self) -> cKDTree:
+        if self._tree is None:
+            self._tree = cKDTree(self.points)
+        return self._tree
 
     def __call__(self, vertices=None) -> tuple[np.ndarray, np.ndarray]:
         """(distance, index) of the nearest vertex to the reflection of each of ``vertices`` (all if None)."""
         p = self.points if vertices is None else self.points[np.asarray(vertices, dtype=np.int64)]
-        dist, idx = self.tree.query(p * REFLECT_X)
-        return dist, idx.astype(np.int64)
+        q = p * REFLECT_X
+        n = self._sorted.size
+        dist, idx = np.zeros(q.shape[0]), np.zeros(q.shape[0], dtype=np.int64)
+        if n == 0 or q.shape[0] == 0:
+            return dist, idx
+        h = self._hash(q)
+        pos = np.searchsorted(self._sorted, h)
+        at = np.minimum(pos, n - 1)
+        nxt = np.minimum(pos + 1, n - 1)
+        cand = self._order[at]
+        exact = (self._sorted[at] == h) & ((self._sorted[nxt] != h) | (pos + 1 >= n))
+        exact &= (self.points[cand] == q).all(axis=1)
+        idx[exact] = cand[exact]
+        rest = np.flatnonzero(~exact)
+        if rest.size:
+            d, i = self.tree.query(q[rest])
+            dist[rest], idx[rest] = d, i
+        return dist, idx
 
 
 def mirror_map(neutral, tolerance: float | None = None) -> np.ndarray:
