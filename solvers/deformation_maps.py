@@ -13,7 +13,7 @@ quantile of itself, taken over the vertices that shape moves, gives every shape 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -32,7 +32,8 @@ class DeformationMaps:
     per_shape     (V, K) ``m_k(v) = ‖L d_k(v)‖``.
     combined      (V,)   ``M(v) = max_k m_k(v)``.
     argmax_shape  (V,)   int, the k reaching the maximum (0 where every shape is still).
-    vector        (V, 3) ``L d_k(v)`` of the arg-max shape (x, y, z → R, G, B in the vector view).
+    vector        (V, 3) ``L d_k(v)`` of the arg-max shape (x, y, z → R, G, B in the vector view), computed on
+                  first use from ``laplacian`` and ``deltas`` (only the vector view shows it).
     displacement  (V,)   ``max_k ‖d_k(v)‖``.
     per_shape_displacement (V, K) ``‖d_k(v)‖``.
     """
@@ -40,9 +41,17 @@ class DeformationMaps:
     per_shape: np.ndarray
     combined: np.ndarray
     argmax_shape: np.ndarray
-    vector: np.ndarray
     displacement: np.ndarray
     per_shape_displacement: np.ndarray | None = None
+    laplacian: sp.csr_matrix | None = field(default=None, repr=False)
+    deltas: np.ndarray | None = field(default=None, repr=False)
+    _vector: np.ndarray | None = field(default=None, init=False, repr=False)
+
+    @property
+    def vector(self) -> np.ndarray:
+        if self._vector is None:
+            self._vector = argmax_vectors(self.laplacian, self.deltas, self.argmax_shape)
+        return self._vector
 
     def per_shape_values(self, kind: str) -> np.ndarray:
         """(V, K) per-shape maps of a kind: 'laplacian' ``‖L d_k‖`` or 'displacement' ``‖d_k‖``."""
@@ -142,9 +151,9 @@ def deformation_maps(laplacian: sp.spmatrix, deltas: np.ndarray) -> DeformationM
         raise RigInputError("The rig has no blendshapes, so there is no deformation map to compute.")
     # (K, V) rows written contiguously; handed out as their (V, K) transposes (column-major views)
     per_shape, disp = _shape_maps(L, d)
-    # the arg-max shape of every vertex (the first of equal maxima, as np.argmax) and its Laplacian vector,
-    # recomputed over the rows each shape wins (the same row sums as the full product): no per-shape running
-    # update over V, and no argmax across the (K, V) rows (numpy copies them to (V, K) for that)
+    # the arg-max shape of every vertex (the first of equal maxima, as np.argmax): no per-shape running update
+    # over V, and no argmax across the (K, V) rows (numpy copies them to (V, K) for that); its Laplacian vector
+    # is computed when the vector view asks for it (``argmax_vectors``)
     combined = per_shape.max(axis=0)
     arg = np.zeros(V, dtype=np.int64)
     for k in range(K - 1, -1, -1):  # the last write is the smallest k at the maximum
@@ -152,15 +161,24 @@ def deformation_maps(laplacian: sp.spmatrix, deltas: np.ndarray) -> DeformationM
     nan = np.isnan(combined)
     if nan.any():  # np.argmax's answer there: the first NaN
         arg[nan] = np.argmax(per_shape[:, nan], axis=0)
+    return DeformationMaps(per_shape=per_shape.T, combined=combined, argmax_shape=arg,
+                           displacement=disp.max(axis=0), per_shape_displacement=disp.T, laplacian=L, deltas=deltas)
+
+
+def argmax_vectors(laplacian: sp.spmatrix, deltas: np.ndarray, argmax_shape: np.ndarray) -> np.ndarray:
+    """(V, 3) ``L d_k(v)`` with k the arg-max shape of each vertex (Joshi et al. 2003, §2, the vector view):
+    one product per shape over the rows it wins (the same row sums as the full product)."""
+    L = sp.csr_matrix(laplacian)
+    arg = np.asarray(argmax_shape)
+    K, V = len(deltas), L.shape[0]
     vector = np.zeros((V, 3))
     order = np.argsort(arg, kind="stable")
     bounds = np.searchsorted(arg[order], np.arange(K + 1))
     L_won = L[order]
     for k in np.flatnonzero(np.diff(bounds)):
         a, b = bounds[k], bounds[k + 1]
-        vector[order[a:b]] = L_won[a:b] @ d[k]
-    return DeformationMaps(per_shape=per_shape.T, combined=combined, argmax_shape=arg, vector=vector,
-                           displacement=disp.max(axis=0), per_shape_displacement=disp.T)
+        vector[order[a:b]] = L_won[a:b] @ np.asarray(deltas[k], dtype=np.float64)
+    return vector
 
 
 def shape_moves(per_shape_displacement: np.ndarray, fraction: float = MOVING_FRACTION) -> np.ndarray:
