@@ -179,6 +179,12 @@ def segmentation_to_json(seg: Segmentation) -> dict:
     }
 
 
+def _any_nonzero(a: np.ndarray, chunk: int = 1 << 16) -> bool:
+    """``np.any(a)``, stopping at the first chunk that holds a nonzero (a rig's first shape, as a rule)."""
+    flat = a.reshape(-1)
+    return any(np.any(flat[i:i + chunk]) for i in range(0, flat.size, chunk))
+
+
 class SegmentationCache:
     """Everything a segmentation needs that depends only on the rig: graph, Laplacian, maps, sorted maps.
 
@@ -214,7 +220,7 @@ class SegmentationCache:
         if deltas.shape[1:] != neutral.shape:
             raise RigInputError(
                 f"The shapes have {deltas.shape[1]} vertices but the neutral has {neutral.shape[0]}.")
-        if not np.any(deltas):
+        if not _any_nonzero(deltas):
             raise RigInputError(
                 "Every shape equals the neutral (all displacements are zero), so there is nothing to segment.")
         self._key = key
@@ -263,8 +269,10 @@ class SegmentationCache:
 
     def support(self) -> np.ndarray:
         """(V, K) where each shape acts: its displacement over its own 99% quantile, at most 1."""
-        return self._get("support", lambda: np.minimum(   # along the maps' (K, V) rows (see shape_moves)
-            self.maps().per_shape_displacement.T / self.scales("displacement")[:, None], 1.0).T)
+        def make():  # along the maps' (K, V) rows (see shape_moves), one (K, V) array
+            out = np.divide(self.maps().per_shape_displacement.T, self.scales("displacement")[:, None])
+            return np.minimum(out, 1.0, out=out).T
+        return self._get("support", make)
 
     def shape_groups(self) -> np.ndarray:
         """(K,) groups of shapes that act on the same part of the face."""

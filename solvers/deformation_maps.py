@@ -188,7 +188,9 @@ def shape_moves(per_shape_displacement: np.ndarray, fraction: float = MOVING_FRA
     top = D.max(axis=0)
     # along the shapes' rows of D's (K, V) memory (the maps are (K, V) arrays handed out transposed): a (V, K)
     # broadcast would walk them across, one page per element on a large rig
-    return ((D.T > (fraction * top)[:, None]) & (top > 0)[:, None]).T
+    out = np.greater(D.T, (fraction * top)[:, None])
+    out[~(top > 0)] = False
+    return out.T
 
 
 def shape_scales(per_shape: np.ndarray, moves: np.ndarray, quantile: float = NORMALISE_QUANTILE) -> np.ndarray:

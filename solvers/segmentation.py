@@ -260,7 +260,7 @@ def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
     K = S.shape[1]
     if K == 1:
         return np.zeros(1, dtype=np.int64)
-    n = np.linalg.norm(S, axis=0)
+    n = _column_norms(S)
     Sn = S / np.where(n > 0, n, 1.0)
     D = np.clip(1.0 - Sn.T @ Sn, 0.0, 2.0)
     D[n == 0, :] = D[:, n == 0] = 1.0
@@ -269,17 +269,35 @@ def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
     return (fcluster(Z, cut, criterion="distance") - 1).astype(np.int64)
 
 
+def _column_norms(S: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(S, axis=0)`` of a (V, K) array, one column at a time along the rows of ``S.T`` (no (V, K)
+    temporary of squares; the same sums, a column's squares added as one contiguous reduction)."""
+    ST = S.T
+    out = np.empty(ST.shape[0])
+    sq = np.empty(ST.shape[1])
+    for k in range(ST.shape[0]):
+        np.multiply(ST[k], ST[k], out=sq)
+        out[k] = np.add.reduce(sq)
+    return np.sqrt(out)
+
+
 def dominant_group(support: np.ndarray, groups: np.ndarray) -> np.ndarray:
     """(V,) the shape group with the largest support at each vertex (``max_{k∈g} support(v, k)``)."""
-    S = np.asarray(support)
+    ST = np.asarray(support).T  # the shapes' rows of the (K, V) maps: a running maximum, no (V, |g|) copies
     G = int(groups.max()) + 1
-    best = np.full(S.shape[0], -1.0)
-    out = np.zeros(S.shape[0], dtype=np.int64)
+    V = ST.shape[1]
+    best = np.full(V, -1.0)
+    out = np.zeros(V, dtype=np.int64)
+    m = np.empty(V)
+    better = np.empty(V, dtype=bool)
     for g in range(G):
-        m = S[:, groups == g].max(axis=1)
-        better = m > best
-        best[better] = m[better]
-        out[better] = g
+        ks = np.flatnonzero(groups == g)
+        np.copyto(m, ST[ks[0]])
+        for k in ks[1:]:
+            np.maximum(m, ST[k], out=m)
+        np.greater(m, best, out=better)
+        np.copyto(best, m, where=better)
+        np.copyto(out, g, where=better)
     return out
 
 
