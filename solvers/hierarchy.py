@@ -66,7 +66,9 @@ def region_contacts(labels: np.ndarray, adjacency: sp.spmatrix) -> tuple[np.ndar
         return gap, bnd
     A = sp.csr_matrix(adjacency)
     src = np.flatnonzero(labels >= 0)
-    dist, _, sources = sp.csgraph.dijkstra(A, directed=False, indices=src, unweighted=True,
+    # A is symmetric: its directed traversal is the undirected one (scipy's undirected mode scans each edge twice
+    # more, through a transposed copy, and changes nothing: a second relaxation at the same distance never wins)
+    dist, _, sources = sp.csgraph.dijkstra(A, directed=True, indices=src, unweighted=True,
                                         min_only=True, return_predecessors=True)
     cell = np.where(sources >= 0, labels[np.maximum(sources, 0)], -1)
     rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
