@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import RigInputError
-from .segmentation import group_sums
+from .segmentation import _rows_cols, group_sums
 
 
 def level_targets(n_regions: int, levels: int | None = None) -> list[int]:
@@ -71,8 +71,7 @@ def region_contacts(labels: np.ndarray, adjacency: sp.spmatrix) -> tuple[np.ndar
     dist, _, sources = sp.csgraph.dijkstra(A, directed=True, indices=src, unweighted=True,
                                         min_only=True, return_predecessors=True)
     cell = np.where(sources >= 0, labels[np.maximum(sources, 0)], -1)
-    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-    cols = A.indices
+    rows, cols = _rows_cols(A)
     m = (rows < cols) & (cell[rows] >= 0) & (cell[cols] >= 0) & (cell[rows] != cell[cols])
     i, j = rows[m], cols[m]
     a, b = cell[i], cell[j]
@@ -96,7 +95,8 @@ def mirror_partners(positions: np.ndarray, per_shape_displacement: np.ndarray,
     K = D.shape[1]
     w = D.sum(axis=0)
     c = (D.T @ X) / np.where(w > 0, w, 1.0)[:, None]
-    size = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0))) or 1.0
+    # per coordinate column (a (V, 3) reduction along axis 0 runs numpy's slow small-inner-axis loop)
+    size = float(np.linalg.norm([X[:, i].max() - X[:, i].min() for i in range(3)])) or 1.0
     refl = c * np.array([-1.0, 1.0, 1.0])
     dist = np.linalg.norm(refl[:, None, :] - c[None, :, :], axis=2)
     dist[w == 0, :] = np.inf

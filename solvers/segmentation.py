@@ -6,6 +6,7 @@ Functions take the (V, V) CSR vertex adjacency from ``solvers.laplacian``.
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 import scipy.sparse as sp
@@ -93,9 +94,19 @@ def _sorted_unique(keys: np.ndarray) -> np.ndarray:
     return k[np.concatenate(([True], k[1:] != k[:-1]))] if k.size else k
 
 
+_ROWS: list = [None, None]  # (weak reference to the last graph's indptr, its rows): a segmentation asks ~12 times
+
+
 def _rows_cols(adjacency: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of every stored entry of a CSR graph (both directions of each mesh edge), in CSR order.
+    The rows depend on ``indptr`` alone and are kept for the last ``indptr`` array asked for (the graphs here
+    are never edited in place)."""
     A = sp.csr_matrix(adjacency)
-    return np.repeat(np.arange(A.shape[0]), np.diff(A.indptr)), A.indices
+    ref, rows = _ROWS
+    if ref is None or ref() is not A.indptr:
+        rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+        _ROWS[:] = [weakref.ref(A.indptr), rows]
+    return rows, A.indices
 
 
 # --- clean-up -----------------------------------------------------------------------------------------
@@ -304,9 +315,11 @@ def dominant_group(support: np.ndarray, groups: np.ndarray) -> np.ndarray:
 def split_graph(adjacency: sp.spmatrix, dominant: np.ndarray) -> sp.csr_matrix:
     """The mesh graph without the edges whose ends are dominated by different shape groups: its components
     within the deforming set are regions that one group of shapes moves (a brow, an eye, a mouth side)."""
-    A = sp.csr_matrix(adjacency).tocoo()
-    keep = dominant[A.row] == dominant[A.col]
-    return sp.csr_matrix((A.data[keep], (A.row[keep], A.col[keep])), shape=A.shape)
+    A = sp.csr_matrix(adjacency)
+    rows, cols = _rows_cols(A)
+    keep = dominant[rows] == dominant[cols]
+    indptr = np.concatenate(([0], np.cumsum(np.bincount(rows[keep], minlength=A.shape[0]))))
+    return sp.csr_matrix((A.data[keep], cols[keep], indptr), shape=A.shape)
 
 
 def attach_separate_meshes(labels: np.ndarray, piece: np.ndarray, main: np.ndarray, support: np.ndarray,

@@ -33,7 +33,7 @@ class MirrorLookup:
     @classmethod
     def _hash(cls, p: np.ndarray) -> np.ndarray:
         bits = np.ascontiguousarray(p + 0.0).view(np.uint64)  # + 0.0: -0.0 and 0.0 hash alike
-        return (bits * cls._MIX).sum(axis=1, dtype=np.uint64) if bits.size else np.zeros(0, dtype=np.uint64)
+        return bits[:, 0] * cls._MIX[0] + bits[:, 1] * cls._MIX[1] + bits[:, 2] * cls._MIX[2]
 
     @property
     def tree(self) -> cKDTree:
@@ -55,7 +55,8 @@ class MirrorLookup:
         nxt = np.minimum(pos + 1, n - 1)
         cand = self._order[at]
         exact = (self._sorted[at] == h) & ((self._sorted[nxt] != h) | (pos + 1 >= n))
-        exact &= (self.points[cand] == q).all(axis=1)
+        c = self.points[cand]
+        exact &= (c[:, 0] == q[:, 0]) & (c[:, 1] == q[:, 1]) & (c[:, 2] == q[:, 2])
         idx[exact] = cand[exact]
         rest = np.flatnonzero(~exact)
         if rest.size:
