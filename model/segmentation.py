@@ -269,19 +269,29 @@ class SegmentationCache:
 
     def support(self) -> np.ndarray:
         """(V, K) where each shape acts: its displacement over its own 99% quantile, at most 1."""
-        def make():  # along the maps' (K, V) rows (see shape_moves), one (K, V) array
-            out = np.divide(self.maps().per_shape_displacement.T, self.scales("displacement")[:, None])
-            return np.minimum(out, 1.0, out=out).T
-        return self._get("support", make)
+        return self._get("support", lambda: _seg.shape_support(self.maps().per_shape_displacement,
+                                                                self.scales("displacement")))
 
     def shape_groups(self) -> np.ndarray:
         """(K,) groups of shapes that act on the same part of the face."""
-        return self._get("groups", lambda: _seg.shape_groups(self.support()))
+        def make():
+            if "support" in self._derived:
+                return _seg.shape_groups(self._derived["support"])
+            # the support made here, its memory lent to the groups' normalised maps and then filled again:
+            # one (V, K) array instead of two (190 MB of fresh pages each on a 422k-vertex rig)
+            disp, scales = self.maps().per_shape_displacement, self.scales("displacement")
+            S = _seg.shape_support(disp, scales)
+            groups = _seg.shape_groups(S, overwrite_support=True)
+            self._derived["support"] = _seg.shape_support(disp, scales, out=S)
+            return groups
+        return self._get("groups", make)
 
     def split_graph(self) -> sp.csr_matrix:
         """The mesh graph cut where the dominant shape group changes."""
-        return self._get("split", lambda: _seg.split_graph(
-            self.adjacency, _seg.dominant_group(self.support(), self.shape_groups())))
+        def make():
+            groups = self.shape_groups()  # first: it makes the support too
+            return _seg.split_graph(self.adjacency, _seg.dominant_group(self.support(), groups))
+        return self._get("split", make)
 
     def vertex_mirror(self, vertices: np.ndarray) -> np.ndarray:
         """(V,) each vertex's mirror image across x = 0 (``solvers.symmetry.mirror_map``), looked up for

@@ -262,17 +262,35 @@ def mesh_pieces(adjacency: sp.spmatrix, main_fraction: float = 0.5) -> tuple[np.
     return piece.astype(np.int64), main
 
 
-def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
+def shape_support(per_shape_displacement: np.ndarray, scales: np.ndarray, out: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """(V, K) where each shape acts: ``min(‖d_k(v)‖ / s_k, 1)``, its displacement over its own scale (the 99%
+    quantile over the vertices it moves), at most 1. Computed along the maps' (K, V) rows, into ``out`` (a (V, K)
+    array of that layout, e.g. an earlier support) when given."""
+    DT = np.asarray(per_shape_displacement).T
+    o = np.empty(DT.shape) if out is None else out.T
+    np.divide(DT, np.asarray(scales, dtype=np.float64)[:, None], out=o)
+    np.minimum(o, 1.0, out=o)
+    return o.T
+
+
+def shape_groups(support: np.ndarray, cut: float = 0.6, overwrite_support: bool = False) -> np.ndarray:
     """(K,) group of every shape: shapes that act on the same part of the face (average-linkage clustering
     of the cosine distance between their (V,) support maps, cut at ``cut``), e.g. a brow's three shapes, an
-    eye's lid and gaze shapes, one side of the mouth. Shapes that move nothing form one group each."""
+    eye's lid and gaze shapes, one side of the mouth. Shapes that move nothing form one group each.
+    ``overwrite_support``: the support maps are normalised in their own memory (it then holds them divided by
+    their norms), instead of in a (V, K) temporary."""
     from scipy.cluster.hierarchy import fcluster, linkage
     S = np.asarray(support, dtype=np.float64)
     K = S.shape[1]
     if K == 1:
         return np.zeros(1, dtype=np.int64)
     n = _column_norms(S)
-    Sn = S / np.where(n > 0, n, 1.0)
+    if overwrite_support:
+        Sn = S
+        Sn /= np.where(n > 0, n, 1.0)
+    else:
+        Sn = S / np.where(n > 0, n, 1.0)
     D = np.clip(1.0 - Sn.T @ Sn, 0.0, 2.0)
     D[n == 0, :] = D[:, n == 0] = 1.0
     np.fill_diagonal(D, 0.0)
