@@ -327,8 +327,8 @@ class SegmentationCache:
         return self._values[key], self._sorted[key]
 
 
-def _level(labels: np.ndarray, adjacency: sp.spmatrix, rings: int) -> SegmentationLevel:
-    cores, verts, blend = _seg.overlap_and_blend(labels, adjacency, rings)
+def _level(labels: np.ndarray, adjacency: sp.spmatrix, rings: int, edges=None) -> SegmentationLevel:
+    cores, verts, blend = _seg.overlap_and_blend(labels, adjacency, rings, edges)
     return SegmentationLevel(regions=[Region(vertices=v, core=c) for c, v in zip(cores, verts)],
                              background=np.flatnonzero(labels < 0), blend=blend)
 
@@ -394,7 +394,8 @@ def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.n
     secs["hierarchy"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    levels = [_level(lab, A, s.overlap_rings) for lab in per_level]
+    edges = _seg.leaving_edges(per_level[0], A)  # every level's core boundaries are among the finest level's
+    levels = [_level(lab, A, s.overlap_rings, edges) for lab in per_level]
     secs["overlap"] = time.perf_counter() - t0
     secs["total"] = time.perf_counter() - t_start
     return Segmentation(threshold_t=s.t, threshold_value=thr, levels=levels, map_kind=s.map_kind,

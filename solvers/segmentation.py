@@ -375,12 +375,27 @@ def region_cores(labels: np.ndarray) -> list[np.ndarray]:
     fg = np.flatnonzero(labels >= 0)
     if fg.size == 0:
         return []
-    order = fg[np.argsort(labels[fg], kind="stable")]
-    counts = np.bincount(labels[fg])
-    return [np.sort(c) for c in np.split(order, np.cumsum(counts)[:-1])]
+    lab = labels[fg]
+    counts = np.bincount(lab)
+    order = fg[np.argsort(lab.astype(np.uint16) if counts.size <= 1 << 16 else lab, kind="stable")]  # radix
+    return [c.copy() for c in np.split(order, np.cumsum(counts)[:-1])]  # each ascending: fg is, the sort stable
 
 
-def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int
+def leaving_edges(labels: np.ndarray, adjacency: sp.spmatrix,
+                  edges: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of the directed mesh edges that leave a region's core (from a core vertex to a vertex not
+    in that core), among ``edges`` (default: all of the graph's). Those of a coarser level of a hierarchy are
+    among those of a finer one (merging regions only removes boundaries), so the finest level's edges can be
+    handed to ``overlap_and_blend`` for every level."""
+    labels = np.asarray(labels, dtype=np.int64)
+    rows, cols = _rows_cols(adjacency) if edges is None else edges
+    lr = labels[rows]
+    leave = (lr >= 0) & (lr != labels[cols])
+    return rows[leave], cols[leave]
+
+
+def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int,
+                      edges: tuple[np.ndarray, np.ndarray] | None = None
                       ) -> tuple[list[np.ndarray], list[np.ndarray], sp.csr_matrix]:
     """Grow every region by ``rings`` rings and build partition-of-unity blend weights (ALGORITHMS.md §3).
 
@@ -388,7 +403,8 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int
     ``φ_r(v)``, ``Σ_r φ_r(v) = 1``, joins their results. Raw weights: 1 on a region's core, the linear ramp
     ``(rings + 1 − d)/(rings + 1)`` at ring distance d in its overlap, 1 on the background for background
     vertices; each row is divided by its sum. Returns (cores, vertices, blend) with ``vertices`` = core ∪
-    overlap (sorted) and ``blend`` (V, R+1) CSR whose last column is the background.
+    overlap (sorted) and ``blend`` (V, R+1) CSR whose last column is the background. ``edges``: directed mesh
+    edges that include every edge leaving a core (``leaving_edges`` of a finer level); default all edges.
     """
     labels = np.asarray(labels, dtype=np.int64)
     V = labels.size
@@ -399,16 +415,16 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int
     R = len(cores)
     M = R + 1  # a (vertex, column) pair as one key v·M + c, so that sorted keys are CSR order; column R = background
     C = rings + 2  # a pair's key with its kind in the low digit: 0 core, d ring d, rings + 1 background
-    fg = np.flatnonzero(labels >= 0)
+    in_core = labels >= 0
+    fg = np.flatnonzero(in_core)
     reach = fg * M + labels[fg]          # sorted: one core pair per foreground vertex
-    keys = [reach * C]
+    # every vertex's own entry (its core, or the background), in vertex order; then the rings, each sorted
+    keys = [(np.arange(V) * M + np.where(in_core, labels, R)) * C + np.where(in_core, 0, C - 1)]
     weight = np.ones(C)
     # ring 1 of every region at once: the far ends of the mesh edges that leave its core; ring d: the neighbours
     # of ring d-1 not reached before
-    rows, cols = _rows_cols(A)
-    lr = labels[rows]
-    leave = (lr >= 0) & (lr != labels[cols])
-    new = _sorted_unique(cols[leave] * M + lr[leave])
+    rows, cols = leaving_edges(labels, A, edges)
+    new = _sorted_unique(cols * M + labels[rows])
     deg = np.diff(A.indptr)
     for d in range(1, rings + 1):
         if d > 1:
@@ -422,10 +438,8 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int
             break
         keys.append(new * C + d)
         weight[d] = (rings + 1.0 - d) / (rings + 1.0)
-        reach = np.sort(np.concatenate((reach, new)))
-    bg = np.flatnonzero(labels < 0)
-    keys.append((bg * M + R) * C + (C - 1))
-    keys = np.sort(np.concatenate(keys))
+        reach = np.sort(np.concatenate((reach, new)), kind="stable")  # two sorted runs: a merge
+    keys = np.sort(np.concatenate(keys), kind="stable")  # sorted runs: a merge
     pair, kind = np.divmod(keys, C)
     rows_w, cols_w = np.divmod(pair, M)
     indptr = np.concatenate(([0], np.cumsum(np.bincount(rows_w, minlength=V))))
@@ -433,10 +447,10 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int
     W.has_sorted_indices = True
     s = np.asarray(W.sum(axis=1)).ravel()  # ≥ 1: every vertex is in a core or the background
     W.data /= np.repeat(s, np.diff(W.indptr))
-    # each region's core and overlap vertices, sorted: the reached pairs by region, then vertex
+    # each region's core and overlap vertices, sorted: the reached pairs (in vertex order) by region
     v, r = np.divmod(reach, M)
-    rv = np.sort(r * V + v)
-    verts = np.split(rv % V, np.cumsum(np.bincount(r, minlength=R))[:-1]) if R else []
+    v = v[np.argsort(r.astype(np.uint16) if R < 1 << 16 else r, kind="stable")]  # 16 bits: a radix sort
+    verts = np.split(v, np.cumsum(np.bincount(r, minlength=R))[:-1]) if R else []
     return cores, verts, W
 
 
