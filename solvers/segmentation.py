@@ -76,15 +76,19 @@ def relabel(labels: np.ndarray) -> np.ndarray:
 def group_sums(values: np.ndarray, vertices: np.ndarray, groups: np.ndarray, n_groups: int) -> np.ndarray:
     """(n_groups, K) ``Σ_{i: groups[i] = g} values[vertices[i], k]`` of a (V, K) per-vertex, per-shape array.
 
-    One bincount per shape along that shape's row of ``values.T`` (the maps are (K, V) arrays handed out as
-    (V, K) views: gathering (V, K) rows would walk across them); every sum is taken in the order of
-    ``vertices``, as a sparse indicator product or ``np.add.at`` over the same vertices takes it."""
+    An (n_groups, V) 0/1 indicator times each shape's row of ``values.T`` (the maps are (K, V) arrays handed
+    out as (V, K) views: gathering (V, K) rows would walk across them); every sum is taken in the order of
+    ``vertices`` from 0, as ``np.add.at`` or ``np.bincount`` over the same vertices takes it."""
     VT = np.asarray(values).T
     vertices = np.asarray(vertices, dtype=np.int64)
     g = np.asarray(groups, dtype=np.int64)
+    counts = np.bincount(g, minlength=n_groups)
+    order = np.argsort(g.astype(np.uint16) if n_groups <= 1 << 16 else g, kind="stable")  # keeps vertex order
+    ind = sp.csr_matrix((np.ones(g.size), vertices[order], np.concatenate(([0], np.cumsum(counts)))),
+                        shape=(n_groups, VT.shape[1]))
     out = np.empty((VT.shape[0], n_groups))
     for k in range(VT.shape[0]):
-        out[k] = np.bincount(g, weights=VT[k].take(vertices), minlength=n_groups)
+        out[k] = ind @ VT[k]
     return np.ascontiguousarray(out.T)
 
 
