@@ -127,6 +127,9 @@ def absorb_small_regions(labels: np.ndarray, adjacency: sp.spmatrix, min_size: i
     if min_size <= 1:
         return lab
     rows, cols = _rows_cols(adjacency)
+    # merging only joins labels, so the edges between two regions are among those between two labels now
+    apart = lab[rows] != lab[cols]
+    rows, cols = rows[apart], cols[apart]
     while True:
         R = int(lab.max()) + 1
         if R == 0:
@@ -209,9 +212,11 @@ def fill_background_holes(labels: np.ndarray, adjacency: sp.spmatrix) -> np.ndar
     csize = np.bincount(comp, minlength=ncomp)
     rows, cols = _rows_cols(A)
     m = (comp_of[rows] >= 0) & (lab[cols] >= 0)
-    pairs = np.unique(np.stack([comp_of[rows[m]], lab[cols[m]]], axis=1), axis=0)
-    if pairs.size == 0:
+    R1 = int(lab.max()) + 1
+    key = _sorted_unique(comp_of[rows[m]] * R1 + lab[cols[m]])  # (piece, region) pairs, sorted
+    if key.size == 0:
         return lab
+    pairs = np.stack(np.divmod(key, R1), axis=1)
     n_nbr = np.bincount(pairs[:, 0], minlength=ncomp)
     region_of = np.full(ncomp, -1, dtype=np.int64)
     region_of[pairs[:, 0]] = pairs[:, 1]
