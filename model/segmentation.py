@@ -7,7 +7,9 @@ depends only on the rig (graph, Laplacian, maps, sorted values) so the GUI can r
 """
 from __future__ import annotations
 
+import threading
 import time
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
@@ -179,6 +181,12 @@ def segmentation_to_json(seg: Segmentation) -> dict:
     }
 
 
+def _any_nonzero(a: np.ndarray, chunk: int = 1 << 16) -> bool:
+    """``np.any(a)``, stopping at the first chunk that holds a nonzero (a rig's first shape, as a rule)."""
+    flat = a.reshape(-1)
+    return any(np.any(flat[i:i + chunk]) for i in range(0, flat.size, chunk))
+
+
 class SegmentationCache:
     """Everything a segmentation needs that depends only on the rig: graph, Laplacian, maps, sorted maps.
 
@@ -214,7 +222,7 @@ class SegmentationCache:
         if deltas.shape[1:] != neutral.shape:
             raise RigInputError(
                 f"The shapes have {deltas.shape[1]} vertices but the neutral has {neutral.shape[0]}.")
-        if not np.any(deltas):
+        if not _any_nonzero(deltas):
             raise RigInputError(
                 "Every shape equals the neutral (all displacements are zero), so there is nothing to segment.")
         self._key = key
@@ -263,22 +271,40 @@ class SegmentationCache:
 
     def support(self) -> np.ndarray:
         """(V, K) where each shape acts: its displacement over its own 99% quantile, at most 1."""
-        return self._get("support", lambda: np.minimum(   # along the maps' (K, V) rows (see shape_moves)
-            self.maps().per_shape_displacement.T / self.scales("displacement")[:, None], 1.0).T)
+        return self._get("support", lambda: _seg.shape_support(self.maps().per_shape_displacement,
+                                                                self.scales("displacement")))
 
     def shape_groups(self) -> np.ndarray:
         """(K,) groups of shapes that act on the same part of the face."""
-        return self._get("groups", lambda: _seg.shape_groups(self.support()))
+        def make():
+            if "support" in self._derived:
+                return _seg.shape_groups(self._derived["support"])
+            # the support made here, its memory lent to the groups' normalised maps and then filled again:
+            # one (V, K) array instead of two (190 MB of fresh pages each on a 422k-vertex rig)
+            disp, scales = self.maps().per_shape_displacement, self.scales("displacement")
+            S = _seg.shape_support(disp, scales)
+            groups = _seg.shape_groups(S, overwrite_support=True)
+            self._derived["support"] = _seg.shape_support(disp, scales, out=S)
+            return groups
+        return self._get("groups", make)
 
     def split_graph(self) -> sp.csr_matrix:
         """The mesh graph cut where the dominant shape group changes."""
-        return self._get("split", lambda: _seg.split_graph(
-            self.adjacency, _seg.dominant_group(self.support(), self.shape_groups())))
+        def make():
+            groups = self.shape_groups()  # first: it makes the support too
+            return _seg.split_graph(self.adjacency, _seg.dominant_group(self.support(), groups))
+        return self._get("split", make)
 
-    def vertex_mirror(self) -> np.ndarray:
-        """(V,) each vertex's mirror image across x = 0 (``solvers.symmetry.mirror_map``)."""
-        from solvers.symmetry import mirror_map
-        return self._get("mirror", lambda: mirror_map(self._neutral))
+    def vertex_mirror(self, vertices: np.ndarray) -> np.ndarray:
+        """(V,) each vertex's mirror image across x = 0 (``solvers.symmetry.mirror_map``), looked up for
+        ``vertices`` (and any asked for before) only: -1 at the others. The k-d tree is built once per rig."""
+        from solvers.symmetry import MirrorLookup
+        lookup = self._get("mirror-lookup", lambda: MirrorLookup(self._neutral))
+        mirror = self._get("mirror", lambda: np.full(self._neutral.shape[0], -1, dtype=np.int64))
+        todo = vertices[mirror[vertices] < 0]
+        if todo.size:
+            mirror[todo] = lookup(todo)[1]
+        return mirror
 
     def mirror_partners(self) -> np.ndarray:
         return self._get("partners", lambda: _hier.mirror_partners(self._neutral, self.maps().per_shape_displacement))
@@ -303,10 +329,42 @@ class SegmentationCache:
         return self._values[key], self._sorted[key]
 
 
-def _level(labels: np.ndarray, adjacency: sp.spmatrix, rings: int) -> SegmentationLevel:
-    cores, verts, blend = _seg.overlap_and_blend(labels, adjacency, rings)
+def _level(labels: np.ndarray, adjacency: sp.spmatrix, rings: int, edges=None) -> SegmentationLevel:
+    cores, verts, blend = _seg.overlap_and_blend(labels, adjacency, rings, edges)
     return SegmentationLevel(regions=[Region(vertices=v, core=c) for c, v in zip(cores, verts)],
                              background=np.flatnonzero(labels < 0), blend=blend)
+
+
+_PAGES_LOCK = threading.Lock()
+_PAGES = [0, None]  # segmentations running without huge pages, numpy's setting before the first of them
+SMALL_PAGES_FROM = 1 << 24  # shapes × vertices from which a segmentation asks for ordinary pages (see below)
+
+
+@contextmanager
+def _small_pages(shapes_x_vertices: int):
+    """numpy asks Linux for transparent huge pages (madvise) for every array of 4 MB or more. Where the kernel
+    compacts memory on first touch to find them (THP defrag 'madvise', a common default), the (K, V) maps of a
+    large rig, written once and streamed through, cost up to 2 ms of kernel time per MB: 1.2 s of 2.9 s on the
+    422k-vertex, 57-shape rig (190 MB maps). Smaller rigs gain from huge pages (measured: 106k vertices 0.39 s
+    without, 0.29 s with; ICT 78 / 73 ms), so from ``SMALL_PAGES_FROM`` shapes × vertices on they are asked for
+    off while the segmentation runs (as ``NUMPY_MADVISE_HUGEPAGE=0`` would for the whole process; a count, so
+    overlapping runs in threads restore numpy's setting once)."""
+    core = getattr(np, "_core", None) or getattr(np, "core", None)  # numpy 2 / numpy 1
+    toggle = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
+    if toggle is None or shapes_x_vertices < SMALL_PAGES_FROM:
+        yield
+        return
+    with _PAGES_LOCK:
+        if _PAGES[0] == 0:
+            _PAGES[1] = toggle(False)
+        _PAGES[0] += 1
+    try:
+        yield
+    finally:
+        with _PAGES_LOCK:
+            _PAGES[0] -= 1
+            if _PAGES[0] == 0:
+                toggle(_PAGES[1])
 
 
 def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray, deltas: np.ndarray,
@@ -320,6 +378,12 @@ def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.n
     ``cache`` on every call for the same rig to reuse the graph, Laplacian and maps. ``finest_only`` skips
     the hierarchy (level 0 only), for a live preview while a threshold slider moves.
     """
+    shape = np.shape(deltas)
+    with _small_pages(int(shape[0]) * int(shape[1]) if len(shape) == 3 else 0):
+        return _segment_rig(neutral, face_counts, face_indices, deltas, settings, cache, finest_only)
+
+
+def _segment_rig(neutral, face_counts, face_indices, deltas, settings, cache, finest_only) -> Segmentation:
     s = settings if settings is not None else SegmentationSettings()
     s.validate()
     cache = cache if cache is not None else SegmentationCache()
@@ -365,12 +429,13 @@ def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.n
         per_level = [labels]
     else:
         activity = _hier.region_activity(labels, cache.support(), cache.mirror_partners())
-        mirrors = _hier.region_mirrors(labels, cache.vertex_mirror())
+        mirrors = _hier.region_mirrors(labels, cache.vertex_mirror(np.flatnonzero(labels >= 0)))
         per_level = _hier.hierarchy_labels(labels, A, cache.neutral, s.levels, activity, mirrors)
     secs["hierarchy"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    levels = [_level(lab, A, s.overlap_rings) for lab in per_level]
+    edges = _seg.leaving_edges(per_level[0], A)  # every level's core boundaries are among the finest level's
+    levels = [_level(lab, A, s.overlap_rings, edges) for lab in per_level]
     secs["overlap"] = time.perf_counter() - t0
     secs["total"] = time.perf_counter() - t_start
     return Segmentation(threshold_t=s.t, threshold_value=thr, levels=levels, map_kind=s.map_kind,

@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import RigInputError
+from .segmentation import _rows_cols, group_sums
 
 
 def level_targets(n_regions: int, levels: int | None = None) -> list[int]:
@@ -65,11 +66,12 @@ def region_contacts(labels: np.ndarray, adjacency: sp.spmatrix) -> tuple[np.ndar
         return gap, bnd
     A = sp.csr_matrix(adjacency)
     src = np.flatnonzero(labels >= 0)
-    dist, _, sources = sp.csgraph.dijkstra(A, directed=False, indices=src, unweighted=True,
+    # A is symmetric: its directed traversal is the undirected one (scipy's undirected mode scans each edge twice
+    # more, through a transposed copy, and changes nothing: a second relaxation at the same distance never wins)
+    dist, _, sources = sp.csgraph.dijkstra(A, directed=True, indices=src, unweighted=True,
                                         min_only=True, return_predecessors=True)
     cell = np.where(sources >= 0, labels[np.maximum(sources, 0)], -1)
-    rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
-    cols = A.indices
+    rows, cols = _rows_cols(A)
     m = (rows < cols) & (cell[rows] >= 0) & (cell[cols] >= 0) & (cell[rows] != cell[cols])
     i, j = rows[m], cols[m]
     a, b = cell[i], cell[j]
@@ -93,7 +95,8 @@ def mirror_partners(positions: np.ndarray, per_shape_displacement: np.ndarray,
     K = D.shape[1]
     w = D.sum(axis=0)
     c = (D.T @ X) / np.where(w > 0, w, 1.0)[:, None]
-    size = float(np.linalg.norm(X.max(axis=0) - X.min(axis=0))) or 1.0
+    # per coordinate column (a (V, 3) reduction along axis 0 runs numpy's slow small-inner-axis loop)
+    size = float(np.linalg.norm([X[:, i].max() - X[:, i].min() for i in range(3)])) or 1.0
     refl = c * np.array([-1.0, 1.0, 1.0])
     dist = np.linalg.norm(refl[:, None, :] - c[None, :, :], axis=2)
     dist[w == 0, :] = np.inf
@@ -111,8 +114,7 @@ def region_activity(labels: np.ndarray, support: np.ndarray, partners: np.ndarra
     S = np.asarray(support, dtype=np.float64)
     R = int(lab.max()) + 1 if (lab >= 0).any() else 0
     fg = np.flatnonzero(lab >= 0)
-    act = np.zeros((R, S.shape[1]))
-    np.add.at(act, lab[fg], S[fg])
+    act = group_sums(S, fg, lab[fg], R)
     if partners is not None:
         act = act + act[:, partners]
     return act
@@ -120,7 +122,8 @@ def region_activity(labels: np.ndarray, support: np.ndarray, partners: np.ndarra
 
 def region_mirrors(labels: np.ndarray, mirror: np.ndarray) -> np.ndarray:
     """(R,) each region's mirror-image region (itself for a region on the midline), -1 if it has none: the
-    region holding most of the mirror vertices (``solvers.symmetry.mirror_map``) of its core, both ways."""
+    region holding most of the mirror vertices (``solvers.symmetry.mirror_map``) of its core, both ways.
+    Only the core vertices' entries of ``mirror`` are read."""
     lab = np.asarray(labels, dtype=np.int64)
     R = int(lab.max()) + 1 if (lab >= 0).any() else 0
     fg = np.flatnonzero(lab >= 0)

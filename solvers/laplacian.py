@@ -40,12 +40,14 @@ def adjacency_matrix(n_vertices: int, edges: np.ndarray) -> sp.csr_matrix:
     if e.size and (e.min() < 0 or e.max() >= n_vertices):
         raise RigInputError("An edge refers to a vertex that does not exist.")
     e = e[e[:, 0] != e[:, 1]]
-    rows = np.concatenate([e[:, 0], e[:, 1]])
-    cols = np.concatenate([e[:, 1], e[:, 0]])
-    A = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n_vertices, n_vertices))
-    A.sum_duplicates()
-    A.data[:] = 1.0
-    A.sort_indices()
+    n = int(n_vertices)
+    # both directions of every edge as one key row·n + col, sorted and deduplicated: CSR order directly
+    key = np.sort(np.concatenate([e[:, 0] * n + e[:, 1], e[:, 1] * n + e[:, 0]]))
+    key = key[np.concatenate(([True], key[1:] != key[:-1]))] if key.size else key
+    rows, cols = np.divmod(key, n)
+    indptr = np.concatenate(([0], np.cumsum(np.bincount(rows, minlength=n))))
+    A = sp.csr_matrix((np.ones(key.size), cols, indptr), shape=(n, n))
+    A.has_sorted_indices = True
     return A
 
 

@@ -6,6 +6,7 @@ Functions take the (V, V) CSR vertex adjacency from ``solvers.laplacian``.
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 import scipy.sparse as sp
@@ -72,9 +73,44 @@ def relabel(labels: np.ndarray) -> np.ndarray:
     return out
 
 
+def group_sums(values: np.ndarray, vertices: np.ndarray, groups: np.ndarray, n_groups: int) -> np.ndarray:
+    """(n_groups, K) ``Σ_{i: groups[i] = g} values[vertices[i], k]`` of a (V, K) per-vertex, per-shape array.
+
+    An (n_groups, V) 0/1 indicator times each shape's row of ``values.T`` (the maps are (K, V) arrays handed
+    out as (V, K) views: gathering (V, K) rows would walk across them); every sum is taken in the order of
+    ``vertices`` from 0, as ``np.add.at`` or ``np.bincount`` over the same vertices takes it."""
+    VT = np.asarray(values).T
+    vertices = np.asarray(vertices, dtype=np.int64)
+    g = np.asarray(groups, dtype=np.int64)
+    counts = np.bincount(g, minlength=n_groups)
+    order = np.argsort(g.astype(np.uint16) if n_groups <= 1 << 16 else g, kind="stable")  # keeps vertex order
+    ind = sp.csr_matrix((np.ones(g.size), vertices[order], np.concatenate(([0], np.cumsum(counts)))),
+                        shape=(n_groups, VT.shape[1]))
+    out = np.empty((VT.shape[0], n_groups))
+    for k in range(VT.shape[0]):
+        out[k] = ind @ VT[k]
+    return np.ascontiguousarray(out.T)
+
+
+def _sorted_unique(keys: np.ndarray) -> np.ndarray:
+    """The distinct values of an int array, sorted (sort and mask: numpy's hash-based unique is slower here)."""
+    k = np.sort(keys)
+    return k[np.concatenate(([True], k[1:] != k[:-1]))] if k.size else k
+
+
+_ROWS: list = [None, None]  # (weak reference to the last graph's indptr, its rows): a segmentation asks ~12 times
+
+
 def _rows_cols(adjacency: sp.spmatrix) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of every stored entry of a CSR graph (both directions of each mesh edge), in CSR order.
+    The rows depend on ``indptr`` alone and are kept for the last ``indptr`` array asked for (the graphs here
+    are never edited in place)."""
     A = sp.csr_matrix(adjacency)
-    return np.repeat(np.arange(A.shape[0]), np.diff(A.indptr)), A.indices
+    ref, rows = _ROWS
+    if ref is None or ref() is not A.indptr:
+        rows = np.repeat(np.arange(A.shape[0]), np.diff(A.indptr))
+        _ROWS[:] = [weakref.ref(A.indptr), rows]
+    return rows, A.indices
 
 
 # --- clean-up -----------------------------------------------------------------------------------------
@@ -91,6 +127,9 @@ def absorb_small_regions(labels: np.ndarray, adjacency: sp.spmatrix, min_size: i
     if min_size <= 1:
         return lab
     rows, cols = _rows_cols(adjacency)
+    # merging only joins labels, so the edges between two regions are among those between two labels now
+    apart = lab[rows] != lab[cols]
+    rows, cols = rows[apart], cols[apart]
     while True:
         R = int(lab.max()) + 1
         if R == 0:
@@ -173,9 +212,11 @@ def fill_background_holes(labels: np.ndarray, adjacency: sp.spmatrix) -> np.ndar
     csize = np.bincount(comp, minlength=ncomp)
     rows, cols = _rows_cols(A)
     m = (comp_of[rows] >= 0) & (lab[cols] >= 0)
-    pairs = np.unique(np.stack([comp_of[rows[m]], lab[cols[m]]], axis=1), axis=0)
-    if pairs.size == 0:
+    R1 = int(lab.max()) + 1
+    key = _sorted_unique(comp_of[rows[m]] * R1 + lab[cols[m]])  # (piece, region) pairs, sorted
+    if key.size == 0:
         return lab
+    pairs = np.stack(np.divmod(key, R1), axis=1)
     n_nbr = np.bincount(pairs[:, 0], minlength=ncomp)
     region_of = np.full(ncomp, -1, dtype=np.int64)
     region_of[pairs[:, 0]] = pairs[:, 1]
@@ -230,17 +271,35 @@ def mesh_pieces(adjacency: sp.spmatrix, main_fraction: float = 0.5) -> tuple[np.
     return piece.astype(np.int64), main
 
 
-def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
+def shape_support(per_shape_displacement: np.ndarray, scales: np.ndarray, out: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """(V, K) where each shape acts: ``min(‖d_k(v)‖ / s_k, 1)``, its displacement over its own scale (the 99%
+    quantile over the vertices it moves), at most 1. Computed along the maps' (K, V) rows, into ``out`` (a (V, K)
+    array of that layout, e.g. an earlier support) when given."""
+    DT = np.asarray(per_shape_displacement).T
+    o = np.empty(DT.shape) if out is None else out.T
+    np.divide(DT, np.asarray(scales, dtype=np.float64)[:, None], out=o)
+    np.minimum(o, 1.0, out=o)
+    return o.T
+
+
+def shape_groups(support: np.ndarray, cut: float = 0.6, overwrite_support: bool = False) -> np.ndarray:
     """(K,) group of every shape: shapes that act on the same part of the face (average-linkage clustering
     of the cosine distance between their (V,) support maps, cut at ``cut``), e.g. a brow's three shapes, an
-    eye's lid and gaze shapes, one side of the mouth. Shapes that move nothing form one group each."""
+    eye's lid and gaze shapes, one side of the mouth. Shapes that move nothing form one group each.
+    ``overwrite_support``: the support maps are normalised in their own memory (it then holds them divided by
+    their norms), instead of in a (V, K) temporary."""
     from scipy.cluster.hierarchy import fcluster, linkage
     S = np.asarray(support, dtype=np.float64)
     K = S.shape[1]
     if K == 1:
         return np.zeros(1, dtype=np.int64)
-    n = np.linalg.norm(S, axis=0)
-    Sn = S / np.where(n > 0, n, 1.0)
+    n = _column_norms(S)
+    if overwrite_support:
+        Sn = S
+        Sn /= np.where(n > 0, n, 1.0)
+    else:
+        Sn = S / np.where(n > 0, n, 1.0)
     D = np.clip(1.0 - Sn.T @ Sn, 0.0, 2.0)
     D[n == 0, :] = D[:, n == 0] = 1.0
     np.fill_diagonal(D, 0.0)
@@ -248,26 +307,46 @@ def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
     return (fcluster(Z, cut, criterion="distance") - 1).astype(np.int64)
 
 
+def _column_norms(S: np.ndarray) -> np.ndarray:
+    """``np.linalg.norm(S, axis=0)`` of a (V, K) array, one column at a time along the rows of ``S.T`` (no (V, K)
+    temporary of squares; the same sums, a column's squares added as one contiguous reduction)."""
+    ST = S.T
+    out = np.empty(ST.shape[0])
+    sq = np.empty(ST.shape[1])
+    for k in range(ST.shape[0]):
+        np.multiply(ST[k], ST[k], out=sq)
+        out[k] = np.add.reduce(sq)
+    return np.sqrt(out)
+
+
 def dominant_group(support: np.ndarray, groups: np.ndarray) -> np.ndarray:
     """(V,) the shape group with the largest support at each vertex (``max_{k∈g} support(v, k)``)."""
-    S = np.asarray(support)
+    ST = np.asarray(support).T  # the shapes' rows of the (K, V) maps: a running maximum, no (V, |g|) copies
     G = int(groups.max()) + 1
-    best = np.full(S.shape[0], -1.0)
-    out = np.zeros(S.shape[0], dtype=np.int64)
+    V = ST.shape[1]
+    best = np.full(V, -1.0)
+    out = np.zeros(V, dtype=np.int64)
+    m = np.empty(V)
+    better = np.empty(V, dtype=bool)
     for g in range(G):
-        m = S[:, groups == g].max(axis=1)
-        better = m > best
-        best[better] = m[better]
-        out[better] = g
+        ks = np.flatnonzero(groups == g)
+        np.copyto(m, ST[ks[0]])
+        for k in ks[1:]:
+            np.maximum(m, ST[k], out=m)
+        np.greater(m, best, out=better)
+        np.copyto(best, m, where=better)
+        np.copyto(out, g, where=better)
     return out
 
 
 def split_graph(adjacency: sp.spmatrix, dominant: np.ndarray) -> sp.csr_matrix:
     """The mesh graph without the edges whose ends are dominated by different shape groups: its components
     within the deforming set are regions that one group of shapes moves (a brow, an eye, a mouth side)."""
-    A = sp.csr_matrix(adjacency).tocoo()
-    keep = dominant[A.row] == dominant[A.col]
-    return sp.csr_matrix((A.data[keep], (A.row[keep], A.col[keep])), shape=A.shape)
+    A = sp.csr_matrix(adjacency)
+    rows, cols = _rows_cols(A)
+    keep = dominant[rows] == dominant[cols]
+    indptr = np.concatenate(([0], np.cumsum(np.bincount(rows[keep], minlength=A.shape[0]))))
+    return sp.csr_matrix((A.data[keep], cols[keep], indptr), shape=A.shape)
 
 
 def attach_separate_meshes(labels: np.ndarray, piece: np.ndarray, main: np.ndarray, support: np.ndarray,
@@ -285,10 +364,10 @@ def attach_separate_meshes(labels: np.ndarray, piece: np.ndarray, main: np.ndarr
     if R == 0 or off.size == 0:
         return lab
     fg = np.flatnonzero(lab >= 0)
-    act = sp.csr_matrix((np.ones(fg.size), (lab[fg], fg)), shape=(R, lab.size)) @ S  # (R, K) per region
+    act = group_sums(S, fg, lab[fg], R)  # (R, K) per region
     act /= np.maximum(np.linalg.norm(act, axis=1, keepdims=True), 1e-300)
     ids, pid = np.unique(piece[off], return_inverse=True)
-    pact = sp.csr_matrix((np.ones(off.size), (pid, off)), shape=(ids.size, lab.size)) @ S  # (P, K) per piece
+    pact = group_sums(S, off, pid, ids.size)  # (P, K) per piece
     norm = np.linalg.norm(pact, axis=1)
     sim = (pact / np.maximum(norm, 1e-300)[:, None]) @ act.T
     best = sim.argmax(axis=1)
@@ -305,12 +384,27 @@ def region_cores(labels: np.ndarray) -> list[np.ndarray]:
     fg = np.flatnonzero(labels >= 0)
     if fg.size == 0:
         return []
-    order = fg[np.argsort(labels[fg], kind="stable")]
-    counts = np.bincount(labels[fg])
-    return [np.sort(c) for c in np.split(order, np.cumsum(counts)[:-1])]
+    lab = labels[fg]
+    counts = np.bincount(lab)
+    order = fg[np.argsort(lab.astype(np.uint16) if counts.size <= 1 << 16 else lab, kind="stable")]  # radix
+    return [c.copy() for c in np.split(order, np.cumsum(counts)[:-1])]  # each ascending: fg is, the sort stable
 
 
-def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int
+def leaving_edges(labels: np.ndarray, adjacency: sp.spmatrix,
+                  edges: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of the directed mesh edges that leave a region's core (from a core vertex to a vertex not
+    in that core), among ``edges`` (default: all of the graph's). Those of a coarser level of a hierarchy are
+    among those of a finer one (merging regions only removes boundaries), so the finest level's edges can be
+    handed to ``overlap_and_blend`` for every level."""
+    labels = np.asarray(labels, dtype=np.int64)
+    rows, cols = _rows_cols(adjacency) if edges is None else edges
+    lr = labels[rows]
+    leave = (lr >= 0) & (lr != labels[cols])
+    return rows[leave], cols[leave]
+
+
+def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int,
+                      edges: tuple[np.ndarray, np.ndarray] | None = None
                       ) -> tuple[list[np.ndarray], list[np.ndarray], sp.csr_matrix]:
     """Grow every region by ``rings`` rings and build partition-of-unity blend weights (ALGORITHMS.md §3).
 
@@ -318,7 +412,8 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int
     ``φ_r(v)``, ``Σ_r φ_r(v) = 1``, joins their results. Raw weights: 1 on a region's core, the linear ramp
     ``(rings + 1 − d)/(rings + 1)`` at ring distance d in its overlap, 1 on the background for background
     vertices; each row is divided by its sum. Returns (cores, vertices, blend) with ``vertices`` = core ∪
-    overlap (sorted) and ``blend`` (V, R+1) CSR whose last column is the background.
+    overlap (sorted) and ``blend`` (V, R+1) CSR whose last column is the background. ``edges``: directed mesh
+    edges that include every edge leaving a core (``leaving_edges`` of a finer level); default all edges.
     """
     labels = np.asarray(labels, dtype=np.int64)
     V = labels.size
@@ -327,32 +422,44 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int
     A = sp.csr_matrix(adjacency)
     cores = region_cores(labels)
     R = len(cores)
-    fg = np.flatnonzero(labels >= 0)
-    # (V, R) indicators, all regions at once: ring d = (A @ ring d-1) minus everything reached so far.
-    core_ind = sp.csr_matrix((np.ones(fg.size), (fg, labels[fg])), shape=(V, R))
-    raw = core_ind.copy()
-    reach = core_ind.copy()
-    frontier = core_ind
+    M = R + 1  # a (vertex, column) pair as one key v·M + c, so that sorted keys are CSR order; column R = background
+    C = rings + 2  # a pair's key with its kind in the low digit: 0 core, d ring d, rings + 1 background
+    in_core = labels >= 0
+    fg = np.flatnonzero(in_core)
+    reach = fg * M + labels[fg]          # sorted: one core pair per foreground vertex
+    # every vertex's own entry (its core, or the background), in vertex order; then the rings, each sorted
+    keys = [(np.arange(V) * M + np.where(in_core, labels, R)) * C + np.where(in_core, 0, C - 1)]
+    weight = np.ones(C)
+    # ring 1 of every region at once: the far ends of the mesh edges that leave its core; ring d: the neighbours
+    # of ring d-1 not reached before
+    rows, cols = leaving_edges(labels, A, edges)
+    new = _sorted_unique(cols * M + labels[rows])
+    deg = np.diff(A.indptr)
     for d in range(1, rings + 1):
-        nb = A @ frontier
-        nb.data[:] = 1.0
-        new = nb - nb.multiply(reach)
-        new.eliminate_zeros()
-        if new.nnz == 0:
+        if d > 1:
+            v, r = np.divmod(new, M)
+            n = deg[v]
+            first = np.repeat(A.indptr[v] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
+            cand = _sorted_unique(A.indices[first] * M + np.repeat(r, n))
+            pos = np.minimum(np.searchsorted(reach, cand), reach.size - 1)
+            new = cand[reach[pos] != cand] if reach.size else cand
+        if new.size == 0:
             break
-        raw = raw + new * ((rings + 1.0 - d) / (rings + 1.0))
-        reach = reach + new
-        frontier = new
-    reach = reach.tocsc()
-    reach.sort_indices()
-    verts = [reach.indices[reach.indptr[r]:reach.indptr[r + 1]].astype(np.int64) for r in range(R)]
-    bg = np.flatnonzero(labels < 0)
-    bg_col = sp.csr_matrix((np.ones(bg.size), (bg, np.zeros(bg.size, dtype=np.int64))), shape=(V, 1))
-    W = sp.csr_matrix(sp.hstack([raw, bg_col], format="csr"))
-    W.sum_duplicates()
+        keys.append(new * C + d)
+        weight[d] = (rings + 1.0 - d) / (rings + 1.0)
+        reach = np.sort(np.concatenate((reach, new)), kind="stable")  # two sorted runs: a merge
+    keys = np.sort(np.concatenate(keys), kind="stable")  # sorted runs: a merge
+    pair, kind = np.divmod(keys, C)
+    rows_w, cols_w = np.divmod(pair, M)
+    indptr = np.concatenate(([0], np.cumsum(np.bincount(rows_w, minlength=V))))
+    W = sp.csr_matrix((weight[kind], cols_w, indptr), shape=(V, M))
+    W.has_sorted_indices = True
     s = np.asarray(W.sum(axis=1)).ravel()  # ≥ 1: every vertex is in a core or the background
     W.data /= np.repeat(s, np.diff(W.indptr))
-    W.sort_indices()
+    # each region's core and overlap vertices, sorted: the reached pairs (in vertex order) by region
+    v, r = np.divmod(reach, M)
+    v = v[np.argsort(r.astype(np.uint16) if R < 1 << 16 else r, kind="stable")]  # 16 bits: a radix sort
+    verts = np.split(v, np.cumsum(np.bincount(r, minlength=R))[:-1]) if R else []
     return cores, verts, W
 
 

@@ -13,14 +13,64 @@ from scipy.spatial import cKDTree
 REFLECT_X = np.array([-1.0, 1.0, 1.0])  # M = diag(−1, 1, 1), the reflection across x = 0
 
 
+class MirrorLookup:
+    """``mirror_map`` of one mesh for any of its vertices: ``lookup(vertices)`` is ``mirror_map(neutral)[vertices]``
+    (and the distances), built once per mesh.
+
+    A vertex whose reflection is exactly the position of one vertex, and of no other, has that vertex as its
+    nearest (at distance 0): those are found by hashing the positions (most of a symmetric mesh). The others
+    (no exact image, or an image shared by several vertices) go to the k-d tree, built on first need."""
+
+    _MIX = np.array([0x9E3779B97F4A7C15, 0xC2B2AE3D27D4EB4F, 0x165667B19E3779F9], dtype=np.uint64)
+
+    def __init__(self, neutral):
+        self.points = np.asarray(neutral, dtype=np.float64)
+        self._tree = None
+        h = self._hash(self.points)
+        self._order = np.argsort(h)
+        self._sorted = h[self._order]
+
+    @classmethod
+    def _hash(cls, p: np.ndarray) -> np.ndarray:
+        bits = np.ascontiguousarray(p + 0.0).view(np.uint64)  # + 0.0: -0.0 and 0.0 hash alike
+        return bits[:, 0] * cls._MIX[0] + bits[:, 1] * cls._MIX[1] + bits[:, 2] * cls._MIX[2]
+
+    @property
+    def tree(self) -> cKDTree:
+        if self._tree is None:
+            self._tree = cKDTree(self.points)
+        return self._tree
+
+    def __call__(self, vertices=None) -> tuple[np.ndarray, np.ndarray]:
+        """(distance, index) of the nearest vertex to the reflection of each of ``vertices`` (all if None)."""
+        p = self.points if vertices is None else self.points[np.asarray(vertices, dtype=np.int64)]
+        q = p * REFLECT_X
+        n = self._sorted.size
+        dist, idx = np.zeros(q.shape[0]), np.zeros(q.shape[0], dtype=np.int64)
+        if n == 0 or q.shape[0] == 0:
+            return dist, idx
+        h = self._hash(q)
+        pos = np.searchsorted(self._sorted, h)
+        at = np.minimum(pos, n - 1)
+        nxt = np.minimum(pos + 1, n - 1)
+        cand = self._order[at]
+        exact = (self._sorted[at] == h) & ((self._sorted[nxt] != h) | (pos + 1 >= n))
+        c = self.points[cand]
+        exact &= (c[:, 0] == q[:, 0]) & (c[:, 1] == q[:, 1]) & (c[:, 2] == q[:, 2])
+        idx[exact] = cand[exact]
+        rest = np.flatnonzero(~exact)
+        if rest.size:
+            d, i = self.tree.query(q[rest])
+            dist[rest], idx[rest] = d, i
+        return dist, idx
+
+
 def mirror_map(neutral, tolerance: float | None = None) -> np.ndarray:
     """(V,) index of each vertex's mirror image across x = 0: the nearest neutral vertex to (−x, y, z).
 
     With ``tolerance``, vertices whose reflection is farther than that from any vertex map to themselves.
     """
-    p = np.asarray(neutral, dtype=np.float64)
-    dist, idx = cKDTree(p).query(p * REFLECT_X)
-    idx = idx.astype(np.int64)
+    dist, idx = MirrorLookup(neutral)()
     if tolerance is not None:
         idx[dist > tolerance] = np.flatnonzero(dist > tolerance)
     return idx

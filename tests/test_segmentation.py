@@ -589,3 +589,22 @@ def test_segment_command_options(tmp_path):
     assert default["levels"][0]["background"] != raw["levels"][0]["background"]
     bad = run_cli("segment", folder, "-o", tmp_path / "x.json", "--smoothing", "-1", check=False)
     assert bad.returncode == 2 and "smoothing" in bad.stderr and bad.stderr.strip().count("\n") == 0
+
+
+def test_large_rig_segmentation_gives_numpy_its_huge_page_setting_back():
+    """A large rig is segmented with ordinary pages (model.segmentation._small_pages); numpy's own setting comes
+    back after, also when two segmentations overlap in threads, and a small rig leaves it alone."""
+    from model.segmentation import SMALL_PAGES_FROM, _small_pages
+    toggle = np._core.multiarray._set_madvise_hugepage
+    before = toggle(True)
+    try:
+        with _small_pages(SMALL_PAGES_FROM):
+            assert toggle(False) is False            # off inside (and left off)
+            with _small_pages(SMALL_PAGES_FROM):     # an overlapping run
+                pass
+            assert toggle(False) is False            # still off: the outer run is not over
+        assert toggle(True) is True                  # back on after the last run
+        with _small_pages(SMALL_PAGES_FROM - 1):
+            assert toggle(True) is True              # a small rig: untouched
+    finally:
+        toggle(before)

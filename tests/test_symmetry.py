@@ -46,3 +46,19 @@ def test_mirrored_regional_pose_on_ict(ict_rig, ict_level):
     rel = np.sqrt((err ** 2).mean()) / np.sqrt((motion ** 2).mean())
     print(f"\nICT, {R} regions, random weights: mirror image off by {100 * rel:.1f} % RMS of the motion")
     assert rel < 0.1
+
+
+def test_mirror_lookup_is_the_kd_tree_answer(ict_rig):
+    """The hashed lookup of exact mirror images gives the k-d tree's nearest vertex and distance, for every
+    vertex and for a subset, on ICT (123 positions shared by two vertices: those go to the tree)."""
+    from scipy.spatial import cKDTree
+    from solvers.symmetry import MirrorLookup
+    p = ict_rig.neutral
+    dist, idx = cKDTree(p).query(p * REFLECT_X)
+    lookup = MirrorLookup(p)
+    d_all, i_all = lookup()
+    assert np.array_equal(i_all, idx) and np.array_equal(d_all, dist)
+    some = np.random.default_rng(0).choice(p.shape[0], 5000, replace=False)
+    d_some, i_some = lookup(some)
+    assert np.array_equal(i_some, idx[some]) and np.array_equal(d_some, dist[some])
+    assert np.array_equal(mirror_map(p), idx)
