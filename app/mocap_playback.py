@@ -118,5 +118,7 @@ class TakePlayback(QtCore.QObject):
             return
         t0, f0 = self._start
         now = time.perf_counter()
-        due = max(t0 + (int((now - t0) * self.rate) + 1) / self.rate, self._last_tick + 1.0 / self.max_rate)
+        due = t0 + (int((now - t0) * self.rate) + 1) / self.rate
+        if self.rate > self.max_rate:   # a fast take: skip frames, no faster than max_rate (a slower one: none)
+            due = max(due, self._last_tick + 1.0 / self.max_rate)
         self.timer.start(max(0, math.ceil((due - now) * 1000.0)))
