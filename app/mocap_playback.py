@@ -2,9 +2,9 @@
 frame the clock is at (frames are skipped when drawing is slow), and a drawn-frames-per-second meter. It knows
 nothing of what a frame shows: ``app.mocap_controller`` listens to ``frame_changed`` and draws it.
 
-The timer is scheduled by the clock: each tick arms a single shot for the moment the next frame is due (a fixed
-interval of int(1000 / 60) = 16 ms beat against the take's 16.67 ms frames, and a tick a little late for the
-event loop dropped a frame now and then: 59.4 frames/s drawn of 60).
+The timer is scheduled by the clock: each tick arms a single shot for the moment the next frame is due, at once
+when drawing the last one took the whole frame (a fixed interval of int(1000 / 60) = 16 ms beat against the
+take's 16.67 ms frames: every 25th tick found no new frame, and a tick the event loop delayed could skip one).
 """
 from __future__ import annotations
 
@@ -112,13 +112,16 @@ class TakePlayback(QtCore.QObject):
         self._schedule()
 
     def _schedule(self) -> None:
-        """Arm the timer for when the clock reaches its next frame (never sooner than ``max_rate`` allows after
-        this tick's start)."""
+        """Arm the timer for when the frame after the shown one is due: at once if the clock is there already
+        (drawing took a frame: it is drawn late rather than skipped, unless the clock has passed it too), else
+        when the clock reaches its next frame (also when the shown frame is ahead of the clock). Never sooner
+        than ``max_rate`` allows after this tick's start."""
         if not self._playing:   # a listener paused
             return
         t0, f0 = self._start
         now = time.perf_counter()
-        due = t0 + (int((now - t0) * self.rate) + 1) / self.rate
+        clock = f0 + int((now - t0) * self.rate)
+        due = t0 + (min(self.frame, clock) + 1 - f0) / self.rate
         if self.rate > self.max_rate:   # a fast take: skip frames, no faster than max_rate (a slower one: none)
             due = max(due, self._last_tick + 1.0 / self.max_rate)
         self.timer.start(max(0, math.ceil((due - now) * 1000.0)))

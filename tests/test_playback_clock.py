@@ -1,5 +1,6 @@
 """app.mocap_playback.TakePlayback schedules its timer by the clock (issue 20): each tick arms one shot for the
-moment the next frame is due, so a 60 fps take draws every frame when drawing takes less than a frame."""
+moment the next frame is due (at once when it is due already), so a 60 fps take draws every frame when drawing
+takes less than a frame, and skips only the frames whose time passed while an earlier one was drawn."""
 from __future__ import annotations
 
 import time
@@ -36,14 +37,17 @@ def test_the_timer_is_armed_for_the_next_frame_on_the_clock(qtbot, clock):
     clock[0] += 0.0005                 # 17.1 ms: frame 1, drawn by 29.1 ms
     pb._tick()
     assert shown == [0, 1] and pb.timer.remainingTime() in (4, 5)  # frame 2 at 33.3 ms
-    # a slow frame: the clock passes frame 3 while frame 2 is drawn; frame 4 comes next, frame 3 is skipped
+    # a slow frame: the clock reaches frame 3 while frame 2 is drawn: frame 3 is drawn at once, late
     clock[0] = 1000.0 + 2 / 60 + 0.0002
-    draw[0] = 0.03                     # drawn by 63.5 ms
+    draw[0] = 0.02                     # drawn by 53.5 ms
     pb._tick()
-    assert shown == [0, 1, 2] and pb.timer.remainingTime() in (3, 4)   # frame 4 at 66.7 ms
-    clock[0] = 1000.0 + 4 / 60 + 0.0003
+    assert shown == [0, 1, 2] and pb.timer.remainingTime() == 0
+    draw[0] = 0.03                     # frame 3, drawn by 83.5 ms: the clock passed frame 4 too
     pb._tick()
-    assert shown == [0, 1, 2, 4]
+    assert shown == [0, 1, 2, 3] and pb.timer.remainingTime() == 0
+    draw[0] = 0.0
+    pb._tick()                         # the frame the clock is at: 5 (frame 4 is skipped to keep the clock)
+    assert shown == [0, 1, 2, 3, 5] and pb.timer.remainingTime() in (16, 17)   # frame 6 at 100 ms
     pb.pause()
     assert not pb.playing and not pb.timer.isActive()
 
