@@ -152,9 +152,15 @@ class MainWindow(QtWidgets.QMainWindow):
         changes (slider drags, marker drags) coalesce into one render."""
         if not self._redraw_pending:
             self._redraw_pending = True
-            QtCore.QTimer.singleShot(0, self.redraw_now)
+            QtCore.QTimer.singleShot(0, self._redraw_if_pending)
+
+    def _redraw_if_pending(self) -> None:
+        # a redraw_now since the request (playback draws its frame at once) drew this change: never twice
+        if self._redraw_pending:
+            self.redraw_now()
 
     def redraw_now(self) -> None:
+        """Redraw the viewport with the current pose now (a requested render still to come is then dropped)."""
         self._redraw_pending = False
         if self.document.project is not None:
             self.viewport.update_points(self.document.surface())

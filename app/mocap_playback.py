@@ -1,9 +1,14 @@
 """Real-time playback of a take: the current frame, play / pause / step / loop on a precise timer that shows the
 frame the clock is at (frames are skipped when drawing is slow), and a drawn-frames-per-second meter. It knows
 nothing of what a frame shows: ``app.mocap_controller`` listens to ``frame_changed`` and draws it.
+
+The timer is scheduled by the clock: each tick arms a single shot for the moment the next frame is due, at once
+when drawing the last one took the whole frame (a fixed interval of int(1000 / 60) = 16 ms beat against the
+take's 16.67 ms frames: every 25th tick found no new frame, and a tick the event loop delayed could skip one).
 """
 from __future__ import annotations
 
+import math
 import time
 
 from PySide6 import QtCore
@@ -22,10 +27,14 @@ class TakePlayback(QtCore.QObject):
         self.frame = -1
         self.loop = True
         self.fps = 0.0
+        self.max_rate = 60.0      # frames drawn per second at most (a faster take skips frames)
         self.timer = QtCore.QTimer(self)
         self.timer.setTimerType(QtCore.Qt.PreciseTimer)
+        self.timer.setSingleShot(True)   # armed by each tick for the next frame's time
         self.timer.timeout.connect(self._tick)
+        self._playing = False
         self._start = (0.0, 0)
+        self._last_tick = 0.0
         self._tick_times: list[float] = []
 
     def set_length(self, n_frames: int, rate: float) -> None:
@@ -45,7 +54,7 @@ class TakePlayback(QtCore.QObject):
 
     @property
     def playing(self) -> bool:
-        return self.timer.isActive()
+        return self._playing
 
     def play(self, on: bool = True) -> None:
         if not on:
@@ -57,11 +66,13 @@ class TakePlayback(QtCore.QObject):
         start = 0 if self.frame >= self.n_frames - 1 else max(self.frame, 0)
         self._start = (time.perf_counter(), start)
         self._tick_times = []
-        self.timer.start(max(1, int(1000 / min(self.rate, 60.0))))
+        self._playing = True
+        self.timer.start(0)   # the first tick shows the start frame (if it is not shown yet)
         self.playing_changed.emit(True)
 
     def pause(self) -> None:
-        was = self.timer.isActive()
+        was = self._playing
+        self._playing = False
         self.timer.stop()
         if was:
             self.playing_changed.emit(False)
@@ -76,8 +87,10 @@ class TakePlayback(QtCore.QObject):
             self.set_frame(max(self.frame, 0) + frames)
 
     def _tick(self) -> None:
+        if not self._playing:
+            return
         t0, f0 = self._start
-        now = time.perf_counter()
+        now = self._last_tick = time.perf_counter()
         target = f0 + int((now - t0) * self.rate)
         if target >= self.n_frames:
             if self.loop:
@@ -87,13 +100,28 @@ class TakePlayback(QtCore.QObject):
                 self.set_frame(self.n_frames - 1)
                 self.pause()
                 return
-        if target == self.frame:
+        if target != self.frame:
+            self.set_frame(target)
+            self.ticked.emit(target)
+            self._tick_times.append(time.perf_counter())
+            self._tick_times = self._tick_times[-30:]
+            if len(self._tick_times) >= 2:
+                dt = (self._tick_times[-1] - self._tick_times[0]) / (len(self._tick_times) - 1)
+                self.fps = 1.0 / dt if dt > 0 else 0.0
+                self.fps_measured.emit(self.fps)
+        self._schedule()
+
+    def _schedule(self) -> None:
+        """Arm the timer for when the frame after the shown one is due: at once if the clock is there already
+        (drawing took a frame: it is drawn late rather than skipped, unless the clock has passed it too), else
+        when the clock reaches its next frame (also when the shown frame is ahead of the clock). Never sooner
+        than ``max_rate`` allows after this tick's start."""
+        if not self._playing:   # a listener paused
             return
-        self.set_frame(target)
-        self.ticked.emit(target)
-        self._tick_times.append(time.perf_counter())
-        self._tick_times = self._tick_times[-30:]
-        if len(self._tick_times) >= 2:
-            dt = (self._tick_times[-1] - self._tick_times[0]) / (len(self._tick_times) - 1)
-            self.fps = 1.0 / dt if dt > 0 else 0.0
-            self.fps_measured.emit(self.fps)
+        t0, f0 = self._start
+        now = time.perf_counter()
+        clock = f0 + int((now - t0) * self.rate)
+        due = t0 + (min(self.frame, clock) + 1 - f0) / self.rate
+        if self.rate > self.max_rate:   # a fast take: skip frames, no faster than max_rate (a slower one: none)
+            due = max(due, self._last_tick + 1.0 / self.max_rate)
+        self.timer.start(max(0, math.ceil((due - now) * 1000.0)))

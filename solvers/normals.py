@@ -3,7 +3,7 @@
 The area-weighted vertex normal (the standard smooth-shading normal, e.g. Max 1999, "Weights for computing
 vertex normals from facet normals"): n_v = normalize(sum over triangles t at v of (e1_t x e2_t)), the cross
 product of a triangle's edges being its normal times twice its area. Polygons are fanned into triangles once;
-the sum onto corners is one precomputed sparse (V, T) incidence product, ~2 ms on ICT FaceKit.
+the sum onto corners is one precomputed sparse (V, T) incidence product per axis, ~1 ms on ICT FaceKit.
 """
 from __future__ import annotations
 
@@ -43,28 +43,34 @@ class VertexNormals:
 
     def __init__(self, face_counts: np.ndarray, face_indices: np.ndarray, n_points: int) -> None:
         self.tris = fan_triangulate(face_counts, face_indices)
-        self._flat = self.tris.ravel().astype(np.intp)
+        self._corners = [np.ascontiguousarray(self.tris[:, c], dtype=np.intp) for c in range(3)]
         T = len(self.tris)
         self.n_points = n_points
         self.incidence = sp.csr_matrix((np.ones(3 * T, np.float32), (self.tris.ravel(), np.repeat(np.arange(T), 3))),
                                        shape=(n_points, T))
 
+    def _face_normal_components(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """x, y, z of e1 x e2 of each triangle, each (T,) float32. Coordinates gathered one axis at a time
+        from contiguous copies (structure of arrays): about 3x faster than gathering (T, 3, 3) corners."""
+        x, y, z = np.array(np.asarray(points, dtype=np.float32).T)   # (3, V) contiguous
+        a, b, c = self._corners
+        ax, ay, az = x[a], y[a], z[a]
+        e1x, e1y, e1z = x[b] - ax, y[b] - ay, z[b] - az
+        e2x, e2y, e2z = x[c] - ax, y[c] - ay, z[c] - az
+        return e1y * e2z - e1z * e2y, e1z * e2x - e1x * e2z, e1x * e2y - e1y * e2x
+
     def face_normals(self, points: np.ndarray) -> np.ndarray:
         """(T, 3) float32 e1 x e2 of each triangle: its normal times twice its area (winding-signed)."""
-        p = np.asarray(points, dtype=np.float32)
-        corners = np.take(p, self._flat, axis=0).reshape(-1, 3, 3)  # (T, 3, 3): np.take is 5x fancy indexing
-        e1 = corners[:, 1] - corners[:, 0]
-        e2 = corners[:, 2] - corners[:, 0]
-        fn = np.empty_like(e1)                      # the cross product, written out (np.cross is slower)
-        fn[:, 0] = e1[:, 1] * e2[:, 2] - e1[:, 2] * e2[:, 1]
-        fn[:, 1] = e1[:, 2] * e2[:, 0] - e1[:, 0] * e2[:, 2]
-        fn[:, 2] = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-        return fn
+        return np.stack(self._face_normal_components(points), axis=1)
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
-        out = np.asarray(self.incidence @ self.face_normals(points), dtype=np.float32)
-        length = np.linalg.norm(out, axis=1, keepdims=True)
-        out /= np.where(length > 0, length, 1.0)
+        # per axis: the triangles' normals summed onto their corners, then normalised (~1 ms on ICT FaceKit)
+        n = [self.incidence @ f for f in self._face_normal_components(points)]
+        length = np.sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2])
+        inv = np.divide(1.0, length, out=np.ones_like(length), where=length > 0)
+        out = np.empty((self.n_points, 3), dtype=np.float32)
+        for c in range(3):
+            np.multiply(n[c], inv, out=out[:, c])
         return out
 
     def quantised(self, points: np.ndarray) -> np.ndarray:

@@ -274,3 +274,44 @@ def test_tool_options_come_back_in_the_next_session(qtbot, tmp_path):
     settings().setValue("sculpt/strength", "strong")
     w3 = make_window(qtbot, tmp_path)
     assert w3.correctives.panel.brush.currentData() == "grab" and w3.correctives.panel.strength.value() == 1.0
+
+
+def test_a_pose_change_draws_one_frame(qtbot, tmp_path):
+    """Issue 20: never render twice for one change. A slider drag step renders once, on the event loop's next
+    turn; a playback tick renders its frame at once (redraw_now), and the render its pose change had requested
+    is then dropped, not drawn a second time."""
+    import vtk
+
+    from widgets.shapes_panel import PoseEdit
+    w = make_window(qtbot, tmp_path)
+    renders = [0]
+    w.viewport.plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent,
+                                           lambda *_: renders.__setitem__(0, renders[0] + 1))
+    qtbot.wait(100)
+    k = w.document.rig.shape_index("jawOpen")
+    p = w.shapes_panel
+    p.pose_edited.emit(PoseEdit("drag-start", k))
+    for value in (0.2, 0.4, 0.6):
+        renders[0] = 0
+        p.pose_edited.emit(PoseEdit("drag", k, value))
+        assert w.redraw_pending
+        qtbot.waitUntil(lambda: not w.redraw_pending, timeout=2000)
+        qtbot.wait(30)
+        assert renders[0] == 1
+    p.pose_edited.emit(PoseEdit("drag-end", k))
+    np.testing.assert_allclose(w.viewport.points(), w.document.surface(), atol=1e-5)
+    # keyed playback: two keys, then the player's tick (the frame's pose, then its redraw now)
+    kf = w.keyframes
+    kf.set_key(0.0)
+    weights = w.document.weights.copy()
+    weights[k] = 1.0
+    w.set_pose(weights, "open")
+    kf.set_key(1.0)
+    qtbot.wait(30)
+    for frame in (6, 12, 18):
+        renders[0] = 0
+        kf.playback.frame_changed.emit(frame)
+        kf.playback.ticked.emit(frame)
+        qtbot.wait(30)
+        assert renders[0] == 1 and not w.redraw_pending
+        np.testing.assert_allclose(w.viewport.points(), w.document.surface(), atol=1e-5)

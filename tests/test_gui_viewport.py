@@ -66,3 +66,43 @@ def test_a_tool_gets_the_picked_point_and_the_view_plane_motion_and_the_camera_s
         mouse(vp.canvas, "release", start)
     assert blocker.args[0] == hit.vertex
     assert len(tool.events) == 4                        # the removed tool saw nothing
+
+
+def test_culled_surface_draws_and_picks_the_back_of_two_sided_parts(qtbot, tmp_path):
+    """Issue 20: the viewport culls the faces turned away on closed parts only; the sample face is an open mask,
+    whose back is drawn by a second actor of its faces reversed: seen from behind, the mask is there. A click
+    on the back of a two-sided part picks the rig's own face (the reversed copy's number mapped back)."""
+    w = make_window(qtbot, tmp_path)
+    vp = w.viewport
+    actors = vp.plotter.renderer.actors
+    assert actors["surface"].GetProperty().GetBackfaceCulling()
+    assert "surface_backs" in actors and actors["surface_backs"].GetVisibility()
+
+    def covered(img):
+        return (np.abs(img.astype(int) - img[2, img.shape[1] // 2].astype(int)).max(axis=2) > 30).mean()
+
+    front = covered(vp.grab_image())
+    vp.plotter.camera.Azimuth(180)                    # look at the back of the face
+    vp.plotter.reset_camera_clipping_range()
+    assert covered(vp.grab_image()) > 0.5 * front > 0.05
+    # a closed box (culled, no back copies) before an open square (two-sided): the square is face 6 of the
+    # surface and face 0 of the backs' actor
+    box = np.array([[x, y, z] for x in (3.0, 4.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
+    box_faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    square = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]])
+    points = np.concatenate([box, square])
+    counts = np.full(7, 4)
+    indices = np.concatenate([np.ravel(box_faces), 8 + np.arange(4)])
+    vp.set_surface(points, counts, indices, focus=square)
+    vp.plotter.camera.Azimuth(180)                    # from behind the square (-Z), the box off to the side
+    vp.plotter.reset_camera_clipping_range()
+    vp.render()
+    x, y, _ = vp.world_to_display(np.array([0.5, 0.5, 0.0]))[0]
+    hit = vp.pick(int(round(x)), int(round(y)))
+    assert hit is not None and hit.face == 6 and hit.vertex in range(8, 12)
+    np.testing.assert_allclose(hit.position, [0.5, 0.5, 0.0], atol=0.05)
+    # the picker meets the square and its reversed copy at one depth; whichever it reports is face 6
+    from widgets.scene import surface_face
+    backs = vp.plotter.renderer.actors["surface_backs"].GetMapper().GetInput()
+    assert backs.GetNumberOfCells() == 1 and surface_face(vp.mesh, backs, 0) == 6
+    assert surface_face(vp.mesh, vp.mesh, 0) == 0

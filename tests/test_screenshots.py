@@ -172,7 +172,8 @@ def test_main_window_viewport_wrong_pose_fails(qtbot, tmp_path, preset, name):
 def test_comparison_catches_an_empty_viewport(qtbot, tmp_path):
     """An empty viewport (no surface drawn) must fail the comparison, or the tests prove nothing."""
     w, _ = _viewport_shot(qtbot, tmp_path, "happy")
-    w.viewport.plotter.remove_actor("surface")
+    for name in ("surface", "surface_backs"):   # the surface, and the back sides of its two-sided parts
+        w.viewport.plotter.remove_actor(name)
     img = w.viewport.grab_image(size=(640, 480))
     assert _face_fraction(img) < 0.01
     assert_wrong_picture_fails(img, "window_viewport_happy", tolerance=0.03, unlike=WINDOW_UNLIKE["window_viewport_happy"])

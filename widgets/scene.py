@@ -43,7 +43,7 @@ def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarr
 
     ``mesh.field_data`` is left alone; the normals function (``normals``, to share one built for these
     faces, else a new one) is kept on the mesh object as ``mesh._display_normals`` so SurfaceArrays can
-    refresh them.
+    refresh them, and the polygons as ``mesh._faces`` (counts, indices) for ``add_surface(cull_hidden=True)``.
     """
     import pyvista as pv
     # A copy: SurfaceArrays writes into the mesh's own arrays, never into the caller's.
@@ -51,6 +51,7 @@ def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarr
     if normals is None:
         normals = VertexNormals(face_counts, face_indices, mesh.n_points)
     object.__setattr__(mesh, "_display_normals", normals)
+    object.__setattr__(mesh, "_faces", (np.asarray(face_counts), np.asarray(face_indices)))
     mesh.point_data["Normals"] = normals(mesh.points)
     mesh.point_data.active_normals_name = "Normals"
     return mesh
@@ -97,14 +98,19 @@ class ColorMap:
 
 
 def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: bool = False, name="surface",
-                specular: float = 0.25):
-    """Add the rig surface with smooth shading; colour by ``colormap`` with a legend if given."""
+                specular: float = 0.25, cull_hidden: bool = False):
+    """Add the rig surface with smooth shading; colour by ``colormap`` with a legend if given.
+
+    ``cull_hidden`` (a ``rig_mesh``; the viewport and ``render``): skip the faces turned away from the camera
+    where that changes nothing seen (``solvers.mesh.hidden_back_faces``: the closed, outward parts); the other
+    parts keep both sides, their backs drawn by a second actor named ``<name>_backs`` (see ``surface_face``)."""
+    plotter.remove_actor(f"{name}_backs", render=False)
     # Smooth shading comes from the mesh's own "Normals" (rig_mesh/SurfaceArrays), not VTK's filter.
     kwargs = dict(smooth_shading=False, interpolation="gouraud", name=name, show_edges=wireframe, edge_color=(0.15, 0.15, 0.18),
                   line_width=0.5, specular=specular, specular_power=20, diffuse=0.85, ambient=0.12,
                   reset_camera=False)
     if colormap is None:
-        return plotter.add_mesh(mesh, color=SKIN, **kwargs)
+        return _shade(plotter, mesh, plotter.add_mesh(mesh, color=SKIN, **kwargs), wireframe, name, cull_hidden)
     if colormap.legend:
         entries = colormap.legend if len(colormap.legend) <= 10 else \
             colormap.legend[:9] + [(f"… {len(colormap.legend) - 9} more", (0.7, 0.7, 0.7))]
@@ -122,7 +128,7 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
         mesh.point_data["colors"] = np.asarray(colormap.scalars, dtype=np.uint8)
         actor = plotter.add_mesh(mesh, scalars="colors", rgb=True, **kwargs)
         _map_directly(actor, mesh, "colors")
-        return actor
+        return _shade(plotter, mesh, actor, wireframe, name, cull_hidden)
     mesh.point_data["values"] = np.asarray(colormap.scalars, dtype=np.float32)
     bar = dict(title=colormap.title or " ", vertical=True, position_x=0.82, position_y=0.12, height=0.76,
                width=0.06, title_font_size=14, label_font_size=12, n_labels=5, fmt="%.3g",
@@ -136,7 +142,131 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
         if bar["title"] in plotter.scalar_bars:
             plotter.scalar_bars[bar["title"]].SetVerticalTitleSeparation(8)  # pixels between title and top label
     _map_directly(actor, mesh, "values")
+    return _shade(plotter, mesh, actor, wireframe, name, cull_hidden)
+
+
+def _white_directional_lights(renderer) -> int:
+    """The number of lights on in ``renderer`` if VTK's shaders light with one uniform direction and colour
+    each ("lightDirectionVC<i>", "lightColor<i>": every light directional, and not one lone headlight of
+    intensity 1, which VTK lights without uniforms) and all are white; else 0."""
+    lights = [light for light in renderer.GetLights() if light.GetSwitch()]
+    if not lights or any(light.GetPositional() for light in lights):
+        return 0
+    if len(lights) == 1 and lights[0].LightTypeIsHeadlight() and lights[0].GetIntensity() == 1.0:
+        return 0
+    if any(len(set(light.GetDiffuseColor())) != 1 for light in lights):
+        return 0
+    return len(lights)
+
+
+def _shade(plotter, mesh, actor, wireframe: bool, name: str, cull_hidden: bool):
+    """Light ``actor``'s surface per vertex (Gouraud shading proper) instead of per pixel, cull the faces whose
+    back cannot show (``cull_hidden``), and return it.
+
+    Why: on software OpenGL (llvmpipe under Xvfb) most of a frame of ICT FaceKit (53k small triangles) is spent
+    per triangle and per 4x4 pixel block of it: the rasteriser's set-up, the depth test, and the fragment
+    shader's inputs. VTK's per-pixel lighting interpolates the view-space position and normal (7 floats) and
+    normalises them in every pixel; here the vertex shader computes each light's diffuse and specular terms
+    for both sides of the surface (VTK lights a face seen from behind with its normal flipped) into one vec4,
+    and the fragment shader only picks a side and applies the material colour (a colour map's included).
+    Culling drops the faces turned away (the back of the head, the far halves of the eyes and teeth, 40% of
+    ICT's triangles from the front) before they are rasterised; the parts whose backs can show (eyelashes,
+    the eyelids' occlusion sheets, the mouth bag, a face mask) get a second actor of their faces reversed,
+    lit as their back. Measured under Xvfb on ICT at the default window size: see the README's Benchmarks.
+    The picture: the same but for highlights a pixel or two off at a few places (within the screenshot
+    tests' tolerance). Only for what the uniforms describe (white directional lights, the ones
+    ``style_plotter`` sets) and a mesh with vertex normals, without edges drawn (VTK draws them through a
+    geometry shader, which would have to pass the new input on); anything else keeps VTK's per-pixel
+    lighting, both sides drawn.
+    """
+    n_lights = _white_directional_lights(plotter.renderer)
+    if wireframe or not n_lights or mesh.GetPointData().GetNormals() is None:
+        return actor
+    _vertex_lighting(actor, n_lights)
+    if cull_hidden and getattr(mesh, "_faces", None) is not None:
+        import vtk
+        actor.GetProperty().BackfaceCullingOn()
+        cells, _faces = _back_sides(mesh)
+        if cells is not None:
+            backs = vtk.vtkPolyData()   # the mesh's points and point data (shared arrays), the reversed faces
+            backs.SetPoints(mesh.GetPoints())
+            backs.GetPointData().ShallowCopy(mesh.GetPointData())
+            backs.SetPolys(cells)
+            mapper = vtk.vtkPolyDataMapper()
+            mapper.ShallowCopy(actor.GetMapper())   # the same colouring
+            mapper.SetInputData(backs)
+            back = vtk.vtkActor()
+            back.SetMapper(mapper)
+            back.SetProperty(actor.GetProperty())
+            _vertex_lighting(back, n_lights, back=True)
+            plotter.add_actor(back, name=f"{name}_backs", reset_camera=False, render=False)
+            object.__setattr__(mesh, "_backs", backs)
     return actor
+
+
+def _back_sides(mesh):
+    """(vtkCellArray of the mesh's faces whose back can show, each reversed; their face indices), cached on
+    the mesh; (None, None) when every face's back is hidden."""
+    cached = getattr(mesh, "_back_cells", None)
+    if cached is None:
+        from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray
+        from vtkmodules.vtkCommonDataModel import vtkCellArray
+
+        from solvers.mesh import hidden_back_faces
+        counts, indices = mesh._faces
+        faces = np.flatnonzero(~hidden_back_faces(mesh.points, counts, indices))
+        cached = (None, None)
+        if faces.size:
+            counts = np.asarray(counts, dtype=np.int64)
+            starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+            n = counts[faces]
+            offsets = np.concatenate(([0], np.cumsum(n)))
+            k = np.arange(offsets[-1]) - np.repeat(offsets[:-1], n)            # corner number in its face
+            # reversed with the first corner kept: (i0, ik, ..., i1), so a fan splits it as the original
+            corner = np.where(k == 0, 0, np.repeat(n, n) - k)
+            reversed_ids = np.asarray(indices, dtype=np.int64)[np.repeat(starts[faces], n) + corner]
+            cells = vtkCellArray()
+            cells.SetData(numpy_to_vtkIdTypeArray(offsets.astype(np.int64), deep=True),
+                          numpy_to_vtkIdTypeArray(reversed_ids, deep=True))
+            cached = (cells, faces)
+        object.__setattr__(mesh, "_back_cells", cached)
+    return cached
+
+
+def surface_face(mesh, dataset, cell: int) -> int:
+    """The mesh's face index of ``cell`` of a picked ``dataset``: the mesh itself, or its backs' actor."""
+    if dataset is not None and dataset is getattr(mesh, "_backs", None):
+        return int(_back_sides(mesh)[1][cell])
+    return int(cell)
+
+
+def _vertex_lighting(actor, n_lights: int, back: bool = False) -> None:
+    """Per-vertex lighting (see ``_shade``); ``back``: the actor draws reversed faces, lit as the back side."""
+    specular = actor.GetProperty().GetSpecular() > 0
+    side_terms = []
+    for i in range(n_lights):
+        for k, sign in ((0, ""), (2, "-")):       # lit.xy: the front side, lit.zw: the back (normal flipped)
+            side_terms.append(f"d = max(0.0, dot({sign}n, -lightDirectionVC{i}));")
+            side_terms.append(f"lit[{k}] += d * lightColor{i}.g;")
+            if specular:
+                side_terms.append(f"lit[{k + 1}] += sign(d) * pow(max(1e-5, dot(reflect(lightDirectionVC{i}, "
+                                  f"{sign}n), eye)), specularPowerUniform) * lightColor{i}.g;")
+    sp = actor.GetShaderProperty()
+    sp.ClearAllShaderReplacements()
+    uniforms = "".join(f"uniform vec3 lightColor{i};\nuniform vec3 lightDirectionVC{i};\n" for i in range(n_lights))
+    sp.AddVertexShaderReplacement("//VTK::Normal::Dec", True, "//VTK::Normal::Dec\n" + uniforms
+                                  + "uniform float specularPowerUniform;\nout vec4 vertexLightVSOutput;\n", False)
+    sp.AddVertexShaderReplacement("//VTK::Normal::Impl", True, "\n".join(
+        ["//VTK::Normal::Impl", "{", "vec3 n = normalize(normalMatrix * normalMC);",
+         "vec3 eye = normalize(-(MCVCMatrix * vertexMC).xyz);", "vec4 lit = vec4(0.0);", "float d;"]
+        + side_terms + ["vertexLightVSOutput = lit;", "}"]), False)
+    sp.AddFragmentShaderReplacement("//VTK::Normal::Dec", True, "//VTK::Normal::Dec\nin vec4 vertexLightVSOutput;",
+                                    False)
+    sp.AddFragmentShaderReplacement("//VTK::Normal::Impl", True, "", False)
+    side = "vertexLightVSOutput.zw" if back else "gl_FrontFacing ? vertexLightVSOutput.xy : vertexLightVSOutput.zw"
+    spec = " + lit.y * specularColor" if specular else ""
+    sp.AddFragmentShaderReplacement("//VTK::Light::Impl", True, f"vec2 lit = {side};\n"
+                                    f"fragOutput0 = vec4(ambientColor + lit.x * diffuseColor{spec}, opacity);", False)
 
 
 def _legend_white_text(legend, entries) -> None:
@@ -272,7 +402,7 @@ def render_png(points, face_counts, face_indices, out_path, *, focus=None, color
         if texture is not None and colormap is None:
             texture(plotter, mesh, wireframe)
         else:
-            add_surface(plotter, mesh, colormap, wireframe=wireframe)
+            add_surface(plotter, mesh, colormap, wireframe=wireframe, cull_hidden=True)
         for add in overlays or ():
             add(plotter)
         if title:

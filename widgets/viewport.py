@@ -23,7 +23,7 @@ from functools import cached_property
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from .scene import ColorMap, SurfaceArrays, add_surface, rig_mesh, set_camera, style_plotter
+from .scene import ColorMap, SurfaceArrays, add_surface, rig_mesh, set_camera, style_plotter, surface_face
 
 CLICK_SLOP_PX = 3   # a press and release this close (display pixels, |dx| + |dy|) is a click
 
@@ -218,9 +218,10 @@ class Viewport(QtWidgets.QWidget):
             if key in self.mesh.point_data:
                 del self.mesh.point_data[key]
         if self._textured is not None and self._colormap is None:
+            self.plotter.remove_actor("surface_backs", render=False)   # add_surface's second actor
             self._textured.add_to(self.plotter, wireframe=self._wireframe)
         else:
-            add_surface(self.plotter, self.mesh, self._colormap, wireframe=self._wireframe)
+            add_surface(self.plotter, self.mesh, self._colormap, wireframe=self._wireframe, cull_hidden=True)
 
     # --- overlays ----------------------------------------------------------------------------------
     def add_overlay(self, name: str, mesh, **style):
@@ -248,7 +249,8 @@ class Viewport(QtWidgets.QWidget):
         if picker.GetDataSet() is None or picker.GetDataSet().GetNumberOfPoints() != shown.n_points:
             return None
         point = np.array(picker.GetPickPosition())
-        face = int(picker.GetCellId())
+        face = int(picker.GetCellId()) if shown is not self.mesh else \
+            surface_face(self.mesh, picker.GetDataSet(), picker.GetCellId())   # the back of a two-sided part
         ids = np.asarray(shown.get_cell(face).point_ids)
         pts = np.asarray(shown.points)[ids]
         nearest = int(ids[np.argmin(np.linalg.norm(pts - point, axis=1))])

@@ -62,7 +62,7 @@ def test_bench_drag_to_redraw_step(benchmark, qtbot, tmp_path, ict_rig, ict_drag
     from model.project import Project
     from tests.gui_helpers import make_window
     seg, level, ms = ict_drag
-    w = make_window(qtbot, tmp_path)
+    w = make_window(qtbot, tmp_path, size=(1400, 900))   # the main window's default size
     c = w.markers
     qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
     w.document.set_project(Project(rig=ict_rig.copy()), None)

@@ -1,0 +1,80 @@
+"""app.mocap_playback.TakePlayback schedules its timer by the clock (issue 20): each tick arms one shot for the
+moment the next frame is due (at once when it is due already), so a 60 fps take draws every frame when drawing
+takes less than a frame, and skips only the frames whose time passed while an earlier one was drawn."""
+from __future__ import annotations
+
+import time
+
+import pytest
+
+import app.mocap_playback as playback
+from app.mocap_playback import TakePlayback
+
+
+@pytest.fixture
+def clock(monkeypatch):
+    now = [1000.0]
+    monkeypatch.setattr(playback.time, "perf_counter", lambda: now[0])
+    return now
+
+
+def test_the_timer_is_armed_for_the_next_frame_on_the_clock(qtbot, clock):
+    pb = TakePlayback()
+    shown = []
+    pb.frame_changed.connect(shown.append)
+    pb.set_length(120, 60.0)
+    pb.set_frame(0)
+    pb.play()
+    assert pb.timer.isSingleShot()
+    clock[0] += 0.0041                 # the first tick, a little after Play: frame 0 is shown already
+    pb._tick()
+    assert shown == [0] and pb.timer.remainingTime() in (13, 14)   # frame 1 is due at 16.7 ms: in 12.6 ms
+    clock[0] += 0.0125                 # the tick for frame 1, at 16.6 ms (a ms early): nothing yet, armed again
+    pb._tick()
+    assert shown == [0] and pb.timer.remainingTime() in (0, 1)
+    draw = [0.012]                     # the clock time drawing a frame takes
+    pb.frame_changed.connect(lambda _f: clock.__setitem__(0, clock[0] + draw[0]))
+    clock[0] += 0.0005                 # 17.1 ms: frame 1, drawn by 29.1 ms
+    pb._tick()
+    assert shown == [0, 1] and pb.timer.remainingTime() in (4, 5)  # frame 2 at 33.3 ms
+    # a slow frame: the clock reaches frame 3 while frame 2 is drawn: frame 3 is drawn at once, late
+    clock[0] = 1000.0 + 2 / 60 + 0.0002
+    draw[0] = 0.02                     # drawn by 53.5 ms
+    pb._tick()
+    assert shown == [0, 1, 2] and pb.timer.remainingTime() == 0
+    draw[0] = 0.03                     # frame 3, drawn by 83.5 ms: the clock passed frame 4 too
+    pb._tick()
+    assert shown == [0, 1, 2, 3] and pb.timer.remainingTime() == 0
+    draw[0] = 0.0
+    pb._tick()                         # the frame the clock is at: 5 (frame 4 is skipped to keep the clock)
+    assert shown == [0, 1, 2, 3, 5] and pb.timer.remainingTime() in (16, 17)   # frame 6 at 100 ms
+    pb.pause()
+    assert not pb.playing and not pb.timer.isActive()
+
+
+def test_a_take_faster_than_60_fps_draws_at_most_60_frames_a_second(qtbot, clock):
+    pb = TakePlayback()
+    pb.set_length(240, 120.0)
+    pb.set_frame(0)
+    pb.play()
+    clock[0] += 0.002
+    pb._tick()                         # frame 0 again: nothing to draw; the next due is 1/60 s after this tick
+    assert pb.timer.remainingTime() in (16, 17)
+
+
+def test_real_playback_plays_a_60_fps_take_in_order_and_ends_on_time(qtbot):
+    """On the real clock and timer, with 8 ms of drawing a frame: one second of a 60 fps take shows its frames in
+    order, ending on the last one a second after Play. (A frame may be skipped when the shared test machine
+    wakes the event loop late; the scheduling itself is pinned on a fake clock above.)"""
+    pb = TakePlayback()
+    shown = []
+    pb.frame_changed.connect(lambda f: (shown.append(f), time.sleep(0.008)))
+    pb.set_length(61, 60.0)
+    pb.loop = False
+    pb.set_frame(0)
+    t0 = time.perf_counter()
+    pb.play()
+    qtbot.waitUntil(lambda: not pb.playing, timeout=5000)
+    elapsed = time.perf_counter() - t0
+    assert shown == sorted(set(shown)) and shown[-1] == 60 and len(shown) >= 30
+    assert 0.99 < elapsed < 1.15
