@@ -40,7 +40,8 @@ def bench_takes(tmp_path_factory, take_dir):
 
 
 _BATCH = """
-import argparse, json, sys, time
+import argparse, json, os, sys, time
+import psutil
 from app.cli_batch import prepare_job
 from app.cli_solve import add_solve_options
 from model.batch import run_batch
@@ -49,18 +50,35 @@ rig_dir, map_path, out, workers, *takes = sys.argv[1:]
 p = argparse.ArgumentParser()
 add_solve_options(p)
 job = prepare_job(load_rig(rig_dir), p.parse_args(["--map", map_path]))
+
+
+def cpu():
+    # CPU seconds of this process and of every process the batch started: the workers are reaped by this process
+    # (spawned) or by its fork server (forked), which stays up until this process ends
+    t = os.times()
+    total = t.user + t.system + t.children_user + t.children_system
+    for c in psutil.Process().children():
+        if "forkserver" in " ".join(c.cmdline()):
+            ct = c.cpu_times()
+            total += ct.user + ct.system + ct.children_user + ct.children_system
+    return total
+
+
 last = {}
-t0 = time.perf_counter()
+c0, t0 = cpu(), time.perf_counter()
 rows = run_batch(job, takes, out, workers=int(workers), force=True, progress=lambda p: last.update(p=p),
                  dashboard_address="127.0.0.1:0")
 wall = time.perf_counter() - t0
+time.sleep(0.5)                                  # the fork server reaps the last worker
 print(json.dumps({"wall": wall, "takes_s": last["p"].elapsed, "status": [r["status"] for r in rows],
-                  "frames": sum(r["frames"] for r in rows), "busy": sum(r["seconds"] for r in rows)}))
+                  "frames": sum(r["frames"] for r in rows), "busy": sum(r["seconds"] for r in rows),
+                  "cpu": cpu() - c0}))
 """
 
 
 def _run(take_dir, takes, out, workers):
-    """(wall s of ``run_batch``, s of takes alone, frames, s the workers spent on takes added up): one batch in a
+    """(wall s of ``run_batch``, s of takes alone, frames, s the workers spent on takes added up, CPU s of all the
+    batch's processes): one batch in a
     fresh process, as one ``batch`` command runs (the rig is loaded and the job prepared before the clock starts).
     A fresh process each time, so that no run inherits another's warm local cluster machinery (the fork server
     its workers are forked from is started by the first local cluster of a process)."""
@@ -73,7 +91,7 @@ def _run(take_dir, takes, out, workers):
     assert proc.returncode == 0, proc.stderr[-3000:]
     r = json.loads(proc.stdout.strip().splitlines()[-1])
     assert r["status"] == ["solved"] * len(takes)
-    return r["wall"], r["takes_s"], r["frames"], r["busy"]
+    return r["wall"], r["takes_s"], r["frames"], r["busy"], r["cpu"]
 
 
 def test_bench_batch_speedup(benchmark, take_dir, bench_takes, tmp_path):
@@ -87,11 +105,12 @@ def test_bench_batch_speedup(benchmark, take_dir, bench_takes, tmp_path):
     benchmark.extra_info.update(takes=N_TAKES, frames=one[2], one_worker_wall_s=one[0], one_worker_takes_s=one[1],
                                 two_workers_wall_s=two[0], two_workers_takes_s=two[1], speedup_wall=speed_wall,
                                 speedup_takes=speed_takes, load_average=load, concurrency=concurrency,
-                                per_take_slowdown_with_two=slowdown)
+                                per_take_slowdown_with_two=slowdown, one_worker_cpu_s=one[4], two_workers_cpu_s=two[4])
     print(f"\nbatch of {N_TAKES} takes ({one[2]} frames): 1 worker {one[0]:.1f} s ({one[1]:.1f} s of takes), "
           f"2 workers {two[0]:.1f} s ({two[1]:.1f} s of takes): speed-up {speed_wall:.2f}x whole run, "
           f"{speed_takes:.2f}x takes alone; {concurrency:.2f} takes at once on average, each {slowdown:.2f}x "
-          f"as long as on 1 worker; load average {load:.1f} on {os.cpu_count()} cores")
+          f"as long as on 1 worker; CPU of all the batch's processes {one[4]:.1f} s on 1 worker, {two[4]:.1f} s on 2; "
+          f"load average {load:.1f} on {os.cpu_count()} cores")
 
 
 _PLAIN = """
@@ -140,7 +159,7 @@ def test_bench_batch_overhead_per_take(benchmark, take_dir, bench_takes, tmp_pat
     env_one = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     as_solve = _plain(takes, take_dir, tmp_path, {})
     as_worker = _plain(takes, take_dir, tmp_path, env_one)
-    wall, takes_s, _, _ = benchmark.pedantic(_run, args=(take_dir, takes, tmp_path / "one", 1), rounds=1, iterations=1)
+    wall, takes_s, _, _, _ = benchmark.pedantic(_run, args=(take_dir, takes, tmp_path / "one", 1), rounds=1, iterations=1)
     batch_s = takes_s / len(takes)
     plain_s = as_worker["per_take_s"]
     benchmark.extra_info.update(plain_solve_per_take_s=as_solve["per_take_s"], plain_solve_one_thread_env_s=plain_s,
