@@ -184,6 +184,8 @@ def test_batch_on_a_local_cluster_matches_solve_resumes_and_survives_a_killed_wo
         tree = psutil.Process(p.pid).children(recursive=True)
         servers = [c for c in tree if "forkserver" in " ".join(c.cmdline())
                    and "forkserver" not in " ".join(c.parent().cmdline())]
+        if sys.platform.startswith("linux"):
+            assert len(servers) == 1, "the local cluster's workers are forked from one fork server"
         workers = (servers[0].children() if servers else
                    [c for c in tree if "spawn_main" in " ".join(c.cmdline())])
         assert len(workers) == 2
