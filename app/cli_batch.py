@@ -47,7 +47,7 @@ def prepare_job(rig, args):
     marker_map = load_marker_map(args.map) if args.map else None
     return BatchJob.prepare(rig, settings, segmentation=segmentation, marker_map=marker_map,
                             cache=bool(getattr(args, "cache", False)), preview=preview_renderer(),
-                            focus=preview_focus(rig))
+                            focus=preview_focus(rig), preload=("app.batch_worker",))
 
 
 def _clock(seconds: float | None) -> str:

@@ -11,7 +11,8 @@ Qt-free; the ``batch`` command (app.cli_batch) and the GUI's File ▸ Batch Solv
   that does not fit) returns a failed row with its one-sentence error.
 - ``completed_row`` is the resumability check: a take whose done-marker matches the take file and the settings
   is skipped unless forced.
-- ``run_batch`` runs the jobs on a ``LocalCluster`` (processes, one thread each) or a scheduler address, with
+- ``run_batch`` runs the jobs on a ``LocalCluster`` (processes forked from one fork server that imported what a take
+  needs, one thread each, Dask's housekeeping made rarer: ``local_cluster_config``) or a scheduler address, with
   retries, and reports progress; ``write_summary`` writes ``batch.json`` and ``batch.csv``.
 """
 from __future__ import annotations
@@ -140,11 +141,14 @@ class BatchJob:
     focus: np.ndarray | None = None       # the points the preview frames
     signature: dict = field(default_factory=dict)
     antagonists: list | None = None       # the pairs the solves keep apart (``solve_pairs``), found once
+    preload: tuple = ()                   # modules a local cluster's workers load before their first take
 
     @classmethod
     def prepare(cls, rig: Rig, settings: dict, *, segmentation=None, marker_map: MarkerMap | None = None,
-                cache: bool = False, preview: Callable | None = None, focus: np.ndarray | None = None) -> "BatchJob":
-        """The shared part of a batch: the rig's float64 pose evaluator is built here, once."""
+                cache: bool = False, preview: Callable | None = None, focus: np.ndarray | None = None,
+                preload: tuple = ()) -> "BatchJob":
+        """The shared part of a batch: the rig's float64 pose evaluator is built here, once. ``preload``: modules
+        whose import readies a worker for ``preview`` (see ``start_client``)."""
         map_id = "automatic" if marker_map is None else hashlib.sha1(
             json.dumps(marker_map.to_json(), sort_keys=True).encode()).hexdigest()[:16]
         signature = {"settings": {k: settings[k] for k in sorted(settings)}, "marker_map": map_id,
@@ -154,7 +158,8 @@ class BatchJob:
         return cls(rig=rig, settings=dict(settings), evaluator=PoseEvaluator(rig, dtype=np.float64),
                    segmentation=segmentation, marker_map=marker_map, cache=cache, preview=preview,
                    focus=focus, signature=json.loads(json.dumps(signature)),
-                   antagonists=solve_pairs(rig, settings))   # once per batch, not once per take
+                   antagonists=solve_pairs(rig, settings),    # once per batch, not once per take
+                   preload=tuple(preload))
 
 
 # --- one take ---------------------------------------------------------------------------------------
@@ -345,11 +350,56 @@ def _unexpected(path: Path, exc: BaseException) -> str:
     return f"{path}: the solve stopped unexpectedly ({type(exc).__name__}{': ' + text if text else ''})."
 
 
+# What a take needs on a worker, imported once by the local cluster's fork server (``start_client``).
+WORKER_MODULES = ("distributed", "model.batch", "model.take_workspace", "model.take_exports", "solvers.take_kernel")
+
+
+def local_cluster_config() -> dict:
+    """Dask settings for the local cluster, for as long as it runs (its nannies read them when they start or
+    restart a worker). With as many workers as cores, every CPU second spent beside the takes is taken from one:
+
+    - the workers are forked from one fork server that imported ``WORKER_MODULES`` and the job's ``preload`` once,
+      instead of each worker starting a fresh interpreter and importing Dask, numpy, the solver and VTK itself
+      (1.2-1.7 s of CPU a worker, most of it in its first take, and again in its deserialisation of the job and
+      its interpreter's teardown at the end);
+    - the workers' housekeeping runs less often: Dask's statistical profiler samples a worker's stack every 10 ms
+      (off: the dashboard's Profile page stays empty), the event-loop health tick runs every 20 ms in every
+      process (1 s), the system monitor every 0.5 s (5 s)."""
+    import multiprocessing
+    config = {"distributed.worker.profile.enabled": False, "distributed.admin.tick.interval": "1s",
+              "distributed.admin.system-monitor.interval": "5s"}
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        config["distributed.worker.multiprocessing-method"] = "forkserver"
+    return config
+
+
+def _start_fork_server(modules: list[str]) -> None:
+    """Start this process's fork server now (if it is not running), importing ``modules``, so that its imports
+    run while the scheduler starts here. It gets the environment the nannies give their workers before they start
+    (``distributed.nanny.pre-spawn-environ``: one BLAS thread before numpy loads, glibc's memory trimming, a fixed
+    hash seed), as a worker spawned by a nanny would, and which each nanny also sets in this process."""
+    import multiprocessing.forkserver
+
+    import dask
+    from distributed.utils import get_mp_context
+    ctx = get_mp_context()                        # Dask's own context (it sets its preload list once)
+    ctx.set_forkserver_preload(list(dict.fromkeys(modules)))
+    env = {k: os.environ.get(k, str(v)) for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()
+           if v is not None}
+    if env.get("PYTHONHASHSEED") in (None, "0"):
+        env["PYTHONHASHSEED"] = "6640"            # the nanny's choice, so that every worker hashes alike
+    os.environ.update(env)
+    multiprocessing.forkserver.ensure_running()
+
+
 def start_client(workers: int | None = None, scheduler: str | None = None, *, timeout: float | None = None,
-                 dashboard_address: str = "127.0.0.1:8787"):
+                 dashboard_address: str = "127.0.0.1:8787", preload: tuple = ()):
     """(Dask client, local cluster or None): a scheduler's address, or a LocalCluster of ``workers`` processes
-    with one thread each on 127.0.0.1 (default: the machine's cores). ``timeout`` (seconds) for a scheduler to
-    answer and show a worker: Dask's connect timeout by default (``distributed.comm.timeouts.connect``)."""
+    with one thread each on 127.0.0.1 (default: the machine's cores), to be run under ``local_cluster_config()``:
+    its workers are forked from a fork server that imported ``WORKER_MODULES`` and ``preload`` (the fork server
+    is this process's, started with the first local cluster and kept for later ones). ``timeout`` (seconds) for a
+    scheduler to answer and show a worker: Dask's connect timeout by default
+    (``distributed.comm.timeouts.connect``)."""
     import logging
 
     import dask
@@ -366,6 +416,8 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
                                 f"{timeout:g} s ({type(exc).__name__}).") from None
         return client, None
     n = workers or os.cpu_count() or 1
+    if dask.config.get("distributed.worker.multiprocessing-method") == "forkserver":
+        _start_fork_server([*WORKER_MODULES, *preload])
     # One core a worker: Dask's nanny already sets one BLAS/OpenMP thread; llvmpipe, which draws the previews
     # off screen, would otherwise rasterise on every core of the machine from each worker at once.
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
@@ -397,44 +449,47 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
         progress(BatchProgress(done, len(takes), 0, 0.0))
     if pending:
         out_dir.mkdir(parents=True, exist_ok=True)
-        client, cluster = start_client(workers, scheduler, dashboard_address=dashboard_address)
-        try:
-            from distributed import as_completed
+        import dask
+        with dask.config.set(local_cluster_config() if not scheduler else {}):   # for the cluster's whole life
+            client, cluster = start_client(workers, scheduler, dashboard_address=dashboard_address,
+                                           preload=job.preload)
             try:
-                dashboard = client.dashboard_link
-            except Exception:   # no dashboard (bokeh missing, or the scheduler runs none)
-                dashboard = None
-            if on_client is not None:
-                on_client(client, dashboard)
-            if progress is not None:
-                progress(BatchProgress(done, len(takes), 0, 0.0, dashboard=dashboard))
-            shared = client.scatter(job, broadcast=True, hash=False)
-            run = uuid.uuid4().hex[:8]
-            futures = {client.submit(solve_take_file, shared, str(takes[i]), str(out_dir / names[i]), names[i],
-                                     key=f"solve-{names[i]}-{run}", pure=False, retries=retries): i
-                       for i in pending}
-            t0 = time.perf_counter()
-            finished = 0
-            for fut in as_completed(list(futures)):
-                i = futures[fut]
+                from distributed import as_completed
                 try:
-                    row = fut.result()
-                except Exception as exc:       # retried and still failing, or every worker it met died
-                    row = _row(names[i], takes[i], None, "failed", _unexpected(takes[i], exc))
-                rows[i] = row
-                done += 1
-                finished += 1
-                if row["status"] == "solved":
-                    frames += int(row["frames"] or 0)
+                    dashboard = client.dashboard_link
+                except Exception:   # no dashboard (bokeh missing, or the scheduler runs none)
+                    dashboard = None
+                if on_client is not None:
+                    on_client(client, dashboard)
                 if progress is not None:
-                    progress(BatchProgress(done, len(takes), frames, time.perf_counter() - t0, finished, row, dashboard))
-                if cancel is not None and cancel():
-                    client.cancel(list(futures))
-                    break
-        finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+                    progress(BatchProgress(done, len(takes), 0, 0.0, dashboard=dashboard))
+                shared = client.scatter(job, broadcast=True, hash=False)
+                run = uuid.uuid4().hex[:8]
+                futures = {client.submit(solve_take_file, shared, str(takes[i]), str(out_dir / names[i]), names[i],
+                                         key=f"solve-{names[i]}-{run}", pure=False, retries=retries): i
+                           for i in pending}
+                t0 = time.perf_counter()
+                finished = 0
+                for fut in as_completed(list(futures)):
+                    i = futures[fut]
+                    try:
+                        row = fut.result()
+                    except Exception as exc:       # retried and still failing, or every worker it met died
+                        row = _row(names[i], takes[i], None, "failed", _unexpected(takes[i], exc))
+                    rows[i] = row
+                    done += 1
+                    finished += 1
+                    if row["status"] == "solved":
+                        frames += int(row["frames"] or 0)
+                    if progress is not None:
+                        progress(BatchProgress(done, len(takes), frames, time.perf_counter() - t0, finished, row, dashboard))
+                    if cancel is not None and cancel():
+                        client.cancel(list(futures))
+                        break
+            finally:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
     for i, r in enumerate(rows):
         if r is None:
             rows[i] = _row(names[i], takes[i], None, "failed",

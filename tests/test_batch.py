@@ -180,8 +180,14 @@ def test_batch_on_a_local_cluster_matches_solve_resumes_and_survives_a_killed_wo
         while not any((out / n / "done.json").exists() for n in stamps):
             assert p.poll() is None and time.monotonic() < deadline, "no take finished"
             time.sleep(0.2)
-        workers = [c for c in psutil.Process(p.pid).children(recursive=True)
-                   if "spawn_main" in " ".join(c.cmdline())]
+        # the workers: forked from the command's fork server (spawned, where there is no fork server)
+        tree = psutil.Process(p.pid).children(recursive=True)
+        servers = [c for c in tree if "forkserver" in " ".join(c.cmdline())
+                   and "forkserver" not in " ".join(c.parent().cmdline())]
+        if sys.platform.startswith("linux"):
+            assert len(servers) == 1, "the local cluster's workers are forked from one fork server"
+        workers = (servers[0].children() if servers else
+                   [c for c in tree if "spawn_main" in " ".join(c.cmdline())])
         assert len(workers) == 2
         finished = sum((out / n / "done.json").exists() for n in stamps)
         assert finished < 11, "the run was over before a worker could be killed"
