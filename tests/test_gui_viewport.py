@@ -106,3 +106,35 @@ def test_culled_surface_draws_and_picks_the_back_of_two_sided_parts(qtbot, tmp_p
     backs = vp.plotter.renderer.actors["surface_backs"].GetMapper().GetInput()
     assert backs.GetNumberOfCells() == 1 and surface_face(vp.mesh, backs, 0) == 6
     assert surface_face(vp.mesh, vp.mesh, 0) == 0
+
+
+def test_blending_is_off_only_when_nothing_drawn_needs_it_and_the_picture_is_unchanged(qtbot, tmp_path, monkeypatch):
+    """Issue 20: OpenGL blending (VTK turns it on for the whole frame) costs ~3 ms CPU a render on llvmpipe; the
+    viewport turns it off when nothing drawn is translucent or text. The shaded face is then the same picture,
+    bit for bit; with a colour map its bar's text needs blending, and it is on (without it, the glyphs' boxes
+    would show: the picture would differ)."""
+    import widgets.scene as scene
+    from widgets.scene import GL_BLEND, ColorMap
+    w = make_window(qtbot, tmp_path)
+    vp = w.viewport
+    ren = vp.plotter.renderer
+    state = vp.plotter.ren_win.GetState()
+
+    def picture(blending=None):
+        if blending is not None:
+            monkeypatch.setattr(scene, "needs_blending", lambda _ren: blending)
+        try:
+            return vp.grab_image(), state.GetEnumState(GL_BLEND)
+        finally:
+            monkeypatch.undo()
+
+    shaded, blend_on = picture()
+    assert not scene.needs_blending(ren) and not blend_on
+    forced, forced_on = picture(blending=True)
+    assert forced_on and np.array_equal(shaded, forced)
+
+    vp.set_colormap(ColorMap(np.linspace(0.0, 1.0, len(vp.mesh.points)), title="a colour bar (mm)"))
+    mapped, blend_on = picture()
+    assert scene.needs_blending(ren) and blend_on
+    assert np.array_equal(mapped, picture(blending=True)[0])
+    assert not np.array_equal(mapped, picture(blending=False)[0])   # the bar's text does need it

@@ -23,8 +23,18 @@ class TimelineRuler(QtWidgets.QWidget):
         self.margin = 10
 
     def set_state(self, time: float, duration: float, fps: float, keys: list[float]) -> None:
-        self.time, self.duration, self.fps, self.keys = float(time), max(float(duration), 1e-3), float(fps), list(keys)
-        self.update()
+        """Show this state; when only the time moved (playback, scrubbing), only the playhead's old and new
+        columns are repainted, not the ruler."""
+        new = (max(float(duration), 1e-3), float(fps), list(keys))
+        moved_only = new == (self.duration, self.fps, self.keys)
+        old_x = self.x_of(self.time)
+        self.time = float(time)
+        if not moved_only:
+            self.duration, self.fps, self.keys = new
+            self.update()
+            return
+        for x in (old_x, self.x_of(self.time)):
+            self.update(QtCore.QRect(int(x) - 3, 0, 7, self.height()))   # the playhead's 2 px line, antialiased
 
     def x_of(self, t: float) -> float:
         return self.margin + (self.width() - 2 * self.margin) * (t / self.duration)
@@ -154,9 +164,13 @@ class TimelinePanel(QtWidgets.QWidget):
     def set_state(self, time: float, duration: float, fps: float, keys: list[float], interpolation: str) -> None:
         for wdg in (self.fps, self.duration, self.interp):
             wdg.blockSignals(True)
-        self.fps.setValue(fps)
-        self.duration.setValue(duration)
-        self.interp.setCurrentIndex(max(0, self.interp.findData(interpolation)))
+        # unchanged values are not set again: a spin box repaints on every setValue (each playback frame)
+        if self.fps.value() != round(fps, self.fps.decimals()):
+            self.fps.setValue(fps)
+        if self.duration.value() != round(duration, self.duration.decimals()):
+            self.duration.setValue(duration)
+        if self.interp.currentData() != interpolation:
+            self.interp.setCurrentIndex(max(0, self.interp.findData(interpolation)))
         for wdg in (self.fps, self.duration, self.interp):
             wdg.blockSignals(False)
         frame = int(round(time * fps))

@@ -2,7 +2,7 @@
 Xvfb at the window's default size (issue 20: at least 60 frames/s).
 
 Run: python -m pytest tests/benchmarks/test_bench_slider.py --benchmark-only -s
-Target: 60 frames/s (issue 20); asserted: 30. One step is one real mouse move on the jawOpen slider's handle (the button held since a press on it), from the
+Target: 60 frames/s (issue 20); asserted: 35 (what it reaches on the shared test machine while others run: 36-56). One step is one real mouse move on the jawOpen slider's handle (the button held since a press on it), from the
 event to the rendered frame: the slider's value, the pose edit, the pose, the normals, the points and the render
 (the window's coalesced render runs on the next turn of the event loop). Every step must draw exactly one frame.
 Printed: wall and CPU time a step (CPU: the process with its llvmpipe render threads; on the shared 2-core test
@@ -73,6 +73,7 @@ def test_bench_slider_drag_step(benchmark, qtbot, tmp_path, ict_dir):
     benchmark.extra_info.update(fps=round(fps, 1), cpu_ms_median=round(float(np.median(cpu_ms)), 1))
     print(f"slider drag step on ICT: wall {wall_ms.min():.1f} / {np.median(wall_ms):.1f} ms (min / median, "
           f"{fps:.0f} fps), CPU {cpu_ms.min():.1f} / {np.median(cpu_ms):.1f} ms")
-    # issue 20's target is 60 fps (16.7 ms); asserted is 30 fps, as for the textured drag (see the README's table
-    # for the figures: this machine is shared, and its wall clock measures the other processes too)
-    assert np.median(wall_ms) < 1000 / 30, f"a slider step takes {np.median(wall_ms):.1f} ms ({fps:.0f} fps)"
+    # issue 20's target is 60 fps (16.7 ms). Asserted is what the step reaches on the shared 2-core test machine
+    # with other processes running (36-39 fps; 56 when it had the cores to itself; see the README's table): the
+    # wall clock measures the other processes too
+    assert np.median(wall_ms) < 1000 / 35, f"a slider step takes {np.median(wall_ms):.1f} ms ({fps:.0f} fps)"

@@ -1,0 +1,62 @@
+"""The timeline panel redraws only what changed during playback (issue 20: keyed playback at 60 fps), and what
+is on screen is then what a full repaint shows."""
+from __future__ import annotations
+
+import numpy as np
+from PySide6 import QtCore, QtGui, QtWidgets
+
+from widgets.timeline import TimelinePanel
+
+
+def _on_screen(widget) -> np.ndarray:
+    """The widget's pixels as the screen shows them (not a fresh paint, as ``QWidget.grab`` would be)."""
+    img = widget.screen().grabWindow(widget.winId()).toImage().convertToFormat(QtGui.QImage.Format_RGB888)
+    return np.frombuffer(img.constBits(), np.uint8).reshape(img.height(), img.bytesPerLine())[:, :img.width() * 3] \
+        .reshape(img.height(), img.width(), 3).copy()
+
+
+class _Paints(QtCore.QObject):
+    def __init__(self):
+        super().__init__()
+        self.widgets: list = []
+
+    def eventFilter(self, obj, event):
+        if event.type() == QtCore.QEvent.Paint:
+            self.widgets.append((obj, event.region().boundingRect()))
+        return False
+
+
+def test_playhead_moves_with_only_its_columns_repainted(qtbot):
+    panel = TimelinePanel()
+    qtbot.addWidget(panel)
+    panel.resize(1600, 44)
+    panel.show()
+    qtbot.waitExposed(panel)
+    keys = [0.0, 1.0, 2.0]
+    panel.set_state(0.25, 2.0, 60.0, keys, "smooth")
+    qtbot.wait(50)
+    ruler = panel.ruler
+    assert ruler.width() > 300
+    paints = _Paints()
+    QtWidgets.QApplication.instance().installEventFilter(paints)
+    try:
+        panel.set_state(1.5, 2.0, 60.0, keys, "smooth")          # a playback frame: only the time moves
+        qtbot.wait(50)
+    finally:
+        QtWidgets.QApplication.instance().removeEventFilter(paints)
+    painted = {type(obj).__name__ for obj, _ in paints.widgets}
+    assert not painted & {"QDoubleSpinBox", "QLineEdit", "QComboBox"}, painted   # unchanged values: not redrawn
+    ruler_rects = [r for obj, r in paints.widgets if obj is ruler]
+    assert ruler_rects and all(r.width() < ruler.width() for r in ruler_rects)   # not the whole ruler
+    shown = _on_screen(ruler)
+    ruler.repaint()                                             # what a full repaint draws
+    qtbot.wait(50)
+    np.testing.assert_array_equal(shown, _on_screen(ruler))
+    red = (shown[:, :, 0] > 200) & (shown[:, :, 1] < 120)      # the playhead's red line
+    columns = np.flatnonzero(red.sum(axis=0) > ruler.height() // 2)
+    assert columns.size and abs(columns.mean() - ruler.x_of(1.5)) < 2
+    assert abs(columns.mean() - ruler.x_of(0.25)) > 50          # gone from where it was
+    # a changed setting still shows, and repaints the whole ruler (its ticks move)
+    panel.set_state(1.5, 4.0, 30.0, keys, "linear")
+    assert panel.fps.value() == 30.0 and panel.duration.value() == 4.0 and panel.interp.currentData() == "linear"
+    assert ruler.duration == 4.0 and ruler.fps == 30.0
