@@ -11,8 +11,9 @@ deformation transfer as the shapes, with no data: they keep their drivers, rule 
   calibration frames). The actor's markers are placed rigidly on the rig's marker points (Kabsch: the actor's
   face where the rig's is, at the actor's size), the template is scaled to them by the similarity (Umeyama 1991)
   and bent onto them by the thin-plate surface warp (``solvers.surface_warp``: smooth over the surface, so a
-  lower-lip marker does not pull the upper lip as the Euclidean Gaussian RBF used before did); the deltas are the template's transferred onto that
-  neutral (the deformation-gradient and closeness terms of Ma's energy, no data term). Scaling the template
+  lower-lip marker does not pull the upper lip as the Euclidean Gaussian RBF used before did); the deltas are
+  the template's transferred onto that neutral (the deformation-gradient and closeness terms of Ma's energy, no
+  data term). Scaling the template
   about the rig's origin instead put the face 5.5 mm from the actor's (a placement, not a shape, error).
 
 ``shape_change_report`` measures how far each shape moved from the template (for the CLI's report and the
@@ -73,7 +74,7 @@ def read_scan(scan, rig: Rig, label: str = "scan") -> np.ndarray:
 
 
 def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tuple[np.ndarray, dict]:
-    """The template neutral rigidly aligned and RBF-warped onto the actor's neutral markers."""
+    """The template neutral rigidly aligned, scaled and surface-warped onto the actor's neutral markers."""
     from solvers.rigid import kabsch, umeyama
     from solvers.surface_warp import biharmonic_warp
 

@@ -11,6 +11,12 @@ import scipy.sparse as sp
 from .errors import RigInputError
 
 
+def sorted_unique(keys: np.ndarray) -> np.ndarray:
+    """The distinct values of a 1-D int array, sorted (sort and mask: numpy's ``np.unique`` is slower here)."""
+    k = np.sort(keys)
+    return k[np.concatenate(([True], k[1:] != k[:-1]))] if k.size else k
+
+
 def polygon_edges(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
     """(E, 2) unique undirected polygon edges (i < j), sorted; each polygon is closed (last → first).
 
@@ -29,8 +35,7 @@ def polygon_edges(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarr
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     keep = lo != hi
     n = int(hi.max()) + 1
-    key = np.sort(lo[keep] * n + hi[keep])  # 1-D keys, sort-and-mask: linear-time-ish, no np.unique
-    key = key[np.concatenate(([True], key[1:] != key[:-1]))]
+    key = sorted_unique(lo[keep] * n + hi[keep])  # 1-D keys, sort-and-mask: no np.unique
     return np.stack([key // n, key % n], axis=1)
 
 
@@ -42,8 +47,7 @@ def adjacency_matrix(n_vertices: int, edges: np.ndarray) -> sp.csr_matrix:
     e = e[e[:, 0] != e[:, 1]]
     n = int(n_vertices)
     # both directions of every edge as one key row·n + col, sorted and deduplicated: CSR order directly
-    key = np.sort(np.concatenate([e[:, 0] * n + e[:, 1], e[:, 1] * n + e[:, 0]]))
-    key = key[np.concatenate(([True], key[1:] != key[:-1]))] if key.size else key
+    key = sorted_unique(np.concatenate([e[:, 0] * n + e[:, 1], e[:, 1] * n + e[:, 0]]))
     rows, cols = np.divmod(key, n)
     indptr = np.concatenate(([0], np.cumsum(np.bincount(rows, minlength=n))))
     A = sp.csr_matrix((np.ones(key.size), cols, indptr), shape=(n, n))

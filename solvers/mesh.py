@@ -59,9 +59,11 @@ def hidden_back_faces(points: np.ndarray, face_counts: np.ndarray, face_indices:
     edges = np.bincount(run_part, minlength=n_parts)
     openings = np.bincount(run_part, weights=run == 1, minlength=n_parts)
     non_manifold = np.bincount(run_part, weights=run > 2, minlength=n_parts)
-    directed = np.sort(a * n_points + b)
+    directed = a * n_points + b
+    by_directed = np.argsort(directed, kind="stable")
+    directed = directed[by_directed]
     repeated = directed[1:] == directed[:-1]                     # an edge twice in one direction: flipped faces
-    twice = np.bincount(edge_part[np.argsort(a * n_points + b, kind="stable")][1:][repeated], minlength=n_parts)
+    twice = np.bincount(edge_part[by_directed][1:][repeated], minlength=n_parts)
     # signed volume of each part about its centroid (fan triangles: v0 . (v1 x v2) / 6)
     tris = fan_triangulate(counts, idx).astype(np.int64)
     tri_part = np.repeat(part, np.maximum(counts - 2, 0))

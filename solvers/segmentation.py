@@ -12,6 +12,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import RigInputError
+from .laplacian import sorted_unique
 
 BACKGROUND = -1
 
@@ -90,12 +91,6 @@ def group_sums(values: np.ndarray, vertices: np.ndarray, groups: np.ndarray, n_g
     for k in range(VT.shape[0]):
         out[k] = ind @ VT[k]
     return np.ascontiguousarray(out.T)
-
-
-def _sorted_unique(keys: np.ndarray) -> np.ndarray:
-    """The distinct values of an int array, sorted (sort and mask: numpy's hash-based unique is slower here)."""
-    k = np.sort(keys)
-    return k[np.concatenate(([True], k[1:] != k[:-1]))] if k.size else k
 
 
 _ROWS: list = [None, None]  # (weak reference to the last graph's indptr, its rows): a segmentation asks ~12 times
@@ -213,7 +208,7 @@ def fill_background_holes(labels: np.ndarray, adjacency: sp.spmatrix) -> np.ndar
     rows, cols = _rows_cols(A)
     m = (comp_of[rows] >= 0) & (lab[cols] >= 0)
     R1 = int(lab.max()) + 1
-    key = _sorted_unique(comp_of[rows[m]] * R1 + lab[cols[m]])  # (piece, region) pairs, sorted
+    key = sorted_unique(comp_of[rows[m]] * R1 + lab[cols[m]])  # (piece, region) pairs, sorted
     if key.size == 0:
         return lab
     pairs = np.stack(np.divmod(key, R1), axis=1)
@@ -433,14 +428,14 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int,
     # ring 1 of every region at once: the far ends of the mesh edges that leave its core; ring d: the neighbours
     # of ring d-1 not reached before
     rows, cols = leaving_edges(labels, A, edges)
-    new = _sorted_unique(cols * M + labels[rows])
+    new = sorted_unique(cols * M + labels[rows])
     deg = np.diff(A.indptr)
     for d in range(1, rings + 1):
         if d > 1:
             v, r = np.divmod(new, M)
             n = deg[v]
             first = np.repeat(A.indptr[v] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
-            cand = _sorted_unique(A.indices[first] * M + np.repeat(r, n))
+            cand = sorted_unique(A.indices[first] * M + np.repeat(r, n))
             pos = np.minimum(np.searchsorted(reach, cand), reach.size - 1)
             new = cand[reach[pos] != cand] if reach.size else cand
         if new.size == 0:
