@@ -162,17 +162,26 @@ class BatchJob:
                    preload=tuple(preload))
 
     def __getstate__(self) -> dict:
-        """Pickled (scattered to every worker) without the evaluator, which is rebuilt from the rig where it is
-        unpickled (``PoseEvaluator(rig)``, as ``prepare`` built it: the same arrays, ~0.05 s on ICT): its matrix
-        is the rig's deltas again, over the moving vertices, and would nearly double what every worker receives
-        (69 MB instead of 40 MB on ICT)."""
+        """Pickled (scattered to every worker) without the evaluator: its matrix is the rig's deltas again, over
+        the moving vertices, and would nearly double what every worker receives (69 MB instead of 39 MB on ICT).
+        Where the job is unpickled, the evaluator is rebuilt from the rig (``PoseEvaluator(rig)``, as ``prepare``
+        built it: the same arrays, ~0.05 s on ICT) when first asked for, in the first take, not while the worker
+        receives the job: Dask's broadcast hands the job from one worker on to the next, which then gets it
+        sooner."""
         state = dict(self.__dict__)
-        state["evaluator"] = self.evaluator.dtype
+        evaluator = state.pop("evaluator", None)        # None: not rebuilt yet here (it keeps its dtype)
+        if evaluator is not None:
+            state["_evaluator_dtype"] = evaluator.dtype
         return state
 
     def __setstate__(self, state: dict) -> None:
-        self.__dict__.update(state)
-        self.evaluator = PoseEvaluator(self.rig, dtype=state["evaluator"])
+        self.__dict__.update(state)                      # no evaluator yet: ``__getattr__`` builds it
+
+    def __getattr__(self, name: str):
+        if name == "evaluator" and "_evaluator_dtype" in self.__dict__:
+            self.evaluator = PoseEvaluator(self.rig, dtype=self.__dict__.pop("_evaluator_dtype"))
+            return self.evaluator
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
 
 # --- one take ---------------------------------------------------------------------------------------
