@@ -49,6 +49,8 @@ import time
 command_t0 = time.perf_counter()
 import argparse, json, os, sys
 import psutil
+from app.runtime import limit_blas_threads
+limit_blas_threads()              # as the command line's main does
 from app.cli_batch import PRELOAD, prepare_job
 from app.cli_solve import add_solve_options
 from model.batch import run_batch, start_fork_server
