@@ -12,8 +12,9 @@ Qt-free; the ``batch`` command (app.cli_batch) and the GUI's File ▸ Batch Solv
 - ``completed_row`` is the resumability check: a take whose done-marker matches the take file and the settings
   is skipped unless forced.
 - ``run_batch`` runs the jobs on a ``LocalCluster`` (processes forked from one fork server that imported what a take
-  needs, one thread each, Dask's housekeeping made rarer: ``local_cluster_config``) or a scheduler address, with
-  retries, and reports progress; ``write_summary`` writes ``batch.json`` and ``batch.csv``.
+  needs, started early by the command: ``start_fork_server``; one thread each, Dask's housekeeping made rarer:
+  ``local_cluster_config``) or a scheduler address, with retries, and reports progress; ``write_summary`` writes
+  ``batch.json`` and ``batch.csv``.
 """
 from __future__ import annotations
 
