@@ -79,8 +79,8 @@ c0, t0 = cpu(), time.perf_counter()
 rows = run_batch(job, takes, out, workers=int(workers), force=True, progress=lambda p: last.update(p=p),
                  dashboard_address="127.0.0.1:0")
 wall = time.perf_counter() - t0
-time.sleep(0.5)                                  # the fork server reaps the last worker
 command = time.perf_counter() - command_t0
+time.sleep(0.5)                                  # the fork server reaps the last worker
 print(json.dumps({"wall": wall, "takes_s": last["p"].elapsed, "status": [r["status"] for r in rows], "command": command,
                   "frames": sum(r["frames"] for r in rows), "busy": sum(r["seconds"] for r in rows),
                   "cpu": cpu() - c0}))
