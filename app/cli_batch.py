@@ -32,6 +32,10 @@ def add_parser(sub, rig_arg) -> None:
     sp.set_defaults(func=cmd_batch)
 
 
+# What the local cluster's fork server imports for the preview (``app.batch_worker``), besides the solve's modules.
+PRELOAD = ("app.batch_worker",)
+
+
 def preview_renderer():
     """The preview PNG of a take (``widgets.scene.render_png`` off screen), picklable for the workers."""
     from widgets.scene import render_png
@@ -47,7 +51,7 @@ def prepare_job(rig, args):
     marker_map = load_marker_map(args.map) if args.map else None
     return BatchJob.prepare(rig, settings, segmentation=segmentation, marker_map=marker_map,
                             cache=bool(getattr(args, "cache", False)), preview=preview_renderer(),
-                            focus=preview_focus(rig), preload=("app.batch_worker",))
+                            focus=preview_focus(rig), preload=PRELOAD)
 
 
 def _clock(seconds: float | None) -> str:
@@ -95,11 +99,13 @@ class ProgressPrinter:
 
 
 def cmd_batch(args) -> int:
-    from model.batch import find_takes, run_batch, take_names
+    from model.batch import find_takes, run_batch, start_fork_server, take_names
 
     if args.workers is not None and args.workers < 1:
         raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
     takes = find_takes(args.takes, exclude=args.output)
+    if not args.scheduler:
+        start_fork_server(PRELOAD)   # the local cluster's workers' imports run on another core while the rig loads
     rig = load_solve_rig(args)
     job = prepare_job(rig, args)
     names = take_names(takes)

@@ -12,8 +12,9 @@ Qt-free; the ``batch`` command (app.cli_batch) and the GUI's File ▸ Batch Solv
 - ``completed_row`` is the resumability check: a take whose done-marker matches the take file and the settings
   is skipped unless forced.
 - ``run_batch`` runs the jobs on a ``LocalCluster`` (processes forked from one fork server that imported what a take
-  needs, one thread each, Dask's housekeeping made rarer: ``local_cluster_config``) or a scheduler address, with
-  retries, and reports progress; ``write_summary`` writes ``batch.json`` and ``batch.csv``.
+  needs, started early by the command: ``start_fork_server``; one thread each, Dask's housekeeping made rarer:
+  ``local_cluster_config``) or a scheduler address, with retries, and reports progress; ``write_summary`` writes
+  ``batch.json`` and ``batch.csv``.
 """
 from __future__ import annotations
 
@@ -160,6 +161,28 @@ class BatchJob:
                    focus=focus, signature=json.loads(json.dumps(signature)),
                    antagonists=solve_pairs(rig, settings),    # once per batch, not once per take
                    preload=tuple(preload))
+
+    def __getstate__(self) -> dict:
+        """Pickled (scattered to every worker) without the evaluator: its matrix is the rig's deltas again, over
+        the moving vertices, and would nearly double what every worker receives (69 MB instead of 39 MB on ICT).
+        Where the job is unpickled, the evaluator is rebuilt from the rig (``PoseEvaluator(rig)``, as ``prepare``
+        built it: the same arrays, ~0.05 s on ICT) when first asked for, in the first take, not while the worker
+        receives the job: Dask's broadcast hands the job from one worker on to the next, which then gets it
+        sooner."""
+        state = dict(self.__dict__)
+        evaluator = state.pop("evaluator", None)        # None: not rebuilt yet here (it keeps its dtype)
+        if evaluator is not None:
+            state["_evaluator_dtype"] = evaluator.dtype
+        return state
+
+    def __setstate__(self, state: dict) -> None:
+        self.__dict__.update(state)                      # no evaluator yet: ``__getattr__`` builds it
+
+    def __getattr__(self, name: str):
+        if name == "evaluator" and "_evaluator_dtype" in self.__dict__:
+            self.evaluator = PoseEvaluator(self.rig, dtype=self.__dict__.pop("_evaluator_dtype"))
+            return self.evaluator
+        raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 
 
 # --- one take ---------------------------------------------------------------------------------------
@@ -350,18 +373,24 @@ def _unexpected(path: Path, exc: BaseException) -> str:
     return f"{path}: the solve stopped unexpectedly ({type(exc).__name__}{': ' + text if text else ''})."
 
 
-# What a take needs on a worker, imported once by the local cluster's fork server (``start_client``).
-WORKER_MODULES = ("distributed", "model.batch", "model.take_workspace", "model.take_exports", "solvers.take_kernel")
+# What a take needs on a worker, imported once by the local cluster's fork server (``start_fork_server``): first
+# Dask's worker environment (before numpy loads), then Dask, the solve and its exports, and what a take imports on
+# first use (the take readers, the weights CSV, the antagonist pairs, the temporal smoothing's scipy.ndimage,
+# threadpoolctl), which would otherwise cost every worker's first take ~0.1 s.
+WORKER_MODULES = ("model.batch_env", "distributed", "model.batch", "model.take_workspace", "model.take_exports",
+                  "solvers.take_kernel", "model.take_c3d", "model.livelink", "model.weights_csv", "model.antagonists",
+                  "scipy.ndimage", "threadpoolctl")
+_FORK_SERVER_HASH_SEED = "6640"         # a nanny's choice when none is set, so that every worker hashes alike
 
 
 def local_cluster_config() -> dict:
     """Dask settings for the local cluster, for as long as it runs (its nannies read them when they start or
     restart a worker). With as many workers as cores, every CPU second spent beside the takes is taken from one:
 
-    - the workers are forked from one fork server that imported ``WORKER_MODULES`` and the job's ``preload`` once,
-      instead of each worker starting a fresh interpreter and importing Dask, numpy, the solver and VTK itself
-      (1.2-1.7 s of CPU a worker, most of it in its first take, and again in its deserialisation of the job and
-      its interpreter's teardown at the end);
+    - the workers are forked from one fork server that imported ``WORKER_MODULES`` and the job's ``preload`` once
+      (``start_fork_server``), instead of each worker starting a fresh interpreter and importing Dask, numpy, the
+      solver and VTK itself (1.2-1.7 s of CPU a worker, most of it in its first take, and again in its
+      deserialisation of the job and its interpreter's teardown at the end);
     - the workers' housekeeping runs less often: Dask's statistical profiler samples a worker's stack every 10 ms
       (off: the dashboard's Profile page stays empty), the event-loop health tick runs every 20 ms in every
       process (1 s), the system monitor every 0.5 s (5 s)."""
@@ -373,23 +402,31 @@ def local_cluster_config() -> dict:
     return config
 
 
-def _start_fork_server(modules: list[str]) -> None:
-    """Start this process's fork server now (if it is not running), importing ``modules``, so that its imports
-    run while the scheduler starts here. It gets the environment the nannies give their workers before they start
-    (``distributed.nanny.pre-spawn-environ``: one BLAS thread before numpy loads, glibc's memory trimming, a fixed
-    hash seed), as a worker spawned by a nanny would, and which each nanny also sets in this process."""
+def start_fork_server(preload: tuple = ()) -> bool:
+    """Start this process's fork server, which the local cluster's workers are forked from, if it is not running:
+    it imports ``WORKER_MODULES`` and ``preload`` in its own process while this one goes on (the ``batch`` command
+    calls this before it loads the rig, so the ~1.3 s of imports run on another core meanwhile; ``start_client``
+    calls it too). Costs this process a few milliseconds: it imports neither Dask nor numpy. The fork server gets
+    the environment a nanny gives the worker it starts (``model.batch_env``) and a fixed hash seed, so that every
+    worker hashes alike. False where there is no fork server (the workers are then spawned)."""
+    import multiprocessing
+    if "forkserver" not in multiprocessing.get_all_start_methods():
+        return False
     import multiprocessing.forkserver
-
-    import dask
-    from distributed.utils import get_mp_context
-    ctx = get_mp_context()                        # Dask's own context (it sets its preload list once)
-    ctx.set_forkserver_preload(list(dict.fromkeys(modules)))
-    env = {k: os.environ.get(k, str(v)) for k, v in dask.config.get("distributed.nanny.pre-spawn-environ").items()
-           if v is not None}
-    if env.get("PYTHONHASHSEED") in (None, "0"):
-        env["PYTHONHASHSEED"] = "6640"            # the nanny's choice, so that every worker hashes alike
-    os.environ.update(env)
+    multiprocessing.get_context("forkserver").set_forkserver_preload(list(dict.fromkeys([*WORKER_MODULES, *preload])))
+    if os.environ.get("PYTHONHASHSEED") in (None, "0"):
+        os.environ["PYTHONHASHSEED"] = _FORK_SERVER_HASH_SEED
     multiprocessing.forkserver.ensure_running()
+    return True
+
+
+def _skip_dask_forkserver_preload() -> None:
+    """Dask builds its own preload list for a fork server the first time it asks for its multiprocessing context,
+    importing pandas and lz4 into this process to see whether they are installed (~0.2 s); the fork server is
+    already running with ours (``start_fork_server``), so that list would never be used."""
+    import distributed.utils
+    if hasattr(distributed.utils, "_forkserver_preload_set"):
+        distributed.utils._forkserver_preload_set = True
 
 
 def start_client(workers: int | None = None, scheduler: str | None = None, *, timeout: float | None = None,
@@ -397,7 +434,7 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
     """(Dask client, local cluster or None): a scheduler's address, or a LocalCluster of ``workers`` processes
     with one thread each on 127.0.0.1 (default: the machine's cores), to be run under ``local_cluster_config()``:
     its workers are forked from a fork server that imported ``WORKER_MODULES`` and ``preload`` (the fork server
-    is this process's, started with the first local cluster and kept for later ones). ``timeout`` (seconds) for a
+    is this process's, started by ``start_fork_server`` or here, and kept for later clusters). ``timeout`` (seconds) for a
     scheduler to answer and show a worker: Dask's connect timeout by default
     (``distributed.comm.timeouts.connect``)."""
     import logging
@@ -416,8 +453,8 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
                                 f"{timeout:g} s ({type(exc).__name__}).") from None
         return client, None
     n = workers or os.cpu_count() or 1
-    if dask.config.get("distributed.worker.multiprocessing-method") == "forkserver":
-        _start_fork_server([*WORKER_MODULES, *preload])
+    if dask.config.get("distributed.worker.multiprocessing-method") == "forkserver" and start_fork_server(preload):
+        _skip_dask_forkserver_preload()
     # One core a worker: Dask's nanny already sets one BLAS/OpenMP thread; llvmpipe, which draws the previews
     # off screen, would otherwise rasterise on every core of the machine from each worker at once.
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
@@ -463,7 +500,9 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
                     on_client(client, dashboard)
                 if progress is not None:
                     progress(BatchProgress(done, len(takes), 0, 0.0, dashboard=dashboard))
-                shared = client.scatter(job, broadcast=True, hash=False)
+                # to every worker; from this process straight to the workers of a local cluster (through the
+                # scheduler, as for a remote one whose workers this process may not reach, it takes ~2x as long)
+                shared = client.scatter(job, broadcast=True, hash=False, direct=cluster is not None)
                 run = uuid.uuid4().hex[:8]
                 futures = {client.submit(solve_take_file, shared, str(takes[i]), str(out_dir / names[i]), names[i],
                                          key=f"solve-{names[i]}-{run}", pure=False, retries=retries): i

@@ -221,6 +221,34 @@ def test_a_take_that_does_not_fit_the_map_fails_alone(tmp_path, ict_rig, take_di
     assert not (tmp_path / "out" / "other").exists()
 
 
+def test_the_job_sent_to_the_workers_carries_the_deltas_once_and_rebuilds_the_same_evaluator(ict_rig, take_dir):
+    """What ``run_batch`` scatters to every worker: the job pickled without the evaluator's matrix (the rig's
+    deltas again, over the moving vertices), and where it is unpickled -- also after being passed on unused, as
+    Dask's broadcast passes it from one worker to the next -- an evaluator bit for bit the one the client built."""
+    import pickle
+
+    from model.batch import BatchJob
+    from model.marker_map import load_marker_map
+    job = BatchJob.prepare(ict_rig, {"mode": "global", "residual": None, "calibration_frames": 30,
+                                     "fixed_head": False}, marker_map=load_marker_map(take_dir / "marker_map.json"))
+    built = job.evaluator
+    assert built._D.nbytes > ict_rig.deltas.nbytes / 2       # worth leaving out: most of the rig's size again
+    data = pickle.dumps(job, protocol=5)
+    assert len(data) < ict_rig.deltas.nbytes * 1.1, len(data)
+    received = pickle.loads(data)
+    passed_on = pickle.loads(pickle.dumps(received, protocol=5))   # before the first worker used it
+    for other in (received, passed_on):
+        rebuilt = other.evaluator
+        assert rebuilt is not built and rebuilt.dtype is built.dtype is np.float64
+        arrays = {k: v for k, v in vars(built).items() if isinstance(v, np.ndarray)}
+        assert {"_D", "_neutral", "_cols", "moving_vertices"} <= set(arrays)
+        for name, array in arrays.items():
+            got = getattr(rebuilt, name)
+            assert got.dtype == array.dtype and got.shape == array.shape and got.tobytes() == array.tobytes(), name
+        assert other.signature == job.signature and other.antagonists == job.antagonists
+    assert pickle.loads(pickle.dumps(passed_on, protocol=5)).evaluator._D.tobytes() == built._D.tobytes()
+
+
 def _wait_for(path: Path, proc: subprocess.Popen, seconds: float) -> None:
     deadline = time.monotonic() + seconds
     while not path.exists():

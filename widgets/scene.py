@@ -184,18 +184,19 @@ def _shade(plotter, mesh, actor, wireframe: bool, name: str, cull_hidden: bool):
         return actor
     _vertex_lighting(actor, n_lights)
     if cull_hidden and getattr(mesh, "_faces", None) is not None:
-        import vtk
+        from vtkmodules.vtkCommonDataModel import vtkPolyData
+        from vtkmodules.vtkRenderingCore import vtkActor, vtkPolyDataMapper
         actor.GetProperty().BackfaceCullingOn()
         cells, _faces = _back_sides(mesh)
         if cells is not None:
-            backs = vtk.vtkPolyData()   # the mesh's points and point data (shared arrays), the reversed faces
+            backs = vtkPolyData()   # the mesh's points and point data (shared arrays), the reversed faces
             backs.SetPoints(mesh.GetPoints())
             backs.GetPointData().ShallowCopy(mesh.GetPointData())
             backs.SetPolys(cells)
-            mapper = vtk.vtkPolyDataMapper()
+            mapper = vtkPolyDataMapper()
             mapper.ShallowCopy(actor.GetMapper())   # the same colouring
             mapper.SetInputData(backs)
-            back = vtk.vtkActor()
+            back = vtkActor()
             back.SetMapper(mapper)
             back.SetProperty(actor.GetProperty())
             _vertex_lighting(back, n_lights, back=True)
@@ -342,7 +343,7 @@ def blend_only_when_needed(renderer) -> None:
     is read, mixed and written back, and the gradient background's full-window quad and the opaque surface
     pay for it although every one of their pixels is opaque (alpha 1: the same picture, bit for bit).
     Measured on ICT in the main window: ~3 ms CPU a render less (see the README's Benchmarks)."""
-    import vtk
+    from vtkmodules.vtkCommonCore import vtkCommand   # not all of VTK (``import vtk``: ~0.4 s in a fresh process)
     if getattr(renderer, "_blend_observer", None) is not None:
         return
 
@@ -350,7 +351,7 @@ def blend_only_when_needed(renderer) -> None:
         state = ren.GetRenderWindow().GetState()
         (state.vtkglEnable if needs_blending(ren) else state.vtkglDisable)(GL_BLEND)
 
-    renderer._blend_observer = renderer.AddObserver(vtk.vtkCommand.StartEvent, on_start)
+    renderer._blend_observer = renderer.AddObserver(vtkCommand.StartEvent, on_start)
 
 
 def camera_direction(name: str) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,32 @@
+"""The first module the local cluster's fork server imports (``model.batch.start_fork_server``): the environment a
+Dask nanny gives the worker it starts (``distributed.nanny.pre-spawn-environ``: one BLAS/OpenMP thread, glibc's
+memory trimming), set in the fork server before anything there loads numpy, so that every worker forked from it
+has it. A nanny sets it in its own process before it starts a worker, which a forked worker never sees.
+
+Read from Dask's configuration as ``distributed.config`` reads it (its defaults file under the user's settings)
+without importing ``distributed``, whose import loads numpy: the process that starts the fork server (the
+``batch`` command, before it loads the rig) then pays nothing for it. A variable already set is kept.
+"""
+from __future__ import annotations
+
+import importlib.util
+import os
+
+import dask   # dask itself does not import numpy
+
+
+def pre_spawn_environ() -> dict[str, str]:
+    """``distributed.nanny.pre-spawn-environ`` with Dask's defaults under the user's configuration."""
+    try:
+        env = dask.config.get("distributed.nanny.pre-spawn-environ")
+    except KeyError:            # distributed not imported here: its defaults are not in the configuration yet
+        import yaml
+        spec = importlib.util.find_spec("distributed")
+        with open(os.path.join(os.path.dirname(spec.origin), "distributed.yaml")) as f:
+            dask.config.update_defaults(yaml.safe_load(f))
+        env = dask.config.get("distributed.nanny.pre-spawn-environ")
+    return {k: str(v) for k, v in env.items() if v is not None}
+
+
+for _name, _value in pre_spawn_environ().items():
+    os.environ.setdefault(_name, _value)
