@@ -417,6 +417,21 @@ def copy_cached_background(renderer) -> None:
         state.PopReadFramebufferBinding()
 
     renderer._background_observer = renderer.AddObserver(vtk.vtkCommand.StartEvent, on_start)
+    renderer._background_cache = cache
+
+
+def drop_cached_background(renderer) -> None:
+    """Undo ``copy_cached_background``: VTK draws the background again, and the cache's frame buffer is released
+    (call it while the render window is still open)."""
+    if getattr(renderer, "_background_observer", None) is None:
+        return
+    renderer.RemoveObserver(renderer._background_observer)
+    renderer._background_observer = None
+    renderer.SetPreserveColorBuffer(False)
+    fbo = renderer._background_cache["fbo"]
+    if fbo is not None and renderer.GetRenderWindow() is not None:
+        fbo.ReleaseGraphicsResources(renderer.GetRenderWindow())
+    renderer._background_cache = None
 
 
 def camera_direction(name: str) -> tuple[np.ndarray, np.ndarray]:

@@ -23,8 +23,8 @@ from functools import cached_property
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, rig_mesh, set_camera, \
-    style_plotter, surface_face
+from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, drop_cached_background, rig_mesh, \
+    set_camera, style_plotter, surface_face
 
 CLICK_SLOP_PX = 3   # a press and release this close (display pixels, |dx| + |dy|) is a click
 
@@ -445,4 +445,6 @@ class Viewport(QtWidgets.QWidget):
     def close_viewport(self) -> None:
         self._tools.clear()
         self._owner = None
+        if not self.plotter._closed:
+            drop_cached_background(self.plotter.renderer)   # its frame buffer, while the window is open
         self.plotter.close()
