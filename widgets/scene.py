@@ -268,8 +268,9 @@ def _vertex_lighting(actor, n_lights: int, back: bool = False) -> None:
     sp.AddFragmentShaderReplacement("//VTK::Normal::Impl", True, "", False)
     side = "vertexLightVSOutput.zw" if back else "gl_FrontFacing ? vertexLightVSOutput.xy : vertexLightVSOutput.zw"
     spec = " + lit.y * specularColor" if specular else ""
-    sp.AddFragmentShaderReplacement("//VTK::Light::Impl", True, f"vec2 lit = {side};\n"
-                                    f"gl_FragData[0] = vec4(ambientColor + lit.x * diffuseColor{spec}, opacity);", False)
+    sp.AddFragmentShaderReplacement(
+        "//VTK::Light::Impl", True,
+        f"vec2 lit = {side};\ngl_FragData[0] = vec4(ambientColor + lit.x * diffuseColor{spec}, opacity);", False)
     if actor.GetProperty().GetOpacity() > 0:
         # VTK's shader ends with ``if (gl_FragData[0].a <= 0.0) discard;``, never true for this surface (its alpha
         # is the opacity). A shader that may discard makes llvmpipe write depth late, after shading every 4x4
