@@ -241,6 +241,9 @@ def surface_face(mesh, dataset, cell: int) -> int:
     return int(cell)
 
 
+VTK_ALPHA_DISCARD = "if (gl_FragData[0].a <= 0.0)\n    {\n    discard;\n    }"   # in vtkPolyDataFS.glsl
+
+
 def _vertex_lighting(actor, n_lights: int, back: bool = False) -> None:
     """Per-vertex lighting (see ``_shade``); ``back``: the actor draws reversed faces, lit as the back side."""
     specular = actor.GetProperty().GetSpecular() > 0
@@ -266,8 +269,14 @@ def _vertex_lighting(actor, n_lights: int, back: bool = False) -> None:
     sp.AddFragmentShaderReplacement("//VTK::Normal::Impl", True, "", False)
     side = "vertexLightVSOutput.zw" if back else "gl_FrontFacing ? vertexLightVSOutput.xy : vertexLightVSOutput.zw"
     spec = " + lit.y * specularColor" if specular else ""
-    sp.AddFragmentShaderReplacement("//VTK::Light::Impl", True, f"vec2 lit = {side};\n"
-                                    f"fragOutput0 = vec4(ambientColor + lit.x * diffuseColor{spec}, opacity);", False)
+    sp.AddFragmentShaderReplacement(
+        "//VTK::Light::Impl", True,
+        f"vec2 lit = {side};\ngl_FragData[0] = vec4(ambientColor + lit.x * diffuseColor{spec}, opacity);", False)
+    if actor.GetProperty().GetOpacity() > 0:
+        # VTK's shader ends with ``if (gl_FragData[0].a <= 0.0) discard;``, never true for this surface (its alpha
+        # is the opacity). A shader that may discard makes llvmpipe write depth late, after shading every 4x4
+        # block of a triangle; without it the depth test and write come first (~1 ms CPU a frame of ICT).
+        sp.AddFragmentShaderReplacement(VTK_ALPHA_DISCARD, True, "", False)
 
 
 def _legend_white_text(legend, entries) -> None:
@@ -352,6 +361,79 @@ def blend_only_when_needed(renderer) -> None:
         (state.vtkglEnable if needs_blending(ren) else state.vtkglDisable)(GL_BLEND)
 
     renderer._blend_observer = renderer.AddObserver(vtkCommand.StartEvent, on_start)
+
+
+GL_READ_FRAMEBUFFER, GL_COLOR_BUFFER_BIT, GL_NEAREST = 0x8CA8, 0x4000, 0x2600
+
+
+def copy_cached_background(renderer) -> None:
+    """Fill ``renderer``'s frames with its gradient background copied from a cached image, not drawn anew.
+
+    Why: VTK draws a gradient background as a full-window quad through a shader on every render; on software
+    OpenGL (llvmpipe under Xvfb) that is ~2 ms CPU a frame (about 1 ms on the two raster threads) for the same
+    pixels each time. Here, as each render starts (an observer of its StartEvent), the renderer's own
+    background drawing (``vtkOpenGLRenderer.Clear``: the gradient, dithered as VTK dithers it) runs once into
+    an off-screen frame buffer of the window's size, and every frame then starts with a copy of it (a plain
+    memory copy: the same format) while the renderer clears depth only (``PreserveColorBuffer``). The picture is
+    the same, bit for bit. The cache is redrawn when the window's size or the background changes; renders this
+    does not fit (a gradient off, a renderer not covering the window, multisampling, hardware selection) draw
+    their background as VTK does."""
+    import vtk
+    if getattr(renderer, "_background_observer", None) is not None:
+        return
+    cache: dict = {"fbo": None, "key": None}
+
+    def on_start(ren, _event) -> None:
+        win = ren.GetRenderWindow()
+        w, h = win.GetSize()
+        usable = (ren.GetGradientBackground() and not ren.GetTexturedBackground() and ren.GetLayer() == 0
+                  and tuple(ren.GetViewport()) == (0.0, 0.0, 1.0, 1.0) and win.GetMultiSamples() <= 1
+                  and ren.GetSelector() is None and w > 0 and h > 0)
+        if not usable:
+            ren.SetPreserveColorBuffer(False)
+            return
+        from vtkmodules.vtkRenderingOpenGL2 import vtkOpenGLFramebufferObject
+        state = win.GetState()
+        key = (w, h, ren.GetBackground(), ren.GetBackground2(), ren.GetDitherGradient(), ren.GetGradientMode(),
+               ren.GetBackgroundAlpha())
+        if cache["key"] != key or cache["fbo"] is None:
+            fbo = cache["fbo"]
+            if fbo is None:
+                fbo = cache["fbo"] = vtkOpenGLFramebufferObject()
+                fbo.SetContext(win)
+            state.PushFramebufferBindings()
+            fbo.PopulateFramebuffer(w, h, True, 1, vtk.VTK_UNSIGNED_CHAR, False, 0, 0)   # binds it
+            fbo.ActivateDrawBuffer(0)
+            state.vtkglViewport(0, 0, w, h)
+            state.vtkglScissor(0, 0, w, h)
+            ren.SetPreserveColorBuffer(False)
+            ren.Clear()                     # VTK's own background, into the cache
+            state.PopFramebufferBindings()
+            cache["key"] = key
+        ren.SetPreserveColorBuffer(True)    # this render clears depth only: its colour comes from the cache
+        state.PushReadFramebufferBinding()
+        cache["fbo"].Bind(GL_READ_FRAMEBUFFER)
+        cache["fbo"].ActivateReadBuffer(0)
+        state.vtkglScissor(0, 0, w, h)      # the camera sets the render's own viewport and scissor next
+        state.vtkglBlitFramebuffer(0, 0, w, h, 0, 0, w, h, GL_COLOR_BUFFER_BIT, GL_NEAREST)
+        state.PopReadFramebufferBinding()
+
+    renderer._background_observer = renderer.AddObserver(vtk.vtkCommand.StartEvent, on_start)
+    renderer._background_cache = cache
+
+
+def drop_cached_background(renderer) -> None:
+    """Undo ``copy_cached_background``: VTK draws the background again, and the cache's frame buffer is released
+    (call it while the render window is still open)."""
+    if getattr(renderer, "_background_observer", None) is None:
+        return
+    renderer.RemoveObserver(renderer._background_observer)
+    renderer._background_observer = None
+    renderer.SetPreserveColorBuffer(False)
+    fbo = renderer._background_cache["fbo"]
+    if fbo is not None and renderer.GetRenderWindow() is not None:
+        fbo.ReleaseGraphicsResources(renderer.GetRenderWindow())
+    renderer._background_cache = None
 
 
 def camera_direction(name: str) -> tuple[np.ndarray, np.ndarray]:

@@ -23,7 +23,8 @@ from functools import cached_property
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from .scene import ColorMap, SurfaceArrays, add_surface, rig_mesh, set_camera, style_plotter, surface_face
+from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, drop_cached_background, rig_mesh, \
+    set_camera, style_plotter, surface_face
 
 CLICK_SLOP_PX = 3   # a press and release this close (display pixels, |dx| + |dy|) is a click
 
@@ -114,6 +115,7 @@ class Viewport(QtWidgets.QWidget):
         # cost ~150 ms instead of ~30 ms; interactive speed matters more here than smooth edges.
         self.plotter = NativePlotter(self, multi_samples=0)
         style_plotter(self.plotter)
+        copy_cached_background(self.plotter.renderer)   # the gradient copied into each frame, not drawn anew
         self.plotter.enable_trackball_style()
         lay = QtWidgets.QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
@@ -443,4 +445,6 @@ class Viewport(QtWidgets.QWidget):
     def close_viewport(self) -> None:
         self._tools.clear()
         self._owner = None
+        if not self.plotter._closed:
+            drop_cached_background(self.plotter.renderer)   # its frame buffer, while the window is open
         self.plotter.close()
