@@ -814,6 +814,18 @@ class MainWindow(QtWidgets.QMainWindow):
             self.resizeDocks([self.segmentation_dock, self.shapes_dock], [370, 330], QtCore.Qt.Horizontal)
             self.resizeDocks([self.keyframes.dock], [60], QtCore.Qt.Vertical)
         self.mocap.views_dock.hide()
+        self._retire_stale_tab_bars()
+
+    def _retire_stale_tab_bars(self) -> None:
+        """Hide every dock tab bar before the window first shows; its first layout shows again the ones in use.
+        QMainWindow makes a new tab bar for a tab group when docks are tabified one by one or a saved state is
+        restored, and only retires the old one once the window is visible: bars made before then stayed shown
+        at their first place (a ghost 'Segmentation | Correctives' bar behind the left panels, and the right
+        panels' tabs a second time, peeking out under the viewport)."""
+        if self.isVisible():
+            return
+        for bar in self.findChildren(QtWidgets.QTabBar, options=QtCore.Qt.FindDirectChildrenOnly):
+            bar.hide()
 
     def closeEvent(self, event: QtGui.QCloseEvent) -> None:
         if not self._maybe_discard():

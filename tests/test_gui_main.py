@@ -315,3 +315,58 @@ def test_a_pose_change_draws_one_frame(qtbot, tmp_path):
         qtbot.wait(30)
         assert renders[0] == 1 and not w.redraw_pending
         np.testing.assert_allclose(w.viewport.points(), w.document.surface(), atol=1e-5)
+
+
+def _dock_tab_bars(w) -> list[list[str]]:
+    """The tabs of every dock tab bar the window shows."""
+    return [[bar.tabText(i) for i in range(bar.count())]
+            for bar in w.findChildren(QtWidgets.QTabBar, options=QtCore.Qt.FindDirectChildrenOnly)
+            if bar.isVisible() and bar.count()]
+
+
+def _assert_one_tab_bar_per_group(w) -> None:
+    docks = {d.windowTitle(): d for d in w.findChildren(QtWidgets.QDockWidget)}
+    bars = _dock_tab_bars(w)
+    assert bars, "no dock tab bar is shown"
+    shown = [t for tabs in bars for t in tabs]
+    assert len(shown) == len(set(shown)), f"a panel's tab is shown twice: {bars}"
+    for tabs in bars:
+        group = {tabs[0], *(d.windowTitle() for d in w.tabifiedDockWidgets(docks[tabs[0]]) if not d.isHidden())}
+        assert set(tabs) == group, f"a tab bar {tabs} is not the tab group {sorted(group)}"
+
+
+def test_each_tab_group_shows_one_tab_bar_also_after_a_restart(qtbot, tmp_path):
+    """QMainWindow left the tab bars it made before the window first showed on screen (docks tabified one by one,
+    a saved layout restored): a ghost 'Segmentation | Correctives' bar and the right panels' tabs twice."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    _assert_one_tab_bar_per_group(w)
+    first = sorted(map(sorted, _dock_tab_bars(w)))
+    assert ["Correctives", "Markers", "Segmentation"] in first
+    w.close()                                            # saves the layout
+    again = make_window(qtbot, tmp_path, size=(1400, 900))   # restores it
+    _assert_one_tab_bar_per_group(again)
+    assert sorted(map(sorted, _dock_tab_bars(again))) == first
+
+
+def test_every_button_shows_its_whole_label_at_the_default_size(qtbot, tmp_path):
+    """At the window's default size every panel's buttons show their whole text (a label cut to 'ew corrective
+    from combinatio' tells a user nothing)."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    checked, cut = 0, []
+    for dock in w.findChildren(QtWidgets.QDockWidget):
+        if dock.isHidden():
+            continue
+        dock.raise_()
+        QtWidgets.QApplication.processEvents()
+        for b in dock.findChildren(QtWidgets.QPushButton) + dock.findChildren(QtWidgets.QToolButton):
+            if b.isVisible() and b.text():
+                checked += 1
+                room = b.width() - 4                   # a tool button's frame
+                if isinstance(b, QtWidgets.QPushButton):
+                    opt = QtWidgets.QStyleOptionButton()
+                    opt.initFrom(b)
+                    room = b.style().subElementRect(QtWidgets.QStyle.SE_PushButtonContents, opt, b).width()
+                if b.fontMetrics().horizontalAdvance(b.text().replace("&", "")) > room:
+                    cut.append((dock.windowTitle(), b.text(), b.width()))
+    assert checked > 30
+    assert not cut, f"buttons whose label does not fit: {cut}"

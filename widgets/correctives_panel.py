@@ -135,7 +135,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
         brow = QtWidgets.QHBoxLayout()
         self.use_pose_button = _button("Use posed shapes", "Tick the shapes whose weight is above 0 now",
                                        self.use_pose_requested)
-        self.new_button = _button("New corrective from combination",
+        self.new_button = _button("New corrective",
                                   "Set the ticked drivers (or, if none are ticked, the posed shapes) to 1 "
                                   "and start sculpting the corrective (Ctrl+Shift+N)", self.new_requested)
         brow.addWidget(self.use_pose_button)
