@@ -378,7 +378,7 @@ def copy_cached_background(renderer) -> None:
     the same, bit for bit. The cache is redrawn when the window's size or the background changes; renders this
     does not fit (a gradient off, a renderer not covering the window, multisampling, hardware selection) draw
     their background as VTK does."""
-    import vtk
+    from vtkmodules.vtkCommonCore import VTK_UNSIGNED_CHAR, vtkCommand   # not all of VTK (see blend_only_when_needed)
     if getattr(renderer, "_background_observer", None) is not None:
         return
     cache: dict = {"fbo": None, "key": None}
@@ -402,7 +402,7 @@ def copy_cached_background(renderer) -> None:
                 fbo = cache["fbo"] = vtkOpenGLFramebufferObject()
                 fbo.SetContext(win)
             state.PushFramebufferBindings()
-            fbo.PopulateFramebuffer(w, h, True, 1, vtk.VTK_UNSIGNED_CHAR, False, 0, 0)   # binds it
+            fbo.PopulateFramebuffer(w, h, True, 1, VTK_UNSIGNED_CHAR, False, 0, 0)   # binds it
             fbo.ActivateDrawBuffer(0)
             state.vtkglViewport(0, 0, w, h)
             state.vtkglScissor(0, 0, w, h)
@@ -418,7 +418,7 @@ def copy_cached_background(renderer) -> None:
         state.vtkglBlitFramebuffer(0, 0, w, h, 0, 0, w, h, GL_COLOR_BUFFER_BIT, GL_NEAREST)
         state.PopReadFramebufferBinding()
 
-    renderer._background_observer = renderer.AddObserver(vtk.vtkCommand.StartEvent, on_start)
+    renderer._background_observer = renderer.AddObserver(vtkCommand.StartEvent, on_start)
     renderer._background_cache = cache
 
 

@@ -240,10 +240,10 @@ class Viewport(QtWidgets.QWidget):
     # --- picking -----------------------------------------------------------------------------------
     def pick(self, x: int, y: int) -> SurfacePoint | None:
         """The surface point under display pixel (x, y from the bottom-left), or None."""
-        import vtk
+        from vtkmodules.vtkRenderingCore import vtkCellPicker
         if self.mesh is None:
             return None
-        picker = vtk.vtkCellPicker()
+        picker = vtkCellPicker()
         picker.SetTolerance(0.0005)
         if not picker.Pick(x, y, 0, self.plotter.renderer) or picker.GetCellId() < 0:
             return None
