@@ -38,6 +38,7 @@ class BatchController(QtCore.QObject):
         self.dialog: BatchDialog | None = None
         self.rows: list[dict] = []
         self.running = False
+        self._units = ""              # the length unit of the rig the running batch solves
         self.map_path: str | None = None
         self.runner = BackgroundRunner(self)
         self._cancel = threading.Event()
@@ -86,6 +87,7 @@ class BatchController(QtCore.QObject):
         rig = self.window.document.rig.copy()      # a snapshot: the user may go on editing the open rig
         if args.rig_units:
             rig.units = args.rig_units
+        self._units = rig.units
         out, force, scheduler = Path(d.output()), d.force_check.isChecked(), d.scheduler() or None
         workers = None if scheduler else d.workers_spin.value()
         self.map_path = args.map
@@ -125,7 +127,7 @@ class BatchController(QtCore.QObject):
         text = (f"Batch: solved {count['solved']}, skipped {count['skipped']} (complete), failed {count['failed']}; "
                 f"summary in {Path(self.dialog.output()) / 'batch.json'}.")
         self.dialog.set_running(False)
-        self.dialog.set_rows(rows)
+        self.dialog.set_rows(rows, units=self._units)   # the marker RMSE is in the solved rig's units
         self.dialog.set_progress(len(rows), len(rows), text)
         self.window.show_status(text, 0)
         self.finished.emit(rows)

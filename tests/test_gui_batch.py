@@ -68,6 +68,13 @@ def test_batch_solve_dialog_runs_in_the_background_and_opens_a_take(qtbot, tmp_p
     assert "truncated" in rows[2]["error"]
     assert d.table.rowCount() == 3 and d.table.item(1, 1).text() == "solved"
     assert d.table.item(2, 6).text() == rows[2]["error"]
+    # the RMSE's unit in its header, the explained motion as a percentage, the error sentence whole on its row
+    assert d.table.horizontalHeaderItem(4).text() == "Marker RMSE (cm)"
+    assert d.table.item(1, 5).text() == f"{100 * rows[1]['motion_explained']:.1f} %"
+    error_rect = d.table.visualItemRect(d.table.item(2, 6))
+    needed = d.table.fontMetrics().boundingRect(QtCore.QRect(0, 0, error_rect.width() - 8, 10000),
+                                                 QtCore.Qt.TextWordWrap, rows[2]["error"])
+    assert error_rect.height() >= needed.height() > d.table.rowHeight(1)
     assert d.run_button.isEnabled() and d.progress_bar.value() == 3
     summary = json.loads((tmp_path / "out" / "batch.json").read_text())
     assert [r["take"] for r in summary["takes"]] == ["first", "second", "cut"]

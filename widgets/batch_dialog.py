@@ -12,7 +12,19 @@ from PySide6 import QtCore, QtWidgets
 TAKE_FILTER = "Marker takes (*.c3d *.trc *.csv);;All files (*)"
 COLUMNS = (("take", "Take"), ("status", "Status"), ("frames", "Frames"), ("rate", "Rate (fps)"),
            ("marker_rmse", "Marker RMSE"), ("motion_explained", "Motion explained"), ("error", "Error"))
+TAKE_COLUMN_MAX = 200     # pixels: the take names' column at most (set_rows)
 RESIDUALS = ("default", "none", "joshi", "gaussian", "multiquadric")
+
+
+def _cell_text(key: str, value) -> str:
+    """A summary value as the table shows it: the explained motion as a percentage, rates and counts whole."""
+    if value is None or value == "":
+        return ""
+    if key == "motion_explained":
+        return f"{100.0 * float(value):.1f} %"
+    if key in ("frames", "rate"):
+        return f"{float(value):g}"
+    return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
 class BatchDialog(QtWidgets.QDialog):
@@ -26,7 +38,7 @@ class BatchDialog(QtWidgets.QDialog):
         super().__init__(parent)
         self.setWindowTitle("Batch Solve")
         self.setObjectName("batch_dialog")
-        self.resize(820, 640)
+        self.resize(960, 680)
         lay = QtWidgets.QVBoxLayout(self)
 
         takes_box = QtWidgets.QGroupBox("Takes")
@@ -106,6 +118,11 @@ class BatchDialog(QtWidgets.QDialog):
         self.table.setSelectionMode(QtWidgets.QAbstractItemView.SingleSelection)
         self.table.horizontalHeader().setStretchLastSection(True)
         self.table.verticalHeader().setVisible(False)
+        self.table.setWordWrap(True)
+        self.table.setTextElideMode(QtCore.Qt.ElideNone)   # an error sentence wraps whole (set_rows)
+        # the rows' heights follow the error column's width as the dialog is resized
+        self.table.horizontalHeader().sectionResized.connect(
+            lambda column, _old, _new: self._fit_rows() if column == len(COLUMNS) - 1 else None)
         lay.addWidget(self.table, 2)
         self.open_button = QtWidgets.QPushButton("Open in Mocap Panel")
         self.open_button.setEnabled(False)
@@ -208,14 +225,38 @@ class BatchDialog(QtWidgets.QDialog):
     def set_status(self, text: str) -> None:
         self.status_label.setText(text)
 
-    def set_rows(self, rows: list[dict]) -> None:
+    def set_rows(self, rows: list[dict], units: str = "") -> None:
+        """The results table: one row a take. ``units``: the rig's length unit, which the marker RMSE is in.
+        The error column takes the room left and wraps its sentence over as many lines as it needs."""
+        labels = dict(COLUMNS)
+        if units:
+            labels["marker_rmse"] = f"Marker RMSE ({units})"
+        self.table.setHorizontalHeaderLabels([labels[key] for key, _ in COLUMNS])
         self.table.setRowCount(len(rows))
         for i, r in enumerate(rows):
             for j, (key, _) in enumerate(COLUMNS):
-                v = r.get(key)
-                text = "" if v is None else (f"{v:.4g}" if isinstance(v, float) else str(v))
-                item = QtWidgets.QTableWidgetItem(text)
-                if key == "error" and v:
-                    item.setToolTip(str(v))
+                item = QtWidgets.QTableWidgetItem(_cell_text(key, r.get(key)))
+                if key in ("frames", "rate", "marker_rmse", "motion_explained"):
+                    item.setTextAlignment(QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
+                if key == "error" and r.get(key):
+                    item.setToolTip(str(r[key]))
+                if key == "take" and r.get("path"):
+                    item.setToolTip(f"{r.get('take')}: {r['path']}")
                 self.table.setItem(i, j, item)
-        self.table.resizeColumnsToContents()
+        error_column = len(COLUMNS) - 1
+        for j in range(error_column):
+            self.table.resizeColumnToContents(j)
+        # a long take name is cut (its tooltip has it whole), so that the error sentences keep room to be read
+        self.table.setColumnWidth(0, min(self.table.columnWidth(0), TAKE_COLUMN_MAX))
+        self._fit_rows()
+
+    def _fit_rows(self) -> None:
+        """Each row as tall as its wrapped error sentence. Qt's item delegate measures wrapped text a few pixels
+        wider than it paints it, so a sentence can need one line more than it is given: a row with an error gets
+        one more line."""
+        self.table.resizeRowsToContents()
+        line = self.table.fontMetrics().lineSpacing()
+        for i in range(self.table.rowCount()):
+            item = self.table.item(i, len(COLUMNS) - 1)
+            if item is not None and item.text():
+                self.table.setRowHeight(i, self.table.rowHeight(i) + line)
