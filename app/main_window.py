@@ -39,6 +39,16 @@ MENUS = (("file", "&File"), ("edit", "&Edit"), ("view", "&View"), ("animation", 
          ("correctives", "&Correctives"), ("help", "&Help"))
 
 
+def _let_choices_shrink(panel: QtWidgets.QWidget) -> None:
+    """A panel's drop-down lists may be narrower than their longest choice (the current one is cut, the open list
+    shows every choice whole), so that a panel fits its dock at the window's default size instead of being cut
+    off at the right behind a scroll bar. Qt's default sizes a combo box to its longest choice."""
+    for combo in panel.findChildren(QtWidgets.QComboBox):
+        if combo.sizeAdjustPolicy() == QtWidgets.QComboBox.AdjustToContentsOnFirstShow:
+            combo.setSizeAdjustPolicy(QtWidgets.QComboBox.AdjustToMinimumContentsLengthWithIcon)
+            combo.setMinimumContentsLength(min(combo.minimumContentsLength() or 12, 12))
+
+
 class MainWindow(QtWidgets.QMainWindow):
     """The viewport, the panels in docks, the menus, undo and the status bar; it owns the controllers.
 
@@ -109,6 +119,7 @@ class MainWindow(QtWidgets.QMainWindow):
         forces the window taller than the screen (the left panels are ~700 px high; the window opens at 1400x900)."""
         dock = QtWidgets.QDockWidget(title, self)
         dock.setObjectName(f"dock_{title.replace(' ', '_')}")
+        _let_choices_shrink(widget)
         if scroll:
             area_widget = QtWidgets.QScrollArea()
             area_widget.setWidget(widget)

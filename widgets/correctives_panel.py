@@ -92,7 +92,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.table.itemDoubleClicked.connect(lambda *_: self.edit_shape_requested.emit())
         self.table.itemChanged.connect(self._on_item_changed)
         lay.addWidget(self.table, 2)
-        row = QtWidgets.QHBoxLayout()
+        row = QtWidgets.QGridLayout()
         self.rename_button = _button("Rename…", "Rename the selected corrective (undoable; F2 in the list)",
                                      self.rename_requested)
         self.drivers_button = _button("Drivers…", "Edit the selected corrective's driver shapes (undoable)",
@@ -103,8 +103,10 @@ class CorrectivesPanel(QtWidgets.QWidget):
                                      "drivers _L↔_R, shape reflected across x = 0 (undoable)", self.mirror_requested)
         self.delete_button = _button("Delete", "Delete the selected corrective (undoable; Delete key in the list)",
                                      self.delete_requested)
-        for b in (self.rename_button, self.drivers_button, self.edit_button, self.mirror_button, self.delete_button):
-            row.addWidget(b)
+        # two rows of buttons: five in one made the panel wider than its dock at the default window size
+        for i, b in enumerate((self.rename_button, self.drivers_button, self.edit_button, self.mirror_button,
+                               self.delete_button)):
+            row.addWidget(b, i // 3, i % 3)
         for key, signal, what in (("Delete", self.delete_requested, "Delete Corrective"),
                                   ("F2", self.rename_requested, "Rename Corrective")):
             sc = QtGui.QShortcut(QtGui.QKeySequence(key), self.table)   # while the list has the focus
@@ -156,10 +158,13 @@ class CorrectivesPanel(QtWidgets.QWidget):
 
         sculpt = QtWidgets.QGroupBox("Sculpt")
         self.sculpt_box = sculpt
-        form = QtWidgets.QFormLayout(sculpt)
+        # the status above the form, in a box layout: a form row gave the wrapped sentence too little height
+        sculpt_lay = QtWidgets.QVBoxLayout(sculpt)
         self.sculpt_status = QtWidgets.QLabel("Not sculpting.")
         self.sculpt_status.setWordWrap(True)
-        form.addRow(self.sculpt_status)
+        sculpt_lay.addWidget(self.sculpt_status)
+        form = QtWidgets.QFormLayout()
+        sculpt_lay.addLayout(form)
         self.brush = _combo(BRUSHES, "Grab drags the surface with the mouse; Smooth relaxes it; Inflate and "
                                      "Deflate push it along its normals (G, Shift+S, I, D)")
         self.radius = QtWidgets.QDoubleSpinBox()

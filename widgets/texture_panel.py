@@ -8,7 +8,7 @@ from PySide6 import QtCore, QtGui, QtWidgets
 MODE_LABELS = [("none", "None (plain shading)"), ("band-pass", "Band-pass (Joshi §5)"), ("linear", "Linear")]
 DETAIL_LABELS = [("regional", "Per region: the strongest shape there"), ("dominant", "Dominant shape"),
                  ("neutral", "Neutral")]
-THUMB = 160   # thumbnail side, pixels
+THUMB = 108   # thumbnail side, pixels: three in a row fit the side docks at the default window size
 
 
 def _pixmap(image8: np.ndarray) -> QtGui.QPixmap:
