@@ -106,7 +106,7 @@ class KeyframeController(QtCore.QObject):
         self.playback = TakePlayback(self)
         self.playback.frame_changed.connect(self._play_frame)
         # the next playback frame's surface and normals, evaluated on a worker while this one is drawn
-        self._ahead: tuple[int, PoseState, Future] | None = None
+        self._ahead: tuple[int, PoseState, int, Future] | None = None   # frame, pose, rig version, job
         self._worker: ThreadPoolExecutor | None = None
         self.playback.ticked.connect(lambda _f: window.redraw_now())
         self.playback.playing_changed.connect(panel.set_playing)
@@ -339,13 +339,15 @@ class KeyframeController(QtCore.QObject):
         """Show playback frame ``frame``. While playing a global (not regional) animation, the next frame's surface
         and normals are then evaluated on a worker thread, in the time the main thread waits for this frame's render
         (llvmpipe's raster threads; VTK releases the GIL): the next tick finds them ready when the clock asks for
-        that frame (else they are dropped), ~1.4 ms (pose and normals) less on the main thread a frame. At most one
+        that frame with the same pose and rig (else they are dropped), ~1.4 ms (pose and normals) less on the main
+        thread a frame. At most one
         evaluation runs at a time, and never beside the main thread's own (it is joined first)."""
         ahead, self._ahead = self._ahead, None
         evaluated = None
         if ahead is not None:
-            result = ahead[2].result()
-            evaluated = (ahead[1], *result) if ahead[0] == frame else None
+            result = ahead[3].result()
+            if ahead[0] == frame and ahead[2] == self.document.rig_version:   # no shape edited meanwhile
+                evaluated = (ahead[1], *result)
         self.scrub(frame / self.fps, evaluated)
         nxt = frame + 1
         normals = self.window.viewport.normals_function()
@@ -359,7 +361,7 @@ class KeyframeController(QtCore.QObject):
             def evaluate() -> tuple[np.ndarray, np.ndarray]:
                 surface = document.evaluate_state(state)
                 return surface, normals(surface)
-            self._ahead = (nxt, state, self._worker.submit(evaluate))
+            self._ahead = (nxt, state, document.rig_version, self._worker.submit(evaluate))
 
     def set_playing(self, on: bool) -> None:
         if on and not self.timeline.keys:

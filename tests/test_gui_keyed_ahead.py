@@ -94,3 +94,23 @@ def test_an_edit_between_frames_is_drawn_not_the_frame_evaluated_before_it(qtbot
         assert w.document.weights[w.document.rig.shape_index("mouthSmile_L")] == pytest.approx(1.0)
     finally:
         kf.playback._playing = False
+
+
+def test_a_shape_edited_between_frames_is_drawn_not_the_frame_evaluated_before_it(qtbot, tmp_path):
+    """A shape muted while the next frame was being evaluated (the same weights, another rig): evaluated anew."""
+    w, kf = _keyed(qtbot, tmp_path)
+    kf.playback.set_length(121, 60.0)
+    kf.playback._playing = True
+    try:
+        kf.playback.set_frame(59)
+        w.redraw_now()
+        assert kf._ahead is not None and kf._ahead[0] == 60
+        rig = w.document.project.rig
+        rig.muted.append("jawOpen")
+        w.document.shape_settings_edited()
+        kf.playback.set_frame(60)
+        w.redraw_now()
+        _drawn_is_fresh(w, kf)
+        np.testing.assert_array_equal(w.viewport.points(), w.document.evaluate_state(kf.pose_at(0.0)))  # no jaw
+    finally:
+        kf.playback._playing = False
