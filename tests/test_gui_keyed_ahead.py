@@ -4,6 +4,8 @@ surface and normals exactly those evaluated on the spot; and the work must reall
 nothing)."""
 from __future__ import annotations
 
+import contextlib
+
 import numpy as np
 import pytest
 
@@ -55,62 +57,52 @@ def test_playback_draws_frames_evaluated_ahead_and_each_is_the_clocks_frame(qtbo
     assert sum(given[1:]) >= sum(follows) > 0
 
 
+@contextlib.contextmanager
+def _playing_from(w, kf, frame: int):
+    """As while playing (without the timer): ``frame`` drawn, the next one being evaluated ahead."""
+    kf.playback.set_length(121, 60.0)
+    kf.playback._playing = True
+    try:
+        kf.playback.set_frame(frame)
+        w.redraw_now()
+        assert kf._ahead is not None and kf._ahead[0] == frame + 1
+        yield
+    finally:
+        kf.playback._playing = False
+
+
+def _show(w, kf, frame: int) -> None:
+    kf.playback.set_frame(frame)
+    w.redraw_now()
+    assert kf.time == pytest.approx(frame / 60.0)
+    _drawn_is_fresh(w, kf)
+
+
 def test_a_frame_other_than_the_one_evaluated_ahead_is_evaluated_on_the_spot(qtbot, tmp_path):
     """The clock skipped a frame: the one evaluated ahead (frame + 1) is not drawn for frame + 2."""
     w, kf = _keyed(qtbot, tmp_path)
-    kf.playback.set_length(121, 60.0)
-    kf.playback._playing = True            # as while playing, without the timer
-    try:
-        kf.playback.set_frame(30)
-        w.redraw_now()
-        assert kf._ahead is not None and kf._ahead[0] == 31
-        kf.playback.set_frame(32)          # 31 was due but its time passed
-        w.redraw_now()
-        assert kf.time == pytest.approx(32 / 60.0)
-        _drawn_is_fresh(w, kf)
-        kf.playback.set_frame(33)          # the one evaluated ahead this time
-        w.redraw_now()
-        _drawn_is_fresh(w, kf)
-    finally:
-        kf.playback._playing = False
+    with _playing_from(w, kf, 30):
+        _show(w, kf, 32)                   # 31 was due but its time passed
+        _show(w, kf, 33)                   # the one evaluated ahead this time
 
 
 def test_an_edit_between_frames_is_drawn_not_the_frame_evaluated_before_it(qtbot, tmp_path):
     """A key changed while the next frame was being evaluated: the frame drawn has the new key's pose."""
     w, kf = _keyed(qtbot, tmp_path)
-    kf.playback.set_length(121, 60.0)
-    kf.playback._playing = True
-    try:
-        kf.playback.set_frame(59)
-        w.redraw_now()
-        assert kf._ahead is not None and kf._ahead[0] == 60
+    with _playing_from(w, kf, 59):
         pose = np.zeros(w.document.rig.n_shapes)
         pose[w.document.rig.shape_index("mouthSmile_L")] = 1.0
         w.set_pose(pose, "smile")
         kf.set_key(1.0)                    # replaces the key at frame 60's time
-        kf.playback.set_frame(60)
-        w.redraw_now()
-        _drawn_is_fresh(w, kf)
+        _show(w, kf, 60)
         assert w.document.weights[w.document.rig.shape_index("mouthSmile_L")] == pytest.approx(1.0)
-    finally:
-        kf.playback._playing = False
 
 
 def test_a_shape_edited_between_frames_is_drawn_not_the_frame_evaluated_before_it(qtbot, tmp_path):
     """A shape muted while the next frame was being evaluated (the same weights, another rig): evaluated anew."""
     w, kf = _keyed(qtbot, tmp_path)
-    kf.playback.set_length(121, 60.0)
-    kf.playback._playing = True
-    try:
-        kf.playback.set_frame(59)
-        w.redraw_now()
-        assert kf._ahead is not None and kf._ahead[0] == 60
-        rig = w.document.project.rig
-        rig.muted.append("jawOpen")
+    with _playing_from(w, kf, 59):
+        w.document.project.rig.muted.append("jawOpen")
         w.document.shape_settings_edited()
-        kf.playback.set_frame(60)
-        w.redraw_now()
-        _drawn_is_fresh(w, kf)
+        _show(w, kf, 60)
         np.testing.assert_array_equal(w.viewport.points(), w.document.evaluate_state(kf.pose_at(0.0)))  # no jaw
-    finally:
-        kf.playback._playing = False
