@@ -160,8 +160,9 @@ class Document(QtCore.QObject):
         return PoseState(self.project.weights.copy(), rw, self.region_blend if rw is not None else None,
                          self.region_level if rw is not None else None)
 
-    def set_pose_state(self, state: PoseState) -> None:
-        """Show ``state`` (global or regional per-region weights with their level's blend)."""
+    def set_pose_state(self, state: PoseState, surface: np.ndarray | None = None) -> None:
+        """Show ``state`` (global or regional per-region weights with their level's blend). ``surface``: its posed
+        surface if already evaluated (``evaluate_state(state)``: keyed playback evaluates the next frame ahead)."""
         w = np.asarray(state.weights, dtype=np.float64)
         if w.shape != self.project.weights.shape:
             raise ValueError(f"expected {self.project.weights.shape[0]} weights, got {w.shape}")
@@ -177,7 +178,7 @@ class Document(QtCore.QObject):
         if self.edit_region is not None and (self.region_weights is None
                                              or self.edit_region >= self.region_weights.shape[0] - 1):
             self.edit_region = None
-        self._surface = None
+        self._surface = surface
         self.pose_changed.emit()
 
     def set_region_weights_live(self, region_weights: np.ndarray) -> None:

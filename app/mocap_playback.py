@@ -34,6 +34,7 @@ class TakePlayback(QtCore.QObject):
         self.timer.timeout.connect(self._tick)
         self._playing = False
         self._start = (0.0, 0)
+        self._started = False     # the clock's origin is the first tick's time (see ``_tick``)
         self._last_tick = 0.0
         self._tick_times: list[float] = []
 
@@ -65,6 +66,7 @@ class TakePlayback(QtCore.QObject):
             return
         start = 0 if self.frame >= self.n_frames - 1 else max(self.frame, 0)
         self._start = (time.perf_counter(), start)
+        self._started = False
         self._tick_times = []
         self._playing = True
         self.timer.start(0)   # the first tick shows the start frame (if it is not shown yet)
@@ -89,8 +91,15 @@ class TakePlayback(QtCore.QObject):
     def _tick(self) -> None:
         if not self._playing:
             return
-        t0, f0 = self._start
         now = self._last_tick = time.perf_counter()
+        if not self._started:
+            # The animation starts when its first frame is shown, not when Play was pressed: the first tick comes
+            # after the press's own work (the play button, the status; 20-60 ms for a first play in the main
+            # window), and a clock started at the press began the take that far behind, catching up by dropping
+            # frames (issue 20: keyed playback dropped the 2nd to 15th frames of its first play at 60 fps).
+            self._start = (now, self._start[1])
+            self._started = True
+        t0, f0 = self._start
         target = f0 + int((now - t0) * self.rate)
         if target >= self.n_frames:
             if self.loop:

@@ -238,6 +238,7 @@ def test_a_30_fps_live_link_face_take_plays_in_real_time(qtbot, tmp_path, monkey
     mc.set_frame(0)
     mc.panel.loop_check.setChecked(False)
     mc.play()
+    mc.playback._tick()                       # the first tick: the clock starts (frame 0 is shown)
     clock[0] += 1.5
     mc.playback._tick()                       # the timer's tick at 1.5 s on the clock
     mc.pause()

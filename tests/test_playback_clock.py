@@ -26,9 +26,11 @@ def test_the_timer_is_armed_for_the_next_frame_on_the_clock(qtbot, clock):
     pb.set_frame(0)
     pb.play()
     assert pb.timer.isSingleShot()
-    clock[0] += 0.0041                 # the first tick, a little after Play: frame 0 is shown already
+    pb._tick()                         # the first tick: the clock starts, frame 0 is shown already
+    assert shown == [0] and pb.timer.remainingTime() in (16, 17)   # frame 1 is due at 16.7 ms
+    clock[0] += 0.0041                 # a tick at 4.1 ms (woken early): nothing yet, armed again
     pb._tick()
-    assert shown == [0] and pb.timer.remainingTime() in (13, 14)   # frame 1 is due at 16.7 ms: in 12.6 ms
+    assert shown == [0] and pb.timer.remainingTime() in (13, 14)   # in 12.6 ms
     clock[0] += 0.0125                 # the tick for frame 1, at 16.6 ms (a ms early): nothing yet, armed again
     pb._tick()
     assert shown == [0] and pb.timer.remainingTime() in (0, 1)
@@ -50,6 +52,31 @@ def test_the_timer_is_armed_for_the_next_frame_on_the_clock(qtbot, clock):
     assert shown == [0, 1, 2, 3, 5] and pb.timer.remainingTime() in (16, 17)   # frame 6 at 100 ms
     pb.pause()
     assert not pb.playing and not pb.timer.isActive()
+
+
+def test_the_clock_starts_when_the_first_frame_is_shown_not_at_play(qtbot, clock):
+    """A first tick 50 ms after Play (the press's own work) starts the take there: frame 1 is due a frame after
+    it, and no frame is skipped to catch up with a clock started at the press."""
+    pb = TakePlayback()
+    shown = []
+    pb.frame_changed.connect(shown.append)
+    pb.set_length(120, 60.0)
+    pb.set_frame(0)
+    pb.play()
+    clock[0] += 0.05                   # three frames' time after Play
+    pb._tick()
+    assert shown == [0] and pb.timer.remainingTime() in (16, 17)
+    for f in range(1, 4):
+        clock[0] += 1 / 60 + 0.0001
+        pb._tick()
+    assert shown == [0, 1, 2, 3]       # on a clock started at Play: 0, 3, 4, 5
+    pb.pause()
+    pb.play()                          # from frame 3, a second start: the clock starts at its first tick again
+    clock[0] += 0.5
+    pb._tick()
+    clock[0] += 1 / 60 + 0.0001
+    pb._tick()
+    assert shown == [0, 1, 2, 3, 4]
 
 
 def test_a_take_faster_than_60_fps_draws_at_most_60_frames_a_second(qtbot, clock):

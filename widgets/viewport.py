@@ -122,6 +122,7 @@ class Viewport(QtWidgets.QWidget):
         lay.addWidget(self.plotter.interactor)
         self.mesh = None
         self._arrays: SurfaceArrays | None = None
+        self._given_normals: tuple[np.ndarray, np.ndarray] | None = None   # use_normals
         self._focus = None
         self._colormap: ColorMap | None = None
         self._wireframe = False
@@ -159,10 +160,21 @@ class Viewport(QtWidgets.QWidget):
         """Move the surface's vertices (same order and count) and redraw."""
         if self.mesh is None:
             return
-        self._arrays.update(points)
+        given, self._given_normals = self._given_normals, None
+        self._arrays.update(points, given[1] if given is not None and given[0] is points else None)
         if self._textured is not None:
             self._textured.update_points(self._arrays.points, self._arrays.normals)
         self.render()
+
+    def use_normals(self, points: np.ndarray, normals: np.ndarray) -> None:
+        """The next ``update_points(points)`` with this very array takes ``normals`` ((V, 3) float32, computed by
+        ``normals_function()`` for ``points``) instead of computing them; any other update computes its own."""
+        self._given_normals = (points, normals)
+
+    def normals_function(self):
+        """The function giving the shown surface's display normals for points (thread-safe: numpy only), or None
+        without a surface."""
+        return None if self.mesh is None else self.mesh._display_normals
 
     def points(self) -> np.ndarray | None:
         """A copy of the drawn vertices (the mesh's own array is rewritten in place on each update)."""
