@@ -490,6 +490,8 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
     if pending:
         out_dir.mkdir(parents=True, exist_ok=True)
         import dask
+        import distributed  # noqa: F401  (its defaults join Dask's configuration here, not inside the block below,
+        #                     whose end would take them out again: a second batch in this process would then fail)
         with dask.config.set(local_cluster_config() if not scheduler else {}):   # for the cluster's whole life
             client, cluster = start_client(workers, scheduler, dashboard_address=dashboard_address,
                                            preload=job.preload)

@@ -413,6 +413,7 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
     import gc
 
     import dask
+    import distributed  # noqa: F401  (before the configuration block, as run_batch does)
 
     from model.batch import local_cluster_config, start_client
     with dask.config.set(local_cluster_config()):
@@ -427,3 +428,24 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
     for worker, n in frozen.items():
         assert n > 50_000, f"{worker}: only {n} objects frozen"    # Dask, numpy, scipy, the solver (no VTK here)
         assert walked[worker] < n / 2, f"{worker}: a full collection still walks {walked[worker]} objects"
+
+
+def test_a_second_batch_in_the_same_process_runs(tmp_path, ict_rig, take_dir):
+    """The GUI runs every Batch Solve in its own process: a second batch there must find Dask's settings intact (the
+    first one's configuration block used to take distributed's defaults out with it: KeyError 'comm')."""
+    import argparse
+
+    from app.cli_batch import prepare_job
+    from app.cli_solve import add_solve_options
+    from model.batch import run_batch
+    from model.take_c3d import write_c3d
+    from model.takes import MarkerTake, load_take
+    t = load_take(take_dir / "take.c3d")
+    take = tmp_path / "short.c3d"
+    write_c3d(take, MarkerTake(t.positions[:40], t.labels, t.rate, t.units))
+    p = argparse.ArgumentParser()
+    add_solve_options(p)
+    job = prepare_job(ict_rig, p.parse_args(["--map", str(take_dir / "marker_map.json")]))
+    for out in ("first", "second"):
+        rows = run_batch(job, [take], tmp_path / out, workers=1, dashboard_address="127.0.0.1:0")
+        assert [r["status"] for r in rows] == ["solved"], rows
