@@ -1,8 +1,7 @@
 """Imported by the local cluster's fork server before it forks the batch's workers (``model.batch.start_fork_server``,
 named by ``app.cli_batch.PRELOAD`` as the job's ``preload``): what a take's preview needs, loaded once for every
 worker instead of in each worker's first take. VTK and pyvista, with the render window backend the preview uses
-(EGL without a display: ``widgets.scene.use_offscreen_backend_if_headless``, as ``render_png`` sets it), the VTK
-modules pyvista loads with its first plotter, the graph search of the preview's hidden faces
+(EGL: ``prefer_egl``), the VTK modules pyvista loads with its first plotter, the graph search of the preview's hidden faces
 (``solvers.mesh.hidden_back_faces``), and the compiled solve kernel. Nothing is rendered here: an OpenGL context
 must not be shared across a fork.
 
@@ -12,10 +11,47 @@ render off screen, and one that cannot be drawn costs its take the picture only 
 """
 from __future__ import annotations
 
+import ctypes.util
 import os
 
 from widgets.scene import use_offscreen_backend_if_headless
 
+_WINDOW = "VTK_DEFAULT_OPENGL_WINDOW"
+_EGL = "vtkEGLRenderWindow"
+egl_over_display = False          # True: EGL chosen here although the workers have an X display (``leave_egl``)
+
+
+def prefer_egl() -> bool:
+    """Let the workers draw their previews through EGL, inside their own process, also where there is an X display
+    (which ``render_png`` would otherwise use). Through the display every preview's OpenGL window and context are
+    made, drawn and read back by round trips to the X server: CPU spent in another process (the server's, ~10-20 ms
+    a preview under Xvfb) and waits on it, taken from the takes when the workers fill the cores; a batch's workers
+    also have no business with the user's display (over ``ssh -X`` every preview would cross the network). Both
+    draw the same pixels through Mesa (compared on ICT: identical). Kept when the user chose a window class
+    (``VTK_DEFAULT_OPENGL_WINDOW``) or when there is no libEGL; without a display ``render_png`` uses EGL anyway.
+    True when EGL was chosen over a display."""
+    global egl_over_display
+    has_display = bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+    if not has_display or os.environ.get(_WINDOW) or ctypes.util.find_library("EGL") is None:
+        return False
+    os.environ[_WINDOW] = _EGL
+    egl_over_display = True
+    return True
+
+
+def leave_egl() -> bool:
+    """After a preview failed through EGL chosen by ``prefer_egl``: this worker's later previews use the display's
+    own window again. True when that changed anything (the failed preview is then worth one more try)."""
+    global egl_over_display
+    if not egl_over_display:
+        return False
+    egl_over_display = False
+    if os.environ.get(_WINDOW) == _EGL:
+        del os.environ[_WINDOW]
+    return True
+
+
+prefer_egl()
 use_offscreen_backend_if_headless()
 os.environ.setdefault("ALLOW_PLOTTING", "true")
 

@@ -9,7 +9,6 @@ failure is one sentence on stderr and in the summary); the other takes are solve
 from __future__ import annotations
 
 import sys
-from functools import partial
 
 from app.cli_solve import add_solve_options, load_solve_rig, solve_settings
 from model.errors import RigInputError
@@ -32,15 +31,29 @@ def add_parser(sub, rig_arg) -> None:
     sp.set_defaults(func=cmd_batch)
 
 
-# What the local cluster's fork server imports for the preview (``app.batch_worker``), besides the solve's modules.
-PRELOAD = ("app.batch_worker",)
+# What the local cluster's fork server imports for the preview (``app.batch_worker``; this module, which the job's
+# preview names), besides the solve's modules.
+PRELOAD = ("app.batch_worker", "app.cli_batch")
+
+
+def render_preview(points, face_counts, face_indices, path, *, focus=None) -> None:
+    """A take's preview PNG (``widgets.scene.render_png`` off screen, from the front). On a local cluster's worker
+    that chose EGL over an X display (``app.batch_worker.prefer_egl``), a preview that fails through EGL is drawn
+    again through the display's window, which that worker keeps using."""
+    from model.batch import PREVIEW_SIZE
+    from widgets.scene import render_png
+    try:
+        render_png(points, face_counts, face_indices, path, focus=focus, size=PREVIEW_SIZE, camera="front")
+    except Exception:
+        worker = sys.modules.get("app.batch_worker")     # loaded by the local cluster's fork server only
+        if worker is None or not worker.leave_egl():
+            raise
+        render_png(points, face_counts, face_indices, path, focus=focus, size=PREVIEW_SIZE, camera="front")
 
 
 def preview_renderer():
-    """The preview PNG of a take (``widgets.scene.render_png`` off screen), picklable for the workers."""
-    from widgets.scene import render_png
-    from model.batch import PREVIEW_SIZE
-    return partial(render_png, size=PREVIEW_SIZE, camera="front")
+    """The preview of a take (``render_preview``), picklable for the workers."""
+    return render_preview
 
 
 def prepare_job(rig, args):

@@ -388,9 +388,10 @@ def local_cluster_config() -> dict:
     restart a worker). With as many workers as cores, every CPU second spent beside the takes is taken from one:
 
     - the workers are forked from one fork server that imported ``WORKER_MODULES`` and the job's ``preload`` once
-      (``start_fork_server``), instead of each worker starting a fresh interpreter and importing Dask, numpy, the
-      solver and VTK itself (1.2-1.7 s of CPU a worker, most of it in its first take, and again in its
-      deserialisation of the job and its interpreter's teardown at the end);
+      and froze them for the garbage collector (``start_fork_server``, ``model.batch_preloaded``), instead of each
+      worker starting a fresh interpreter and importing Dask, numpy, the solver and VTK itself (1.2-1.7 s of CPU a
+      worker, most of it in its first take, and again in its deserialisation of the job and its interpreter's
+      teardown at the end);
     - the workers' housekeeping runs less often: Dask's statistical profiler samples a worker's stack every 10 ms
       (off: the dashboard's Profile page stays empty), the event-loop health tick runs every 20 ms in every
       process (1 s), the system monitor every 0.5 s (5 s)."""
@@ -406,14 +407,16 @@ def start_fork_server(preload: tuple = ()) -> bool:
     """Start this process's fork server, which the local cluster's workers are forked from, if it is not running:
     it imports ``WORKER_MODULES`` and ``preload`` in its own process while this one goes on (the ``batch`` command
     calls this before it loads the rig, so the ~1.3 s of imports run on another core meanwhile; ``start_client``
-    calls it too). Costs this process a few milliseconds: it imports neither Dask nor numpy. The fork server gets
-    the environment a nanny gives the worker it starts (``model.batch_env``) and a fixed hash seed, so that every
-    worker hashes alike. False where there is no fork server (the workers are then spawned)."""
+    calls it too), then freezes what they made for the garbage collector (``model.batch_preloaded``). Costs this
+    process a few milliseconds: it imports neither Dask nor numpy. The fork server gets the environment a nanny gives
+    the worker it starts (``model.batch_env``) and a fixed hash seed, so that every worker hashes alike. False where
+    there is no fork server (the workers are then spawned)."""
     import multiprocessing
     if "forkserver" not in multiprocessing.get_all_start_methods():
         return False
     import multiprocessing.forkserver
-    multiprocessing.get_context("forkserver").set_forkserver_preload(list(dict.fromkeys([*WORKER_MODULES, *preload])))
+    modules = [*dict.fromkeys([*WORKER_MODULES, *preload]), "model.batch_preloaded"]   # its gc.freeze() last
+    multiprocessing.get_context("forkserver").set_forkserver_preload(modules)
     if os.environ.get("PYTHONHASHSEED") in (None, "0"):
         os.environ["PYTHONHASHSEED"] = _FORK_SERVER_HASH_SEED
     multiprocessing.forkserver.ensure_running()
@@ -487,6 +490,8 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
     if pending:
         out_dir.mkdir(parents=True, exist_ok=True)
         import dask
+        import distributed  # noqa: F401  (its defaults join Dask's configuration here, not inside the block below,
+        #                     whose end would take them out again: a second batch in this process would then fail)
         with dask.config.set(local_cluster_config() if not scheduler else {}):   # for the cluster's whole life
             client, cluster = start_client(workers, scheduler, dashboard_address=dashboard_address,
                                            preload=job.preload)
