@@ -101,8 +101,9 @@ class KeyframeController(QtCore.QObject):
         self.fps = DEFAULTS["fps"]
         self.duration = DEFAULTS["duration"]
         self.time = 0.0
-        # real-time playback on the take player's clock: the frame the clock is at is shown, frames whose time
-        # passed while drawing are skipped (a slow frame never slows the animation down)
+        # real-time playback on the take player's clock: the frame the clock is at is shown; a frame is drawn late
+        # when playback fell at most a frame behind, and skipped when it fell further (slow frames never slow the
+        # animation down by more than that)
         self.playback = TakePlayback(self)
         self.playback.frame_changed.connect(self._play_frame)
         # the next playback frame's surface and normals, evaluated on a worker while this one is drawn

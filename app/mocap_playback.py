@@ -1,5 +1,6 @@
 """Real-time playback of a take: the current frame, play / pause / step / loop on a precise timer that shows the
-frame the clock is at (frames are skipped when drawing is slow), and a drawn-frames-per-second meter. It knows
+frame the clock is at (a frame drawn late by up to ``late_frames`` is still drawn; frames are skipped when drawing
+stays slow), and a drawn-frames-per-second meter. It knows
 nothing of what a frame shows: ``app.mocap_controller`` listens to ``frame_changed`` and draws it.
 
 The timer is scheduled by the clock: each tick arms a single shot for the moment the next frame is due, at once
@@ -28,6 +29,10 @@ class TakePlayback(QtCore.QObject):
         self.loop = True
         self.fps = 0.0
         self.max_rate = 60.0      # frames drawn per second at most (a faster take skips frames)
+        # how many frames playback may fall behind the clock and still draw the next frame rather than skip to the
+        # clock's: one slow frame (another process took the CPU) is made up by the next faster ones instead of
+        # being dropped; the animation stays within this many frames of real time, more behind it skips
+        self.late_frames = 1
         self.timer = QtCore.QTimer(self)
         self.timer.setTimerType(QtCore.Qt.PreciseTimer)
         self.timer.setSingleShot(True)   # armed by each tick for the next frame's time
@@ -101,6 +106,8 @@ class TakePlayback(QtCore.QObject):
             self._started = True
         t0, f0 = self._start
         target = f0 + int((now - t0) * self.rate)
+        if self.rate <= self.max_rate and f0 <= self.frame < target <= self.frame + 1 + self.late_frames:
+            target = self.frame + 1     # behind the clock by at most ``late_frames``: the next frame, late
         if target >= self.n_frames:
             if self.loop:
                 self._start = (now, 0)
@@ -122,7 +129,8 @@ class TakePlayback(QtCore.QObject):
 
     def _schedule(self) -> None:
         """Arm the timer for when the frame after the shown one is due: at once if the clock is there already
-        (drawing took a frame: it is drawn late rather than skipped, unless the clock has passed it too), else
+        (drawing took a frame: it is drawn late rather than skipped, unless the clock is more than ``late_frames``
+        past it too), else
         when the clock reaches its next frame (also when the shown frame is ahead of the clock). Never sooner
         than ``max_rate`` allows after this tick's start."""
         if not self._playing:   # a listener paused

@@ -1,6 +1,7 @@
 """app.mocap_playback.TakePlayback schedules its timer by the clock (issue 20): each tick arms one shot for the
 moment the next frame is due (at once when it is due already), so a 60 fps take draws every frame when drawing
-takes less than a frame, and skips only the frames whose time passed while an earlier one was drawn."""
+takes less than a frame, draws a frame late when it fell at most ``late_frames`` (1) behind the clock, and skips to the
+clock's frame when it fell further behind."""
 from __future__ import annotations
 
 import time
@@ -44,12 +45,16 @@ def test_the_timer_is_armed_for_the_next_frame_on_the_clock(qtbot, clock):
     draw[0] = 0.02                     # drawn by 53.5 ms
     pb._tick()
     assert shown == [0, 1, 2] and pb.timer.remainingTime() == 0
-    draw[0] = 0.03                     # frame 3, drawn by 83.5 ms: the clock passed frame 4 too
+    draw[0] = 0.03                     # frame 3, drawn by 83.5 ms: the clock passed frame 4 too (it is at 5)
     pb._tick()
     assert shown == [0, 1, 2, 3] and pb.timer.remainingTime() == 0
+    assert pb.late_frames == 1
+    draw[0] = 0.05                     # one frame behind: frame 4 is drawn, late, not skipped; drawn by 133.5 ms
+    pb._tick()
+    assert shown == [0, 1, 2, 3, 4] and pb.timer.remainingTime() == 0
     draw[0] = 0.0
-    pb._tick()                         # the frame the clock is at: 5 (frame 4 is skipped to keep the clock)
-    assert shown == [0, 1, 2, 3, 5] and pb.timer.remainingTime() in (16, 17)   # frame 6 at 100 ms
+    pb._tick()                         # three frames behind: the frame the clock is at, 8 (5 to 7 skipped)
+    assert shown == [0, 1, 2, 3, 4, 8] and pb.timer.remainingTime() in (16, 17)   # frame 9 at 150 ms
     pb.pause()
     assert not pb.playing and not pb.timer.isActive()
 
