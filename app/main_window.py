@@ -285,12 +285,14 @@ class MainWindow(QtWidgets.QMainWindow):
                                            else "Marker mode (M): click the face to add markers, drag them to pose")
 
     def _arrange_docks(self) -> None:
-        """Left: Segmentation, Correctives, Markers as tabs. Right: Shapes, History, Mocap. Bottom: the
-        timeline with the mocap views above it when they are shown."""
-        self.tabifyDockWidget(self.shapes_dock, self.history_dock)
+        """Left: Segmentation, Correctives, Markers as tabs. Right: Shapes, History, Texture, Mocap as tabs.
+        Bottom: the timeline with the mocap views above it when they are shown."""
+        # each tabified onto the group's first dock, in tab order: tabifying onto a dock that was itself just moved
+        # into a group left the dock tabified before it on its own in one Qt version (6.11) and not in another
+        for dock in (self.history_dock, self.textures.dock, self.mocap.dock):
+            self.tabifyDockWidget(self.shapes_dock, dock)
         self.tabifyDockWidget(self.segmentation_dock, self.correctives.dock)
         self.tabifyDockWidget(self.segmentation_dock, self.markers.dock)
-        self.tabifyDockWidget(self.history_dock, self.mocap.dock)
         self.splitDockWidget(self.mocap.views_dock, self.keyframes.dock, QtCore.Qt.Vertical)
         self.tabifyDockWidget(self.mocap.views_dock, self.keyframes.graph_dock)   # above the timeline, full width
         self.segmentation_dock.raise_()

@@ -256,7 +256,6 @@ def install(window) -> TextureController:
     from widgets.texture_panel import TexturePanel
     panel = TexturePanel(window)
     dock = window.add_dock("Texture", panel, QtCore.Qt.RightDockWidgetArea, scroll=True)
-    window.tabifyDockWidget(window.history_dock, dock)   # a tab beside History: the layout stays as it was
     app_settings.remember(panel.mode, "texture/mode")
     app_settings.remember(panel.detail, "texture/detail")
     app_settings.remember(panel.mask, "texture/mask")

@@ -335,6 +335,19 @@ def _assert_one_tab_bar_per_group(w) -> None:
         assert set(tabs) == group, f"a tab bar {tabs} is not the tab group {sorted(group)}"
 
 
+def test_the_side_panels_are_two_tab_groups_on_first_start(qtbot, tmp_path):
+    """On first start the left panels are one tab group and the right ones another, Shapes first and full height: a
+    Qt version left Texture (or History, Mocap) as a dock of its own beside the group, taking half the Shapes list's
+    height."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    right = {w.shapes_dock, *w.tabifiedDockWidgets(w.shapes_dock)}
+    assert {d.windowTitle() for d in right} == {"Shapes", "History", "Texture", "Mocap"}
+    left = {w.segmentation_dock, *w.tabifiedDockWidgets(w.segmentation_dock)}
+    assert {d.windowTitle() for d in left} == {"Segmentation", "Correctives", "Markers"}
+    assert not w.shapes_dock.visibleRegion().isEmpty()
+    assert w.shapes_dock.height() > 0.8 * w.centralWidget().height()
+
+
 def test_each_tab_group_shows_one_tab_bar_also_after_a_restart(qtbot, tmp_path):
     """QMainWindow left the tab bars it made before the window first showed on screen (docks tabified one by one,
     a saved layout restored): a ghost 'Segmentation | Correctives' bar and the right panels' tabs twice."""
