@@ -19,13 +19,19 @@ def clock(monkeypatch):
     return now
 
 
-def test_the_timer_is_armed_for_the_next_frame_on_the_clock(qtbot, clock):
+def _playing_from_frame_0(n_frames: int = 120, rate: float = 60.0) -> tuple[TakePlayback, list[int]]:
+    """A player of an ``n_frames`` take at ``rate``, started from frame 0, and the frames it shows."""
     pb = TakePlayback()
-    shown = []
+    shown: list[int] = []
     pb.frame_changed.connect(shown.append)
-    pb.set_length(120, 60.0)
+    pb.set_length(n_frames, rate)
     pb.set_frame(0)
     pb.play()
+    return pb, shown
+
+
+def test_the_timer_is_armed_for_the_next_frame_on_the_clock(qtbot, clock):
+    pb, shown = _playing_from_frame_0()
     assert pb.timer.isSingleShot()
     pb._tick()                         # the first tick: the clock starts, frame 0 is shown already
     assert shown == [0] and pb.timer.remainingTime() in (16, 17)   # frame 1 is due at 16.7 ms
@@ -62,12 +68,7 @@ def test_the_timer_is_armed_for_the_next_frame_on_the_clock(qtbot, clock):
 def test_the_clock_starts_when_the_first_frame_is_shown_not_at_play(qtbot, clock):
     """A first tick 50 ms after Play (the press's own work) starts the take there: frame 1 is due a frame after
     it, and no frame is skipped to catch up with a clock started at the press."""
-    pb = TakePlayback()
-    shown = []
-    pb.frame_changed.connect(shown.append)
-    pb.set_length(120, 60.0)
-    pb.set_frame(0)
-    pb.play()
+    pb, shown = _playing_from_frame_0()
     clock[0] += 0.05                   # three frames' time after Play
     pb._tick()
     assert shown == [0] and pb.timer.remainingTime() in (16, 17)
