@@ -51,11 +51,6 @@ def render_preview(points, face_counts, face_indices, path, *, focus=None) -> No
         render_png(points, face_counts, face_indices, path, focus=focus, size=PREVIEW_SIZE, camera="front")
 
 
-def preview_renderer():
-    """The preview of a take (``render_preview``), picklable for the workers."""
-    return render_preview
-
-
 def prepare_job(rig, args):
     """The ``model.batch.BatchJob`` of the solve options in ``args`` for ``rig`` (the command and the GUI)."""
     from model.batch import BatchJob, preview_focus
@@ -63,7 +58,7 @@ def prepare_job(rig, args):
     settings, segmentation = solve_settings(args, rig)
     marker_map = load_marker_map(args.map) if args.map else None
     return BatchJob.prepare(rig, settings, segmentation=segmentation, marker_map=marker_map,
-                            cache=bool(getattr(args, "cache", False)), preview=preview_renderer(),
+                            cache=bool(getattr(args, "cache", False)), preview=render_preview,
                             focus=preview_focus(rig), preload=PRELOAD)
 
 

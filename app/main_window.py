@@ -44,9 +44,10 @@ def _let_choices_shrink(panel: QtWidgets.QWidget) -> None:
     shows every choice whole), so that a panel fits its dock at the window's default size instead of being cut
     off at the right behind a scroll bar. Qt's default sizes a combo box to its longest choice."""
     for combo in panel.findChildren(QtWidgets.QComboBox):
-        if combo.sizeAdjustPolicy() == QtWidgets.QComboBox.AdjustToContentsOnFirstShow:
+        if combo.sizeAdjustPolicy() == QtWidgets.QComboBox.AdjustToContentsOnFirstShow:   # Qt's default
             combo.setSizeAdjustPolicy(QtWidgets.QComboBox.AdjustToMinimumContentsLengthWithIcon)
-            combo.setMinimumContentsLength(min(combo.minimumContentsLength() or 12, 12))
+            if not combo.minimumContentsLength():
+                combo.setMinimumContentsLength(12)   # characters
 
 
 class MainWindow(QtWidgets.QMainWindow):
