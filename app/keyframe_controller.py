@@ -341,14 +341,13 @@ class KeyframeController(QtCore.QObject):
         and normals are then evaluated on a worker thread, in the time the main thread waits for this frame's render
         (llvmpipe's raster threads; VTK releases the GIL): the next tick finds them ready when the clock asks for
         that frame with the same pose and rig (else they are dropped), ~1.4 ms (pose and normals) less on the main
-        thread a frame. At most one
-        evaluation runs at a time, and never beside the main thread's own (it is joined first)."""
+        thread a frame. At most one evaluation runs at a time, and never beside the main thread's own (it is joined
+        first); one that failed (the rig edited under it) is dropped like a stale one and the frame evaluated here."""
         ahead, self._ahead = self._ahead, None
         evaluated = None
-        if ahead is not None:
-            result = ahead[3].result()
+        if ahead is not None and ahead[3].exception() is None:   # waits for it
             if ahead[0] == frame and ahead[2] == self.document.rig_version:   # no shape edited meanwhile
-                evaluated = (ahead[1], *result)
+                evaluated = (ahead[1], *ahead[3].result())
         self.scrub(frame / self.fps, evaluated)
         nxt = frame + 1
         normals = self.window.viewport.normals_function()
