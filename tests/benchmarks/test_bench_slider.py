@@ -7,11 +7,8 @@ event to the rendered frame: the slider's value, the pose edit, the pose, the no
 (the window's coalesced render runs on the next turn of the event loop). Every step must draw exactly one frame.
 Printed: wall and CPU time a step (CPU: the process with its llvmpipe render threads; on the shared 2-core test
 machine the wall clock also measures the other processes).
-Measured (README, Benchmarks): 15.3 / 16.1 ms wall (min / median, 62 fps) on a quiet machine (the first of this
-session's cuts alone); all cuts, alternated with main's code: 17.5-18.6 ms median with another session's load of
-0.6-0.9 (main 19.6-24.3), 19.6-23.6 with a load of 1.3-2.3 (main 21.7-33.7). Where a step goes: the README's
-"Where a slider step goes" (pose 0.6 ms, normals 1.2, Qt 1.4, VTK and llvmpipe's geometry ~4, the rest llvmpipe's
-rasterisation of the surface and the copy into the window).
+The figures, and where a step goes, are in the README (Benchmarks: the viewport table and "How the speed was
+reached").
 """
 from __future__ import annotations
 
