@@ -36,19 +36,39 @@ def add_parser(sub, rig_arg) -> None:
 PRELOAD = ("app.batch_worker", "app.cli_batch")
 
 
+_snapshots = None      # this process's widgets.scene.SurfaceSnapshots: a worker draws every take's preview with it
+
+
 def render_preview(points, face_counts, face_indices, path, *, focus=None) -> None:
-    """A take's preview PNG (``widgets.scene.render_png`` off screen, from the front). On a local cluster's worker
-    that chose EGL over an X display (``app.batch_worker.prefer_egl``), a preview that fails through EGL is drawn
-    again through the display's window, which that worker keeps using."""
+    """A take's preview PNG: ``widgets.scene.render_png``'s picture from the front, drawn by one off-screen plotter
+    kept in this process for every preview of the same surface (``SurfaceSnapshots``: ~0.06 s a preview on ICT
+    instead of ~0.18 with a new plotter each time), PNG compression level 1 (a 480x360 preview encodes in 10 ms
+    instead of 41 and weighs ~150 KB instead of ~125). On a local cluster's worker that chose EGL over an X display
+    (``app.batch_worker.prefer_egl``), a preview that fails through EGL is drawn again through the display's window,
+    which that worker keeps using."""
+    global _snapshots
     from model.batch import PREVIEW_SIZE
-    from widgets.scene import render_png
+    from widgets.scene import SurfaceSnapshots
+
+    def draw() -> None:
+        global _snapshots
+        if _snapshots is None or not _snapshots.matches(face_counts, face_indices, PREVIEW_SIZE, "front"):
+            if _snapshots is not None:
+                _snapshots.close()
+            _snapshots = None
+            _snapshots = SurfaceSnapshots(face_counts, face_indices, size=PREVIEW_SIZE, camera="front")
+        _snapshots.write(points, path, focus=focus, compress_level=1)
+
     try:
-        render_png(points, face_counts, face_indices, path, focus=focus, size=PREVIEW_SIZE, camera="front")
+        draw()
     except Exception:
         worker = sys.modules.get("app.batch_worker")     # loaded by the local cluster's fork server only
         if worker is None or not worker.leave_egl():
             raise
-        render_png(points, face_counts, face_indices, path, focus=focus, size=PREVIEW_SIZE, camera="front")
+        if _snapshots is not None:                       # made through EGL: the next one goes through the display
+            _snapshots.close()
+            _snapshots = None
+        draw()
 
 
 def prepare_job(rig, args):

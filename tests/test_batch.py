@@ -362,15 +362,15 @@ window = type(p.ren_win).__name__
 p.close()
 import widgets.scene as scene
 from app.cli_batch import render_preview
-real, tried = scene.render_png, []
+real, tried = scene.SurfaceSnapshots.write, []
 
-def egl_fails_once(*args, **kw):            # a machine whose libEGL cannot draw
+def egl_fails_once(self, *args, **kw):      # a machine whose libEGL cannot draw
     tried.append(os.environ.get("VTK_DEFAULT_OPENGL_WINDOW"))
     if len(tried) == 1:
         raise RuntimeError("no EGL device")
-    return real(*args, **kw)
+    return real(self, *args, **kw)
 
-scene.render_png = egl_fails_once
+scene.SurfaceSnapshots.write = egl_fails_once
 pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
 faces = np.array([0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3])
 render_preview(pts, np.full(4, 3), faces, sys.argv[1], focus=pts)
@@ -449,3 +449,39 @@ def test_a_second_batch_in_the_same_process_runs(tmp_path, ict_rig, take_dir):
     for out in ("first", "second"):
         rows = run_batch(job, [take], tmp_path / out, workers=1, dashboard_address="127.0.0.1:0")
         assert [r["status"] for r in rows] == ["solved"], rows
+
+
+
+_KEPT_AND_FRESH = """
+import sys
+import numpy as np
+from app.cli_batch import render_preview
+from model.batch import PREVIEW_SIZE, preview_focus
+from model.pose import PoseEvaluator
+from model.readers import load_rig
+from widgets.scene import render_png
+rig = load_rig(sys.argv[1])
+ev, focus = PoseEvaluator(rig), preview_focus(rig)
+for k, names in enumerate((["jawOpen"], ["mouthSmile_L", "mouthSmile_R"], ["jawOpen"])):
+    pts = ev.pose(np.array([float(n in names) for n in rig.shape_names]))
+    render_preview(pts, rig.face_counts, rig.face_indices, f"{sys.argv[2]}/kept{k}.png", focus=focus)
+    render_png(pts, rig.face_counts, rig.face_indices, f"{sys.argv[2]}/fresh{k}.png", focus=focus, size=PREVIEW_SIZE,
+               camera="front")
+"""
+
+
+def test_a_worker_draws_each_preview_as_a_fresh_render_would(tmp_path, ict_dir, ict_rig):
+    """A worker keeps one off-screen plotter for every preview (``render_preview``, ``widgets.scene.SurfaceSnapshots``):
+    each picture is pixel for pixel what a fresh ``render_png`` of that pose draws, never the previous take's.
+    In a process of its own, as a worker's."""
+    from model.batch import PREVIEW_SIZE
+    from tests.image_compare import load_png
+    assert {"jawOpen", "mouthSmile_L", "mouthSmile_R"} <= set(ict_rig.shape_names)
+    proc = subprocess.run([sys.executable, "-c", _KEPT_AND_FRESH, str(ict_dir), str(tmp_path)], capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    kept = [load_png(tmp_path / f"kept{k}.png") for k in range(3)]
+    for k in range(3):
+        assert kept[k].shape[:2] == (PREVIEW_SIZE[1], PREVIEW_SIZE[0])
+        assert np.array_equal(kept[k], load_png(tmp_path / f"fresh{k}.png")), k
+    assert (np.abs(kept[0].astype(int) - kept[1].astype(int)).max(axis=2) > 30).sum() > 500   # the poses differ
