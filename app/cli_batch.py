@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 
 from app.cli_solve import add_solve_options, load_solve_rig, solve_settings
+from app.batch_preload import BATCH_PRELOAD
 from model.errors import RigInputError
 
 
@@ -31,9 +32,7 @@ def add_parser(sub, rig_arg) -> None:
     sp.set_defaults(func=cmd_batch)
 
 
-# What the local cluster's fork server imports for the preview (``app.batch_worker``; this module, which the job's
-# preview names), besides the solve's modules.
-PRELOAD = ("app.batch_worker", "app.cli_batch")
+PRELOAD = BATCH_PRELOAD    # what the local cluster's fork server imports for the preview besides the solve's modules
 
 
 _snapshots = None      # this process's widgets.scene.SurfaceSnapshots: a worker draws every take's preview with it
@@ -133,7 +132,7 @@ def cmd_batch(args) -> int:
         raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
     takes = find_takes(args.takes, exclude=args.output)
     if not args.scheduler:
-        start_fork_server(PRELOAD)   # the local cluster's workers' imports run on another core while the rig loads
+        start_fork_server(PRELOAD)   # running already when the command came through app.launch (a no-op then)
     rig = load_solve_rig(args)
     job = prepare_job(rig, args)
     names = take_names(takes)

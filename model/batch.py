@@ -36,6 +36,7 @@ import numpy as np
 
 from .atomic import process_alive
 from .errors import RigInputError
+from .fork_server import start_fork_server
 from .marker_map import MarkerMap
 from .output_set import finish_interrupted_sets, write_set
 from .pose import PoseEvaluator
@@ -373,16 +374,6 @@ def _unexpected(path: Path, exc: BaseException) -> str:
     return f"{path}: the solve stopped unexpectedly ({type(exc).__name__}{': ' + text if text else ''})."
 
 
-# What a take needs on a worker, imported once by the local cluster's fork server (``start_fork_server``): first
-# Dask's worker environment (before numpy loads), then Dask, the solve and its exports, and what a take imports on
-# first use (the take readers, the weights CSV, the antagonist pairs, the temporal smoothing's scipy.ndimage,
-# threadpoolctl), which would otherwise cost every worker's first take ~0.1 s.
-WORKER_MODULES = ("model.batch_env", "distributed", "model.batch", "model.take_workspace", "model.take_exports",
-                  "solvers.take_kernel", "model.take_c3d", "model.livelink", "model.weights_csv", "model.antagonists",
-                  "scipy.ndimage", "threadpoolctl")
-_FORK_SERVER_HASH_SEED = "6640"         # a nanny's choice when none is set, so that every worker hashes alike
-
-
 def local_cluster_config() -> dict:
     """Dask settings for the local cluster, for as long as it runs (its nannies read them when they start or
     restart a worker). With as many workers as cores, every CPU second spent beside the takes is taken from one:
@@ -401,26 +392,6 @@ def local_cluster_config() -> dict:
     if "forkserver" in multiprocessing.get_all_start_methods():
         config["distributed.worker.multiprocessing-method"] = "forkserver"
     return config
-
-
-def start_fork_server(preload: tuple = ()) -> bool:
-    """Start this process's fork server, which the local cluster's workers are forked from, if it is not running:
-    it imports ``WORKER_MODULES`` and ``preload`` in its own process while this one goes on (the ``batch`` command
-    calls this before it loads the rig, so the ~1.3 s of imports run on another core meanwhile; ``start_client``
-    calls it too), then freezes what they made for the garbage collector (``model.batch_preloaded``). Costs this
-    process a few milliseconds: it imports neither Dask nor numpy. The fork server gets the environment a nanny gives
-    the worker it starts (``model.batch_env``) and a fixed hash seed, so that every worker hashes alike. False where
-    there is no fork server (the workers are then spawned)."""
-    import multiprocessing
-    if "forkserver" not in multiprocessing.get_all_start_methods():
-        return False
-    import multiprocessing.forkserver
-    modules = [*dict.fromkeys([*WORKER_MODULES, *preload]), "model.batch_preloaded"]   # its gc.freeze() last
-    multiprocessing.get_context("forkserver").set_forkserver_preload(modules)
-    if os.environ.get("PYTHONHASHSEED") in (None, "0"):
-        os.environ["PYTHONHASHSEED"] = _FORK_SERVER_HASH_SEED
-    multiprocessing.forkserver.ensure_running()
-    return True
 
 
 def _skip_dask_forkserver_preload() -> None:

@@ -13,7 +13,7 @@ def command() -> list[str]:
     if exe.exists():
         return [str(exe)]
     found = shutil.which("blendshape-studio")
-    return [found] if found else [sys.executable, "-m", "app.cli"]
+    return [found] if found else [sys.executable, "-m", "app.launch"]
 
 
 def run_cli(*args, check: bool = True, env: dict | None = None, timeout: float = 300) -> subprocess.CompletedProcess:

@@ -485,3 +485,35 @@ def test_a_worker_draws_each_preview_as_a_fresh_render_would(tmp_path, ict_dir, 
         assert kept[k].shape[:2] == (PREVIEW_SIZE[1], PREVIEW_SIZE[0])
         assert np.array_equal(kept[k], load_png(tmp_path / f"fresh{k}.png")), k
     assert (np.abs(kept[0].astype(int) - kept[1].astype(int)).max(axis=2) > 30).sum() > 500   # the poses differ
+
+
+_LAUNCH = """
+import json, sys
+import model.fork_server
+seen = []
+model.fork_server.start_fork_server = lambda preload: seen.append(["numpy" in sys.modules, list(preload)]) or True
+from app.launch import main
+try:
+    code = main(sys.argv[1:])
+except SystemExit as exc:        # argparse's --help
+    code = exc.code
+print(json.dumps({"seen": seen, "code": code}))
+"""
+
+
+@pytest.mark.parametrize("argv, starts", [
+    (["batch", "RIG", "TAKE.c3d", "-o", "OUT"], True),
+    (["batch", "RIG", "TAKE.c3d", "-o", "OUT", "--scheduler", "tcp://127.0.0.1:9"], False),
+    (["batch", "--help"], False),
+    (["solve", "RIG", "TAKE.c3d", "-o", "OUT.csv"], False),
+])
+def test_the_batch_command_starts_its_fork_server_before_it_imports_numpy(tmp_path, argv, starts):
+    """``blendshape-studio batch`` on the local cluster starts the fork server first (``app.launch``), so that its
+    ~2 s of imports overlap the command's own; a batch on a scheduler, help, and other commands start none. The
+    command then runs as before (here: a rig that does not exist, exit 2)."""
+    from app.batch_preload import BATCH_PRELOAD
+    argv = [str(tmp_path / a) if a in ("RIG", "TAKE.c3d", "OUT", "OUT.csv") else a for a in argv]
+    proc = subprocess.run([sys.executable, "-c", _LAUNCH, *argv], capture_output=True, text=True, timeout=120)
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert r["seen"] == ([[False, list(BATCH_PRELOAD)]] if starts else [])
+    assert r["code"] == (0 if "--help" in argv else 2), proc.stderr[-2000:]

@@ -3,8 +3,8 @@ plain solve (issue 21; target: a speed-up of at least 1.7x on 2 cores).
 
 The takes are the shared ICT Live Link take (358 frames) turned and shifted 24 ways, solved with the default
 options and the shared marker map, previews on. Each configuration runs in a fresh process in the order the ``batch``
-command runs: the local cluster's fork server started (``model.batch.start_fork_server``: its imports of what a
-worker needs run in its own process, on the other core, while this one loads the rig), the rig loaded and the job
+command runs: the local cluster's fork server started first (``app.launch``, ``model.fork_server``: its imports of
+what a worker needs run in its own process, on the other core, while this one imports and loads the rig), the rig loaded and the job
 prepared, then the clock started around ``model.batch.run_batch``. Figures per configuration: the wall time of the
 whole run (the scheduler and its dashboard started, the workers forked from the fork server -- waiting for its
 imports if they are not done --, the job scattered, the takes, the cluster's shutdown, the summary), of the takes
@@ -47,18 +47,20 @@ def bench_takes(tmp_path_factory, take_dir):
 _BATCH = """
 import time
 command_t0 = time.perf_counter()
+from app.batch_preload import BATCH_PRELOAD
+from model.fork_server import start_fork_server
+start_fork_server(BATCH_PRELOAD)  # as the batch command does (app.launch) before it imports anything else
 import argparse, json, os, sys
 import psutil
 from app.runtime import limit_blas_threads
 limit_blas_threads()              # as the command line's main does
-from app.cli_batch import PRELOAD, prepare_job
+from app.cli_batch import prepare_job
 from app.cli_solve import add_solve_options
-from model.batch import run_batch, start_fork_server
+from model.batch import run_batch
 from model.readers import load_rig
 rig_dir, map_path, out, workers, *takes = sys.argv[1:]
 p = argparse.ArgumentParser()
 add_solve_options(p)
-start_fork_server(PRELOAD)        # as the batch command does before it loads the rig
 job = prepare_job(load_rig(rig_dir), p.parse_args(["--map", map_path]))
 
 
