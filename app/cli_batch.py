@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import sys
 
-from app.cli_solve import add_solve_options, load_solve_rig, solve_settings
 from app.batch_preload import BATCH_PRELOAD
+from app.cli_solve import add_solve_options, load_solve_rig, solve_settings
 from model.errors import RigInputError
 
 
@@ -32,9 +32,6 @@ def add_parser(sub, rig_arg) -> None:
     sp.set_defaults(func=cmd_batch)
 
 
-PRELOAD = BATCH_PRELOAD    # what the local cluster's fork server imports for the preview besides the solve's modules
-
-
 _snapshots = None      # this process's widgets.scene.SurfaceSnapshots: a worker draws every take's preview with it
 
 
@@ -45,29 +42,26 @@ def render_preview(points, face_counts, face_indices, path, *, focus=None) -> No
     instead of 41 and weighs ~150 KB instead of ~125). On a local cluster's worker that chose EGL over an X display
     (``app.batch_worker.prefer_egl``), a preview that fails through EGL is drawn again through the display's window,
     which that worker keeps using."""
-    global _snapshots
     from model.batch import PREVIEW_SIZE
     from widgets.scene import SurfaceSnapshots
 
-    def draw() -> None:
+    def draw(keep: bool) -> None:
         global _snapshots
-        if _snapshots is None or not _snapshots.matches(face_counts, face_indices, PREVIEW_SIZE, "front"):
-            if _snapshots is not None:
-                _snapshots.close()
+        if _snapshots is not None and not (
+                keep and _snapshots.matches(face_counts, face_indices, PREVIEW_SIZE, "front")):
+            _snapshots.close()
             _snapshots = None
+        if _snapshots is None:
             _snapshots = SurfaceSnapshots(face_counts, face_indices, size=PREVIEW_SIZE, camera="front")
         _snapshots.write(points, path, focus=focus, compress_level=1)
 
     try:
-        draw()
+        draw(keep=True)
     except Exception:
         worker = sys.modules.get("app.batch_worker")     # loaded by the local cluster's fork server only
         if worker is None or not worker.leave_egl():
             raise
-        if _snapshots is not None:                       # made through EGL: the next one goes through the display
-            _snapshots.close()
-            _snapshots = None
-        draw()
+        draw(keep=False)            # the plotter made through EGL goes; the new one draws through the display
 
 
 def prepare_job(rig, args):
@@ -78,7 +72,7 @@ def prepare_job(rig, args):
     marker_map = load_marker_map(args.map) if args.map else None
     return BatchJob.prepare(rig, settings, segmentation=segmentation, marker_map=marker_map,
                             cache=bool(getattr(args, "cache", False)), preview=render_preview,
-                            focus=preview_focus(rig), preload=PRELOAD)
+                            focus=preview_focus(rig), preload=BATCH_PRELOAD)
 
 
 def _clock(seconds: float | None) -> str:
@@ -132,7 +126,7 @@ def cmd_batch(args) -> int:
         raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
     takes = find_takes(args.takes, exclude=args.output)
     if not args.scheduler:
-        start_fork_server(PRELOAD)   # running already when the command came through app.launch (a no-op then)
+        start_fork_server(BATCH_PRELOAD)   # running already when the command came through app.launch (a no-op then)
     rig = load_solve_rig(args)
     job = prepare_job(rig, args)
     names = take_names(takes)

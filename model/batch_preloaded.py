@@ -1,4 +1,4 @@
-"""The last module the local cluster's fork server imports (``model.batch.start_fork_server``): once everything a worker
+"""The last module the local cluster's fork server imports (``model.fork_server.start_fork_server``): once everything a worker
 needs is imported there, ``gc.freeze()`` moves those objects (~220,000 of them: Dask, numpy, scipy, VTK, pyvista,
 matplotlib through pyvista, the solver) out of the cyclic garbage collector's reach in every worker forked afterwards.
 
