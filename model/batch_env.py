@@ -1,5 +1,5 @@
-"""The first module the local cluster's fork server imports (``model.fork_server.start_fork_server``): the environment a
-Dask nanny gives the worker it starts (``distributed.nanny.pre-spawn-environ``: one BLAS/OpenMP thread, glibc's
+"""The first module the local cluster's fork server imports (``model.fork_server.start_fork_server``): the environment
+a Dask nanny gives the worker it starts (``distributed.nanny.pre-spawn-environ``: one BLAS/OpenMP thread, glibc's
 memory trimming), set in the fork server before anything there loads numpy, so that every worker forked from it
 has it. A nanny sets it in its own process before it starts a worker, which a forked worker never sees.
 

@@ -1,6 +1,7 @@
-"""The last module the local cluster's fork server imports (``model.fork_server.start_fork_server``): once everything a worker
-needs is imported there, ``gc.freeze()`` moves those objects (~220,000 of them: Dask, numpy, scipy, VTK, pyvista,
-matplotlib through pyvista, the solver) out of the cyclic garbage collector's reach in every worker forked afterwards.
+"""The last module the local cluster's fork server imports (``model.fork_server.start_fork_server``): once everything
+a worker needs is imported there, ``gc.freeze()`` moves those objects (~220,000 of them: Dask, numpy, scipy, VTK,
+pyvista, matplotlib through pyvista, the solver) out of the cyclic garbage collector's reach in every worker forked
+afterwards.
 
 Without it a worker's full collection walks all of them: 85 ms in one process, 130-180 ms inside a worker during a
 batch, once or twice a run per worker, with the GIL held, so the worker's take and its event loop (heartbeats, the

@@ -555,14 +555,15 @@ class SurfaceSnapshots:
               compress_level: int | None = None) -> None:
         """The surface at ``points`` to the PNG ``out_path``, atomically (``write_image_atomically``)."""
         points = np.asarray(points, dtype=np.float32)
-        if self._mesh is None:
+        first = self._mesh is None
+        if first:
             self._mesh = rig_mesh(points, self.face_counts, self.face_indices)
             add_surface(self.plotter, self._mesh, cull_hidden=True)
             self._arrays = SurfaceArrays(self._mesh)
-            set_camera(self.plotter, self.camera, points if focus is None else focus)
         else:
             self._arrays.update(points)
-            set_camera(self.plotter, self.camera, points if focus is None else focus)
+        set_camera(self.plotter, self.camera, points if focus is None else focus)
+        if not first:
             self.plotter.render()       # a plotter's screenshot renders by itself only the first time
         write_image_atomically(self.plotter, out_path, compress_level=compress_level)
 
