@@ -77,21 +77,27 @@ def cpu():
 
 
 last = {}
+
+
+def progress(p):
+    last.setdefault("started", time.perf_counter() - t0)   # the first call: the cluster is up
+    last["p"] = p
+
+
 c0, t0 = cpu(), time.perf_counter()
-rows = run_batch(job, takes, out, workers=int(workers), force=True, progress=lambda p: last.update(p=p),
-                 dashboard_address="127.0.0.1:0")
+rows = run_batch(job, takes, out, workers=int(workers), force=True, progress=progress, dashboard_address="127.0.0.1:0")
 wall = time.perf_counter() - t0
 command = time.perf_counter() - command_t0
 time.sleep(0.5)                                  # the fork server reaps the last worker
 print(json.dumps({"wall": wall, "takes_s": last["p"].elapsed, "status": [r["status"] for r in rows], "command": command,
                   "frames": sum(r["frames"] for r in rows), "busy": sum(r["seconds"] for r in rows),
-                  "cpu": cpu() - c0}))
+                  "cpu": cpu() - c0, "started": last["started"]}))
 """
 
 
 def _run(take_dir, takes, out, workers):
     """(wall s of ``run_batch``, s of takes alone, frames, s the workers spent on takes added up, CPU s of all the
-    batch's processes during ``run_batch``, s of the whole command): one batch in a fresh process, as one ``batch``
+    batch's processes during ``run_batch``, s of the whole command, s until the cluster was up): one batch in a fresh process, as one ``batch``
     command runs: the local cluster's fork server started, then the rig loaded and the job prepared, then the clock
     started around ``run_batch``. A fresh process each time, so that no run inherits another's warm local cluster
     machinery (the fork server its workers are forked from)."""
@@ -104,28 +110,48 @@ def _run(take_dir, takes, out, workers):
     assert proc.returncode == 0, proc.stderr[-3000:]
     r = json.loads(proc.stdout.strip().splitlines()[-1])
     assert r["status"] == ["solved"] * len(takes)
-    return r["wall"], r["takes_s"], r["frames"], r["busy"], r["cpu"], r["command"]
+    return r["wall"], r["takes_s"], r["frames"], r["busy"], r["cpu"], r["command"], r["started"]
+
+
+ROUNDS = 3
 
 
 def test_bench_batch_speedup(benchmark, take_dir, bench_takes, tmp_path):
-    one = _run(take_dir, bench_takes, tmp_path / "one", 1)
-    two = benchmark.pedantic(_run, args=(take_dir, bench_takes, tmp_path / "two", 2), rounds=1, iterations=1)
+    """1 worker and 2 workers, alternated ``ROUNDS`` times (1, 2, 1, 2, ...): this machine's speed drifts by 20% and
+    more within a minute, so one run of each can land on a fast and a slow spell. The speed-up is the median run on
+    1 worker against the median run on 2; every round's own ratio is printed beside it."""
+    import statistics
+
+    def rounds():
+        return [(_run(take_dir, bench_takes, tmp_path / "one", 1), _run(take_dir, bench_takes, tmp_path / "two", 2))
+                for _ in range(ROUNDS)]
+
+    runs = benchmark.pedantic(rounds, rounds=1, iterations=1)
+    ones, twos = [r[0] for r in runs], [r[1] for r in runs]
+    med = [{k: statistics.median(run[k] for run in side) for k in range(7)} for side in (ones, twos)]
+    one, two = med
     speed_wall, speed_takes, speed_command = one[0] / two[0], one[1] / two[1], one[5] / two[5]
+    per_round = [o[0] / t[0] for o, t in zip(ones, twos)]
+    fixed = [t[0] - t[1] for t in twos]
+    started = [t[6] for t in twos]
     load = os.getloadavg()[0]
     # how many takes were being solved at once on average, and how much slower each became: on a free machine
     # 2 workers give ~2 at once at ~1x; on a shared one the per-take slow-down eats the speed-up
     concurrency, slowdown = two[3] / two[1], (two[3] / len(bench_takes)) / (one[3] / len(bench_takes))
-    benchmark.extra_info.update(takes=N_TAKES, frames=one[2], one_worker_wall_s=one[0], one_worker_takes_s=one[1],
-                                two_workers_wall_s=two[0], two_workers_takes_s=two[1], speedup_wall=speed_wall,
-                                speedup_takes=speed_takes, load_average=load, concurrency=concurrency,
+    benchmark.extra_info.update(takes=N_TAKES, rounds=ROUNDS, frames=ones[0][2], one_worker_wall_s=one[0],
+                                one_worker_takes_s=one[1], two_workers_wall_s=two[0], two_workers_takes_s=two[1],
+                                speedup_wall=speed_wall, speedup_wall_per_round=per_round, speedup_takes=speed_takes,
+                                fixed_part_two_workers_s=fixed, cluster_up_two_workers_s=started, load_average=load, concurrency=concurrency,
                                 per_take_slowdown_with_two=slowdown, one_worker_cpu_s=one[4], two_workers_cpu_s=two[4],
                                 one_worker_command_s=one[5], two_workers_command_s=two[5], speedup_command=speed_command)
-    print(f"\nbatch of {N_TAKES} takes ({one[2]} frames): 1 worker {one[0]:.1f} s ({one[1]:.1f} s of takes), "
-          f"2 workers {two[0]:.1f} s ({two[1]:.1f} s of takes): speed-up {speed_wall:.2f}x whole run, "
-          f"{speed_takes:.2f}x takes alone; the whole command (rig load included) {one[5]:.1f} s against "
-          f"{two[5]:.1f} s, {speed_command:.2f}x; {concurrency:.2f} takes at once on average, each {slowdown:.2f}x "
-          f"as long as on 1 worker; CPU of all the batch's processes {one[4]:.1f} s on 1 worker, {two[4]:.1f} s on 2; "
-          f"load average {load:.1f} on {os.cpu_count()} cores")
+    print(f"\nbatch of {N_TAKES} takes ({ones[0][2]} frames), medians of {ROUNDS} alternated rounds: 1 worker "
+          f"{one[0]:.2f} s ({one[1]:.2f} s of takes), 2 workers {two[0]:.2f} s ({two[1]:.2f} s of takes): speed-up "
+          f"{speed_wall:.2f}x whole run (each round: {', '.join(f'{r:.2f}' for r in per_round)}), {speed_takes:.2f}x "
+          f"takes alone; fixed part on 2 workers {', '.join(f'{f:.2f}' for f in fixed)} s (of which the cluster's start "
+          f"{', '.join(f'{f:.2f}' for f in started)} s); the whole command (rig load "
+          f"included) {one[5]:.1f} s against {two[5]:.1f} s, {speed_command:.2f}x; {concurrency:.2f} takes at once on "
+          f"average, each {slowdown:.2f}x as long as on 1 worker; CPU of all the batch's processes {one[4]:.1f} s on "
+          f"1 worker, {two[4]:.1f} s on 2; load average {load:.1f} on {os.cpu_count()} cores")
 
 
 _PLAIN = """
@@ -174,7 +200,7 @@ def test_bench_batch_overhead_per_take(benchmark, take_dir, bench_takes, tmp_pat
     env_one = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     as_solve = _plain(takes, take_dir, tmp_path, {})
     as_worker = _plain(takes, take_dir, tmp_path, env_one)
-    wall, takes_s, _, _, _, _ = benchmark.pedantic(_run, args=(take_dir, takes, tmp_path / "one", 1), rounds=1, iterations=1)
+    wall, takes_s, *_ = benchmark.pedantic(_run, args=(take_dir, takes, tmp_path / "one", 1), rounds=1, iterations=1)
     batch_s = takes_s / len(takes)
     plain_s = as_worker["per_take_s"]
     benchmark.extra_info.update(plain_solve_per_take_s=as_solve["per_take_s"], plain_solve_one_thread_env_s=plain_s,
