@@ -328,8 +328,7 @@ class KeyframeController(QtCore.QObject):
         self.time = min(max(float(t), 0.0), self.duration)
         if self.timeline.keys:
             state, surface = self.pose_at(self.time), None
-            if evaluated is not None and evaluated[0].region_weights is None and state.region_weights is None \
-                    and np.array_equal(evaluated[0].weights, state.weights):
+            if evaluated is not None and evaluated[0].equals(state):
                 surface = evaluated[1]
                 self.window.viewport.use_normals(surface, evaluated[2])
             self.document.set_pose_state(state, surface=surface)
@@ -337,12 +336,13 @@ class KeyframeController(QtCore.QObject):
         self.time_changed.emit(self.time)
 
     def _play_frame(self, frame: int) -> None:
-        """Show playback frame ``frame``. While playing a global (not regional) animation, the next frame's surface
-        and normals are then evaluated on a worker thread, in the time the main thread waits for this frame's render
-        (llvmpipe's raster threads; VTK releases the GIL): the next tick finds them ready when the clock asks for
-        that frame with the same pose and rig (else they are dropped), ~1.4 ms (pose and normals) less on the main
-        thread a frame. At most one evaluation runs at a time, and never beside the main thread's own (it is joined
-        first); one that failed (the rig edited under it) is dropped like a stale one and the frame evaluated here."""
+        """Show playback frame ``frame``. While playing (a global or a marker-keyed, regional animation), the next
+        frame's surface and normals are then evaluated on a worker thread, in the time the main thread waits for this
+        frame's render (llvmpipe's raster threads; VTK releases the GIL): the next tick finds them ready when the
+        clock asks for that frame with the same pose and rig (else they are dropped), ~1.4 ms (pose and normals) less
+        on the main thread a frame. At most one evaluation runs at a time, and never beside the main thread's own (it
+        is joined first); one that failed (the rig edited under it) is dropped like a stale one and the frame
+        evaluated here."""
         ahead, self._ahead = self._ahead, None
         evaluated = None
         if ahead is not None and ahead[3].exception() is None:   # waits for it
@@ -351,8 +351,7 @@ class KeyframeController(QtCore.QObject):
         self.scrub(frame / self.fps, evaluated)
         nxt = frame + 1
         normals = self.window.viewport.normals_function()
-        if self.playing and self.timeline.keys and self.blend is None and nxt < self.playback.n_frames \
-                and normals is not None:
+        if self.playing and self.timeline.keys and nxt < self.playback.n_frames and normals is not None:
             state = self.pose_at(min(nxt / self.fps, self.duration))
             if self._worker is None:
                 self._worker = ThreadPoolExecutor(max_workers=1, thread_name_prefix="keyed-playback")

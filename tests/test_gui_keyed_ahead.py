@@ -9,20 +9,33 @@ import contextlib
 import numpy as np
 import pytest
 
+from app.document import PoseState
 from tests.gui_helpers import make_window
 
 pytestmark = pytest.mark.gui
 
 
-def _keyed(qtbot, tmp_path):
+def _keyed(qtbot, tmp_path, regional: bool = False):
+    """The sample rig keyed at 0, 1 and 2 s: the jaw opening and closing, or (``regional``) three random per-region
+    poses of segmentation level 1, as marker drags at that level leave them: a marker-keyed animation."""
     w = make_window(qtbot, tmp_path)
     kf, rig = w.keyframes, w.document.rig
     kf.set_settings(fps=60.0)
-    for t, jaw in ((0.0, 0.0), (1.0, 1.0), (2.0, 0.0)):
-        pose = np.zeros(rig.n_shapes)
-        pose[rig.shape_index("jawOpen")] = jaw
-        w.set_pose(pose, "jaw")
-        kf.set_key(t)
+    if regional:
+        w.segmentation.wait()
+        blend = w.segmentation.segmentation.levels[1].blend
+        rng = np.random.default_rng(7)
+        for t in (0.0, 1.0, 2.0):
+            W = rng.uniform(0, 1, (blend.shape[1], rig.n_shapes))
+            w.document.set_pose_state(PoseState(np.zeros(rig.n_shapes), W, blend, 1))
+            kf.set_key(t)
+        assert kf.blend is not None and kf.level == 1
+    else:
+        for t, jaw in ((0.0, 0.0), (1.0, 1.0), (2.0, 0.0)):
+            pose = np.zeros(rig.n_shapes)
+            pose[rig.shape_index("jawOpen")] = jaw
+            w.set_pose(pose, "jaw")
+            kf.set_key(t)
     kf.scrub(0.0)
     return w, kf
 
@@ -35,8 +48,9 @@ def _drawn_is_fresh(w, kf) -> None:
     np.testing.assert_array_equal(w.viewport._arrays.normals, normals)
 
 
-def test_playback_draws_frames_evaluated_ahead_and_each_is_the_clocks_frame(qtbot, tmp_path):
-    w, kf = _keyed(qtbot, tmp_path)
+@pytest.mark.parametrize("regional", [False, True], ids=["global", "marker-keyed"])
+def test_playback_draws_frames_evaluated_ahead_and_each_is_the_clocks_frame(qtbot, tmp_path, regional):
+    w, kf = _keyed(qtbot, tmp_path, regional)
     given, frames = [], []
     set_pose_state = w.document.set_pose_state
     w.document.set_pose_state = lambda state, surface=None: (given.append(surface is not None),
@@ -78,9 +92,10 @@ def _show(w, kf, frame: int) -> None:
     _drawn_is_fresh(w, kf)
 
 
-def test_a_frame_other_than_the_one_evaluated_ahead_is_evaluated_on_the_spot(qtbot, tmp_path):
+@pytest.mark.parametrize("regional", [False, True], ids=["global", "marker-keyed"])
+def test_a_frame_other_than_the_one_evaluated_ahead_is_evaluated_on_the_spot(qtbot, tmp_path, regional):
     """The clock skipped a frame: the one evaluated ahead (frame + 1) is not drawn for frame + 2."""
-    w, kf = _keyed(qtbot, tmp_path)
+    w, kf = _keyed(qtbot, tmp_path, regional)
     with _playing_from(w, kf, 30):
         _show(w, kf, 32)                   # 31 was due but its time passed
         _show(w, kf, 33)                   # the one evaluated ahead this time

@@ -22,18 +22,31 @@ from tests.gui_helpers import make_window, open_and_wait
 from tests.test_gui_editor_habits import _focus
 
 
-@pytest.mark.parametrize("fps", [24.0, 60.0])
-def test_keyed_playback_keeps_real_time_on_ict(benchmark, qtbot, tmp_path, ict_dir, fps):
+@pytest.mark.parametrize("fps,kind", [(24.0, "global"), (60.0, "global"), (60.0, "marker-keyed")])
+def test_keyed_playback_keeps_real_time_on_ict(benchmark, qtbot, tmp_path, ict_dir, fps, kind):
+    """``kind`` "marker-keyed": the same three keys as per-region poses of segmentation level 2 (every region the
+    same weights but the mouth's, which smiles less), as marker drags at that level leave them."""
     w = make_window(qtbot, tmp_path, size=(1400, 900))   # the window's size before it is maximised
     open_and_wait(qtbot, w, ict_dir)
     kf, rig = w.keyframes, w.document.rig
     kf.set_settings(fps=fps)
+    level = None
+    if kind == "marker-keyed":
+        from app.document import PoseState
+        w.segmentation.wait()
+        level = w.segmentation.segmentation.levels[2]
     for t, pose in ((0.0, {}), (1.0, {"jawOpen": 0.8, "mouthSmile_L": 0.6, "browInnerUp_L": 1.0}), (2.0, {})):
         weights = np.zeros(rig.n_shapes)
         for name, v in pose.items():
             weights[rig.shape_index(name)] = v
-        w.set_pose(weights, "pose")
+        if level is None:
+            w.set_pose(weights, "pose")
+        else:
+            W = np.tile(weights, (level.blend.shape[1], 1))
+            W[0] *= 0.5
+            w.document.set_pose_state(PoseState(np.zeros(rig.n_shapes), W, level.blend, 2))
         kf.set_key(t)
+    assert (kf.blend is None) == (level is None)
     assert kf.duration == 2.0 and kf.fps == fps
     kf.playback.loop = False
     drawn: list[int] = []
@@ -74,7 +87,7 @@ def test_keyed_playback_keeps_real_time_on_ict(benchmark, qtbot, tmp_path, ict_d
     benchmark.extra_info.update(elapsed_s=round(elapsed, 3), frames_shown=len(shown), frames_drawn=len(drawn),
                                 frames=n_frames, draw_ms=round(per_frame * 1000, 1), render_ms=round(render_ms, 1),
                                 render_cpu_ms=round(render_cpu_ms, 1))
-    print(f"\nkeyed playback at {fps:g} fps on ICT: a 2.000 s animation played in {elapsed:.3f} s, "
+    print(f"\n{kind} keyed playback at {fps:g} fps on ICT: a 2.000 s animation played in {elapsed:.3f} s, "
           f"{len(shown)} of {n_frames} frames shown (the start frame and {len(drawn)} drawn by the clock), "
           f"{per_frame * 1000:.1f} ms to draw a frame; VTK's render alone {render_ms:.1f} ms "
           f"({render_cpu_ms:.1f} ms of CPU on {os.cpu_count()} cores; a frame at {fps:g} fps has {1000 / fps:.1f} ms)")
