@@ -436,6 +436,101 @@ def test_blender_imports_the_glb_and_the_obj(exported, rig_with_corrective, ict_
     assert seen["obj"]["vertices"] == 26719 and seen["obj"]["uv_layers"] == 1 and seen["obj"]["materials"] == 12
 
 
+BLENDER_PLAY_SCRIPT = r"""
+import array, bpy, json, os, sys
+# argv after "--": output folder, then "glb" PATH FRAME... or "obj+pc2" OBJ PC2 FRAME...
+out, kind, *rest = sys.argv[sys.argv.index("--") + 1:]
+bpy.ops.wm.read_factory_settings(use_empty=True)
+if kind == "glb":
+    path, frames = rest[0], rest[1:]
+    bpy.ops.import_scene.gltf(filepath=path)
+else:
+    path, cache, frames = rest[0], rest[1], rest[2:]
+    if hasattr(bpy.ops.wm, "obj_import"):
+        bpy.ops.wm.obj_import(filepath=path)
+    else:
+        bpy.ops.import_scene.obj(filepath=path, split_mode="OFF")
+o = max((o for o in bpy.data.objects if o.type == "MESH"), key=lambda o: len(o.data.vertices))
+if kind != "glb":               # as a user plays a point cache: a Mesh Cache modifier with its defaults
+    mod = o.modifiers.new("cache", "MESH_CACHE")
+    mod.cache_format = "PC2"
+    mod.filepath = cache
+
+
+def write(name, mesh):
+    co = array.array("f", [0.0]) * (3 * len(mesh.vertices))
+    mesh.vertices.foreach_get("co", co)
+    with open(os.path.join(out, name + ".f32"), "wb") as f:
+        f.write(co.tobytes())
+
+
+write("rest", o.data)
+for frame in frames:
+    bpy.context.scene.frame_set(int(frame))
+    evaluated = o.evaluated_get(bpy.context.evaluated_depsgraph_get())
+    write(frame, evaluated.to_mesh())
+    evaluated.to_mesh_clear()
+print("BLENDER_FPS", bpy.context.scene.render.fps / bpy.context.scene.render.fps_base)
+"""
+
+
+def _blender_play(blender, tmp_path, kind: str, files: list, frames: list[int]) -> tuple[dict, float]:
+    """Blender's surfaces (mesh coordinates, deformed) at scene ``frames``, and its scene's frame rate."""
+    script, out = tmp_path / "play.py", tmp_path / kind
+    script.write_text(BLENDER_PLAY_SCRIPT)
+    out.mkdir()
+    proc = subprocess.run([blender, "-b", "--factory-startup", "--python", str(script), "--", str(out), kind,
+                           *map(str, files), *map(str, frames)], capture_output=True, text=True, timeout=900)
+    fps = next((float(l.split()[1]) for l in proc.stdout.splitlines() if l.startswith("BLENDER_FPS ")), None)
+    assert fps, proc.stdout[-2000:] + proc.stderr[-2000:]
+    return {name: np.fromfile(out / f"{name}.f32", np.float32).reshape(-1, 3).astype(np.float64)
+            for name in ["rest", *map(str, frames)]}, fps
+
+
+def test_blender_plays_the_glb_animation_as_the_application_poses_it(exported, rig_with_corrective, performance,
+                                                                       tmp_path):
+    """The Live Link Face performance in the .glb, played by Blender's glTF importer: at a frame of the performance,
+    Blender's deformed mesh is the application's pose of that frame's weights, corrective included (in Blender's
+    axes and metres: the map is fitted on the rest surface alone, and must be exact there)."""
+    blender = shutil.which("blender")
+    if not blender:
+        pytest.skip("blender is not installed")
+    rig = rig_with_corrective
+    ks = [100, 200, 250]          # performance frames (60 fps) that fall on Blender's whole frames (24 fps)
+    seen, fps = _blender_play(blender, tmp_path, "glb", [exported[0][".glb"]], [round(k * 24 / 60) for k in ks])
+    assert fps == 24.0
+    rest = seen.pop("rest")
+    # Blender's axes and units, fitted on the rest surface: metres, and glTF's +Y up turned to Blender's +Z up
+    X = np.c_[rig.neutral, np.ones(rig.n_vertices)]
+    A, *_ = np.linalg.lstsq(X, rest, rcond=None)
+    np.testing.assert_allclose(A, 0.01 * np.array([[1, 0, 0], [0, 0, 1], [0, -1, 0], [0, 0, 0]]), atol=1e-9)
+    assert np.abs(X @ A - rest).max() < 1e-6
+    for k in ks:
+        expected = np.c_[dense(rig, performance.weights[k]), np.ones(rig.n_vertices)] @ A
+        played = seen[str(round(k * 24 / 60))]
+        assert np.abs(played - rest).max() * 100 > 0.3              # the face moved (cm)
+        assert np.abs(played - expected).max() * 100 < 1e-4, k      # as the application poses it (cm)
+
+
+def test_blender_plays_the_pc2_cache_on_the_obj_as_the_application_solved_it(ict_dir, take_dir, tmp_path):
+    """``solve --cache``'s PC2 on ``export``'s OBJ, played in Blender with a Mesh Cache modifier left at its
+    defaults: every vertex of a frame where the solve put it (vertex order, frame numbering, units)."""
+    blender = shutil.which("blender")
+    if not blender:
+        pytest.skip("blender is not installed")
+    from model.pc2 import read_pc2
+    run_cli("export", ict_dir, "-o", tmp_path / "neutral.obj")
+    run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json",
+            "-o", tmp_path / "w.csv", "--cache", tmp_path / "take.pc2")
+    frames, _, _ = read_pc2(tmp_path / "take.pc2")
+    seen, _ = _blender_play(blender, tmp_path, "obj+pc2", [tmp_path / "neutral.obj", tmp_path / "take.pc2"],
+                            [0, 180, len(frames) - 1])
+    assert np.abs(seen.pop("rest") - load_rig(ict_dir).neutral).max() < 1e-5
+    for f, played in seen.items():
+        np.testing.assert_array_equal(played, frames[int(f)].astype(np.float64))
+    assert np.abs(seen["180"] - seen["0"]).max() > 0.2            # the frames differ (cm)
+
+
 def test_keyframes_are_sampled_at_every_frame(tmp_path, sample_rig):
     from model.export import animation_from_timeline
     from model.keyframes import Keyframe, Timeline
