@@ -501,17 +501,28 @@ def focus_vertices(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
     return neutral
 
 
+def offscreen_plotter(size):
+    """A pyvista plotter drawing off screen at ``size`` (w, h) pixels, in the application's look (``style_plotter``):
+    what ``render_png`` and ``SurfaceSnapshots`` draw into."""
+    use_offscreen_backend_if_headless()
+    import pyvista as pv
+    plotter = pv.Plotter(off_screen=True, window_size=list(size))
+    try:
+        style_plotter(plotter)
+    except BaseException:
+        plotter.close()
+        raise
+    return plotter
+
+
 def render_png(points, face_counts, face_indices, out_path, *, focus=None, colormap: ColorMap | None = None,
                camera: str = "front", size=(1024, 768), wireframe=False, overlays=None, title: str = "",
                texture=None) -> None:
     """Render the surface off screen to a PNG file, atomically (a temporary beside it, then moved into place:
     a killed render never leaves a truncated PNG under the final name). ``texture(plotter, mesh, wireframe)``
     adds the surface instead, textured (widgets.texture_view.textured_surface)."""
-    use_offscreen_backend_if_headless()
-    import pyvista as pv
-    plotter = pv.Plotter(off_screen=True, window_size=list(size))
+    plotter = offscreen_plotter(size)
     try:
-        style_plotter(plotter)
         mesh = rig_mesh(points, face_counts, face_indices)
         if texture is not None and colormap is None:
             texture(plotter, mesh, wireframe)
@@ -539,12 +550,9 @@ class SurfaceSnapshots:
     loads. ``matches`` tells whether a surface's faces, picture size and camera are this one's."""
 
     def __init__(self, face_counts: np.ndarray, face_indices: np.ndarray, *, size=(1024, 768), camera: str = "front"):
-        use_offscreen_backend_if_headless()
-        import pyvista as pv
         self.face_counts, self.face_indices = np.array(face_counts), np.array(face_indices)
         self.size, self.camera = tuple(int(v) for v in size), camera
-        self.plotter = pv.Plotter(off_screen=True, window_size=list(self.size))
-        style_plotter(self.plotter)
+        self.plotter = offscreen_plotter(self.size)
         self._mesh = self._arrays = None
 
     def matches(self, face_counts, face_indices, size, camera: str) -> bool:
