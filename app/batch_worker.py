@@ -3,8 +3,7 @@
 a take's preview needs, loaded once for every worker instead of in each worker's first take. VTK and pyvista, with
 the render window backend the preview uses (EGL: ``prefer_egl``), the VTK modules pyvista loads with its first
 plotter, the graph search of the preview's hidden faces (``solvers.mesh.hidden_back_faces``), and the compiled solve
-kernel. Nothing is rendered here: an OpenGL context
-must not be shared across a fork.
+kernel. Nothing is rendered here: an OpenGL context must not be shared across a fork.
 
 ``ALLOW_PLOTTING``: pyvista's first plotter in a process otherwise checks whether the system can plot at all (it
 runs ``xset`` or opens an OpenGL window to ask, ~0.07 s in every worker's first take) only to warn; the previews

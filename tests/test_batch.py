@@ -451,7 +451,6 @@ def test_a_second_batch_in_the_same_process_runs(tmp_path, ict_rig, take_dir):
         assert [r["status"] for r in rows] == ["solved"], rows
 
 
-
 _KEPT_AND_FRESH = """
 import sys
 import numpy as np

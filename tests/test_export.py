@@ -414,10 +414,16 @@ print("BLENDER_RESULT " + json.dumps(out))
 """
 
 
-def test_blender_imports_the_glb_and_the_obj(exported, rig_with_corrective, ict_dir, tmp_path):
-    blender = shutil.which("blender")
-    if not blender:
+@pytest.fixture
+def blender() -> str:
+    """The ``blender`` executable (run headless: ``blender -b``); the test skips where it is not installed."""
+    path = shutil.which("blender")
+    if not path:
         pytest.skip("blender is not installed")
+    return path
+
+
+def test_blender_imports_the_glb_and_the_obj(blender, exported, rig_with_corrective, ict_dir, tmp_path):
     (tmp_path / "script.py").write_text(BLENDER_SCRIPT)
     run_cli("export", ict_dir, "-o", tmp_path / "neutral.obj")
     proc = subprocess.run([blender, "-b", "--factory-startup", "--python", str(tmp_path / "script.py"), "--",
@@ -487,14 +493,11 @@ def _blender_play(blender, tmp_path, kind: str, files: list, frames: list[int]) 
             for name in ["rest", *map(str, frames)]}, fps
 
 
-def test_blender_plays_the_glb_animation_as_the_application_poses_it(exported, rig_with_corrective, performance,
-                                                                       tmp_path):
+def test_blender_plays_the_glb_animation_as_the_application_poses_it(blender, exported, rig_with_corrective,
+                                                                       performance, tmp_path):
     """The Live Link Face performance in the .glb, played by Blender's glTF importer: at a frame of the performance,
     Blender's deformed mesh is the application's pose of that frame's weights, corrective included (in Blender's
     axes and metres: the map is fitted on the rest surface alone, and must be exact there)."""
-    blender = shutil.which("blender")
-    if not blender:
-        pytest.skip("blender is not installed")
     rig = rig_with_corrective
     ks = [100, 200, 250]          # performance frames (60 fps) that fall on Blender's whole frames (24 fps)
     seen, fps = _blender_play(blender, tmp_path, "glb", [exported[0][".glb"]], [round(k * 24 / 60) for k in ks])
@@ -512,12 +515,9 @@ def test_blender_plays_the_glb_animation_as_the_application_poses_it(exported, r
         assert np.abs(played - expected).max() * 100 < 1e-4, k      # as the application poses it (cm)
 
 
-def test_blender_plays_the_pc2_cache_on_the_obj_as_the_application_solved_it(ict_dir, take_dir, tmp_path):
+def test_blender_plays_the_pc2_cache_on_the_obj_as_the_application_solved_it(blender, ict_dir, take_dir, tmp_path):
     """``solve --cache``'s PC2 on ``export``'s OBJ, played in Blender with a Mesh Cache modifier left at its
     defaults: every vertex of a frame where the solve put it (vertex order, frame numbering, units)."""
-    blender = shutil.which("blender")
-    if not blender:
-        pytest.skip("blender is not installed")
     from model.pc2 import read_pc2
     run_cli("export", ict_dir, "-o", tmp_path / "neutral.obj")
     run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json",

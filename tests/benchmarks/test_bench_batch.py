@@ -4,14 +4,14 @@ plain solve (issue 21; target: a speed-up of at least 1.7x on 2 cores).
 The takes are the shared ICT Live Link take (358 frames) turned and shifted 24 ways, solved with the default
 options and the shared marker map, previews on. Each configuration runs in a fresh process in the order the ``batch``
 command runs: the local cluster's fork server started first (``app.launch``, ``model.fork_server``: its imports of
-what a worker needs run in its own process, on the other core, while this one imports and loads the rig), the rig loaded and the job
-prepared, then the clock started around ``model.batch.run_batch``. Figures per configuration: the wall time of the
-whole run (the scheduler and its dashboard started, the workers forked from the fork server -- waiting for its
-imports if they are not done --, the job scattered, the takes, the cluster's shutdown, the summary), of the takes
-alone (from the submits to the last result), and of the whole command (from the script's first line: its imports,
-the rig's load and the job's preparation included; the interpreter's start-up not). "Plain solve" is the same take
-solved and exported in this process with the rig loaded once
-(TakeWorkspace.solve, weights CSV and report): what a loop over ``solve`` costs per take apart from loading the
+what a worker needs run in its own process, on the other core, while this one imports and loads the rig), the rig
+loaded and the job prepared, then the clock started around ``model.batch.run_batch``. Figures per configuration:
+the wall time of the whole run (the scheduler and its dashboard started, the workers forked from the fork server --
+waiting for its imports if they are not done --, the job scattered, the takes, the cluster's shutdown, the summary),
+of the takes alone (from the submits to the last result), and of the whole command (from the script's first line:
+its imports, the rig's load and the job's preparation included; the interpreter's start-up not). "Plain solve" is
+the same take solved and exported in this process with the rig loaded once (TakeWorkspace.solve, weights CSV and
+report): what a loop over ``solve`` costs per take apart from loading the
 rig, which every ``solve`` command does again (its time is printed too). Run with -s to see the figures; they are
 also in ``benchmark.extra_info``. The machine is shared: the speed-up is noisy, see the README for the spread.
 """
@@ -97,10 +97,10 @@ print(json.dumps({"wall": wall, "takes_s": last["p"].elapsed, "status": [r["stat
 
 def _run(take_dir, takes, out, workers):
     """(wall s of ``run_batch``, s of takes alone, frames, s the workers spent on takes added up, CPU s of all the
-    batch's processes during ``run_batch``, s of the whole command, s until the cluster was up): one batch in a fresh process, as one ``batch``
-    command runs: the local cluster's fork server started, then the rig loaded and the job prepared, then the clock
-    started around ``run_batch``. A fresh process each time, so that no run inherits another's warm local cluster
-    machinery (the fork server its workers are forked from)."""
+    batch's processes during ``run_batch``, s of the whole command, s until the cluster was up): one batch in a
+    fresh process, as one ``batch`` command runs: the local cluster's fork server started, then the rig loaded and
+    the job prepared, then the clock started around ``run_batch``. A fresh process each time, so that no run
+    inherits another's warm local cluster machinery (the fork server its workers are forked from)."""
     import json
     import subprocess
     import sys
@@ -141,17 +141,18 @@ def test_bench_batch_speedup(benchmark, take_dir, bench_takes, tmp_path):
     benchmark.extra_info.update(takes=N_TAKES, rounds=ROUNDS, frames=ones[0][2], one_worker_wall_s=one[0],
                                 one_worker_takes_s=one[1], two_workers_wall_s=two[0], two_workers_takes_s=two[1],
                                 speedup_wall=speed_wall, speedup_wall_per_round=per_round, speedup_takes=speed_takes,
-                                fixed_part_two_workers_s=fixed, cluster_up_two_workers_s=started, load_average=load, concurrency=concurrency,
-                                per_take_slowdown_with_two=slowdown, one_worker_cpu_s=one[4], two_workers_cpu_s=two[4],
-                                one_worker_command_s=one[5], two_workers_command_s=two[5], speedup_command=speed_command)
+                                fixed_part_two_workers_s=fixed, cluster_up_two_workers_s=started,
+                                load_average=load, concurrency=concurrency, per_take_slowdown_with_two=slowdown,
+                                one_worker_cpu_s=one[4], two_workers_cpu_s=two[4], one_worker_command_s=one[5],
+                                two_workers_command_s=two[5], speedup_command=speed_command)
     print(f"\nbatch of {N_TAKES} takes ({ones[0][2]} frames), medians of {ROUNDS} alternated rounds: 1 worker "
           f"{one[0]:.2f} s ({one[1]:.2f} s of takes), 2 workers {two[0]:.2f} s ({two[1]:.2f} s of takes): speed-up "
           f"{speed_wall:.2f}x whole run (each round: {', '.join(f'{r:.2f}' for r in per_round)}), {speed_takes:.2f}x "
-          f"takes alone; fixed part on 2 workers {', '.join(f'{f:.2f}' for f in fixed)} s (of which the cluster's start "
-          f"{', '.join(f'{f:.2f}' for f in started)} s); the whole command (rig load "
-          f"included) {one[5]:.1f} s against {two[5]:.1f} s, {speed_command:.2f}x; {concurrency:.2f} takes at once on "
-          f"average, each {slowdown:.2f}x as long as on 1 worker; CPU of all the batch's processes {one[4]:.1f} s on "
-          f"1 worker, {two[4]:.1f} s on 2; load average {load:.1f} on {os.cpu_count()} cores")
+          f"takes alone; fixed part on 2 workers {', '.join(f'{f:.2f}' for f in fixed)} s (of which the cluster's "
+          f"start {', '.join(f'{f:.2f}' for f in started)} s); the whole command (rig load included) {one[5]:.1f} s "
+          f"against {two[5]:.1f} s, {speed_command:.2f}x; {concurrency:.2f} takes at once on average, each "
+          f"{slowdown:.2f}x as long as on 1 worker; CPU of all the batch's processes {one[4]:.1f} s on 1 worker, "
+          f"{two[4]:.1f} s on 2; load average {load:.1f} on {os.cpu_count()} cores")
 
 
 _PLAIN = """
