@@ -131,6 +131,8 @@ def cmd_batch(args) -> int:
     job = prepare_job(rig, args)
     names = take_names(takes)
     print(f"{len(takes)} take(s) onto {rig.name} into {args.output}", flush=True)
+    if not args.scheduler:
+        announce_solver_build()      # the local workers' fork server compiles it before the first take
     rows = run_batch(job, takes, args.output, names=names, force=args.force, workers=args.workers,
                      scheduler=args.scheduler, progress=ProgressPrinter())
     count = {s: sum(r["status"] == s for r in rows) for s in ("solved", "skipped", "failed")}

@@ -101,6 +101,14 @@ def solve_settings(args, rig) -> tuple[dict, object]:
     return settings, segmentation
 
 
+def announce_solver_build() -> None:
+    """Say on stderr that the take solver is compiled first, when it is (the first solve after installing):
+    otherwise the command would sit silent for up to half a minute."""
+    from solvers import take_kernel
+    if not take_kernel.ready():
+        print(take_kernel.BUILD_MESSAGE, file=sys.stderr, flush=True)
+
+
 def cmd_solve(args) -> int:
     from model.marker_map import load_marker_map
     from model.take_exports import export_solve_outputs
@@ -111,6 +119,7 @@ def cmd_solve(args) -> int:
     if not ws.prepare_solve(args.take, load_marker_map(args.map) if args.map else None, solve_options(args)):
         return write_weight_take(ws, args)
     settings, segmentation = solve_settings(args, rig)
+    announce_solver_build()
     sol = ws.solve(settings, segmentation=segmentation)
     report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
     for lab in report["markers_left_out"]:

@@ -18,6 +18,7 @@ def run_gui(path: str | None = None) -> int:
     window = MainWindow()
     install_excepthook(window)
     window.show()
+    window.prepare_take_solver()
     if not window.autosave.offer_recovery(path):   # a crash left an autosave: restoring it replaces the open
         if path:
             window.open_path(path)

@@ -308,6 +308,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.statusBar().addPermanentWidget(self.jobs_bar)
         self.counts_label = QtWidgets.QLabel("no rig")
         self.statusBar().addPermanentWidget(self.counts_label)
+        self.solver_build_label = QtWidgets.QLabel()   # while the take solver compiles (prepare_take_solver)
+        self.solver_build_label.hide()
+        self.statusBar().addPermanentWidget(self.solver_build_label)
         self.jobs.changed.connect(self._on_jobs_changed)
 
     def _on_jobs_changed(self, n: int, text: str) -> None:
@@ -852,6 +855,28 @@ class MainWindow(QtWidgets.QMainWindow):
         self.autosave.shutdown(clean_quit=True)
         self.viewport.close_viewport()
         super().closeEvent(event)
+
+    def prepare_take_solver(self) -> None:
+        """Compile the take solver in a process of its own when this installation has not yet
+        (``solvers.take_kernel.start_background_build``), so that the first solve does not sit for up to half a
+        minute; the status bar says so until it is done. The application calls this when it opens."""
+        from solvers import take_kernel
+        proc = take_kernel.start_background_build()
+        if proc is None:
+            return
+        self.solver_build_label.setText(take_kernel.BUILD_MESSAGE)
+        self.solver_build_label.setToolTip("A solve started meanwhile waits for this build; it is kept for later runs")
+        self.solver_build_label.show()
+        timer = QtCore.QTimer(self)
+        timer.setInterval(250)
+
+        def check() -> None:
+            if proc.poll() is not None:
+                timer.stop()
+                self.solver_build_label.hide()
+        timer.timeout.connect(check)
+        timer.start()
+        self._solver_build = proc
 
     def shutdown_background(self) -> None:
         """Finish or stop every background job before the window goes: a thread must not outlive it."""

@@ -62,6 +62,28 @@ def solve_pass(Y, order, w, R, t, rest, Dm, At, Hs, Bts, mu, tols, mask_of, lam_
         solved, bool(first_solved_before)))
 
 
+def ready() -> bool:
+    """Whether ``kernel()`` returns at once: the kernel is loaded, or built for this machine, or numba is missing
+    (the Python loop then). False: the first solve compiles it first (``BUILD_MESSAGE``)."""
+    return _impl is not None or importlib.util.find_spec("numba") is None or _built_path() is not None
+
+
+# the ahead-of-time build: 5-25 s measured (15-25 s CPU the first time, less with numba's caches warm)
+BUILD_MESSAGE = "Compiling the take solver for this processor (once per installation, up to half a minute)\u2026"
+
+
+def start_background_build():
+    """Build the kernel in a separate process (a ``subprocess.Popen``, or None when ``ready()``), so that the
+    first solve does not wait for it: the GUI starts this when it opens. A solve that starts meanwhile waits for
+    that build instead of starting its own (``_build``'s lock)."""
+    if ready():
+        return None
+    import subprocess
+    return subprocess.Popen([sys.executable, "-c", "from solvers import take_kernel; take_kernel.kernel()"],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            cwd=str(_SOURCE.parent.parent), start_new_session=True)
+
+
 def kernel():
     """The module whose ``solve_pass`` runs the sweep: the ahead-of-time build (built here on first use), else
     the just-in-time one."""
@@ -136,25 +158,14 @@ def _build():
     cannot be built here."""
     if importlib.util.find_spec("numba") is None:
         return None
-    import warnings
     name = _file_name()
     for folder in _cache_dirs():
         try:
             folder.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=folder, prefix=".take-kernel-build-") as tmp:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")   # numba.pycc's pending deprecation
-                    from numba.pycc import CC
-                    from . import take_kernel_jit
-                    import llvmlite.binding as llvm
-                    cc = CC(_MODULE)
-                    cc.target_cpu = llvm.get_host_cpu_name()   # this processor's instructions (AVX2, FMA ...): the
-                    cc.output_dir = tmp                        # cache key carries the processor (_cpu)
-                    cc.output_file = name
-                    cc.verbose = False
-                    cc.export("solve_pass", _SIGNATURE)(take_kernel_jit.solve_pass.py_func)
-                    cc.compile()
-                os.replace(Path(tmp) / name, folder / name)   # atomic: a concurrent build wins or loses whole
+            with _build_lock(folder):
+                if (folder / name).is_file():       # built by another process while this one waited
+                    return _import(folder / name)
+                _compile(folder, name)
             for old in folder.glob(f"{_MODULE}_*"):       # builds of earlier sources or another processor
                 if old.name != name:
                     try:
@@ -165,6 +176,48 @@ def _build():
         except Exception:        # no compiler, a read-only folder, ...: the next folder, then the jit kernel
             continue
     return None
+
+
+class _build_lock:
+    """An exclusive lock on ``folder``'s build (``flock`` on a lock file): a process that needs the kernel while
+    another builds it (the GUI's background build, a batch's workers) waits for that build instead of doing the
+    same 20 s of work beside it. A no-op where ``fcntl`` is missing."""
+
+    def __init__(self, folder: Path) -> None:
+        self.path = folder / f".{_MODULE}.lock"
+        self.file = None
+
+    def __enter__(self):
+        try:
+            import fcntl
+        except ImportError:
+            return self
+        self.file = open(self.path, "a")
+        fcntl.flock(self.file, fcntl.LOCK_EX)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.file is not None:
+            self.file.close()       # releases the lock
+
+
+def _compile(folder: Path, name: str) -> None:
+    """The numba.pycc build of the kernel into ``folder / name``, moved into place atomically."""
+    import warnings
+    with tempfile.TemporaryDirectory(dir=folder, prefix=".take-kernel-build-") as tmp:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # numba.pycc's pending deprecation
+            from numba.pycc import CC
+            from . import take_kernel_jit
+            import llvmlite.binding as llvm
+            cc = CC(_MODULE)
+            cc.target_cpu = llvm.get_host_cpu_name()   # this processor's instructions (AVX2, FMA ...): the
+            cc.output_dir = tmp                        # cache key carries the processor (_cpu)
+            cc.output_file = name
+            cc.verbose = False
+            cc.export("solve_pass", _SIGNATURE)(take_kernel_jit.solve_pass.py_func)
+            cc.compile()
+        os.replace(Path(tmp) / name, folder / name)   # atomic: a concurrent build wins or loses whole
 
 
 def _jit():

@@ -404,3 +404,29 @@ def test_every_panel_fits_its_dock_at_the_default_size(qtbot, tmp_path, ict_dir)
             too_wide.append((dock.windowTitle(), need, room))
     assert checked >= 5
     assert not too_wide, f"panels wider than their docks (title, needs px, has px): {too_wide}"
+
+
+def test_the_window_compiles_the_take_solver_in_the_background_and_says_so_meanwhile(qtbot, tmp_path, monkeypatch):
+    """A fresh installation: the window starts the solver's build in a process of its own when it opens and the
+    status bar says so until that process ends; with the solver built, nothing is started or shown."""
+    import subprocess
+    import sys
+
+    from solvers import take_kernel
+    window = make_window(qtbot, tmp_path)
+    real_start = take_kernel.start_background_build
+    started = []
+
+    def start():      # a build process that takes a second
+        started.append(subprocess.Popen([sys.executable, "-c", "import time; time.sleep(1.0)"]))
+        return started[-1]
+    monkeypatch.setattr(take_kernel, "start_background_build", start)
+    window.prepare_take_solver()
+    label = window.solver_build_label
+    assert len(started) == 1 and label.isVisible() and label.text() == take_kernel.BUILD_MESSAGE
+    qtbot.waitUntil(lambda: not label.isVisible(), timeout=10000)
+    assert started[0].poll() == 0
+    monkeypatch.setattr(take_kernel, "start_background_build", real_start)
+    monkeypatch.setattr(take_kernel, "ready", lambda: True)        # built
+    window.prepare_take_solver()
+    assert not label.isVisible()

@@ -146,3 +146,45 @@ def test_low_rank_qp_sweep_equals_the_python_sweep_with_many_shapes():
     assert np.abs(a.weights - b.weights).max() < 1e-8
     assert np.abs(a.head - b.head).max() < 1e-8
     assert 0.0 < a.weights.max() <= 1.0 and a.weights.min() >= 0.0
+
+
+def test_a_process_needing_the_kernel_waits_for_a_build_under_way_instead_of_building_it_again(tmp_path, monkeypatch):
+    """Two builders of one cache folder (the GUI's background build and a solve started meanwhile, or a batch's
+    workers): the second waits on the build lock, then loads what the first built; the kernel is compiled once."""
+    import shutil
+    import threading
+    import time
+    built = take_kernel._built_path() or (take_kernel.kernel() and take_kernel._built_path())
+    monkeypatch.setattr(take_kernel, "_cache_dirs", lambda: [tmp_path])
+    compiled = []
+
+    def slow_compile(folder, name):           # the real build's result, after a real build's kind of wait
+        compiled.append(name)
+        time.sleep(0.6)
+        shutil.copy(built, folder / name)
+    monkeypatch.setattr(take_kernel, "_compile", slow_compile)
+    assert not take_kernel._built_path()
+    results = []
+    first = threading.Thread(target=lambda: results.append(take_kernel._build()))
+    first.start()
+    time.sleep(0.2)                            # the first holds the lock and is compiling
+    t0 = time.perf_counter()
+    results.append(take_kernel._build())
+    waited = time.perf_counter() - t0
+    first.join()
+    assert len(compiled) == 1, compiled
+    assert waited > 0.2 and all(r is not None and hasattr(r, "solve_pass") for r in results)
+    assert take_kernel._built_path() == tmp_path / compiled[0]
+
+
+@pytest.mark.parametrize("ready", [False, True])
+def test_a_solve_that_must_compile_the_solver_says_so_first(ready, monkeypatch, capsys, ict_dir, take_dir, tmp_path):
+    """The first `solve` after installing compiles the take solver before solving (up to half a minute): it says
+    so on stderr instead of sitting silent; once it is built, nothing is said."""
+    from app.cli import main
+    monkeypatch.setattr(take_kernel, "ready", lambda: ready)
+    rc = main(["solve", str(ict_dir), str(take_dir / "take.c3d"), "--map", str(take_dir / "marker_map.json"),
+               "-o", str(tmp_path / "w.csv")])
+    err = capsys.readouterr().err
+    assert rc == 0 and (tmp_path / "w.csv").is_file()
+    assert (take_kernel.BUILD_MESSAGE in err) is (not ready), err
