@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 
 from app.batch_preload import BATCH_PRELOAD
-from app.cli_solve import add_solve_options, load_solve_rig, solve_settings
+from app.cli_solve import add_solve_options, announce_solver_build, load_solve_rig, solve_settings
 from model.errors import RigInputError
 
 
