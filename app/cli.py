@@ -63,16 +63,26 @@ def cmd_render(args) -> int:
     from model.segmentation import SegmentationSettings
     t = SegmentationSettings().t if args.threshold is None else args.threshold
     view = build_view(rig, weights, args.view, threshold=t, level=args.level)
+    from model.parts import checked_hidden, default_hidden, rig_parts, shown_faces, subset_faces, vertex_colors
+    from widgets.scene import SKIN, render_png
+    parts = rig_parts(rig)
+    if args.hide is None:
+        hidden = default_hidden(parts.names) if parts is not None else []
+    else:
+        hidden = checked_hidden(parts, [n.strip() for n in args.hide.split(",") if n.strip() and n.strip() != "none"])
+    faces = shown_faces(parts, hidden)
+    counts, indices = subset_faces(rig.face_counts, rig.face_indices, faces)
+    colors = vertex_colors(parts, rig.face_counts, rig.face_indices, rig.n_vertices, SKIN) \
+        if args.material_colors else None
     texture = None
     if args.texture != "none":
         from app.texture_controller import render_texture
         from widgets.texture_view import textured_surface
-        texture = textured_surface(*render_texture(rig, weights, args.rig, args.texture, args.texture_detail, args.view),
-                                   rig.face_counts)
-    from widgets.scene import render_png
-    render_png(view.points, rig.face_counts, rig.face_indices, args.output, focus=view.focus,
+        split, image8 = render_texture(rig, weights, args.rig, args.texture, args.texture_detail, args.view)
+        texture = textured_surface(split.of_faces(rig.face_counts, faces), image8, counts)
+    render_png(view.points, counts, indices, args.output, focus=view.focus,
                colormap=view.colormap, camera=args.camera, size=size, wireframe=args.wireframe,
-               title=view.title if args.label else "", texture=texture)
+               title=view.title if args.label else "", texture=texture, base_colors=colors)
     print(f"wrote {args.output}")
     return 0
 
@@ -200,6 +210,11 @@ def build_parser() -> argparse.ArgumentParser:
                     help="draw the rig's textures blended by the pose (shaded view; textures found beside the rig)")
     sp.add_argument("--texture-detail", default="regional", choices=["regional", "dominant", "neutral"],
                     help="band-pass: whose detail band shows (default: per region, the strongest shape there)")
+    sp.add_argument("--hide", default=None, metavar="PART,...",
+                    help="parts (the materials the faces name) not to draw; 'none' draws every part (default: the "
+                         "helper shells over the eyes, e.g. ICT's M_EyeOcclusion, M_EyeBlend, M_LacrimalFluid)")
+    sp.add_argument("--material-colors", action="store_true",
+                    help="draw each part in its material's colour (MTL Kd, glTF base colour) instead of one skin colour")
     sp.set_defaults(func=cmd_render)
 
     sp = sub.add_parser("export", help="write the rig for other tools: glTF/USD blend shapes and animation, or a posed OBJ")

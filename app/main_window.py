@@ -21,6 +21,7 @@ from app.export_controller import ExportController
 from app.keyframe_controller import KeyframeController
 from app.loading import LoadWorker
 from app.marker_controller import MarkerController
+from app.parts_controller import PartsController
 from app.segmentation_controller import SegmentationController
 from app.shape_list_controller import ShapeListController
 from model.errors import RigInputError
@@ -231,6 +232,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
         act("view", "&Wireframe", self.viewport.set_wireframe, "W", "Draw polygon edges over the surface",
             checkable=True)
+        self.parts = PartsController(self)     # View ▸ Parts and View ▸ Material Colours
         self.add_separator("view")
         for i, (name, label) in enumerate([("front", "&Front"), ("left", "&Left Side"),
                                            ("right", "&Right Side"), ("three-quarter", "&Three-Quarter")]):
@@ -333,8 +335,9 @@ class MainWindow(QtWidgets.QMainWindow):
         rig = self.document.rig
         self.mocap.views_dock.hide()   # a fresh rig has no solve to show (a solve shows the dock again)
         self.shapes_panel.set_shapes(rig.shape_names, sorted(rig.presets))
+        shown, colors = self.parts.view_for(rig)
         self.viewport.set_surface(self.document.surface(), rig.face_counts, rig.face_indices,
-                                  focus=focus_vertices(rig.neutral, rig.deltas))
+                                  focus=focus_vertices(rig.neutral, rig.deltas), shown_faces=shown, base_colors=colors)
         self._update_counts()
         self._update_title()
 

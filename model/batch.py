@@ -163,6 +163,18 @@ class BatchJob:
                    antagonists=solve_pairs(rig, settings),    # once per batch, not once per take
                    preload=tuple(preload))
 
+    def preview_faces(self) -> tuple[np.ndarray, np.ndarray]:
+        """(face counts, face indices) a preview draws: the rig's faces without its helper shells, as ``render``
+        draws them by default (``model.parts``); found once per process."""
+        faces = getattr(self, "_preview_faces", None)
+        if faces is None:
+            from .parts import default_hidden, rig_parts, shown_faces, subset_faces
+            parts = rig_parts(self.rig)
+            hidden = default_hidden(parts.names) if parts is not None else []
+            faces = subset_faces(self.rig.face_counts, self.rig.face_indices, shown_faces(parts, hidden))
+            self._preview_faces = faces
+        return faces
+
     def __getstate__(self) -> dict:
         """Pickled (scattered to every worker) without the evaluator: its matrix is the rig's deltas again, over
         the moving vertices, and would nearly double what every worker receives (69 MB instead of 39 MB on ICT).
@@ -293,8 +305,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
         if job.preview is not None:
             try:          # a preview that cannot be drawn (no display, no EGL) costs the take its picture only
                 surface = sol.dense(frame) if sol is not None else job.evaluator.pose(weights[frame])
-                job.preview(surface, job.rig.face_counts, job.rig.face_indices, tmp / OUTPUTS["preview"],
-                            focus=job.focus)
+                job.preview(surface, *job.preview_faces(), tmp / OUTPUTS["preview"], focus=job.focus)
                 files[OUTPUTS["preview"]] = None
             except Exception as exc:
                 preview_error = f"the preview could not be rendered ({type(exc).__name__}: {exc})"

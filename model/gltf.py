@@ -20,6 +20,7 @@ buffers before reading. Coordinates are labelled ``units`` (glTF's own conventio
 from __future__ import annotations
 
 import base64
+import re
 import struct
 from pathlib import Path
 from urllib.parse import unquote
@@ -491,7 +492,38 @@ def _load(path: Path, units: str, mesh: str | None) -> Rig:
         rig.corners = CornerAttributes(uvs=np.concatenate(uvs), corner_uv=rig.face_indices.copy())
     elif isinstance(uvs, str):
         rig.corners = CornerAttributes(notes=[f"{path}: {uvs}"])
+    records, rig.materials = _material_parts(doc, prims, [len(t) for t in tris])
+    if records:
+        rig.corners = rig.corners or CornerAttributes()
+        rig.corners.records = records
     return rig
+
+
+def _material_parts(doc: _Doc, prims: list[dict], n_tris: list[int]) -> tuple[list[tuple[int, str]], dict]:
+    """(``usemtl`` records, one before each primitive's first face; {material: base colour}) when the primitives
+    name more than one material or one with a colour (``model.parts``); ([], {}) otherwise. A material's colour
+    is its ``baseColorFactor`` when no texture multiplies it."""
+    materials = doc.gltf.get("materials") if isinstance(doc.gltf.get("materials"), list) else []
+    names, colors, start = [], {}, 0
+    records = []
+    for p, n in zip(prims, n_tris):
+        i = p.get("material")
+        m = materials[i] if isinstance(i, int) and not isinstance(i, bool) and 0 <= i < len(materials) \
+            and isinstance(materials[i], dict) else None
+        name = "default" if m is None else re.sub(r"\s+", "_", str(m.get("name") or f"material_{i}"))[:100]
+        pbr = (m or {}).get("pbrMetallicRoughness")
+        pbr = pbr if isinstance(pbr, dict) else {}
+        factor = pbr.get("baseColorFactor")
+        if m is not None and "baseColorTexture" not in pbr and isinstance(factor, list) and len(factor) == 4 \
+                and all(isinstance(c, (int, float)) and not isinstance(c, bool) and np.isfinite(c) for c in factor):
+            colors[name] = tuple(float(min(1.0, max(0.0, c))) for c in factor[:3])
+        if not records or records[-1][1] != f"usemtl {name}":
+            records.append((start, f"usemtl {name}"))
+        names.append(name)
+        start += n
+    if len(set(names)) < 2 and not colors:
+        return [], {}
+    return records, colors
 
 
 def _texcoords(doc: _Doc, prim: dict, n: int, uvs: list | str | None) -> list | str | None:

@@ -2,7 +2,9 @@
 
 We read ``v`` and ``f`` records ourselves, in file order. General mesh loaders (trimesh, pyvista)
 split vertices at UV seams and material groups, which silently breaks blendshape correspondence
-(DESIGN.md, Readers). Everything else in the file (vt, vn, usemtl, g, s) is ignored.
+(DESIGN.md, Readers). The neutral's vt/vn per corner and its g/o/s/usemtl/mtllib records are kept as
+``CornerAttributes`` (written back on export; ``model.parts`` reads the materials from them); the targets' are not
+read.
 """
 from __future__ import annotations
 

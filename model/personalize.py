@@ -21,6 +21,7 @@ GUI's heat map, ``solvers.personalize.shape_change``).
 """
 from __future__ import annotations
 
+import copy
 import dataclasses
 from pathlib import Path
 
@@ -141,7 +142,8 @@ def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, m
               shape_names=list(rig.shape_names), deltas=result.deltas, units=rig.units,
               name=name or f"{rig.name}_actor", source="", correctives=correctives,
               presets={k: dict(v) for k, v in rig.presets.items()}, inbetweens=inbetweens,
-              muted=list(rig.muted), solo=list(rig.solo), ranges=dict(rig.ranges))
+              muted=list(rig.muted), solo=list(rig.solo), ranges=dict(rig.ranges),
+              corners=copy.deepcopy(rig.corners), materials=dict(rig.materials))   # the same faces: UVs, parts
     summary.update(unknowns=result.unknowns, seconds=round(result.seconds, 3),
                    delta_seconds=[round(s, 3) for s in result.delta_seconds],
                    delta_cpu_seconds=[round(s, 3) for s in result.delta_cpu_seconds], cg_iterations=result.cg_iterations,

@@ -259,6 +259,7 @@ def save_project(project: Project, path: str | Path) -> None:
         "rig": {"name": rig.name, "units": rig.units, "shape_names": rig.shape_names,
                 "presets": rig.presets, "source": rig.source,
                 "records": [list(r) for r in corners.records] if corners is not None else None,
+                **({"materials": {k: list(v) for k, v in rig.materials.items()}} if rig.materials else {}),
                 **({"shapes": shapes} if shapes else {})},
         "correctives": correctives,
         "pose": pose,
@@ -274,6 +275,17 @@ def save_project(project: Project, path: str | Path) -> None:
                 z.writestr(f"{key}.npy", _npy_bytes(a))
 
     atomic_write_with(path, write)
+
+
+def _materials(entry, path) -> dict[str, tuple[float, float, float]]:
+    """The rig's material colours from the manifest: {name: [r, g, b]} with numbers in 0..1."""
+    ok = isinstance(entry, dict) and all(
+        isinstance(v, list) and len(v) == 3 and all(isinstance(c, (int, float)) and not isinstance(c, bool)
+                                                    and 0.0 <= c <= 1.0 for c in v) for v in entry.values())
+    if not ok:
+        raise RigInputError(f"{path}: the rig's material colours are not three numbers from 0 to 1 each; "
+                            "the project is damaged.")
+    return {str(k): tuple(float(c) for c in v) for k, v in entry.items()}
 
 
 def load_project(path: str | Path) -> Project:
@@ -325,6 +337,8 @@ def load_project(path: str | Path) -> Project:
                     **{k: array(f"rig/{k}") if f"rig/{k}" in declared else None
                        for k in ("uvs", "corner_uv", "normals", "corner_normal")})
                 rig.validate()
+            if meta.get("materials") is not None:
+                rig.materials = _materials(meta["materials"], path)
             if meta.get("shapes") is not None:
                 _read_shape_settings(rig, meta["shapes"], array, declared)
             if manifest.get("correctives"):

@@ -62,6 +62,10 @@ def load_obj_folder(folder: str | Path, neutral: str | None = None, units: str =
               shape_names=stems, deltas=deltas, units=units, name=folder.name, source=str(folder),
               corners=base.corners)
     rig.presets = read_presets(folder / PRESETS_FILE, stems)
+    if base.corners is not None:
+        from .parts import obj_materials
+        rig.materials, notes = obj_materials(neutral_path, base.corners.records)
+        base.corners.notes.extend(notes)
     return rig
 
 

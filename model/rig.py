@@ -114,6 +114,8 @@ class Rig:
     solo         if any: only these shapes take part (Blender's solo); muted wins over solo.
     ranges       {shape: (min, max)} slider range; the weight is clamped to it (overdrive beyond 1, negative
                  weights where the rig allows). A shape without one has a 0..1 slider and is not clamped.
+    materials    {material: (r, g, b) in 0..1}: the diffuse colour of the materials the faces name (the OBJ's
+                 ``usemtl`` records in ``corners``; ``model.parts``), from its MTL file or a glTF's materials.
     """
 
     neutral: np.ndarray
@@ -131,6 +133,7 @@ class Rig:
     muted: list[str] = field(default_factory=list)
     solo: list[str] = field(default_factory=list)
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    materials: dict[str, tuple[float, float, float]] = field(default_factory=dict)   # colours by material name
 
     def __post_init__(self) -> None:
         where = self.source or self.name

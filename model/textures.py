@@ -286,6 +286,13 @@ class DisplaySplit:
     uv: np.ndarray
     face_indices: np.ndarray
 
+    def of_faces(self, face_counts: np.ndarray, faces: np.ndarray | None) -> "DisplaySplit":
+        """The split of the polygons ``faces`` only (a view that hides parts, ``model.parts``); itself when None."""
+        if faces is None:
+            return self
+        from .parts import subset_faces
+        return DisplaySplit(self.vertex, self.uv, subset_faces(face_counts, self.face_indices, faces)[1])
+
 
 def display_split(rig: Rig) -> DisplaySplit | None:
     """The surface split where a vertex has several UVs (for drawing a texture only: the rig's vertices are

@@ -98,8 +98,10 @@ class ColorMap:
 
 
 def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: bool = False, name="surface",
-                specular: float = 0.25, cull_hidden: bool = False):
-    """Add the rig surface with smooth shading; colour by ``colormap`` with a legend if given.
+                specular: float = 0.25, cull_hidden: bool = False, base_colors: np.ndarray | None = None):
+    """Add the rig surface with smooth shading; colour by ``colormap`` with a legend if given, else by
+    ``base_colors`` ((V, 3) uint8: each part in its material's colour, ``model.parts.vertex_colors``) if given,
+    else in the one skin colour.
 
     ``cull_hidden`` (a ``rig_mesh``; the viewport and ``render``): skip the faces turned away from the camera
     where that changes nothing seen (``solvers.mesh.hidden_back_faces``: the closed, outward parts); the other
@@ -109,6 +111,8 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
     kwargs = dict(smooth_shading=False, interpolation="gouraud", name=name, show_edges=wireframe, edge_color=(0.15, 0.15, 0.18),
                   line_width=0.5, specular=specular, specular_power=20, diffuse=0.85, ambient=0.12,
                   reset_camera=False)
+    if colormap is None and base_colors is not None and len(base_colors) == mesh.n_points:
+        colormap = ColorMap(base_colors, rgb=True)
     if colormap is None:
         return _shade(plotter, mesh, plotter.add_mesh(mesh, color=SKIN, **kwargs), wireframe, name, cull_hidden)
     if colormap.legend:
@@ -517,17 +521,18 @@ def offscreen_plotter(size):
 
 def render_png(points, face_counts, face_indices, out_path, *, focus=None, colormap: ColorMap | None = None,
                camera: str = "front", size=(1024, 768), wireframe=False, overlays=None, title: str = "",
-               texture=None) -> None:
+               texture=None, base_colors: np.ndarray | None = None) -> None:
     """Render the surface off screen to a PNG file, atomically (a temporary beside it, then moved into place:
     a killed render never leaves a truncated PNG under the final name). ``texture(plotter, mesh, wireframe)``
-    adds the surface instead, textured (widgets.texture_view.textured_surface)."""
+    adds the surface instead, textured (widgets.texture_view.textured_surface). ``base_colors``: the parts'
+    colours without a colour map (``add_surface``)."""
     plotter = offscreen_plotter(size)
     try:
         mesh = rig_mesh(points, face_counts, face_indices)
         if texture is not None and colormap is None:
             texture(plotter, mesh, wireframe)
         else:
-            add_surface(plotter, mesh, colormap, wireframe=wireframe, cull_hidden=True)
+            add_surface(plotter, mesh, colormap, wireframe=wireframe, cull_hidden=True, base_colors=base_colors)
         for add in overlays or ():
             add(plotter)
         if title:

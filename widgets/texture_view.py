@@ -45,6 +45,10 @@ class TexturedSurface:
         for obj in self._vtk:
             obj.Modified()
 
+    def pixels_top_down(self) -> np.ndarray:
+        """The texels shown now, (H, W, 3) uint8, row 0 the top (as ``update_image`` takes them)."""
+        return self._pixels[::-1, :, :3]
+
     def update_image(self, image8: np.ndarray, boxes=None) -> None:
         """New texels (H, W, 3) uint8, row 0 the top; ``boxes`` (row slice, column slice) limits the copy."""
         H = self._pixels.shape[0]

@@ -23,6 +23,8 @@ from functools import cached_property
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
+from model.parts import subset_faces
+
 from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, drop_cached_background, rig_mesh, \
     set_camera, style_plotter, surface_face
 
@@ -127,7 +129,11 @@ class Viewport(QtWidgets.QWidget):
         self._colormap: ColorMap | None = None
         self._wireframe = False
         self._textured = None   # widgets.texture_view.TexturedSurface while a texture is shown
-        self._face_counts: np.ndarray | None = None
+        self._texture_split = None   # its model.textures.DisplaySplit (of every face)
+        self._face_counts: np.ndarray | None = None   # of the faces drawn
+        self._all_faces: tuple[np.ndarray, np.ndarray] | None = None   # the surface's faces, every part
+        self._shown_faces: np.ndarray | None = None   # the faces drawn (set_parts), None: all
+        self._base_colors: np.ndarray | None = None   # the parts' colours (set_parts)
         self._camera = "front"
         self._tools: list[ViewportTool] = []
         self._owner: ViewportTool | None = None      # the tool whose gesture is under way
@@ -142,19 +148,52 @@ class Viewport(QtWidgets.QWidget):
 
     # --- content -----------------------------------------------------------------------------------
     def set_surface(self, points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
-                    focus: np.ndarray | None = None, *, reset_camera: bool = True) -> None:
-        """Show a new surface (a new rig): topology is uploaded once here."""
+                    focus: np.ndarray | None = None, *, reset_camera: bool = True,
+                    shown_faces: np.ndarray | None = None, base_colors: np.ndarray | None = None) -> None:
+        """Show a new surface (a new rig): topology is uploaded once here. ``shown_faces`` and ``base_colors``:
+        see ``set_parts``."""
         self._focus = focus if focus is not None else points
         if self._colormap is not None and len(self._colormap.scalars) != len(points):
             self._colormap = None   # the last rig's colours: its owner sets the new rig's when they are ready
-        self.mesh = rig_mesh(points, face_counts, face_indices)
-        self._face_counts = np.asarray(face_counts)
-        self._arrays = SurfaceArrays(self.mesh)
-        self._textured = None   # a new rig: its owner sets its texture when it is ready
-        self._redraw_surface()
+        self._all_faces = (np.asarray(face_counts), np.asarray(face_indices))
+        self._texture_split = None   # a new rig: its owner sets its texture when it is ready
+        self._textured = None
+        self._build_mesh(points, shown_faces, base_colors)
         if reset_camera:
             self.set_camera(self._camera)
         self.render()
+
+    def set_parts(self, shown_faces: np.ndarray | None, base_colors: np.ndarray | None) -> None:
+        """Draw only the polygons ``shown_faces`` (indices into the surface's faces, in order; None: all of them)
+        and colour the plain shaded surface by ``base_colors`` ((V, 3) uint8, each part in its material's colour;
+        None: the one skin colour). Every vertex stays (vertex order is sacred); a hidden part is not drawn or
+        picked (``model.parts``). Keeps the camera, the pose, the colour map and the texture."""
+        if self.mesh is None:
+            return
+        self._build_mesh(self._arrays.points.copy(), shown_faces, base_colors)
+        self.render()
+
+    @property
+    def shown_faces(self) -> np.ndarray | None:
+        """The surface's faces drawn (indices into its faces), None when all are."""
+        return self._shown_faces
+
+    def _build_mesh(self, points, shown_faces, base_colors) -> None:
+        counts, indices = subset_faces(*self._all_faces, shown_faces)
+        self._shown_faces = None if shown_faces is None else np.asarray(shown_faces, dtype=np.int64)
+        self._base_colors = base_colors
+        self.mesh = rig_mesh(points, counts, indices)
+        self._face_counts = np.asarray(counts)
+        self._arrays = SurfaceArrays(self.mesh)
+        if self._texture_split is not None and self._textured is not None:
+            image8 = np.ascontiguousarray(self._textured.pixels_top_down())
+            self._textured = self._textured_surface(self._texture_split, image8)
+        self._redraw_surface()
+
+    def _textured_surface(self, split, image8):
+        from .texture_view import TexturedSurface
+        return TexturedSurface(self._arrays.points, self._arrays.normals, self._face_counts,
+                               split.of_faces(self._all_faces[0], self._shown_faces), image8)
 
     def update_points(self, points: np.ndarray) -> None:
         """Move the surface's vertices (same order and count) and redraw."""
@@ -194,9 +233,8 @@ class Viewport(QtWidgets.QWidget):
     def set_texture(self, split, image8: np.ndarray | None) -> None:
         """Show ``image8`` ((H, W, 3) uint8, row 0 the top) on the surface through ``split``
         (``model.textures.DisplaySplit``); None: plain shading again. A colour map, while set, is shown instead."""
-        from .texture_view import TexturedSurface
-        self._textured = None if image8 is None or self.mesh is None else TexturedSurface(
-            self._arrays.points, self._arrays.normals, self._face_counts, split, image8)
+        self._texture_split = split
+        self._textured = None if image8 is None or self.mesh is None else self._textured_surface(split, image8)
         if self.mesh is not None:
             self._redraw_surface()
             self.render()
@@ -235,7 +273,8 @@ class Viewport(QtWidgets.QWidget):
             self.plotter.remove_actor("surface_backs", render=False)   # add_surface's second actor
             self._textured.add_to(self.plotter, wireframe=self._wireframe)
         else:
-            add_surface(self.plotter, self.mesh, self._colormap, wireframe=self._wireframe, cull_hidden=True)
+            add_surface(self.plotter, self.mesh, self._colormap, wireframe=self._wireframe, cull_hidden=True,
+                        base_colors=self._base_colors)
 
     # --- overlays ----------------------------------------------------------------------------------
     def add_overlay(self, name: str, mesh, **style):
@@ -268,6 +307,8 @@ class Viewport(QtWidgets.QWidget):
         ids = np.asarray(shown.get_cell(face).point_ids)
         pts = np.asarray(shown.points)[ids]
         nearest = int(ids[np.argmin(np.linalg.norm(pts - point, axis=1))])
+        if self._shown_faces is not None:
+            face = int(self._shown_faces[face])     # the surface's own face number, hidden parts counted
         return SurfacePoint(int(self._textured.vertex[nearest]) if shown is not self.mesh else nearest, face, point)
 
     # --- tools: the gesture API --------------------------------------------------------------------
