@@ -510,7 +510,8 @@ def _material_parts(doc: _Doc, prims: list[dict], n_tris: list[int]) -> tuple[li
         i = p.get("material")
         m = materials[i] if isinstance(i, int) and not isinstance(i, bool) and 0 <= i < len(materials) \
             and isinstance(materials[i], dict) else None
-        name = "default" if m is None else re.sub(r"\s+", "_", str(m.get("name") or f"material_{i}"))[:100]
+        label = str(m.get("name") or f"material_{i}") if m is not None else "default"
+        name = re.sub(r"[\s\x00-\x1f\x7f]+", "_", label)[:100]      # one word on an OBJ's usemtl line
         pbr = (m or {}).get("pbrMetallicRoughness")
         pbr = pbr if isinstance(pbr, dict) else {}
         factor = pbr.get("baseColorFactor")

@@ -168,3 +168,15 @@ def test_an_exported_obj_keeps_the_parts_and_its_material_library_line(ict_rig, 
     back = load_rig(tmp_path / "neutral.obj")
     a, b = rig_parts(ict_rig), rig_parts(back)
     assert a.names == b.names and np.array_equal(a.face_part, b.face_part) and np.array_equal(a.colors, b.colors)
+
+
+def test_gltf_material_names_become_one_word_each(tmp_path):
+    """A glTF's material names are free text; as part names they are written back on an OBJ's usemtl line, so
+    spaces and control characters become underscores (a newline would start a new OBJ record)."""
+    from tests.conftest import DATA, require_data
+    doc = json.loads(require_data(DATA / "thirdparty" / "gltf" / "MorphStressTest.gltf").read_text())
+    doc["materials"][0]["name"] = "Base skin\nf 1 2 3\x00"
+    doc["materials"][1].pop("name", None)
+    (tmp_path / "m.gltf").write_text(json.dumps(doc))
+    parts = rig_parts(load_rig(tmp_path / "m.gltf"))
+    assert parts.names == ["Base_skin_f_1_2_3_", "material_1"]
