@@ -112,8 +112,10 @@ class TakePlayback(QtCore.QObject):
             if self.loop:
                 self._start = (now, 0)
                 target = 0
-            else:
-                self.set_frame(self.n_frames - 1)
+            else:       # the end: its last frame drawn as every frame is (a late clock may have passed it)
+                if self.frame != self.n_frames - 1:
+                    self.set_frame(self.n_frames - 1)
+                    self.ticked.emit(self.n_frames - 1)
                 self.pause()
                 return
         if target != self.frame:

@@ -111,3 +111,20 @@ def test_real_playback_plays_a_60_fps_take_in_order_and_ends_on_time(qtbot):
     elapsed = time.perf_counter() - t0
     assert shown == sorted(set(shown)) and shown[-1] == 60 and len(shown) >= 30
     assert 0.99 < elapsed < 1.15
+
+
+def test_a_late_clock_past_the_end_still_draws_the_last_frame_as_a_tick_then_stops(qtbot, clock):
+    """Without looping, a clock that passed the end while a frame near it was drawn (another process took the
+    CPU) ends on the last frame, drawn as every frame is (``ticked``: the views redraw on it), then pauses."""
+    pb, shown = _playing_from_frame_0(n_frames=10)
+    pb.loop = False
+    ticked: list[int] = []
+    pb.ticked.connect(ticked.append)
+    pb._tick()                          # the clock starts at frame 0
+    clock[0] += 7.5 / 60
+    pb._tick()                          # frame 7
+    clock[0] += 5 / 60                  # frame 7 took five frames to draw: the clock is at 12, past the end (9)
+    pb._tick()
+    assert shown == [0, 7, 9] and ticked == [7, 9] and not pb.playing
+    pb._tick()                          # nothing more
+    assert shown == [0, 7, 9] and ticked == [7, 9]
