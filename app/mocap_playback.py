@@ -108,16 +108,13 @@ class TakePlayback(QtCore.QObject):
         target = f0 + int((now - t0) * self.rate)
         if self.rate <= self.max_rate and f0 <= self.frame < target <= self.frame + 1 + self.late_frames:
             target = self.frame + 1     # behind the clock by at most ``late_frames``: the next frame, late
+        end = False
         if target >= self.n_frames:
             if self.loop:
                 self._start = (now, 0)
                 target = 0
             else:       # the end: its last frame drawn as every frame is (a late clock may have passed it)
-                if self.frame != self.n_frames - 1:
-                    self.set_frame(self.n_frames - 1)
-                    self.ticked.emit(self.n_frames - 1)
-                self.pause()
-                return
+                target, end = self.n_frames - 1, True
         if target != self.frame:
             self.set_frame(target)
             self.ticked.emit(target)
@@ -127,7 +124,10 @@ class TakePlayback(QtCore.QObject):
                 dt = (self._tick_times[-1] - self._tick_times[0]) / (len(self._tick_times) - 1)
                 self.fps = 1.0 / dt if dt > 0 else 0.0
                 self.fps_measured.emit(self.fps)
-        self._schedule()
+        if end:
+            self.pause()
+        else:
+            self._schedule()
 
     def _schedule(self) -> None:
         """Arm the timer for when the frame after the shown one is due: at once if the clock is there already
