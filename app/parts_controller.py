@@ -94,25 +94,33 @@ class PartsController(QtCore.QObject):
 
     def set_shown(self, name: str, shown: bool) -> None:
         """Show or hide part ``name`` (remembered by name); the last part shown cannot be hidden."""
-        if self.parts is None or name not in self.parts.names or (name not in self.hidden) == shown:
+        self._set_shown({name: shown})
+
+    def show_all(self) -> None:
+        self._set_shown(dict.fromkeys(self.hidden, True))
+
+    def _set_shown(self, wanted: dict[str, bool]) -> None:
+        """Show (True) or hide (False) the parts named in ``wanted``, remember it, and redraw once."""
+        if self.parts is None:
             return
-        if not shown and len(self.hidden) + 1 >= len(self.parts.names):
+        wanted = {n: on for n, on in wanted.items() if n in self.parts.names and (n not in self.hidden) != on}
+        if not wanted:
+            return
+        hidden = (set(self.hidden) | {n for n, on in wanted.items() if not on}) - {n for n, on in wanted.items() if on}
+        if len(hidden) >= len(self.parts.names):
             self.window.show_status("One part at least stays shown.")
             self._sync_checks()
             return
-        self.hidden = [n for n in self.parts.names if (n in self.hidden or n == name) and not (shown and n == name)]
+        self.hidden = [n for n in self.parts.names if n in hidden]
         hidden_by_user, shown_by_user = _names(HIDDEN_KEY), _names(SHOWN_KEY)
-        (hidden_by_user.discard if shown else hidden_by_user.add)(name)
-        (shown_by_user.add if shown else shown_by_user.discard)(name)
+        for n, on in wanted.items():
+            (hidden_by_user.discard if on else hidden_by_user.add)(n)
+            (shown_by_user.add if on else shown_by_user.discard)(n)
         s = app_settings.settings()
         s.setValue(HIDDEN_KEY, sorted(hidden_by_user))
         s.setValue(SHOWN_KEY, sorted(shown_by_user))
         self._sync_checks()
         self._apply()
-
-    def show_all(self) -> None:
-        for name in list(self.hidden):
-            self.set_shown(name, True)
 
     def _sync_checks(self) -> None:
         for name, a in self.part_actions.items():

@@ -66,6 +66,11 @@ def test_a_hidden_part_is_neither_drawn_nor_clicked(qtbot, ict_window):
     assert vp.points().shape == rig.neutral.shape
     w.parts.show_all_action.trigger()
     assert w.parts.hidden == [] and vp.shown_faces is None
+    for a in w.parts.part_actions.values():                # untick every part: the last one stays shown
+        a.trigger()
+    assert len(w.parts.hidden) == len(parts.names) - 1
+    assert [n for n, a in w.parts.part_actions.items() if a.isChecked()] == [parts.names[-1]]
+    assert np.array_equal(vp.shown_faces, parts.faces(parts.names[-1]))
 
 
 def test_material_colours_replace_the_skin_tone_and_both_choices_are_remembered(qtbot, tmp_path, ict_window, ict_dir):
