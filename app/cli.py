@@ -63,15 +63,12 @@ def cmd_render(args) -> int:
     from model.segmentation import SegmentationSettings
     t = SegmentationSettings().t if args.threshold is None else args.threshold
     view = build_view(rig, weights, args.view, threshold=t, level=args.level)
-    from model.parts import checked_hidden, default_hidden, rig_parts, shown_faces, subset_faces, vertex_colors
+    from model.parts import checked_hidden, drawn_faces, rig_parts, vertex_colors
     from widgets.scene import SKIN, render_png
     parts = rig_parts(rig)
-    if args.hide is None:
-        hidden = default_hidden(parts.names) if parts is not None else []
-    else:
-        hidden = checked_hidden(parts, [n.strip() for n in args.hide.split(",") if n.strip() and n.strip() != "none"])
-    faces = shown_faces(parts, hidden)
-    counts, indices = subset_faces(rig.face_counts, rig.face_indices, faces)
+    hidden = None if args.hide is None else \
+        checked_hidden(parts, [n.strip() for n in args.hide.split(",") if n.strip() and n.strip() != "none"])
+    faces, counts, indices = drawn_faces(rig, hidden)
     colors = vertex_colors(parts, rig.face_counts, rig.face_indices, rig.n_vertices, SKIN) \
         if args.material_colors else None
     texture = None

@@ -168,11 +168,8 @@ class BatchJob:
         draws them by default (``model.parts``); found once per process."""
         faces = getattr(self, "_preview_faces", None)
         if faces is None:
-            from .parts import default_hidden, rig_parts, shown_faces, subset_faces
-            parts = rig_parts(self.rig)
-            hidden = default_hidden(parts.names) if parts is not None else []
-            faces = subset_faces(self.rig.face_counts, self.rig.face_indices, shown_faces(parts, hidden))
-            self._preview_faces = faces
+            from .parts import drawn_faces
+            faces = self._preview_faces = drawn_faces(self.rig)[1:]
         return faces
 
     def __getstate__(self) -> dict:

@@ -64,17 +64,13 @@ def rig_parts(rig) -> Parts | None:
             names.append(name)
         face_part[max(0, start):max(0, min(end, n_faces))] = names.index(name)
     used = [n for k, n in enumerate(names) if (face_part == k).any()]
-    if len(used) < 2 and not (face_part < 0).any() and not any(n in (rig.materials or {}) for n in used):
+    if len(used) < 2 and not (face_part < 0).any() and not any(n in rig.materials for n in used):
         return None
     if used != names:     # a usemtl with no face after it: not a part
         remap = np.array([used.index(n) if n in used else -1 for n in names] + [-1], dtype=np.int32)
         face_part = remap[face_part]
         names = used
-    colors = np.full((len(names), 3), np.nan, dtype=np.float32)
-    for k, n in enumerate(names):
-        c = (rig.materials or {}).get(n)
-        if c is not None:
-            colors[k] = c
+    colors = np.array([rig.materials.get(n, (np.nan,) * 3) for n in names], dtype=np.float32).reshape(-1, 3)
     return Parts(names, face_part, colors)
 
 
@@ -103,6 +99,17 @@ def shown_faces(parts: Parts | None, hidden) -> np.ndarray | None:
     if not off:
         return None
     return np.flatnonzero(~np.isin(parts.face_part, off)).astype(np.int64)
+
+
+def drawn_faces(rig, hidden: list[str] | None = None):
+    """(faces or None, counts, indices): the polygons a picture of ``rig`` draws with the parts ``hidden`` left
+    out (default: ``default_hidden``), as ``shown_faces`` and ``subset_faces`` give them (``render``, batch
+    previews)."""
+    parts = rig_parts(rig)
+    if hidden is None:
+        hidden = default_hidden(parts.names) if parts is not None else []
+    faces = shown_faces(parts, hidden)
+    return (faces, *subset_faces(rig.face_counts, rig.face_indices, faces))
 
 
 def subset_faces(face_counts: np.ndarray, face_indices: np.ndarray, faces: np.ndarray | None):
