@@ -170,7 +170,7 @@ class Viewport(QtWidgets.QWidget):
         picked (``model.parts``). Keeps the camera, the pose, the colour map and the texture."""
         if self.mesh is None:
             return
-        self._build_mesh(self._arrays.points.copy(), shown_faces, base_colors)
+        self._build_mesh(self._arrays.points, shown_faces, base_colors)   # rig_mesh copies them
         self.render()
 
     @property
