@@ -120,6 +120,7 @@ class ExportContent:
     times: np.ndarray | None = None
     frames: np.ndarray | None = None
     uvs: np.ndarray | None = None   # (V, 2) one UV per vertex (v up, as OBJ), when the rig has them so
+    parts: object = None            # the rig's parts (model.parts.Parts: faces by material, colours) or None
 
 
 def full_weights(rig: Rig, weights: np.ndarray) -> np.ndarray:
@@ -163,6 +164,8 @@ def export_content(rig: Rig, weights: np.ndarray | None = None, animation: Weigh
                             name=rig.name or "rig")
     from .textures import per_vertex_uvs
     content.uvs = per_vertex_uvs(rig)
+    from .parts import rig_parts
+    content.parts = rig_parts(rig)
     if animation is not None:
         if animation.weights.shape[1] != rig.n_shapes:
             raise RigInputError(f"{animation.source or 'the animation'}: has {animation.weights.shape[1]} "
@@ -174,25 +177,56 @@ def export_content(rig: Rig, weights: np.ndarray | None = None, animation: Weigh
 
 def write_posed_obj(rig: Rig, path: str | Path, weights: np.ndarray | None = None, *, units: str | None = None,
                     up: str = "y") -> None:
-    """The posed surface (the application's pose evaluation) as an OBJ with the source's UVs and groups.
+    """The posed surface (the application's pose evaluation) as an OBJ with the source's UVs, groups and
+    materials (``write_surface_obj``).
 
     The source's normals are kept for the rest pose only: a posed surface gets none (clients compute them).
     """
-    import dataclasses
-    from .obj_io import write_obj
     from .pose import PoseEvaluator
     if up not in UP_AXES:
         raise RigInputError(f"Unknown up axis '{up}': use one of {', '.join(UP_AXES)}.")
     w = np.zeros(rig.n_shapes) if weights is None else np.asarray(weights, dtype=np.float64).reshape(-1)
     R = _Y_TO_Z if up == "z" else np.eye(3)
     points = PoseEvaluator(rig, dtype=np.float64).evaluate(w) @ (unit_scale(rig.units, units or rig.units) * R.T)
-    corners = rig.corners
-    if corners is not None and up != "y" and corners.normals is not None:
-        corners = dataclasses.replace(corners, normals=corners.normals @ R.T)
     header = f"Blendshape Studio export of {rig.name}\nweights: " + ", ".join(
         f"{n}={v:g}" for n, v in zip(rig.shape_names, w) if v != 0)
-    write_obj(path, points, rig.face_counts, rig.face_indices, header=header, corners=corners,
-              normals=not np.any(w != 0))
+    write_surface_obj(rig, path, points, header=header, normals=not np.any(w != 0), rotation=R)
+
+
+def write_surface_obj(rig: Rig, path: str | Path, points: np.ndarray, *, header: str, normals: bool = False,
+                      rotation: np.ndarray | None = None) -> None:
+    """``points`` (V, 3) on the rig's polygons as an OBJ, with the source's UVs, groups and material records, and
+    (when the rig knows its materials' colours) its material library beside it: ``<name>.mtl`` with each
+    material's ``Kd``, named by the OBJ's ``mtllib`` line, so a DCC -- or this application -- reading the OBJ
+    shows each part in its colour. ``normals``: keep the source's normals (turned by ``rotation``)."""
+    import dataclasses
+    import re
+
+    from .obj_io import write_obj
+    corners = rig.corners
+    if corners is not None and rotation is not None and corners.normals is not None:
+        corners = dataclasses.replace(corners, normals=corners.normals @ np.asarray(rotation).T)
+    path = Path(path)
+    if rig.materials and corners is not None:
+        from .atomic import atomic_write
+        from .parts import rig_parts
+        parts = rig_parts(rig)
+        names = parts.names if parts is not None else list(rig.materials)
+        library = re.sub(r"\s+", "_", path.stem) + ".mtl"
+        atomic_write(path.with_name(library), mtl_text(names, rig.materials, rig.name).encode("utf-8"))
+        records = [r for r in corners.records if not r[1].startswith("mtllib")]
+        corners = dataclasses.replace(corners, records=[(0, f"mtllib {library}")] + records)
+    write_obj(path, points, rig.face_counts, rig.face_indices, header=header, corners=corners, normals=normals)
+
+
+def mtl_text(names: list[str], colors: dict, title: str) -> str:
+    """A Wavefront material library: ``newmtl`` for each of ``names``, with ``Kd`` where ``colors`` has one."""
+    lines = [f"# Blendshape Studio materials of {title}"]
+    for name in names:
+        lines.append(f"newmtl {name}")
+        if name in colors:
+            lines.append("Kd " + " ".join(f"{c:.6f}" for c in colors[name]))
+    return "\n".join(lines) + "\n"
 
 
 EXPORT_SUFFIXES = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".obj")

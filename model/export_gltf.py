@@ -5,6 +5,10 @@ per vertex (an OBJ rig with UV seams exports without: splitting its vertices wou
 fan-triangulated uint32 indices and
 one morph target per blend shape of ``model.export.ExportContent`` (the rig's shapes, then its correctives),
 named in ``mesh.extras.targetNames`` (the de facto convention of Blender, three.js, Babylon.js and Unreal).
+The rig's parts (its faces by material, ``model.parts``) are not split into primitives: Blender's importer gives
+each primitive its own copy of the vertices it uses, which renumbers the vertices and doubles them at a seam
+between parts (ICT FaceKit: 362 between the face and the back of the head), and vertex order is what caches and
+marker maps rely on; the USD and OBJ exports carry the parts and their colours.
 The current pose is the mesh's default ``weights``; an animation is one LINEAR sampler on the node's
 ``weights`` path with one key per frame, so every frame plays exactly the weights (and corrective
 activations) the application computed. Written atomically (model.atomic).

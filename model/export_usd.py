@@ -11,6 +11,11 @@ Stage metadata: ``upAxis`` and ``metersPerUnit`` from the export's ``up`` and ``
 OBJ's UVs are on the rig and every corner has one, they are written as the face-varying primvar ``st``.
 Blend shape prims need identifier names: a name like ``browInnerUp_L+browInnerUp_R`` is made valid
 (``browInnerUp_L_browInnerUp_R``) and the original kept in the prim's ``customData`` (``name``).
+A rig whose faces name materials (``model.parts``: an OBJ's ``usemtl``, a glTF's primitive materials) gets one
+``UsdShade.Material`` per part under ``/Root/Materials`` (a ``UsdPreviewSurface``, its ``diffuseColor`` the
+material's colour where the file gave one) bound to the part's faces through a ``GeomSubset`` of the mesh's
+``materialBind`` family, as Maya's and Houdini's USD exports bind per-face materials: the vertices and faces
+are untouched, so vertex order survives, and a DCC gets one material slot per part.
 """
 from __future__ import annotations
 
@@ -72,8 +77,8 @@ def usd_stage(content, corners=None):
     mesh = UsdGeom.Mesh.Define(stage, "/Root/" + Tf.MakeValidIdentifier(content.name))
     points = np.ascontiguousarray(content.neutral, dtype=np.float32)
     mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(points))
-    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(content.face_counts, np.int32)))
-    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(np.ascontiguousarray(content.face_indices, np.int32)))
+    mesh.CreateFaceVertexCountsAttr(_ints(content.face_counts))
+    mesh.CreateFaceVertexIndicesAttr(_ints(content.face_indices))
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     # The extent covers every pose the blend shapes can reach at weights in [0, 1].
     reach = points + np.minimum(content.deltas, 0).sum(axis=0), points + np.maximum(content.deltas, 0).sum(axis=0)
@@ -85,7 +90,10 @@ def usd_stage(content, corners=None):
         st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
                                                      UsdGeom.Tokens.faceVarying)
         st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(corners.uvs[:, :2], dtype=np.float32)))
-        st.SetIndices(Vt.IntArray.FromNumpy(np.ascontiguousarray(corners.corner_uv, np.int32)))
+        st.SetIndices(_ints(corners.corner_uv))
+
+    if content.parts is not None:
+        _bind_part_materials(stage, mesh, content.parts)
 
     binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
     binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
@@ -98,7 +106,7 @@ def usd_stage(content, corners=None):
         moved = np.flatnonzero(np.abs(d).max(axis=1) > 0).astype(np.int32)
         shape = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(ident))
         shape.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(d[moved], dtype=np.float32)))
-        shape.CreatePointIndicesAttr(Vt.IntArray.FromNumpy(moved))
+        shape.CreatePointIndicesAttr(_ints(moved))
         if name != ident:
             shape.GetPrim().SetCustomDataByKey("name", name)
         targets.append(shape.GetPath())
@@ -127,6 +135,36 @@ def usd_stage(content, corners=None):
             weights.Set(Vt.FloatArray.FromNumpy(w), Usd.TimeCode(code))
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets([anim.GetPath()])
     return stage
+
+
+def _bind_part_materials(stage, mesh, parts) -> None:
+    """One material per part, bound to its faces by a ``materialBind`` GeomSubset (module docstring)."""
+    from pxr import Gf, Sdf, UsdGeom, UsdShade
+    UsdGeom.Scope.Define(stage, "/Root/Materials")
+    idents = usd_names(parts.names)
+    api = UsdShade.MaterialBindingAPI.Apply(mesh.GetPrim())
+    for k, (name, ident) in enumerate(zip(parts.names, idents)):
+        material = UsdShade.Material.Define(stage, f"/Root/Materials/{ident}")
+        shader = UsdShade.Shader.Define(stage, material.GetPath().AppendChild("PreviewSurface"))
+        shader.CreateIdAttr("UsdPreviewSurface")
+        if not np.isnan(parts.colors[k]).any():
+            shader.CreateInput("diffuseColor", Sdf.ValueTypeNames.Color3f).Set(Gf.Vec3f(*map(float, parts.colors[k])))
+        shader.CreateInput("metallic", Sdf.ValueTypeNames.Float).Set(0.0)
+        material.CreateSurfaceOutput().ConnectToSource(shader.ConnectableAPI(), "surface")
+        if name != ident:
+            material.GetPrim().SetCustomDataByKey("name", name)
+        faces = np.flatnonzero(parts.face_part == k).astype(np.int32)
+        subset = api.CreateMaterialBindSubset(ident, _ints(faces), UsdGeom.Tokens.face)
+        UsdShade.MaterialBindingAPI.Apply(subset.GetPrim()).Bind(material)
+    # every face in a part: a partition of the mesh's faces; faces before any usemtl stay unbound
+    api.SetMaterialBindSubsetsFamilyType(UsdGeom.Tokens.partition if (parts.face_part >= 0).all()
+                                         else UsdGeom.Tokens.nonOverlapping)
+
+
+def _ints(values: np.ndarray):
+    """A ``VtIntArray`` of ``values``."""
+    from pxr import Vt
+    return Vt.IntArray.FromNumpy(np.ascontiguousarray(values, dtype=np.int32))
 
 
 def write_usd_content(content, path: str | Path, corners=None) -> None:

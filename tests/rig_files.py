@@ -1,4 +1,5 @@
-"""Small OBJ rig folders written on the fly for reader tests (bad input is easiest to make by hand)."""
+"""Small OBJ rig folders written on the fly for reader tests (bad input is easiest to make by hand), and independent
+readings of an OBJ's materials (usemtl per face, an MTL's Kd) to check the parts and exports against."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -35,3 +36,28 @@ def write_rig_folder(folder: Path, n: int = 6) -> tuple[np.ndarray, dict[str, np
     for name, t in targets.items():
         (folder / f"{name}.obj").write_text(obj_text(t, faces))
     return verts, targets
+
+
+def material_of_each_face(obj_path) -> list[str | None]:
+    """An independent reading of an OBJ: the material named by the last ``usemtl`` line before each face line."""
+    out, current = [], None
+    with open(obj_path) as f:
+        for line in f:
+            if line.startswith("usemtl "):
+                current = line.split(None, 1)[1].strip()
+            elif line.startswith("f "):
+                out.append(current)
+    return out
+
+
+def mtl_kd(mtl_path) -> dict[str, list[float]]:
+    """An independent reading of a material library: each ``newmtl``'s ``Kd`` numbers."""
+    out, name = {}, None
+    with open(mtl_path) as f:
+        for line in f:
+            words = line.split()
+            if words[:1] == ["newmtl"]:
+                name = words[1]
+            elif words[:1] == ["Kd"]:
+                out[name] = [float(w) for w in words[1:4]]
+    return out

@@ -7,7 +7,7 @@ import os
 import shutil
 import stat
 import subprocess
-
+from collections import Counter
 
 import numpy as np
 import pytest
@@ -19,6 +19,7 @@ from model.obj_io import read_obj
 from model.pose import PoseEvaluator
 from model.readers import load_rig
 from tests.cli_runner import run_cli
+from tests.rig_files import material_of_each_face, mtl_kd
 from tests.gltf_reference import reference_animation, reference_mesh
 from tests.gltf_rules import read_gltf_file, violations
 
@@ -248,6 +249,34 @@ def test_usd_holds_the_same_content_and_plays_the_same_pose(exported, rig_with_c
     assert st and len(st.Get()) == 28911  # the OBJ's UVs, face-varying through its own indices
 
 
+@pytest.mark.parametrize("suffix", [".usda", ".usdc"])
+def test_usd_binds_each_part_its_material_on_the_faces_the_obj_gives_it(exported, ict_dir, suffix):
+    """ICT's twelve materials in the USD export: usd-core's own binding resolution (ComputeBoundMaterial on each
+    GeomSubset) gives every face the material of the usemtl line before it in the source OBJ, whose colour is the
+    MTL's Kd; the subsets partition the faces (a valid materialBind family) and the mesh keeps its vertices."""
+    from pxr import Usd, UsdGeom, UsdShade
+    stage = Usd.Stage.Open(str(exported[0][suffix]))
+    mesh = next(p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh))
+    expected = material_of_each_face(ict_dir / "generic_neutral_mesh.obj")
+    subsets = UsdShade.MaterialBindingAPI(mesh).GetMaterialBindSubsets()
+    assert len(subsets) == 12
+    assert UsdGeom.Subset.ValidateFamily(UsdGeom.Imageable(mesh), UsdGeom.Tokens.face, "materialBind")[0]
+    assert UsdShade.MaterialBindingAPI(mesh).GetMaterialBindSubsetsFamilyType() == UsdGeom.Tokens.partition
+    kd = mtl_kd(ict_dir / "ICTFaceModelMaterial.mtl")
+    got = [None] * len(expected)
+    for subset in subsets:
+        material, _ = UsdShade.MaterialBindingAPI(subset.GetPrim()).ComputeBoundMaterial()
+        name = material.GetPrim().GetCustomDataByKey("name") or material.GetPrim().GetName()
+        for f in subset.GetIndicesAttr().Get():
+            got[f] = name
+        shader, _, _ = material.ComputeSurfaceSource()
+        assert shader.GetIdAttr().Get() == "UsdPreviewSurface"
+        assert list(shader.GetInput("diffuseColor").Get()) == pytest.approx(kd[name], abs=1e-6), name
+    wrong = [f for f, (a, b) in enumerate(zip(got, expected)) if a != b]
+    assert len(got) == len(expected) and not wrong, f"{len(wrong)} faces bound to another material, e.g. {wrong[:5]}"
+    assert len(UsdGeom.Mesh(mesh).GetPointsAttr().Get()) == 26719
+
+
 def _usd_errors(path):
     """Errors of usd-core's compliance checker (UsdUtils.ComplianceChecker, replaced by the validation
     framework in usd-core 26; whichever this usd-core has)."""
@@ -332,7 +361,10 @@ def test_ict_obj_export_keeps_uvs_and_materials(ict_dir, tmp_path):
     assert np.array_equal(back.face_indices, src.face_indices) and np.array_equal(back.face_counts, src.face_counts)
     assert np.allclose(back.corners.uvs, src.corners.uvs, atol=1e-6)
     assert np.array_equal(back.corners.corner_uv, src.corners.corner_uv)
-    assert back.corners.records == src.corners.records
+    # the records as in the source, the material library named by the one written beside the export
+    assert back.corners.records == [(0, "mtllib neutral.mtl")] + [r for r in src.corners.records
+                                                                   if not r[1].startswith("mtllib")]
+    assert (tmp_path / "neutral.mtl").is_file()
     assert [r for r in src.corners.records if r[1].startswith("usemtl")][2] == (14034, "usemtl M_GumsTongue")
 
 
@@ -410,6 +442,11 @@ for kind, path in (("glb", sys.argv[-2]), ("obj", sys.argv[-1])):
                  "frame_range": list(action.frame_range) if action else None,
                  "uv_layers": len(o.data.uv_layers), "materials": len(o.data.materials),
                  "fps": bpy.context.scene.render.fps / bpy.context.scene.render.fps_base}
+    # each material's faces and the base colour its importer gave it
+    used = [0] * max(1, len(o.data.materials))
+    for p in o.data.polygons:
+        used[p.material_index] += 1
+    out[kind]["material_faces"] = {m.name: [n, list(m.diffuse_color)[:3]] for m, n in zip(o.data.materials, used) if m}
 print("BLENDER_RESULT " + json.dumps(out))
 """
 
@@ -440,6 +477,12 @@ def test_blender_imports_the_glb_and_the_obj(blender, exported, rig_with_correct
     assert span == pytest.approx(327 / 60, abs=1.5 / glb["fps"])
     assert glb["polygons"] == len(rig_with_corrective.triangles())
     assert seen["obj"]["vertices"] == 26719 and seen["obj"]["uv_layers"] == 1 and seen["obj"]["materials"] == 12
+    # the OBJ's material library, written beside it: each part's faces in its MTL colour
+    faces = Counter(material_of_each_face(ict_dir / "generic_neutral_mesh.obj"))
+    kd = mtl_kd(ict_dir / "ICTFaceModelMaterial.mtl")
+    got = seen["obj"]["material_faces"]
+    assert {n: f for n, (f, _) in got.items()} == dict(faces)
+    assert all(rgb == pytest.approx(kd[n], abs=1e-6) for n, (_, rgb) in got.items()), got
 
 
 BLENDER_PLAY_SCRIPT = r"""

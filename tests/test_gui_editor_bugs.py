@@ -224,6 +224,16 @@ def test_keyed_pc2_and_pose_obj_exports_return_at_once_on_ict(qtbot, tmp_path, m
     assert cache.shape == (49, rig.n_vertices, 3)
     np.testing.assert_allclose(cache[-1], w.document.evaluate_state(kf.pose_at(2.0), dtype=np.float64), atol=1e-5)
     assert np.allclose(read_obj(obj).vertices, w.document.surface(), atol=1e-4)
+    # what `export` writes for the same pose (model.export.write_surface_obj): the rig's UVs, usemtl records and
+    # material library (pose.mtl beside it), line for line but for the header
+    from model.export import export_rig
+    (tmp_path / "cli").mkdir()
+    export_rig(rig, tmp_path / "cli" / "pose.obj", pose)
+    body = lambda p: [l for l in p.read_text().splitlines() if not l.startswith("#")]
+    same_obj = body(obj) == body(tmp_path / "cli" / "pose.obj")      # (a bool: pytest would diff 80k lines)
+    assert same_obj, "the window's pose OBJ differs from the export command's"
+    assert body(tmp_path / "pose.mtl") == body(tmp_path / "cli" / "pose.mtl")
+    assert sum(l.startswith("usemtl ") for l in body(obj)) == 12 and read_obj(obj).corners.uvs is not None
 
 
 def _select_region_in_viewport(qtbot, w, region):

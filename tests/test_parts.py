@@ -4,7 +4,6 @@ outside the rig's folder never stops the rig loading."""
 from __future__ import annotations
 
 import json
-import shutil
 from collections import Counter
 
 import numpy as np
@@ -14,20 +13,14 @@ from model.parts import default_hidden, read_mtl, rig_parts, shown_faces, subset
 from model.project import Project, load_project, save_project
 from model.readers import load_rig
 from tests.cli_runner import run_cli
+from tests.rig_files import material_of_each_face, mtl_kd
 
 HELPERS = ["M_LacrimalFluid", "M_EyeBlend", "M_EyeOcclusion"]
 
 
 def _faces_per_material(obj_path) -> Counter:
     """An independent count: the face lines after each ``usemtl`` line of the file."""
-    counts, current = Counter(), None
-    with open(obj_path) as f:
-        for line in f:
-            if line.startswith("usemtl "):
-                current = line.split(None, 1)[1].strip()
-            elif line.startswith("f "):
-                counts[current] += 1
-    return counts
+    return Counter(material_of_each_face(obj_path))
 
 
 def test_ict_parts_are_its_materials_with_their_faces_and_colours(ict_dir, ict_rig):
@@ -159,15 +152,45 @@ def test_render_hides_the_helper_shells_and_draws_material_colours_on_request(ic
     assert not (tmp_path / "x.png").exists()
 
 
-def test_an_exported_obj_keeps_the_parts_and_its_material_library_line(ict_rig, tmp_path):
-    """The OBJ export writes the usemtl/mtllib records back (model.obj_io), so a rig read back has the same parts;
-    the library itself is the user's file: copied beside the export, the colours come back too."""
+def test_an_exported_obj_writes_its_material_library_and_keeps_the_parts(ict_dir, ict_rig, tmp_path):
+    """The OBJ export writes the usemtl records back and the rig's colours as a material library beside it, named
+    by its mtllib line (``neutral.mtl``), so the OBJ alone -- read back here or in a DCC -- has the same parts in
+    the same colours; the source's library is not needed beside it."""
     from model.export import export_rig
-    shutil.copy(ict_rig.source + "/ICTFaceModelMaterial.mtl", tmp_path / "ICTFaceModelMaterial.mtl")
     export_rig(ict_rig, tmp_path / "neutral.obj", np.zeros(ict_rig.n_shapes))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["neutral.mtl", "neutral.obj"]
+    text = (tmp_path / "neutral.obj").read_text()
+    assert [l for l in text.splitlines() if l.startswith("mtllib")] == ["mtllib neutral.mtl"]
+    assert _faces_per_material(tmp_path / "neutral.obj") == _faces_per_material(ict_dir / "generic_neutral_mesh.obj")
+    written, source = mtl_kd(tmp_path / "neutral.mtl"), mtl_kd(ict_dir / "ICTFaceModelMaterial.mtl")
+    assert set(written) == set(rig_parts(ict_rig).names) and written == {n: source[n] for n in written}
     back = load_rig(tmp_path / "neutral.obj")
     a, b = rig_parts(ict_rig), rig_parts(back)
     assert a.names == b.names and np.array_equal(a.face_part, b.face_part) and np.array_equal(a.colors, b.colors)
+    assert not back.corners.notes                        # the library was found and read
+
+
+def test_gltf_materials_reach_the_obj_export(tmp_path):
+    """Other tools' glTF files exported as OBJ: the sparse cube's base colour becomes the material library's Kd;
+    MorphStressTest's two textured materials (no colour of their own) keep their parts through the usemtl records
+    and write no library (there is nothing to put in it)."""
+    from model.export import export_rig
+    from tests.conftest import DATA, require_data
+    folder = require_data(DATA / "thirdparty" / "gltf")
+    cube = load_rig(folder / "singleBlendshapeCube_sparse.glb")
+    (tmp_path / "cube").mkdir()
+    export_rig(cube, tmp_path / "cube" / "cube.obj")
+    kd = mtl_kd(tmp_path / "cube" / "cube.mtl")
+    parts = rig_parts(cube)
+    assert len(kd) == 1 and kd[parts.names[0]] == pytest.approx(parts.colors[0].tolist(), abs=1e-6)
+    assert not np.isnan(parts.colors).any()
+    assert rig_parts(load_rig(tmp_path / "cube" / "cube.obj")).colors == pytest.approx(parts.colors, abs=1e-6)
+    stress = load_rig(folder / "MorphStressTest.gltf")
+    (tmp_path / "stress").mkdir()
+    export_rig(stress, tmp_path / "stress" / "stress.obj")
+    assert [p.name for p in (tmp_path / "stress").iterdir()] == ["stress.obj"]
+    back, parts = rig_parts(load_rig(tmp_path / "stress" / "stress.obj")), rig_parts(stress)
+    assert back.names == parts.names == ["Base", "TestMaterial"] and np.array_equal(back.face_part, parts.face_part)
 
 
 def test_gltf_material_names_become_one_word_each(tmp_path):
