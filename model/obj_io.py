@@ -91,11 +91,41 @@ def _vertex_block(data: bytes) -> bytes | None:
 
 
 def _parse_vertex_block(block: bytes) -> np.ndarray | None:
-    """(V, 3) from a run of 'v' lines, None when some line does not parse (the caller's careful path)."""
+    """(V, 3) from a run of 'v' lines, None when some line does not parse (the caller's careful path).
+
+    The compiled reader (``solvers.decimal_kernel_jit``: the same bits as ``strtod``, about ten times faster) when
+    the take solver's kernel is built on this machine and the lines are plain decimal ``v x y z`` lines; numpy's
+    text reader otherwise."""
+    verts = _compiled_vertex_block(block)
+    if verts is not None:
+        return verts
     try:
         return np.loadtxt(io.BytesIO(block), usecols=(1, 2, 3), dtype=np.float64, ndmin=2, comments=None)
     except ValueError:
         return None  # ragged lines (colours on some, w on others): take the careful path
+
+
+def _compiled_vertex_block(block: bytes) -> np.ndarray | None:
+    """``solvers.decimal_kernel_jit.parse_vertex_lines`` over ``block``, the numbers outside its fast path
+    converted by ``float``; None when the kernel is not built here or a line is not a plain one."""
+    from solvers import take_kernel
+    module = take_kernel.built()
+    if module is None or not block:
+        return None
+    chars = np.frombuffer(block, np.uint8)
+    rows = block.count(b"\n") + (block[-1:] != b"\n")
+    out = np.empty((rows, 3))
+    slow = np.empty((3 * rows, 3), np.int64)       # room for every number (pages touched only where written)
+    n_slow = np.zeros(1, np.int64)
+    if module.parse_vertex_lines(chars, out, slow, n_slow) != rows:
+        return None
+    flat = out.reshape(-1)
+    for index, start, end in slow[:n_slow[0]].tolist():
+        try:
+            flat[index] = float(block[start:end])
+        except ValueError:
+            return None
+    return out
 
 
 def _parse_vertices(path: Path, data: bytes, span: tuple[int, int] | None | bool = False) -> np.ndarray:

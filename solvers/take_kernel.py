@@ -1,4 +1,5 @@
-"""The compiled inner loop of a take solve (``solvers.take_solve.TakeSolver._pass``), loaded without numba.
+"""The compiled inner loop of a take solve (``solvers.take_solve.TakeSolver._pass``), loaded without numba; the
+same extension module also holds the OBJ vertex-line reader (``solvers.decimal_kernel_jit``, ``built()``).
 
 The kernel's source is ``solvers.take_kernel_jit`` (numba). Importing numba and initialising its compiler costs
 about 0.5 s of CPU in every fresh process (the command line's ``solve``, the GUI's first take), more than the
@@ -12,6 +13,7 @@ ahead-of-time build cannot run (no C compiler), the kernel runs through numba's 
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import importlib.util
 import os
@@ -23,12 +25,14 @@ from pathlib import Path
 import numpy as np
 
 _SOURCE = Path(__file__).with_name("take_kernel_jit.py")
+_DECIMAL_SOURCE = Path(__file__).with_name("decimal_kernel_jit.py")
 _MODULE = "_take_kernel_aot"
 # solve_pass's argument types, in take_kernel_jit.solve_pass's order (arrays C-contiguous: ``solve_pass`` below
 # makes them so)
 _SIGNATURE = ("i8(f8[:,:,::1], i8[::1], f8[::1], f8[:,::1], f8[::1], f8[:,::1], f8[:,::1], f8[:,::1], f8[:,:,::1], "
               "f8[:,:,::1], f8, f8[::1], i8[::1], f8, i8, f8, f8, f8, f8, i8, f8[:,::1], f8[:,:,::1], f8[:,::1], "
               "b1[::1], b1)")
+_PARSE_SIGNATURE = "i8(u1[::1], f8[:,::1], i8[:,::1], i8[::1])"   # decimal_kernel_jit.parse_vertex_lines
 _impl = None           # the loaded kernel: the extension module, or take_kernel_jit
 
 
@@ -84,6 +88,18 @@ def start_background_build():
                             cwd=str(_SOURCE.parent.parent), start_new_session=True)
 
 
+def built():
+    """The ahead-of-time module when it is built for this machine (its ``solve_pass`` and
+    ``parse_vertex_lines``), else None: never builds it, never imports numba (a reader's fast path)."""
+    global _impl
+    if _impl is None or not hasattr(_impl, "parse_vertex_lines"):
+        module = _load_built()
+        if module is None:
+            return None
+        _impl = module
+    return _impl
+
+
 def kernel():
     """The module whose ``solve_pass`` runs the sweep: the ahead-of-time build (built here on first use), else
     the just-in-time one."""
@@ -112,9 +128,10 @@ def _cpu() -> str:
         return platform.machine() + platform.processor()
 
 
+@functools.lru_cache(maxsize=1)
 def _key() -> str:
-    h = hashlib.sha256(_SOURCE.read_bytes())
-    for part in (_SIGNATURE, np.__version__, _cpu()):
+    h = hashlib.sha256(_SOURCE.read_bytes() + _DECIMAL_SOURCE.read_bytes())
+    for part in (_SIGNATURE, _PARSE_SIGNATURE, np.__version__, _cpu()):
         h.update(part.encode())
     return h.hexdigest()[:16]
 
@@ -208,7 +225,7 @@ def _compile(folder: Path, name: str) -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")   # numba.pycc's pending deprecation
             from numba.pycc import CC
-            from . import take_kernel_jit
+            from . import decimal_kernel_jit, take_kernel_jit
             import llvmlite.binding as llvm
             cc = CC(_MODULE)
             cc.target_cpu = llvm.get_host_cpu_name()   # this processor's instructions (AVX2, FMA ...): the
@@ -216,6 +233,7 @@ def _compile(folder: Path, name: str) -> None:
             cc.output_file = name
             cc.verbose = False
             cc.export("solve_pass", _SIGNATURE)(take_kernel_jit.solve_pass.py_func)
+            cc.export("parse_vertex_lines", _PARSE_SIGNATURE)(decimal_kernel_jit.parse_vertex_lines.py_func)
             cc.compile()
         os.replace(Path(tmp) / name, folder / name)   # atomic: a concurrent build wins or loses whole
 
