@@ -105,15 +105,16 @@ def _parse_vertex_block(block: bytes) -> np.ndarray | None:
         return None  # ragged lines (colours on some, w on others): take the careful path
 
 
-def _compiled_vertex_block(block: bytes) -> np.ndarray | None:
+def _compiled_vertex_block(block: bytes, rows: int | None = None) -> np.ndarray | None:
     """``solvers.decimal_kernel_jit.parse_vertex_lines`` over ``block``, the numbers outside its fast path
-    converted by ``float``; None when the kernel is not built here or a line is not a plain one."""
+    converted by ``float``; None when the kernel is not built here, a line is not a plain one, or (given ``rows``)
+    the block does not have that many lines."""
     from solvers import take_kernel
     module = take_kernel.built()
     if module is None or not block:
         return None
     chars = np.frombuffer(block, np.uint8)
-    rows = block.count(b"\n") + (block[-1:] != b"\n")
+    rows = block.count(b"\n") + (block[-1:] != b"\n") if rows is None else rows
     out = np.empty((rows, 3))
     slow = np.empty((3 * rows, 3), np.int64)       # room for every number (pages touched only where written)
     n_slow = np.zeros(1, np.int64)
@@ -396,6 +397,9 @@ def _target_vertices(data: bytes, neutral: ObjMesh) -> np.ndarray | None:
         return None
     block = data[start:end]
     n = len(neutral.vertices)
+    verts = _compiled_vertex_block(block, rows=n)      # checks that the block is n plain 'v x y z' lines itself
+    if verts is not None:
+        return verts if np.isfinite(verts).all() else None
     # every line of the run is one 'v ' record, and there are V of them
     chars = np.frombuffer(block, np.uint8)
     ends = np.flatnonzero(chars == 10)
