@@ -202,21 +202,26 @@ def write_surface_obj(rig: Rig, path: str | Path, points: np.ndarray, *, header:
     import dataclasses
     import re
 
-    from .obj_io import write_obj
+    from .atomic import atomic_write
+    from .obj_io import obj_bytes
     corners = rig.corners
     if corners is not None and rotation is not None and corners.normals is not None:
         corners = dataclasses.replace(corners, normals=corners.normals @ np.asarray(rotation).T)
     path = Path(path)
-    if rig.materials and corners is not None:
-        from .atomic import atomic_write
-        from .parts import rig_parts
-        parts = rig_parts(rig)
-        names = parts.names if parts is not None else list(rig.materials)
-        library = re.sub(r"\s+", "_", path.stem) + ".mtl"
-        atomic_write(path.with_name(library), mtl_text(names, rig.materials, rig.name).encode("utf-8"))
-        records = [r for r in corners.records if not r[1].startswith("mtllib")]
-        corners = dataclasses.replace(corners, records=[(0, f"mtllib {library}")] + records)
-    write_obj(path, points, rig.face_counts, rig.face_indices, header=header, corners=corners, normals=normals)
+    if not (rig.materials and corners is not None):
+        atomic_write(path, obj_bytes(points, rig.face_counts, rig.face_indices, header=header, corners=corners,
+                                     normals=normals))
+        return
+    from .output_set import write_set
+    from .parts import rig_parts
+    parts = rig_parts(rig)
+    names = parts.names if parts is not None else list(rig.materials)
+    library = path.with_name(re.sub(r"\s+", "_", path.stem) + ".mtl")
+    records = [r for r in corners.records if not r[1].startswith("mtllib")]
+    corners = dataclasses.replace(corners, records=[(0, f"mtllib {library.name}")] + records)
+    obj = obj_bytes(points, rig.face_counts, rig.face_indices, header=header, corners=corners, normals=normals)
+    mtl = mtl_text(names, rig.materials, rig.name).encode("utf-8")
+    write_set({path: lambda f: f.write(obj), library: lambda f: f.write(mtl)})   # both new, or both as they were
 
 
 def mtl_text(names: list[str], colors: dict, title: str) -> str:

@@ -440,13 +440,20 @@ def read_obj_target(path: str | Path, neutral: ObjMesh) -> np.ndarray:
 
 def write_obj(path: str | Path, vertices: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
               *, header: str = "", corners: CornerAttributes | None = None, normals: bool = True) -> None:
-    """Write vertices and polygons in the given order (1-based indices), atomically.
+    """Write vertices and polygons in the given order (1-based indices), atomically (``obj_bytes``)."""
+    from .atomic import atomic_write
+    atomic_write(path, obj_bytes(vertices, face_counts, face_indices, header=header, corners=corners,
+                                 normals=normals))
+
+
+def obj_bytes(vertices: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray, *, header: str = "",
+              corners: CornerAttributes | None = None, normals: bool = True) -> bytes:
+    """An OBJ file of vertices and polygons in the given order (1-based indices).
 
     With ``corners`` (a source OBJ's, ``Rig.corners``) its ``vt``/``vn`` lists, each corner's ``v/vt/vn``
     and the group, material and smoothing records are written back where they were (``normals=False``
     leaves the normals out, e.g. for a posed surface they no longer fit).
     """
-    from .atomic import atomic_write
     out = io.StringIO()
     if header:
         for line in header.splitlines():
@@ -482,4 +489,4 @@ def write_obj(path: str | Path, vertices: np.ndarray, face_counts: np.ndarray, f
         pos += cnt
     lines.extend(line + "\n" for _, line in records[r:])
     out.write("".join(lines))
-    atomic_write(path, out.getvalue().encode("utf-8"))
+    return out.getvalue().encode("utf-8")

@@ -1,5 +1,6 @@
 """kill -9 at any moment during a save, an export or a render never leaves a broken file under the final
-name, and the next write cleans away the temporaries the killed one left (issue 17). A few kills each in the
+name (nor an OBJ beside another write's material library), and the next write cleans away the temporaries the
+killed one left (issue 17). A few kills each in the
 normal run; 100 each with ``pytest -m fuzz tests/test_kill_writes.py``."""
 from __future__ import annotations
 
@@ -40,6 +41,22 @@ print("go", flush=True)
 while True:
     export_rig(rig, sys.argv[1])
 """,
+    # an OBJ export with its material library: each rewrite poses the rig and colours its material by the same
+    # number, so an OBJ and an MTL from two different writes would disagree
+    "export-obj": r"""
+import sys
+import numpy as np
+from model.export import export_rig
+from model.readers import load_rig
+rig = load_rig(sys.argv[2])
+i = 0
+while True:
+    rig.materials["skin"] = (i % 100 / 100, 0.0, 0.0)
+    export_rig(rig, sys.argv[1], np.full(rig.n_shapes, i % 100 / 100))
+    if i == 0:
+        print("go", flush=True)
+    i += 1
+""",
     "render": r"""
 import sys
 from model.readers import load_rig
@@ -60,6 +77,13 @@ def _check(kind: str, path: Path) -> None:
     elif kind == "export":
         from model.gltf import load_gltf
         load_gltf(path)
+    elif kind == "export-obj":           # the OBJ and its library from the same write: weight and colour agree
+        from model.output_set import finish_interrupted_sets
+        finish_interrupted_sets(path.parent)     # what the next write does first (a set killed mid-moves)
+        header = next(l for l in path.read_text().splitlines() if l.startswith("# weights:"))
+        weight = float(header.split("=")[1].split(",")[0]) if "=" in header else 0.0
+        red = next(float(l.split()[1]) for l in path.with_suffix(".mtl").read_text().splitlines() if l[:3] == "Kd ")
+        assert abs(weight - red) < 1e-6, (header, red)
     else:
         data = path.read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and data[-8:-4] == b"IEND", "a truncated PNG"
@@ -89,15 +113,27 @@ def rig_folder(tmp_path_factory):
     return write_sample(tmp_path_factory.mktemp("rig") / "sample")
 
 
-CASES = [("save", ".bsproj"), ("export", ".glb"), ("render", ".png")]
+@pytest.fixture(scope="module")
+def material_rig_folder(tmp_path_factory):
+    """A small rig folder whose neutral names a material library beside it (material ``skin``)."""
+    from tests.rig_files import write_rig_folder
+    folder = tmp_path_factory.mktemp("rig") / "grid"
+    write_rig_folder(folder, n=30)
+    neutral = folder / "neutral.obj"
+    neutral.write_text("mtllib grid.mtl\n" + neutral.read_text())
+    (folder / "grid.mtl").write_text("newmtl skin\nKd 0.5 0.5 0.5\n")
+    return folder
+
+
+CASES = [("save", ".bsproj"), ("export", ".glb"), ("export-obj", ".obj"), ("render", ".png")]
 
 
 @pytest.mark.parametrize("kind,suffix", CASES)
-def test_kill_minus_9_never_leaves_a_broken_file(kind, suffix, tmp_path, rig_folder):
-    _kill_runs(kind, suffix, 6, tmp_path, rig_folder, seed=1)
+def test_kill_minus_9_never_leaves_a_broken_file(kind, suffix, tmp_path, rig_folder, material_rig_folder):
+    _kill_runs(kind, suffix, 6, tmp_path, material_rig_folder if kind == "export-obj" else rig_folder, seed=1)
 
 
 @pytest.mark.fuzz
 @pytest.mark.parametrize("kind,suffix", CASES)
-def test_100_kills_each(kind, suffix, tmp_path, rig_folder):
-    _kill_runs(kind, suffix, 100, tmp_path, rig_folder, seed=2)
+def test_100_kills_each(kind, suffix, tmp_path, rig_folder, material_rig_folder):
+    _kill_runs(kind, suffix, 100, tmp_path, material_rig_folder if kind == "export-obj" else rig_folder, seed=2)

@@ -170,6 +170,33 @@ def test_an_exported_obj_writes_its_material_library_and_keeps_the_parts(ict_dir
     assert not back.corners.notes                        # the library was found and read
 
 
+def test_an_obj_export_and_its_library_are_one_set(ict_rig, tmp_path, monkeypatch):
+    """Written as one set (model.output_set): when the OBJ cannot be written, the library beside it is not
+    replaced either, so an OBJ never sits beside another export's colours (kill -9 at random moments:
+    tests/test_kill_writes.py)."""
+    from model import atomic, output_set
+    from model.export import export_rig
+    rig = ict_rig.copy()
+    export_rig(rig, tmp_path / "face.obj")
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    rig.materials = dict(rig.materials, M_Face=(1.0, 0.0, 0.0))
+    real = atomic.write_temporary
+
+    def disk_full_for_the_obj(path, writer):
+        if str(path).endswith(".obj"):
+            raise OSError(28, "No space left on device")
+        return real(path, writer)
+
+    monkeypatch.setattr(atomic, "write_temporary", disk_full_for_the_obj)
+    monkeypatch.setattr(output_set, "write_temporary", disk_full_for_the_obj)
+    with pytest.raises(OSError):
+        export_rig(rig, tmp_path / "face.obj", np.full(rig.n_shapes, 0.5))
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before     # both as they were, nothing left
+    monkeypatch.undo()
+    export_rig(rig, tmp_path / "face.obj")
+    assert mtl_kd(tmp_path / "face.mtl")["M_Face"] == [1.0, 0.0, 0.0]
+
+
 def test_gltf_materials_reach_the_obj_export(tmp_path):
     """Other tools' glTF files exported as OBJ: the sparse cube's base colour becomes the material library's Kd;
     MorphStressTest's two textured materials (no colour of their own) keep their parts through the usemtl records
