@@ -20,6 +20,7 @@ import os
 import sys
 import sysconfig
 import tempfile
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -34,6 +35,7 @@ _SIGNATURE = ("i8(f8[:,:,::1], i8[::1], f8[::1], f8[:,::1], f8[::1], f8[:,::1], 
               "b1[::1], b1)")
 _PARSE_SIGNATURE = "i8(u1[::1], f8[:,::1], i8[:,::1], i8[::1])"   # decimal_kernel_jit.parse_vertex_lines
 _impl = None           # the loaded kernel: the extension module, or take_kernel_jit
+_load_lock = threading.RLock()
 
 
 def available() -> bool:
@@ -90,23 +92,32 @@ def start_background_build():
 
 def built():
     """The ahead-of-time module when it is built for this machine (its ``solve_pass`` and
-    ``parse_vertex_lines``), else None: never builds it, never imports numba (a reader's fast path)."""
+    ``parse_vertex_lines``), else None: never builds it, never imports numba (a reader's fast path; a loader
+    thread may call this while a solve thread calls ``kernel()``: one lock)."""
     global _impl
-    if _impl is None or not hasattr(_impl, "parse_vertex_lines"):
-        module = _load_built()
-        if module is None:
-            return None
-        _impl = module
-    return _impl
+    with _load_lock:
+        if _impl is None or not hasattr(_impl, "parse_vertex_lines"):
+            module = _load_built()
+            if module is None:
+                return None
+            _impl = module
+        return _impl
 
 
 def kernel():
     """The module whose ``solve_pass`` runs the sweep: the ahead-of-time build (built here on first use), else
     the just-in-time one."""
     global _impl
-    if _impl is None:
-        _impl = _load_built() or _build() or _jit()
-    return _impl
+    with _load_lock:
+        if _impl is None:
+            _impl = _load_built()
+        if _impl is not None:
+            return _impl
+    module = _build() or _jit()      # not under the lock: a build takes up to half a minute (``_build_lock``)
+    with _load_lock:
+        if _impl is None or not hasattr(_impl, "parse_vertex_lines"):
+            _impl = module
+        return _impl
 
 
 def __getattr__(name):

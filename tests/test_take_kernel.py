@@ -177,6 +177,37 @@ def test_a_process_needing_the_kernel_waits_for_a_build_under_way_instead_of_bui
     assert take_kernel._built_path() == tmp_path / compiled[0]
 
 
+def test_a_rig_loading_while_a_solve_builds_the_kernel_does_not_wait_for_the_build(tmp_path, monkeypatch):
+    """The OBJ reader asks for the built kernel (``built()``) while a solve thread may be compiling it
+    (``kernel()``, up to half a minute): the reader gets None at once and reads with numpy, the build still under
+    way when the rig is in; once the build is in, both get the same module."""
+    import shutil
+    import threading
+    import time
+
+    from model.readers import load_rig
+    from resources.sample_rig import write_sample
+    folder = write_sample(tmp_path / "sample")
+    real = take_kernel._built_path() or (take_kernel.kernel() and take_kernel._built_path())
+    monkeypatch.setattr(take_kernel, "_cache_dirs", lambda: [tmp_path])
+    monkeypatch.setattr(take_kernel, "_impl", None)
+    building = threading.Event()
+
+    def slow_compile(folder, name):
+        building.set()
+        time.sleep(4.0)
+        shutil.copy(real, folder / name)
+    monkeypatch.setattr(take_kernel, "_compile", slow_compile)
+    solve = threading.Thread(target=take_kernel.kernel)
+    solve.start()
+    assert building.wait(30)                     # the solve thread is compiling
+    assert take_kernel.built() is None
+    rig = load_rig(folder)                       # numpy's reader, not waiting for the build
+    assert solve.is_alive() and rig.n_vertices > 0
+    solve.join()
+    assert take_kernel.built() is take_kernel.kernel() and hasattr(take_kernel.built(), "parse_vertex_lines")
+
+
 @pytest.mark.parametrize("ready", [False, True])
 def test_a_solve_that_must_compile_the_solver_says_so_first(ready, monkeypatch, capsys, ict_dir, take_dir, tmp_path):
     """The first `solve` after installing compiles the take solver before solving (up to half a minute): it says
