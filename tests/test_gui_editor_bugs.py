@@ -398,12 +398,14 @@ def test_mocap_panel_counts_the_takes_frames_says_the_next_step_and_keeps_solve_
     assert where() == before
     assert "Load or build" not in mc.panel.status_label.text() and "Solve" in mc.panel.status_label.text()
     labels = []
+
+    def label_now(*_):       # after the controller's own slot has set the dialog's text for this progress step
+        if mc._progress is not None:
+            labels.append(mc._progress.labelText())
+    mc._relay.progress.connect(label_now)     # every step seen (a timer sampling the text missed them under load)
     with qtbot.waitSignal(mc.solved, timeout=180000):
         qtbot.mouseClick(button, QtCore.Qt.LeftButton)
-        timer = QtCore.QTimer()
-        timer.timeout.connect(lambda: labels.append(mc._progress.labelText()) if mc._progress else None)
-        timer.start(20)
-    timer.stop()
+    mc._relay.progress.disconnect(label_now)
     frames = [t for t in labels if "frame" in t]
     assert frames and all("/358" in t for t in frames), labels[-3:]
     assert not any("/716" in t for t in labels)

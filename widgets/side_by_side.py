@@ -46,6 +46,7 @@ class SideBySideView(QtWidgets.QWidget):
         self._focus = None
         self._camera = "front"
         self._framed = None  # the camera position a preset framing left, while the user has not moved it
+        self._closed = False  # close_views ran: a reframe queued before it does nothing
         self.plotter.subplot(0, 0)
         self.plotter.add_text(f"blendshape projection, markers, errors x{ERROR_SCALE:g}", position="upper_left",
                               font_size=9, color="white", name="title_left")
@@ -181,10 +182,12 @@ class SideBySideView(QtWidgets.QWidget):
         """Keep a preset framing fitted to the new size (the views were framed before the dock had its size);
         a camera the user has orbited or zoomed is left alone."""
         super().resizeEvent(event)
-        if self._framed is not None and self.plotter.camera_position == self._framed:
+        if not self._closed and self._framed is not None and self.plotter.camera_position == self._framed:
             QtCore.QTimer.singleShot(0, self._reframe)
 
     def _reframe(self) -> None:
+        if self._closed:                 # the window closed between the resize and this turn of the event loop
+            return
         if self._framed is not None and self.plotter.camera_position == self._framed:
             self.set_camera(self._camera)
 
@@ -203,6 +206,7 @@ class SideBySideView(QtWidgets.QWidget):
             self.render()
 
     def close_views(self) -> None:
+        self._closed = True
         self.plotter.close()
 
 
