@@ -208,30 +208,20 @@ def write_surface_obj(rig: Rig, path: str | Path, points: np.ndarray, *, header:
     if corners is not None and rotation is not None and corners.normals is not None:
         corners = dataclasses.replace(corners, normals=corners.normals @ np.asarray(rotation).T)
     path = Path(path)
-    if not (rig.materials and corners is not None):
-        atomic_write(path, obj_bytes(points, rig.face_counts, rig.face_indices, header=header, corners=corners,
-                                     normals=normals))
-        return
-    from .output_set import write_set
-    from .parts import rig_parts
-    parts = rig_parts(rig)
-    names = parts.names if parts is not None else list(rig.materials)
-    library = path.with_name(re.sub(r"\s+", "_", path.stem) + ".mtl")
-    records = [r for r in corners.records if not r[1].startswith("mtllib")]
-    corners = dataclasses.replace(corners, records=[(0, f"mtllib {library.name}")] + records)
+    library = None
+    if rig.materials and corners is not None:
+        from .parts import mtl_bytes, rig_parts
+        parts = rig_parts(rig)
+        library = path.with_name(re.sub(r"\s+", "_", path.stem) + ".mtl")
+        mtl = mtl_bytes(parts.names if parts is not None else list(rig.materials), rig.materials, rig.name)
+        records = [r for r in corners.records if not r[1].startswith("mtllib")]
+        corners = dataclasses.replace(corners, records=[(0, f"mtllib {library.name}")] + records)
     obj = obj_bytes(points, rig.face_counts, rig.face_indices, header=header, corners=corners, normals=normals)
-    mtl = mtl_text(names, rig.materials, rig.name).encode("utf-8")
-    write_set({path: lambda f: f.write(obj), library: lambda f: f.write(mtl)})   # both new, or both as they were
-
-
-def mtl_text(names: list[str], colors: dict, title: str) -> str:
-    """A Wavefront material library: ``newmtl`` for each of ``names``, with ``Kd`` where ``colors`` has one."""
-    lines = [f"# Blendshape Studio materials of {title}"]
-    for name in names:
-        lines.append(f"newmtl {name}")
-        if name in colors:
-            lines.append("Kd " + " ".join(f"{c:.6f}" for c in colors[name]))
-    return "\n".join(lines) + "\n"
+    if library is None:
+        atomic_write(path, obj)
+    else:
+        from .output_set import write_set
+        write_set({path: lambda f: f.write(obj), library: lambda f: f.write(mtl)})   # both new, or both as they were
 
 
 EXPORT_SUFFIXES = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".obj")

@@ -93,7 +93,7 @@ def _vertex_block(data: bytes) -> bytes | None:
 def _parse_vertex_block(block: bytes) -> np.ndarray | None:
     """(V, 3) from a run of 'v' lines, None when some line does not parse (the caller's careful path).
 
-    The compiled reader (``solvers.decimal_kernel_jit``: the same bits as ``strtod``, about ten times faster) when
+    The compiled reader (``solvers.decimal_kernel_jit``: the same bits as ``strtod``, about eight times faster) when
     the take solver's kernel is built on this machine and the lines are plain decimal ``v x y z`` lines; numpy's
     text reader otherwise."""
     verts = _compiled_vertex_block(block)

@@ -171,6 +171,17 @@ def read_mtl(path: Path) -> tuple[dict[str, tuple[float, float, float]], str | N
     return out, None
 
 
+def mtl_bytes(names: list[str], colors: dict, title: str) -> bytes:
+    """A Wavefront material library, as bytes: ``newmtl`` for each of ``names``, with ``Kd`` where ``colors`` has
+    one (what ``read_mtl`` reads back)."""
+    lines = [f"# Blendshape Studio materials of {title}"]
+    for name in names:
+        lines.append(f"newmtl {name}")
+        if name in colors:
+            lines.append("Kd " + " ".join(f"{c:.6f}" for c in colors[name]))
+    return ("\n".join(lines) + "\n").encode("utf-8")
+
+
 def obj_materials(obj_path: Path, records: list[tuple[int, str]]) -> tuple[dict, list[str]]:
     """The colours of the materials an OBJ's ``mtllib`` records name (files beside ``obj_path`` only), and one
     sentence per library that could not be used."""
