@@ -35,8 +35,12 @@ def polygon_edges(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarr
     lo, hi = np.minimum(a, b), np.maximum(a, b)
     keep = lo != hi
     n = int(hi.max()) + 1
-    key = sorted_unique(lo[keep] * n + hi[keep])  # 1-D keys, sort-and-mask: no np.unique
-    return np.stack([key // n, key % n], axis=1)
+    # deduplicated as the pattern of a sparse (lo, hi) matrix: scipy's conversion to CSR buckets the entries by
+    # row in linear time, then sorts each row's few columns and merges repeats (a quarter of the time of sorting
+    # all the edges' keys)
+    pattern = sp.csr_matrix((np.ones(int(keep.sum()), dtype=np.int8), (lo[keep], hi[keep])), shape=(n, n))
+    rows = np.repeat(np.arange(n, dtype=np.int64), np.diff(pattern.indptr))
+    return np.stack([rows, pattern.indices.astype(np.int64)], axis=1)
 
 
 def adjacency_matrix(n_vertices: int, edges: np.ndarray) -> sp.csr_matrix:
@@ -46,6 +50,15 @@ def adjacency_matrix(n_vertices: int, edges: np.ndarray) -> sp.csr_matrix:
         raise RigInputError("An edge refers to a vertex that does not exist.")
     e = e[e[:, 0] != e[:, 1]]
     n = int(n_vertices)
+    if e.size and (e[:, 0] < e[:, 1]).all() and (np.diff(e[:, 0] * n + e[:, 1]) > 0).all():
+        # distinct edges i < j in sorted order (``polygon_edges``'s): row i's columns are its j > i in order, and
+        # the reversed edges (j, i) give row j its i < j in order, so a stable bucketing by row (scipy's linear
+        # COO-to-CSR conversion) of the reversed edges followed by the edges is the sorted CSR, nothing to merge
+        rows = np.concatenate([e[:, 1], e[:, 0]])
+        cols = np.concatenate([e[:, 0], e[:, 1]])
+        A = sp.coo_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n)).tocsr()
+        A.has_sorted_indices = True
+        return A
     # both directions of every edge as one key row·n + col, sorted and deduplicated: CSR order directly
     key = sorted_unique(np.concatenate([e[:, 0] * n + e[:, 1], e[:, 1] * n + e[:, 0]]))
     rows, cols = np.divmod(key, n)

@@ -26,6 +26,42 @@ def test_polygon_edges_match_the_rig_edges(ict_rig):
     assert np.array_equal(polygon_edges(ict_rig.face_counts, ict_rig.face_indices), ict_rig.edges())
 
 
+def _one_ring_by_sets(n, counts, indices):
+    """An independent reading: each polygon's consecutive corners (closed) as Python sets of neighbours."""
+    ring = [set() for _ in range(n)]
+    at = 0
+    for c in counts:
+        poly = [int(v) for v in indices[at:at + c]]
+        at += c
+        for a, b in zip(poly, poly[1:] + poly[:1]):
+            if a != b:
+                ring[a].add(b)
+                ring[b].add(a)
+    return ring
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_edges_and_adjacency_of_messy_polygons_against_sets(seed):
+    # triangles to hexagons over few vertices: repeated corners, edges shared by many polygons in both
+    # directions, unused vertices (the sparse-matrix deduplication against a plain set reading)
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(5, 40))
+    counts = rng.integers(3, 7, int(rng.integers(1, 80)))
+    indices = rng.integers(0, n - 2, int(counts.sum()))
+    ring = _one_ring_by_sets(n, counts, indices)
+    expected = sorted((a, b) for a in range(n) for b in ring[a] if a < b)
+    edges = polygon_edges(counts, indices)
+    assert edges.dtype == np.int64 and edges.tolist() == [list(e) for e in expected]
+    A = mesh_adjacency(n, counts, indices)
+    assert A.has_canonical_format
+    assert all(A.indices[A.indptr[v]:A.indptr[v + 1]].tolist() == sorted(ring[v]) for v in range(n))
+    assert (A.data == 1.0).all()
+    # the general path (edges in any order, repeated, reversed) builds the same matrix
+    messy = np.concatenate([edges[::-1], edges[:, ::-1], edges])
+    B = adjacency_matrix(n, messy)
+    assert np.array_equal(A.indptr, B.indptr) and np.array_equal(A.indices, B.indices)
+
+
 def test_adjacency_is_the_symmetric_one_ring(ict_rig, ict_graph):
     A, _ = ict_graph
     assert (A != A.T).nnz == 0
