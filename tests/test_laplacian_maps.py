@@ -209,3 +209,24 @@ def test_light_smoothing_of_a_map(ict_rig, ict_graph):
     assert np.allclose(y[nbrs], 1.0 / (1 + np.diff(A.indptr)[nbrs]))
     assert np.count_nonzero(y) == 1 + nbrs.size
     assert np.array_equal(smooth_map(x, A, 0), x)
+
+
+@pytest.mark.parametrize("kind", ["uniform", "cotangent"])
+def test_compiled_maps_are_the_scipy_products_bit_for_bit(ict_rig, kind, monkeypatch):
+    # solvers.maps_kernel_jit (one pass over each shape's (V, 3) deltas) against the three scipy sparse products
+    # per shape it replaces: the same bits, so a segmentation does not depend on whether the kernel is built
+    from solvers import deformation_maps as dm
+    from solvers import take_kernel
+    take_kernel.kernel()            # the ahead-of-time build, where this machine has none yet (once, ~20 s)
+    if take_kernel.built() is None:
+        pytest.skip("the kernel cannot be compiled ahead of time here (no C compiler): scipy's products are used")
+    L = mesh_laplacian(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, kind)
+    assert dm._compiled_shape_maps(L) is not None
+    # a few shapes, and a shape whose deltas are a view with strides (a rig's float32 deltas converted)
+    d = np.concatenate([ict_rig.deltas[[0, 20, 40]], ict_rig.deltas[[5]].astype(np.float32).astype(np.float64)])
+    compiled, compiled_disp = dm._shape_maps(L, d)
+    monkeypatch.setattr(take_kernel, "built", lambda: None)
+    scipy_maps, scipy_disp = dm._shape_maps(L, d)
+    assert np.array_equal(compiled.view(np.int64), scipy_maps.view(np.int64))
+    assert np.array_equal(compiled_disp.view(np.int64), scipy_disp.view(np.int64))
+    assert (compiled > 0).any(axis=1).all()
