@@ -1,7 +1,8 @@
 """The ``blendshape-studio`` command's entry point: ``app.cli.main``, except that a ``batch`` on the local cluster
 starts the cluster's fork server (``model.fork_server``) before anything else is imported, so that its imports of
 what the workers need (~2 s of CPU: Dask, the solver, VTK) overlap the command's own imports (~0.3 s) and the rig's
-load on the other core. Standard library only until then.
+load on the other core. Standard library only until then; then scipy's array-API layer is imported without the
+numpy submodules it would load for nothing (``model.scipy_import``), before the command's own imports.
 """
 from __future__ import annotations
 
@@ -20,6 +21,7 @@ def main(argv: list[str] | None = None) -> int:
         from app.batch_preload import BATCH_PRELOAD
         from model.fork_server import start_fork_server
         start_fork_server(BATCH_PRELOAD)
+    import model.scipy_import  # noqa: F401  (scipy's array-API layer without numpy's f2py, testing ...: ~0.07 s)
     from app.cli import main as cli_main
     return cli_main(argv)
 

@@ -8,10 +8,11 @@ from __future__ import annotations
 import os
 
 # What a take needs on a worker, imported once by the local cluster's fork server (``start_fork_server``): first
-# Dask's worker environment (before numpy loads), then Dask, the solve and its exports, and what a take imports on
+# Dask's worker environment (before numpy loads), scipy's array-API layer without numpy's unused submodules
+# (``model.scipy_import``), then Dask, the solve and its exports, and what a take imports on
 # first use (the take readers, the weights CSV, the antagonist pairs, the temporal smoothing's scipy.ndimage,
 # threadpoolctl), which would otherwise cost every worker's first take ~0.1 s.
-WORKER_MODULES = ("model.batch_env", "distributed", "model.batch", "model.take_workspace", "model.take_exports",
+WORKER_MODULES = ("model.batch_env", "model.scipy_import", "distributed", "model.batch", "model.take_workspace", "model.take_exports",
                   "solvers.take_kernel", "model.take_c3d", "model.livelink", "model.weights_csv", "model.antagonists",
                   "scipy.ndimage", "threadpoolctl")
 _FORK_SERVER_HASH_SEED = "6640"         # a nanny's choice when none is set, so that every worker hashes alike
