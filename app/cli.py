@@ -68,7 +68,7 @@ def cmd_render(args) -> int:
     parts = rig_parts(rig)
     hidden = None if args.hide is None else \
         checked_hidden(parts, [n.strip() for n in args.hide.split(",") if n.strip() and n.strip() != "none"])
-    faces, counts, indices = drawn_faces(rig, hidden)
+    faces, counts, indices = drawn_faces(rig, hidden, parts)
     colors = vertex_colors(parts, rig.face_counts, rig.face_indices, rig.n_vertices, SKIN) \
         if args.material_colors else None
     texture = None

@@ -101,11 +101,11 @@ def shown_faces(parts: Parts | None, hidden) -> np.ndarray | None:
     return np.flatnonzero(~np.isin(parts.face_part, off)).astype(np.int64)
 
 
-def drawn_faces(rig, hidden: list[str] | None = None):
+def drawn_faces(rig, hidden: list[str] | None = None, parts: Parts | None | bool = False):
     """(faces or None, counts, indices): the polygons a picture of ``rig`` draws with the parts ``hidden`` left
     out (default: ``default_hidden``), as ``shown_faces`` and ``subset_faces`` give them (``render``, batch
-    previews)."""
-    parts = rig_parts(rig)
+    previews). ``parts``: the rig's ``rig_parts`` when the caller has them."""
+    parts = rig_parts(rig) if parts is False else parts
     if hidden is None:
         hidden = default_hidden(parts.names) if parts is not None else []
     faces = shown_faces(parts, hidden)
