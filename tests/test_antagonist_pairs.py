@@ -1,0 +1,60 @@
+"""Antagonist pairs (solvers.antagonists, ALGORITHMS.md §13) against a plain loop over the pairs, each pair's
+shared support, cosine and overlap computed on its own from the rule's words."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from solvers.antagonists import antagonist_pairs
+
+
+def _by_loop(D, cosine=-0.5, support=0.1, overlap=0.5):
+    K = D.shape[0]
+    norms = [np.linalg.norm(D[k], axis=1) for k in range(K)]
+    acts = [norms[k] > support * norms[k].max() for k in range(K)]
+    out = []
+    for i in range(K):
+        for j in range(i + 1, K):
+            if norms[i].max() == 0 or norms[j].max() == 0:
+                continue
+            both = acts[i] & acts[j]
+            if both.sum() < max(1, overlap * min(acts[i].sum(), acts[j].sum())):
+                continue
+            di, dj = D[i][both], D[j][both]
+            c = float((di * dj).sum() / np.sqrt((di * di).sum() * (dj * dj).sum()))
+            if c < cosine:
+                out.append((i, j, c))
+    return sorted(out, key=lambda p: p[2])
+
+
+def _assert_same(got, expected):
+    assert [p[:2] for p in got] == [p[:2] for p in expected]
+    assert np.allclose([p[2] for p in got], [p[2] for p in expected], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_pairs_of_local_random_shapes_match_the_loop(seed):
+    # shapes acting on bumps of a strip of vertices; some made as the negative of another (plus noise and a
+    # shift of their bump), some still, so that every branch of the rule (too little overlap, cosine above
+    # the limit, a shape that moves nothing) is taken
+    rng = np.random.default_rng(seed)
+    V, K = 400, 12
+    x = np.arange(V)
+    D = np.zeros((K, V, 3))
+    for k in range(K):
+        centre, width = rng.integers(0, V), rng.integers(10, 80)
+        D[k] = np.exp(-0.5 * ((x - centre) / width) ** 2)[:, None] * rng.normal(size=3)
+    for k in range(0, K - 1, 3):
+        shift = int(rng.integers(-15, 16))
+        D[k + 1] = -np.roll(D[k], shift, axis=0) + 0.2 * rng.normal(size=(V, 3)) * (np.abs(D[k]) > 0.05)
+    D[K - 1] = 0.0
+    expected = _by_loop(D)
+    assert expected, "no pair found: the test lost its point"
+    _assert_same(antagonist_pairs(D), expected)
+    _assert_same(antagonist_pairs(D, cosine=-0.2, overlap=0.3), _by_loop(D, cosine=-0.2, overlap=0.3))
+
+
+def test_ict_pairs_match_the_loop(ict_rig):
+    expected = _by_loop(ict_rig.deltas)
+    assert len(expected) > 10
+    _assert_same(antagonist_pairs(ict_rig.deltas), expected)
