@@ -77,7 +77,8 @@ class PoseEvaluator:
         self.moving_vertices = moving
         self._cols = (moving[:, None] * 3 + np.arange(3)).reshape(-1)
         # (K+C, 3U) row-major: w @ D is a fast BLAS gemv.
-        self._D = np.take(full.reshape(full.shape[0], V, 3), moving, axis=1).reshape(full.shape[0], -1).astype(dtype)
+        self._D = np.take(full.reshape(full.shape[0], V, 3), moving, axis=1).reshape(full.shape[0], -1).astype(
+            dtype, copy=False)    # np.take made a new array: a float64 evaluator keeps it (no second 36 MB copy)
         self._blends: list[_BlendEntry] = []
         self._inbetween_refs = _inbetween_refs(rig)   # the arrays themselves (kept alive), not their ids
 
