@@ -5,8 +5,9 @@ holds them.
 ``solvers.deformation_maps`` otherwise copies each shape to (3, V) rows, runs three scipy sparse
 matrix-vector products and two norm passes: the Laplacian is read three times per shape. On a rig whose
 Laplacian does not fit in the processor's cache (35 MB at 422k vertices) that is what the maps cost: 1.7 s
-against 0.5 s here for the 422k-vertex studio rig's 57 shapes (on ICT FaceKit, whose Laplacian fits, about
-the same time either way). Here every row of the Laplacian is read once and its three coordinates summed
+against 0.5 s here for the 422k-vertex studio rig's 57 shapes into maps already in memory (a segmentation from
+scratch also pays ~0.4 s for its fresh maps' pages either way; on ICT FaceKit, whose Laplacian fits in the
+cache, the same time either way). Here every row of the Laplacian is read once and its three coordinates summed
 together. The sums are scipy's ``csr_matvec``'s, term by term in the row's stored order from 0.0, and the
 norms ``_norm_rows``'s ``sqrt((x² + z²) + y²)``, so the maps are the same to the last bit
 (``tests/test_laplacian_maps.py`` compares them).
