@@ -17,9 +17,10 @@ def antagonist_pairs(deltas: np.ndarray, *, cosine: float = -0.5, support: float
                      overlap: float = 0.5) -> list[tuple[int, int, float]]:
     """[(i, j, cosine)] with i < j, most opposed first, for deltas (K, V, 3).
 
-    All pairs at once as matrix products over the supports' indicator A (K, V): shared support sizes A Aᵀ, the
-    displacements' dot products over the shared support (A∘d)(A∘d)ᵀ summed over x, y, z, and each shape's squared
-    norm there (A∘‖d‖²) Aᵀ: O(K²V) in BLAS instead of a loop over the K² pairs."""
+    Per pair, over the shared support: its size, the displacements' dot products summed over x, y, z, and each
+    shape's squared norm. Where the compiled kernel is built (``solvers.shape_kernels_jit.antagonist_sums``), vertex
+    by vertex over the pairs acting there (a vertex is in few shapes' support); else all pairs at once as matrix
+    products over the supports' indicator A (K, V): A Aᵀ, (A∘d)(A∘d)ᵀ and (A∘‖d‖²) Aᵀ, O(K²V) in BLAS."""
     D = np.asarray(deltas, dtype=np.float64)
     K = D.shape[0]
     n2 = np.einsum("kvc,kvc->kv", D, D)                                # (K, V) squared norms
@@ -27,11 +28,15 @@ def antagonist_pairs(deltas: np.ndarray, *, cosine: float = -0.5, support: float
     top = n.max(axis=1) if K else np.zeros(0)
     act = n > support * np.maximum(top, 1e-300)[:, None]
     size = act.sum(axis=1)
-    A = act.astype(np.float64)
-    shared = A @ A.T                                                   # shared support sizes (exact in float64)
-    AD = (D * A[:, :, None]).reshape(K, -1)
-    dots = AD @ AD.T                                                   # Σ over the shared support of d_i·d_j
-    sq = (n2 * A) @ A.T                                                # [i, j]: Σ over the shared support of ‖d_i‖²
+    sums = _compiled_sums(D, n2, act)
+    if sums is not None:
+        shared, dots, sq = sums
+    else:
+        A = act.astype(np.float64)
+        shared = A @ A.T                                               # shared support sizes (exact in float64)
+        AD = (D * A[:, :, None]).reshape(K, -1)
+        dots = AD @ AD.T                                               # Σ over the shared support of d_i·d_j
+        sq = (n2 * A) @ A.T                                            # [i, j]: Σ over the shared support of ‖d_i‖²
     moving = top > 0
     enough = shared >= np.maximum(1, overlap * np.minimum(size[:, None], size[None, :]))
     candidate = np.triu(enough & moving[:, None] & moving[None, :], k=1)
@@ -39,6 +44,20 @@ def antagonist_pairs(deltas: np.ndarray, *, cosine: float = -0.5, support: float
         cos = dots / np.sqrt(sq * sq.T)
     i, j = np.nonzero(candidate & (cos < cosine))                       # row-major: the (i, j) order of a loop
     return sorted(zip(i.tolist(), j.tolist(), cos[i, j].tolist()), key=lambda p: p[2])
+
+
+def _compiled_sums(D: np.ndarray, n2: np.ndarray, act: np.ndarray):
+    """(shared, dots, sq) of ``antagonist_pairs`` from the compiled kernel (their entries above the diagonal, and
+    ``sq``'s below it), or None where it is not built here (``solvers.take_kernel.built``)."""
+    from . import take_kernel
+    module = take_kernel.built()
+    if module is None or D.shape[0] == 0:
+        return None
+    K = D.shape[0]
+    shared, dots, sq = np.zeros((K, K)), np.zeros((K, K)), np.zeros((K, K))
+    module.antagonist_sums(np.ascontiguousarray(D), np.ascontiguousarray(n2), np.ascontiguousarray(act.T),
+                           shared, dots, sq)
+    return shared, dots, sq
 
 
 def pair_penalty(pairs, K: int, lam: float) -> np.ndarray:

@@ -107,7 +107,7 @@ def _norm_rows(x: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> None:
 
 
 def _compiled_shape_maps(L: sp.csr_matrix):
-    """``maps_kernel_jit.shape_maps`` bound to ``L``'s arrays, as ``f(d (V, 3), lap (V,), disp (V,))``; None when
+    """``shape_kernels_jit.shape_maps`` bound to ``L``'s arrays, as ``f(d (V, 3), lap (V,), disp (V,))``; None when
     the compiled module is not built on this machine (``solvers.take_kernel.built``) or ``L`` has 64-bit
     indices (over 2^31 entries)."""
     from . import take_kernel
@@ -127,7 +127,7 @@ def _shape_maps(L: sp.csr_matrix, d: np.ndarray, displacement: bool = True
     per_shape = np.empty((K, V))
     disp = np.empty((K, V)) if displacement else None
     compiled = _compiled_shape_maps(L)
-    if compiled is not None:            # the same bits, the Laplacian read once per shape (maps_kernel_jit)
+    if compiled is not None:            # the same bits, the Laplacian read once per shape (shape_kernels_jit)
         scratch = None if displacement else np.empty(V)
         for k in range(K):
             compiled(np.ascontiguousarray(d[k]), per_shape[k], disp[k] if displacement else scratch)

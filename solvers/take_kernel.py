@@ -1,6 +1,7 @@
 """The compiled inner loop of a take solve (``solvers.take_solve.TakeSolver._pass``), loaded without numba; the
-same extension module also holds the OBJ vertex-line reader (``solvers.decimal_kernel_jit``) and the per-shape
-deformation maps (``solvers.maps_kernel_jit``), which the readers and the segmentation use through ``built()``.
+same extension module also holds the OBJ vertex-line reader (``solvers.decimal_kernel_jit``), the per-shape
+deformation maps and the antagonist pairs' sums (``solvers.shape_kernels_jit``), which the readers, the
+segmentation and the antagonist pairs use through ``built()``.
 
 The kernel's source is ``solvers.take_kernel_jit`` (numba). Importing numba and initialising its compiler costs
 about 0.5 s of CPU in every fresh process (the command line's ``solve``, the GUI's first take), more than the
@@ -28,7 +29,7 @@ import numpy as np
 
 _SOURCE = Path(__file__).with_name("take_kernel_jit.py")
 _DECIMAL_SOURCE = Path(__file__).with_name("decimal_kernel_jit.py")
-_MAPS_SOURCE = Path(__file__).with_name("maps_kernel_jit.py")
+_SHAPES_SOURCE = Path(__file__).with_name("shape_kernels_jit.py")
 _MODULE = "_take_kernel_aot"
 # solve_pass's argument types, in take_kernel_jit.solve_pass's order (arrays C-contiguous: ``solve_pass`` below
 # makes them so)
@@ -36,7 +37,8 @@ _SIGNATURE = ("i8(f8[:,:,::1], i8[::1], f8[::1], f8[:,::1], f8[::1], f8[:,::1], 
               "f8[:,:,::1], f8, f8[::1], i8[::1], f8, i8, f8, f8, f8, f8, i8, f8[:,::1], f8[:,:,::1], f8[:,::1], "
               "b1[::1], b1)")
 _PARSE_SIGNATURE = "i8(u1[::1], f8[:,::1], i8[:,::1], i8[::1])"   # decimal_kernel_jit.parse_vertex_lines
-_MAPS_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,::1], f8[::1], f8[::1])"   # maps_kernel_jit.shape_maps
+_MAPS_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,::1], f8[::1], f8[::1])"   # shape_kernels_jit.shape_maps
+_PAIRS_SIGNATURE = "i8(f8[:,:,::1], f8[:,::1], b1[:,::1], f8[:,::1], f8[:,::1], f8[:,::1])"   # .antagonist_sums
 _impl = None           # the loaded kernel: the extension module, or take_kernel_jit
 _load_lock = threading.RLock()
 
@@ -94,8 +96,8 @@ def start_background_build():
 
 
 def built():
-    """The ahead-of-time module when it is built for this machine (its ``solve_pass``, ``parse_vertex_lines``
-    and ``shape_maps``), else None: never builds it, never imports numba (a reader's fast path; a loader
+    """The ahead-of-time module when it is built for this machine (its ``solve_pass``, ``parse_vertex_lines``,
+    ``shape_maps`` and ``antagonist_sums``), else None: never builds it, never imports numba (a reader's fast path; a loader
     thread may call this while a solve thread calls ``kernel()``: one lock)."""
     global _impl
     with _load_lock:
@@ -144,8 +146,8 @@ def _cpu() -> str:
 
 @functools.lru_cache(maxsize=1)
 def _key() -> str:
-    h = hashlib.sha256(_SOURCE.read_bytes() + _DECIMAL_SOURCE.read_bytes() + _MAPS_SOURCE.read_bytes())
-    for part in (_SIGNATURE, _PARSE_SIGNATURE, _MAPS_SIGNATURE, np.__version__, _cpu()):
+    h = hashlib.sha256(_SOURCE.read_bytes() + _DECIMAL_SOURCE.read_bytes() + _SHAPES_SOURCE.read_bytes())
+    for part in (_SIGNATURE, _PARSE_SIGNATURE, _MAPS_SIGNATURE, _PAIRS_SIGNATURE, np.__version__, _cpu()):
         h.update(part.encode())
     return h.hexdigest()[:16]
 
@@ -239,7 +241,7 @@ def _compile(folder: Path, name: str) -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")   # numba.pycc's pending deprecation
             from numba.pycc import CC
-            from . import decimal_kernel_jit, maps_kernel_jit, take_kernel_jit
+            from . import decimal_kernel_jit, shape_kernels_jit, take_kernel_jit
             import llvmlite.binding as llvm
             cc = CC(_MODULE)
             cc.target_cpu = llvm.get_host_cpu_name()   # this processor's instructions (AVX2, FMA ...): the
@@ -248,7 +250,8 @@ def _compile(folder: Path, name: str) -> None:
             cc.verbose = False
             cc.export("solve_pass", _SIGNATURE)(take_kernel_jit.solve_pass.py_func)
             cc.export("parse_vertex_lines", _PARSE_SIGNATURE)(decimal_kernel_jit.parse_vertex_lines.py_func)
-            cc.export("shape_maps", _MAPS_SIGNATURE)(maps_kernel_jit.shape_maps.py_func)
+            cc.export("shape_maps", _MAPS_SIGNATURE)(shape_kernels_jit.shape_maps.py_func)
+            cc.export("antagonist_sums", _PAIRS_SIGNATURE)(shape_kernels_jit.antagonist_sums.py_func)
             cc.compile()
         os.replace(Path(tmp) / name, folder / name)   # atomic: a concurrent build wins or loses whole
 

@@ -1,11 +1,25 @@
 """Antagonist pairs (solvers.antagonists, ALGORITHMS.md §13) against a plain loop over the pairs, each pair's
-shared support, cosine and overlap computed on its own from the rule's words."""
+shared support, cosine and overlap computed on its own from the rule's words; both ways the pairs are summed:
+the compiled kernel (vertex by vertex, solvers.shape_kernels_jit) and the matrix products where it is not built."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+from solvers import take_kernel
 from solvers.antagonists import antagonist_pairs
+
+
+@pytest.fixture(params=["compiled", "matrix products"])
+def summed(request, monkeypatch):
+    """Which way ``antagonist_pairs`` sums the pairs in the test."""
+    if request.param == "compiled":
+        take_kernel.kernel()            # the ahead-of-time build, where this machine has none yet (once, ~20 s)
+        if take_kernel.built() is None:
+            pytest.skip("the kernel cannot be compiled ahead of time here (no C compiler)")
+    else:
+        monkeypatch.setattr(take_kernel, "built", lambda: None)
+    return request.param
 
 
 def _by_loop(D, cosine=-0.5, support=0.1, overlap=0.5):
@@ -33,7 +47,7 @@ def _assert_same(got, expected):
 
 
 @pytest.mark.parametrize("seed", range(6))
-def test_pairs_of_local_random_shapes_match_the_loop(seed):
+def test_pairs_of_local_random_shapes_match_the_loop(seed, summed):
     # shapes acting on bumps of a strip of vertices; some made as the negative of another (plus noise and a
     # shift of their bump), some still, so that every branch of the rule (too little overlap, cosine above
     # the limit, a shape that moves nothing) is taken
@@ -54,7 +68,7 @@ def test_pairs_of_local_random_shapes_match_the_loop(seed):
     _assert_same(antagonist_pairs(D, cosine=-0.2, overlap=0.3), _by_loop(D, cosine=-0.2, overlap=0.3))
 
 
-def test_ict_pairs_match_the_loop(ict_rig):
+def test_ict_pairs_match_the_loop(ict_rig, summed):
     expected = _by_loop(ict_rig.deltas)
     assert len(expected) > 10
     _assert_same(antagonist_pairs(ict_rig.deltas), expected)

@@ -213,7 +213,7 @@ def test_light_smoothing_of_a_map(ict_rig, ict_graph):
 
 @pytest.mark.parametrize("kind", ["uniform", "cotangent"])
 def test_compiled_maps_are_the_scipy_products_bit_for_bit(ict_rig, kind, monkeypatch):
-    # solvers.maps_kernel_jit (one pass over each shape's (V, 3) deltas) against the three scipy sparse products
+    # solvers.shape_kernels_jit (one pass over each shape's (V, 3) deltas) against the three scipy sparse products
     # per shape it replaces: the same bits, so a segmentation does not depend on whether the kernel is built
     from solvers import deformation_maps as dm
     from solvers import take_kernel

@@ -1,0 +1,91 @@
+"""Compiled passes over a rig's shapes, for what is computed once per rig: one shape's deformation maps
+(``shape_maps``) and the sums behind the antagonist pairs (``antagonist_sums``).
+
+**Deformation maps.** ``‖L d(v)‖`` and ``‖d(v)‖`` for every vertex v (Joshi et al. 2003, §2,
+``m_k(v) = ‖L d_k(v)‖``; ALGORITHMS.md §2), from the shape's (V, 3) deltas as the rig holds them.
+``solvers.deformation_maps`` otherwise copies each shape to (3, V) rows, runs three scipy sparse
+matrix-vector products and two norm passes: the Laplacian is read three times per shape. On a rig whose
+Laplacian does not fit in the processor's cache (35 MB at 422k vertices) that is what the maps cost: 1.7 s
+against 0.5 s here for the 422k-vertex studio rig's 57 shapes into maps already in memory (a segmentation from
+scratch also pays ~0.4 s for its fresh maps' pages either way; on ICT FaceKit, whose Laplacian fits in the
+cache, the same time either way). Here every row of the Laplacian is read once and its three coordinates summed
+together. The sums are scipy's ``csr_matvec``'s, term by term in the row's stored order from 0.0, and the
+norms ``_norm_rows``'s ``sqrt((x² + z²) + y²)``, so the maps are the same to the last bit
+(``tests/test_laplacian_maps.py`` compares them).
+
+**Antagonist sums** (ALGORITHMS.md §13, ``solvers.antagonists``): over each pair's shared support, its size, the
+dot product of the two displacement fields and each shape's squared norm. As matrix products over all shapes and
+vertices that is O(K²V) work (55 ms on ICT, a third of a cold take solve); a vertex is in the support of few
+shapes (5.6 of ICT's 57 on average), so summed vertex by vertex over the pairs that act there it is 40 times
+less arithmetic.
+
+Compiled ahead of time with the take solver's kernel (``solvers.take_kernel``); a process that uses them never
+imports numba (its import costs more than they save).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+try:
+    from numba import njit
+except ImportError:                         # the callers keep their numpy and scipy products
+    njit = None
+
+
+def shape_maps(indptr, indices, data, d, lap, disp):
+    """``lap[v] = ‖Σ_j L[v, j] d[j]‖`` over row v of the CSR Laplacian (``indptr``, ``indices``, ``data``) and
+    ``disp[v] = ‖d[v]‖`` for the (V, 3) deltas ``d``; ``lap`` and ``disp`` (V,) are written in place. Returns V."""
+    V = lap.shape[0]
+    for v in range(V):
+        x = 0.0
+        y = 0.0
+        z = 0.0
+        for jj in range(indptr[v], indptr[v + 1]):
+            a = data[jj]
+            j = indices[jj]
+            x += a * d[j, 0]
+            y += a * d[j, 1]
+            z += a * d[j, 2]
+        lap[v] = math.sqrt((x * x + z * z) + y * y)
+        x = d[v, 0]
+        y = d[v, 1]
+        z = d[v, 2]
+        disp[v] = math.sqrt((x * x + z * z) + y * y)
+    return V
+
+
+def antagonist_sums(D, n2, active, shared, dots, sq):
+    """For every pair i < j of the (K, V, 3) deltas ``D``, over the vertices where both act (``active`` (V, K),
+    row v: the shapes acting at v): ``shared[i, j]`` the count, ``dots[i, j]`` ``Σ d_i(v)·d_j(v)``, and
+    ``sq[i, j]``, ``sq[j, i]`` ``Σ ‖d_i(v)‖²`` and ``Σ ‖d_j(v)‖²`` (``n2`` (K, V) the squared norms). The (K, K)
+    outputs start at zero; only the entries above the diagonal (and ``sq``'s below it) are written. Returns the
+    number of (vertex, pair) terms."""
+    V, K = active.shape[0], active.shape[1]
+    acting = np.empty(K, np.int64)
+    terms = 0
+    for v in range(V):
+        a = 0
+        for k in range(K):
+            if active[v, k]:
+                acting[a] = k
+                a += 1
+        for p in range(a):
+            i = acting[p]
+            xi = D[i, v, 0]
+            yi = D[i, v, 1]
+            zi = D[i, v, 2]
+            for q in range(p + 1, a):
+                j = acting[q]
+                shared[i, j] += 1.0
+                dots[i, j] += xi * D[j, v, 0] + yi * D[j, v, 1] + zi * D[j, v, 2]
+                sq[i, j] += n2[i, v]
+                sq[j, i] += n2[j, v]
+                terms += 1
+    return terms
+
+
+if njit is not None:
+    shape_maps = njit(cache=True, nogil=True)(shape_maps)
+    antagonist_sums = njit(cache=True, nogil=True)(antagonist_sums)
