@@ -48,12 +48,17 @@ def antagonist_pairs(deltas: np.ndarray, *, cosine: float = -0.5, support: float
 
 def _compiled_sums(D: np.ndarray, n2: np.ndarray, act: np.ndarray):
     """(shared, dots, sq) of ``antagonist_pairs`` from the compiled kernel (their entries above the diagonal, and
-    ``sq``'s below it), or None where it is not built here (``solvers.take_kernel.built``)."""
+    ``sq``'s below it), or None where it is not built here (``solvers.take_kernel.built``) or where the shapes act
+    so broadly that the pairs acting at each vertex are more than a sixteenth of all pairs (a rig of global shapes:
+    the matrix products, vectorised by BLAS, are then the faster way)."""
     from . import take_kernel
     module = take_kernel.built()
-    if module is None or D.shape[0] == 0:
+    K, V = D.shape[0], D.shape[1]
+    if module is None or K == 0:
         return None
-    K = D.shape[0]
+    acting = act.sum(axis=0, dtype=np.float64)
+    if float((acting * (acting - 1)).sum()) / 2 > K * K * V / 32:
+        return None
     shared, dots, sq = np.zeros((K, K)), np.zeros((K, K)), np.zeros((K, K))
     module.antagonist_sums(np.ascontiguousarray(D), np.ascontiguousarray(n2), np.ascontiguousarray(act.T),
                            shared, dots, sq)
