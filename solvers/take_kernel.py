@@ -97,8 +97,8 @@ def start_background_build():
 
 def built():
     """The ahead-of-time module when it is built for this machine (its ``solve_pass``, ``parse_vertex_lines``,
-    ``shape_maps`` and ``antagonist_sums``), else None: never builds it, never imports numba (a reader's fast path; a loader
-    thread may call this while a solve thread calls ``kernel()``: one lock)."""
+    ``shape_maps`` and ``antagonist_sums``), else None: never builds it, never imports numba (a reader's fast
+    path; a loader thread may call this while a solve thread calls ``kernel()``: one lock)."""
     global _impl
     with _load_lock:
         if _impl is None or not hasattr(_impl, "parse_vertex_lines"):
