@@ -32,7 +32,7 @@ def add_parser(sub, rig_arg) -> None:
     sp.set_defaults(func=cmd_batch)
 
 
-_snapshots = None      # this process's widgets.scene.SurfaceSnapshots: a worker draws every take's preview with it
+_snapshots = None      # this process's widgets.snapshots.SurfaceSnapshots: a worker draws every take's preview with it
 
 
 def render_preview(points, face_counts, face_indices, path, *, focus=None) -> None:
@@ -43,7 +43,7 @@ def render_preview(points, face_counts, face_indices, path, *, focus=None) -> No
     (``app.batch_worker.prefer_egl``), a preview that fails through EGL is drawn again through the display's window,
     which that worker keeps using."""
     from model.batch import PREVIEW_SIZE
-    from widgets.scene import SurfaceSnapshots
+    from widgets.snapshots import SurfaceSnapshots
 
     def draw(keep: bool) -> None:
         global _snapshots

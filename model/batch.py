@@ -435,14 +435,38 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
                                 f"{timeout:g} s ({type(exc).__name__}).") from None
         return client, None
     n = workers or os.cpu_count() or 1
-    if dask.config.get("distributed.worker.multiprocessing-method") == "forkserver" and start_fork_server(preload):
+    forked = (dask.config.get("distributed.worker.multiprocessing-method") == "forkserver"
+              and start_fork_server(preload))
+    if forked:
         _skip_dask_forkserver_preload()
     # One core a worker: Dask's nanny already sets one BLAS/OpenMP thread; llvmpipe, which draws the previews
     # off screen, would otherwise rasterise on every core of the machine from each worker at once.
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                           dashboard_address=dashboard_address, silence_logs=logging.ERROR,
-                           env={"LP_NUM_THREADS": "1"})
+    options = dict(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                   dashboard_address=dashboard_address, silence_logs=logging.ERROR, env={"LP_NUM_THREADS": "1"})
+    cluster = _forked_scheduler_cluster(**options) if forked else LocalCluster(**options)
     return Client(cluster), cluster
+
+
+def _forked_scheduler_cluster(*, n_workers: int, threads_per_worker: int, processes: bool, host: str,
+                              dashboard_address: str | None, silence_logs: int, env: dict):
+    """The ``LocalCluster`` of these arguments with its scheduler in a process forked from the fork server
+    (``model.batch_scheduler``) instead of this one: Dask's ``SpecCluster`` with the scheduler and the workers
+    (nannies, their processes forked from the fork server) that ``LocalCluster`` would make."""
+    import logging
+
+    from distributed import Nanny, SpecCluster
+    from distributed.worker_memory import parse_memory_limit
+
+    from .batch_scheduler import ForkedScheduler
+    assert processes
+    scheduler = {"cls": ForkedScheduler, "options": dict(
+        log_level=silence_logs, host=host, port=0, protocol="tcp://", dashboard=dashboard_address is not None,
+        dashboard_address=dashboard_address)}
+    worker = {"cls": Nanny, "options": dict(
+        host=host, nthreads=threads_per_worker, protocol="tcp://", dashboard=False, silence_logs=silence_logs,
+        env=env, memory_limit=parse_memory_limit("auto", 1, n_workers, logger=logging.getLogger("distributed")))}
+    return SpecCluster(scheduler=scheduler, workers={i: worker for i in range(n_workers)}, worker=worker,
+                       silence_logs=silence_logs)
 
 
 def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: list[str] | None = None,

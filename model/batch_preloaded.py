@@ -13,5 +13,12 @@ writes to them).
 from __future__ import annotations
 
 import gc
+import signal
 
 gc.freeze()
+
+# Ctrl-C in the terminal reaches every process of the command's process group: the workers and the scheduler forked
+# from here would each print a KeyboardInterrupt traceback while the command closes the cluster anyway. A signal mask
+# is inherited by a fork, so SIGINT stays blocked in all of them (the command, which closes them, is not forked
+# from here and still gets it).
+signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})

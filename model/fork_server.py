@@ -14,7 +14,8 @@ import os
 # threadpoolctl), which would otherwise cost every worker's first take ~0.1 s.
 WORKER_MODULES = ("model.batch_env", "model.scipy_import", "distributed", "model.batch", "model.take_workspace",
                   "model.take_exports", "solvers.take_kernel", "model.take_c3d", "model.livelink", "model.weights_csv",
-                  "model.antagonists", "scipy.ndimage", "threadpoolctl")
+                  "model.antagonists", "scipy.ndimage", "threadpoolctl", "model.batch_scheduler",
+                  "distributed.dashboard.scheduler")
 _FORK_SERVER_HASH_SEED = "6640"         # a nanny's choice when none is set, so that every worker hashes alike
 
 

@@ -36,10 +36,11 @@ def weights_csv_bytes(path: str | Path, weights: np.ndarray, names: list[str], *
     if fr.shape != (F,) or times.shape != (F,):
         raise RigInputError(f"{path}: frames and times must have one entry per row of weights ({F}).")
     buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["frame", "time", *names])
-    for i in range(F):
-        w.writerow([int(fr[i]), repr(float(times[i])), *(repr(float(x)) for x in W[i])])
+    csv.writer(buf, lineterminator="\n").writerow(["frame", "time", *names])   # names quoted where a CSV needs it
+    # The numbers as the csv module writes them (shortest round-trip repr; a number never needs quoting), joined
+    # directly: a csv writer over numpy scalars cost ~25 ms for the shared 358 x 57 take, a third of that here.
+    buf.write("".join(f"{f},{t!r},{','.join(map(repr, row))}\n"
+                      for f, t, row in zip(fr.astype(np.int64).tolist(), times.tolist(), W.tolist())))
     return buf.getvalue().encode("utf-8")
 
 

@@ -186,7 +186,10 @@ def test_batch_on_a_local_cluster_matches_solve_resumes_and_survives_a_killed_wo
                    and "forkserver" not in " ".join(c.parent().cmdline())]
         if sys.platform.startswith("linux"):
             assert len(servers) == 1, "the local cluster's workers are forked from one fork server"
-        workers = (servers[0].children() if servers else
+        forked = servers[0].children() if servers else []
+        if sys.platform.startswith("linux"):   # beside the workers, the scheduler (model.batch_scheduler)
+            assert [c.name() for c in forked].count("dask-scheduler") == 1
+        workers = ([c for c in forked if c.name() != "dask-scheduler"] if servers else
                    [c for c in tree if "spawn_main" in " ".join(c.cmdline())])
         assert len(workers) == 2
         finished = sum((out / n / "done.json").exists() for n in stamps)
@@ -303,6 +306,35 @@ def test_batch_says_when_no_scheduler_answers(tmp_path, ict_dir, take_dir, takes
     assert "--scheduler" in proc.stderr and proc.stderr.count("\n") == 1
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
+def test_ctrl_c_stops_a_batch_without_tracebacks_and_leaves_no_process(tmp_path, ict_dir, take_dir, takes):
+    """Ctrl-C in a terminal sends SIGINT to the command's whole process group: the command closes the cluster and
+    says 'interrupted' (exit 130); the workers and the scheduler forked from the fork server print nothing (they each
+    printed a KeyboardInterrupt traceback), and no process of the batch is left running."""
+    import psutil
+    out = tmp_path / "out"
+    p = subprocess.Popen(command() + ["batch", str(ict_dir), *map(str, takes[:-1]), "--map",
+                                      str(take_dir / "marker_map.json"), "-o", str(out), "--workers", "2"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 300
+        while not list(out.glob("*/done.json")):
+            assert p.poll() is None and time.monotonic() < deadline, "no take finished"
+            time.sleep(0.1)
+        group = [c for c in psutil.Process(p.pid).children(recursive=True)]
+        assert len(group) >= 4          # the fork server, the scheduler, two workers (and Python's resource tracker)
+        os.killpg(p.pid, signal.SIGINT)
+        stdout, stderr = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.communicate()
+    assert p.returncode == 130 and "interrupted" in stderr, stderr
+    assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr
+    gone, alive = psutil.wait_procs(group, timeout=10)
+    assert not alive, [c.cmdline() for c in alive]
+
+
 def test_a_killed_writers_private_folder_is_removed_by_the_next_write(tmp_path, ict_rig, take_dir):
     """A worker killed while writing a take leaves its private folder in OUTDIR/<take>/; the next writer of that
     take removes it (its process is gone) and leaves a live writer's folder alone."""
@@ -356,13 +388,12 @@ import json, os, sys
 import numpy as np
 import app.batch_worker as worker          # what the local cluster's fork server imports before it forks the workers
 chosen = os.environ.get("VTK_DEFAULT_OPENGL_WINDOW")
-import pyvista as pv
-p = pv.Plotter(off_screen=True)
-window = type(p.ren_win).__name__
-p.close()
-import widgets.scene as scene
+import widgets.snapshots as snapshots
+s = snapshots.SurfaceSnapshots(np.full(1, 3), np.arange(3), size=(8, 8))
+window = type(s.window).__name__                 # the window class a preview draws through
+s.close()
 from app.cli_batch import render_preview
-real, tried = scene.SurfaceSnapshots.write, []
+real, tried = snapshots.SurfaceSnapshots.write, []
 
 def egl_fails_once(self, *args, **kw):      # a machine whose libEGL cannot draw
     tried.append(os.environ.get("VTK_DEFAULT_OPENGL_WINDOW"))
@@ -370,7 +401,7 @@ def egl_fails_once(self, *args, **kw):      # a machine whose libEGL cannot draw
         raise RuntimeError("no EGL device")
     return real(self, *args, **kw)
 
-scene.SurfaceSnapshots.write = egl_fails_once
+snapshots.SurfaceSnapshots.write = egl_fails_once
 pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
 faces = np.array([0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3])
 render_preview(pts, np.full(4, 3), faces, sys.argv[1], focus=pts)
@@ -461,18 +492,22 @@ from model.readers import load_rig
 from widgets.scene import render_png
 rig = load_rig(sys.argv[1])
 ev, focus = PoseEvaluator(rig), preview_focus(rig)
-for k, names in enumerate((["jawOpen"], ["mouthSmile_L", "mouthSmile_R"], ["jawOpen"])):
-    pts = ev.pose(np.array([float(n in names) for n in rig.shape_names]))
+poses = [ev.pose(np.array([float(n in names) for n in rig.shape_names]))
+         for names in (["jawOpen"], ["mouthSmile_L", "mouthSmile_R"], ["jawOpen"])]
+for k, pts in enumerate(poses):
     render_preview(pts, rig.face_counts, rig.face_indices, f"{sys.argv[2]}/kept{k}.png", focus=focus)
+assert "pyvista" not in sys.modules, "a preview imported pyvista"
+for k, pts in enumerate(poses):
     render_png(pts, rig.face_counts, rig.face_indices, f"{sys.argv[2]}/fresh{k}.png", focus=focus, size=PREVIEW_SIZE,
                camera="front")
 """
 
 
 def test_a_worker_draws_each_preview_as_a_fresh_render_would(tmp_path, ict_dir, ict_rig):
-    """A worker keeps one off-screen plotter for every preview (``render_preview``, ``widgets.scene.SurfaceSnapshots``):
-    each picture is pixel for pixel what a fresh ``render_png`` of that pose draws, never the previous take's.
-    In a process of its own, as a worker's."""
+    """A worker keeps one off-screen render window for every preview (``render_preview``,
+    ``widgets.snapshots.SurfaceSnapshots``, VTK without pyvista): each picture is pixel for pixel what a fresh
+    ``render_png`` (pyvista's plotter) of that pose draws, never the previous take's. In a process of its own, as a
+    worker's."""
     from model.batch import PREVIEW_SIZE
     from tests.image_compare import load_png
     assert {"jawOpen", "mouthSmile_L", "mouthSmile_R"} <= set(ict_rig.shape_names)

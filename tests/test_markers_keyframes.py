@@ -265,6 +265,29 @@ def test_weights_csv_round_trip_and_bad_files(tmp_path, ict_rig):
         read_weights_csv(tmp_path / "short.csv")
 
 
+def test_weights_csv_is_what_the_csv_module_writes(tmp_path):
+    """The weights CSV's rows are joined directly (fast) but must be exactly what Python's csv module writes for the
+    same values: names quoted where they need it, every number the shortest repr that reads back to it, the frames
+    and times given."""
+    import csv
+    import io
+    rng = np.random.default_rng(3)
+    W = rng.random((7, 4)) * [1.0, 1e-7, 1e5, -1.0]
+    W[0] = [0.0, -0.0, 1 / 3, 5e-324]
+    names = ["jaw", 'a,"quoted"', "b c", "é"]
+    frames, times = np.array([3, 4, 5, 7, 8, 10, 11]), np.array([0.1, 0.2, 1 / 3, 0.5, 2.0, 1e-9, 7.0])
+    path = tmp_path / "w.csv"
+    write_weights_csv(path, W, names, times=times, frames=frames)
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["frame", "time", *names])
+    for f, t, row in zip(frames, times, W):
+        w.writerow([int(f), repr(float(t)), *(repr(float(x)) for x in row)])
+    assert path.read_bytes() == buf.getvalue().encode("utf-8")
+    f2, t2, n2, W2 = read_weights_csv(path)
+    assert n2 == names and np.array_equal(f2, frames) and np.array_equal(t2, times) and np.array_equal(W2, W)
+
+
 def test_pc2_streaming_round_trip_header_and_atomicity(tmp_path, ict_rig):
     ev = PoseEvaluator(ict_rig)
     path = tmp_path / "take.pc2"

@@ -17,6 +17,11 @@ BACKGROUND_TOP = (0.33, 0.35, 0.40)
 BACKGROUND_BOTTOM = (0.12, 0.12, 0.14)
 BACKGROUND_FLAT = (0.20, 0.21, 0.24)
 CAMERAS = ("front", "left", "right", "three-quarter")
+# The surface's material (``add_surface``) and the default view's lights (``style_plotter``); widgets.snapshots draws
+# the same look without pyvista.
+EDGE_COLOR, EDGE_WIDTH = (0.15, 0.15, 0.18), 0.5
+DIFFUSE, AMBIENT, SPECULAR_POWER = 0.85, 0.12, 20
+KEY_LIGHT_POSITION, KEY_LIGHT_INTENSITY, FILL_LIGHT_INTENSITY = (-0.6, 0.8, 1.0), 0.75, 0.45
 
 
 def use_offscreen_backend_if_headless() -> None:
@@ -108,9 +113,9 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
     parts keep both sides, their backs drawn by a second actor named ``<name>_backs`` (see ``surface_face``)."""
     plotter.remove_actor(f"{name}_backs", render=False)
     # Smooth shading comes from the mesh's own "Normals" (rig_mesh/SurfaceArrays), not VTK's filter.
-    kwargs = dict(smooth_shading=False, interpolation="gouraud", name=name, show_edges=wireframe, edge_color=(0.15, 0.15, 0.18),
-                  line_width=0.5, specular=specular, specular_power=20, diffuse=0.85, ambient=0.12,
-                  reset_camera=False)
+    kwargs = dict(smooth_shading=False, interpolation="gouraud", name=name, show_edges=wireframe, edge_color=EDGE_COLOR,
+                  line_width=EDGE_WIDTH, specular=specular, specular_power=SPECULAR_POWER, diffuse=DIFFUSE,
+                  ambient=AMBIENT, reset_camera=False)
     if colormap is None and base_colors is not None and len(base_colors) == mesh.n_points:
         colormap = ColorMap(base_colors, rgb=True)
     if colormap is None:
@@ -183,30 +188,43 @@ def _shade(plotter, mesh, actor, wireframe: bool, name: str, cull_hidden: bool):
     geometry shader, which would have to pass the new input on); anything else keeps VTK's per-pixel
     lighting, both sides drawn.
     """
-    n_lights = _white_directional_lights(plotter.renderer)
-    if wireframe or not n_lights or mesh.GetPointData().GetNormals() is None:
+    if wireframe:
         return actor
-    _vertex_lighting(actor, n_lights)
-    if cull_hidden and getattr(mesh, "_faces", None) is not None:
-        from vtkmodules.vtkCommonDataModel import vtkPolyData
-        from vtkmodules.vtkRenderingCore import vtkActor, vtkPolyDataMapper
-        actor.GetProperty().BackfaceCullingOn()
-        cells, _faces = _back_sides(mesh)
-        if cells is not None:
-            backs = vtkPolyData()   # the mesh's points and point data (shared arrays), the reversed faces
-            backs.SetPoints(mesh.GetPoints())
-            backs.GetPointData().ShallowCopy(mesh.GetPointData())
-            backs.SetPolys(cells)
-            mapper = vtkPolyDataMapper()
-            mapper.ShallowCopy(actor.GetMapper())   # the same colouring
-            mapper.SetInputData(backs)
-            back = vtkActor()
-            back.SetMapper(mapper)
-            back.SetProperty(actor.GetProperty())
-            _vertex_lighting(back, n_lights, back=True)
-            plotter.add_actor(back, name=f"{name}_backs", reset_camera=False, render=False)
-            object.__setattr__(mesh, "_backs", backs)
+    back = shade_surface_actor(plotter.renderer, mesh, actor, cull_hidden)
+    if back is not None:
+        plotter.add_actor(back, name=f"{name}_backs", reset_camera=False, render=False)
     return actor
+
+
+def shade_surface_actor(renderer, mesh, actor, cull_hidden: bool):
+    """``_shade``'s work on a plain VTK ``renderer`` (``widgets.snapshots`` draws without pyvista): per-vertex
+    lighting for ``actor`` and, with ``cull_hidden``, its hidden back sides culled; returns the actor of the
+    reversed faces whose backs can show (for the caller to add after ``actor``), or None."""
+    n_lights = _white_directional_lights(renderer)
+    if not n_lights or mesh.GetPointData().GetNormals() is None:
+        return None
+    _vertex_lighting(actor, n_lights)
+    if not (cull_hidden and getattr(mesh, "_faces", None) is not None):
+        return None
+    from vtkmodules.vtkCommonDataModel import vtkPolyData
+    from vtkmodules.vtkRenderingCore import vtkActor, vtkPolyDataMapper
+    actor.GetProperty().BackfaceCullingOn()
+    cells, _faces = _back_sides(mesh)
+    if cells is None:
+        return None
+    backs = vtkPolyData()   # the mesh's points and point data (shared arrays), the reversed faces
+    backs.SetPoints(mesh.GetPoints())
+    backs.GetPointData().ShallowCopy(mesh.GetPointData())
+    backs.SetPolys(cells)
+    mapper = vtkPolyDataMapper()
+    mapper.ShallowCopy(actor.GetMapper())   # the same colouring
+    mapper.SetInputData(backs)
+    back = vtkActor()
+    back.SetMapper(mapper)
+    back.SetProperty(actor.GetProperty())
+    _vertex_lighting(back, n_lights, back=True)
+    object.__setattr__(mesh, "_backs", backs)
+    return back
 
 
 def _back_sides(mesh):
@@ -214,12 +232,13 @@ def _back_sides(mesh):
     the mesh; (None, None) when every face's back is hidden."""
     cached = getattr(mesh, "_back_cells", None)
     if cached is None:
-        from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray
+        from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray, vtk_to_numpy
         from vtkmodules.vtkCommonDataModel import vtkCellArray
 
         from solvers.mesh import hidden_back_faces
         counts, indices = mesh._faces
-        faces = np.flatnonzero(~hidden_back_faces(mesh.points, counts, indices))
+        points = vtk_to_numpy(mesh.GetPoints().GetData())     # a pyvista mesh's ``points``, or a plain vtkPolyData's
+        faces = np.flatnonzero(~hidden_back_faces(points, counts, indices))
         cached = (None, None)
         if faces.size:
             counts = np.asarray(counts, dtype=np.int64)
@@ -333,9 +352,9 @@ def style_plotter(plotter, playback: bool = False) -> None:
                                    intensity=1.05))
         return
     plotter.set_background(BACKGROUND_BOTTOM, top=BACKGROUND_TOP)
-    plotter.add_light(pv.Light(position=(-0.6, 0.8, 1.0), focal_point=(0, 0, 0), light_type="camera light",
-                               intensity=0.75))
-    plotter.add_light(pv.Light(light_type="headlight", intensity=0.45))
+    plotter.add_light(pv.Light(position=KEY_LIGHT_POSITION, focal_point=(0, 0, 0), light_type="camera light",
+                               intensity=KEY_LIGHT_INTENSITY))
+    plotter.add_light(pv.Light(light_type="headlight", intensity=FILL_LIGHT_INTENSITY))
 
 
 GL_BLEND = 0x0BE2   # the OpenGL enum (VTK's Python wrapping takes the number)
@@ -462,6 +481,18 @@ def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float =
     The camera looks at the centre of the points' box and stands as close as it can with every point inside
     the view (each at its own depth: the nose nearer than the ears), with a margin of 10%: a box's bounding
     sphere wasted a third of the view on a face, which is much deeper and narrower than it is tall."""
+    center, position, up = camera_placement(name, focus_points, size or plotter.window_size, view_angle, direction)
+    cam = plotter.camera
+    cam.view_angle = view_angle
+    cam.focal_point = center.tolist()
+    cam.position = position.tolist()
+    cam.up = up.tolist()
+    plotter.reset_camera_clipping_range()
+
+
+def camera_placement(name: str, focus_points: np.ndarray, size: tuple[int, int], view_angle: float = 30.0,
+                     direction: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(focal point, position, view up) of ``set_camera``'s camera for a picture of ``size`` (w, h) pixels."""
     pts = np.asarray(focus_points, dtype=np.float64).reshape(-1, 3)
     lo, hi = pts.min(axis=0), pts.max(axis=0)
     center = (lo + hi) / 2
@@ -475,17 +506,12 @@ def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float =
     true_up = np.cross(d, right)
     rel = pts - center
     x, y, z = np.abs(rel @ right) * 1.1, np.abs(rel @ true_up) * 1.1, rel @ d   # z: towards the eye
-    w, h = size or plotter.window_size
+    w, h = size
     t = np.tan(np.radians(view_angle / 2))
     aspect = w / h if w > 0 and h > 0 else 1.0
     dist = float(np.max(z + np.maximum(y / t, x / (t * aspect)))) if len(pts) else 1.0
     dist = max(dist, 1e-6 + float(z.max(initial=0.0)), 1e-6)
-    cam = plotter.camera
-    cam.view_angle = view_angle
-    cam.focal_point = center.tolist()
-    cam.position = (center + d * dist).tolist()
-    cam.up = true_up.tolist()
-    plotter.reset_camera_clipping_range()
+    return center, center + d * dist, true_up
 
 
 def focus_vertices(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
@@ -507,7 +533,7 @@ def focus_vertices(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
 
 def offscreen_plotter(size):
     """A pyvista plotter drawing off screen at ``size`` (w, h) pixels, in the application's look (``style_plotter``):
-    what ``render_png`` and ``SurfaceSnapshots`` draw into."""
+    what ``render_png`` draws into (``widgets.snapshots.SurfaceSnapshots`` sets up the same without pyvista)."""
     use_offscreen_backend_if_headless()
     import pyvista as pv
     plotter = pv.Plotter(off_screen=True, window_size=list(size))
@@ -541,47 +567,6 @@ def render_png(points, face_counts, face_indices, out_path, *, focus=None, color
         write_image_atomically(plotter, out_path)
     finally:
         plotter.close()
-
-
-class SurfaceSnapshots:
-    """``render_png``'s picture (no colour map, no overlays) of one surface in pose after pose, from one off-screen
-    plotter kept between pictures: only the points and normals change (``SurfaceArrays``), then the camera frames
-    ``focus`` and the picture is written. A batch worker draws every take's preview through one of these.
-
-    Why not ``render_png`` each time: a new plotter is a new OpenGL context, whose shaders llvmpipe compiles again
-    (LLVM) in its first render, and the faces' back sides are found again (``solvers.mesh.hidden_back_faces``):
-    on ICT at 480x360 a picture took ~0.18 s that way and ~0.06 s here (measured on this machine; see the README's
-    batch figures). The back sides are found once, on the first pose, as the viewport finds them on the rig it
-    loads. ``matches`` tells whether a surface's faces, picture size and camera are this one's."""
-
-    def __init__(self, face_counts: np.ndarray, face_indices: np.ndarray, *, size=(1024, 768), camera: str = "front"):
-        self.face_counts, self.face_indices = np.array(face_counts), np.array(face_indices)
-        self.size, self.camera = tuple(int(v) for v in size), camera
-        self.plotter = offscreen_plotter(self.size)
-        self._mesh = self._arrays = None
-
-    def matches(self, face_counts, face_indices, size, camera: str) -> bool:
-        return (tuple(int(v) for v in size) == self.size and camera == self.camera
-                and np.array_equal(face_counts, self.face_counts) and np.array_equal(face_indices, self.face_indices))
-
-    def write(self, points: np.ndarray, out_path, *, focus: np.ndarray | None = None,
-              compress_level: int | None = None) -> None:
-        """The surface at ``points`` to the PNG ``out_path``, atomically (``write_image_atomically``)."""
-        points = np.asarray(points, dtype=np.float32)
-        first = self._mesh is None
-        if first:
-            self._mesh = rig_mesh(points, self.face_counts, self.face_indices)
-            add_surface(self.plotter, self._mesh, cull_hidden=True)
-            self._arrays = SurfaceArrays(self._mesh)
-        else:
-            self._arrays.update(points)
-        set_camera(self.plotter, self.camera, points if focus is None else focus)
-        if not first:
-            self.plotter.render()       # a plotter's screenshot renders by itself only the first time
-        write_image_atomically(self.plotter, out_path, compress_level=compress_level)
-
-    def close(self) -> None:
-        self.plotter.close()
 
 
 def write_image_atomically(plotter, out_path, size: tuple[int, int] | None = None, *,

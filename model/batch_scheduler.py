@@ -1,0 +1,115 @@
+"""A local cluster's Dask scheduler in a process of its own, forked from the batch's fork server.
+
+Why: a scheduler with its dashboard imports bokeh and Dask's dashboard (~0.4 s of CPU, measured on the 2-core
+development machine); inside the ``batch`` command that import was the longest step of the cluster's start, on the
+command's own core, after it had loaded the rig. The fork server (``model.fork_server``) imports it on the other core
+while the command starts (it and ``distributed.dashboard.scheduler`` are among its ``WORKER_MODULES``), so the scheduler forked from it is up in a
+few milliseconds. Used by ``model.batch.start_client`` where the fork server runs; elsewhere (no fork server) the
+scheduler runs in the command's process as Dask's ``LocalCluster`` runs it.
+
+``ForkedScheduler`` is a ``distributed.deploy.spec.ProcessInterface`` (Dask's interface for a cluster's scheduler or
+worker started some other way: ``SSHCluster`` uses it), so ``distributed.SpecCluster`` starts, watches and closes it
+as its own. The scheduler process never outlives the command: it closes when the command's end of its pipe closes,
+however the command ended, and leaves Ctrl-C to the command.
+"""
+from __future__ import annotations
+
+import asyncio
+import logging
+
+from distributed.deploy.spec import ProcessInterface
+
+
+PROCESS_NAME = "dask-scheduler"     # the scheduler process's name in ``ps``/``top`` (Linux), beside the workers'
+
+
+def _name_process(name: str) -> None:
+    """Give this process ``name`` as the system shows it (Linux's ``prctl(PR_SET_NAME)``; elsewhere nothing): the
+    scheduler and the workers are all forked from the same fork server and would look alike."""
+    import ctypes
+    import sys
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(15, name.encode()[:15], 0, 0, 0)     # 15: PR_SET_NAME
+        except (OSError, AttributeError):
+            pass
+
+
+def _serve(conn, options: dict, config: dict, log_level: int) -> None:
+    """The scheduler process: a Dask ``Scheduler`` with ``options``, under ``config`` (the command's Dask
+    configuration); sends its (address, None) on ``conn`` once it listens, or (None, error text), then runs until
+    it is told to close or ``conn``'s other end closes (the command ended)."""
+    import signal
+
+    import dask
+    from distributed import Scheduler
+    from distributed.utils import silence_logging_cmgr
+    signal.signal(signal.SIGINT, signal.SIG_IGN)        # Ctrl-C is the command's: it closes the cluster
+    _name_process(PROCESS_NAME)
+    dask.config.update(dask.config.config, config, priority="new")
+
+    async def main() -> None:
+        loop = asyncio.get_running_loop()
+        try:
+            scheduler = await Scheduler(**options)
+        except Exception as exc:                        # e.g. the dashboard's port is taken and cannot move
+            conn.send((None, f"{type(exc).__name__}: {exc}"))
+            return
+        conn.send((scheduler.address, None))
+        closing = []
+
+        def command_gone() -> None:                     # EOF on the pipe: the command has ended
+            loop.remove_reader(conn.fileno())
+            closing.append(asyncio.ensure_future(scheduler.close()))
+
+        loop.add_reader(conn.fileno(), command_gone)
+        await scheduler.finished()
+
+    with silence_logging_cmgr(level=log_level), silence_logging_cmgr(level=log_level, root="bokeh"):
+        asyncio.run(main())
+
+
+class ForkedScheduler(ProcessInterface):
+    """``SpecCluster``'s scheduler, run in a process forked from this process's fork server (``_serve``).
+    ``options``: ``distributed.Scheduler``'s keyword arguments (plain values: they are pickled to the process);
+    ``log_level``: the level below which its log lines are dropped, as ``LocalCluster(silence_logs=...)``."""
+
+    def __init__(self, log_level: int = logging.ERROR, **options) -> None:
+        self.options, self.log_level = options, log_level
+        self.process = self._conn = None
+        super().__init__()
+
+    async def start(self) -> None:
+        import multiprocessing
+
+        import dask
+        ctx = multiprocessing.get_context("forkserver")
+        ours, theirs = ctx.Pipe(duplex=True)
+        self.process = ctx.Process(target=_serve, args=(theirs, self.options, dask.config.config, self.log_level),
+                                   name="dask-scheduler", daemon=True)
+        self.process.start()
+        theirs.close()
+        self._conn = ours
+        loop = asyncio.get_running_loop()
+        try:
+            address, error = await loop.run_in_executor(None, ours.recv)
+        except EOFError:
+            address, error = None, f"the process ended (exit code {self.process.exitcode})"
+        if address is None:
+            await self.close()
+            raise RuntimeError(f"The local cluster's scheduler did not start: {error}.")
+        self.address = address
+        await super().start()
+
+    async def close(self) -> None:
+        """After ``SpecCluster`` has told the scheduler to close: wait for its process to end (5 s), else end it."""
+        if self.process is not None:
+            loop = asyncio.get_running_loop()
+            await loop.run_in_executor(None, self.process.join, 5.0)
+            if self.process.exitcode is None:
+                self.process.terminate()
+                await loop.run_in_executor(None, self.process.join, 5.0)
+        if self._conn is not None:
+            self._conn.close()
+            self._conn = None
+        await super().close()
