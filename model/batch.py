@@ -180,6 +180,7 @@ class BatchJob:
         receives the job: Dask's broadcast hands the job from one worker on to the next, which then gets it
         sooner."""
         state = dict(self.__dict__)
+        state.pop("prepared", None)                     # this process's own
         evaluator = state.pop("evaluator", None)        # None: not rebuilt yet here (it keeps its dtype)
         if evaluator is not None:
             state["_evaluator_dtype"] = evaluator.dtype
@@ -189,6 +190,9 @@ class BatchJob:
         self.__dict__.update(state)                      # no evaluator yet: ``__getattr__`` builds it
 
     def __getattr__(self, name: str):
+        if name == "prepared":      # the take solver's preparation for this rig, kept across this process's takes
+            self.prepared = {}
+            return self.prepared
         if name == "evaluator" and "_evaluator_dtype" in self.__dict__:
             self.evaluator = PoseEvaluator(self.rig, dtype=self.__dict__.pop("_evaluator_dtype"))
             return self.evaluator
@@ -284,7 +288,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
         solved = ws.prepare_solve(take_path, job.marker_map, job.settings)   # False: a weight take, played as it is
         identity = _take_identity(take_path)
         sol = ws.solve(job.settings, segmentation=job.segmentation, evaluator=job.evaluator,
-                       antagonists=job.antagonists) if solved else None
+                       antagonists=job.antagonists, prepared=job.prepared) if solved else None
     except RigInputError as exc:
         return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
     out_dir.mkdir(parents=True, exist_ok=True)

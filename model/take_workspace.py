@@ -122,7 +122,7 @@ def regional_solve_options(segmentation, level: int) -> dict:
 
 def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: PoseEvaluator | None = None,
                progress: Progress = None, cancel=None, calibration_frames: int = DEFAULTS["calibration_frames"],
-               neutral=None, stable=None, **options) -> TakeSolution:
+               neutral=None, stable=None, prepared: dict | None = None, **options) -> TakeSolution:
     """Solve a marker take onto a rig with a marker map (``solvers.take_solve.TakeSolver``).
 
     Uses the take's and rig's units; markers of the map missing from the take are dropped, and so are markers
@@ -134,7 +134,8 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
     not given) plus the residual. ``options`` go to ``TakeSolver``, their lengths physical (cm, and cm² for the
     λ's: ``solvers.take_solve.DEFAULTS``) whatever the rig's units, converted here (``model.units``) so that the
     same face solves alike in m, cm or mm. The solution's marker columns follow
-    ``marker_map.match(take)`` without the markers left out."""
+    ``marker_map.match(take)`` without the markers left out. ``prepared``: the solver's per-rig preparation kept
+    across takes of this rig (``TakeSolver``'s ``prepared``; a batch worker keeps one)."""
     labels, cols = marker_map.match(take)
     missing = np.isnan(take.positions).any(axis=2).mean(axis=0)               # (take markers,) fraction
     keep = missing[cols] <= MOSTLY_MISSING
@@ -171,7 +172,7 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
     live = live_mask(rig)     # muted (and unsoloed) shapes do not explain markers: their weights go to 0
     deltas = rig.deltas if live.all() else rig.deltas * live[:, None, None]
     solver = TakeSolver(rig.neutral, deltas, binding, correctives=solver_correctives(rig), surface=surface,
-                        surface_many=many, **options)
+                        surface_many=many, prepared=prepared, **options)
     try:
         sol = solver.solve(take.positions[:, cols], unit_factor=unit_scale(take.units, rig.units),
                            calibration_frames=calibration_frames, calibrate=calibration_frames > 0,
@@ -412,26 +413,28 @@ class TakeWorkspace:
         self.check_map(self.marker_map)
 
     def solve(self, settings: dict, *, segmentation=None, evaluator: PoseEvaluator | None = None,
-              progress: Progress = None, cancel=None, antagonists: list | None = None) -> TakeSolution:
+              progress: Progress = None, cancel=None, antagonists: list | None = None,
+              prepared: dict | None = None) -> TakeSolution:
         """Solve the take with ``settings`` (see the module docstring); ``segmentation`` for a per-region solve;
         ``antagonists`` the pairs ``model.antagonists.solve_pairs`` already found for these settings and rig (a
-        batch finds them once), not a setting: the report still says whose pairs they are. Keeps and returns the
-        solution (``solvers.take_solve.SolveCancelled`` propagates)."""
+        batch finds them once), not a setting: the report still says whose pairs they are; ``prepared`` the
+        solver's per-rig preparation kept across takes (``solve_take``). Keeps and returns the solution
+        (``solvers.take_solve.SolveCancelled`` propagates)."""
         self.check_ready()
         solution = self.solve_detached(settings, segmentation=segmentation, evaluator=evaluator,
-                                       progress=progress, cancel=cancel, antagonists=antagonists)
+                                       progress=progress, cancel=cancel, antagonists=antagonists, prepared=prepared)
         self.accept(solution, settings)
         return solution
 
     def solve_detached(self, settings: dict, *, segmentation=None, evaluator=None, progress=None,
-                       cancel=None, antagonists: list | None = None) -> TakeSolution:
+                       cancel=None, antagonists: list | None = None, prepared: dict | None = None) -> TakeSolution:
         """``solve`` without keeping the result (for a worker thread; ``accept`` keeps it)."""
         options, calibration = solver_options(settings, self.take, segmentation)
         if antagonists is not None and options.get("antagonists") is None:
             options["antagonists"] = antagonists
         try:
             return solve_take(self.rig, self.take, self.marker_map, evaluator=evaluator, progress=progress,
-                              cancel=cancel, calibration_frames=calibration, **options)
+                              cancel=cancel, calibration_frames=calibration, prepared=prepared, **options)
         except ValueError as exc:
             raise RigInputError(f"The take could not be solved: {exc}") from None
 

@@ -368,6 +368,11 @@ class TakeSolver:
     dense frames and projections use it. Without it the solver fits the markers only. surface_many: the same
     pose for many global weight vectors at once, (n, K) -> (n, V, 3) float32 (``PoseEvaluator.evaluate_many``):
     ``TakeSolution.dense_blocks`` then computes all frames as matrix products.
+
+    prepared: a dict the caller keeps for one rig (its neutral unchanged) across takes, e.g. a batch worker's: the
+    residual's preparation (its vertices, the phantom points, the RBF's kernel matrices and factorisations, ~20 ms
+    on ICT) is reused from it for the same marker points and residual settings instead of being computed again.
+    The same numbers either way (``tests/test_batch.py`` compares a worker's weights with ``solve``'s, byte for byte).
     """
 
     def __init__(self, neutral: np.ndarray, deltas: np.ndarray, binding, *, mode: str = "box",
@@ -388,7 +393,8 @@ class TakeSolver:
                  retarget: str = DEFAULTS["retarget"], warp_scale: float = DEFAULTS["warp_scale"],
                  warp_lambda: float = DEFAULTS["warp_lambda"], antagonists=None,
                  lam_antagonist: float = DEFAULTS["lam_antagonist"], ridge: float = DEFAULTS["ridge"],
-                 surface_many: Callable[[np.ndarray], np.ndarray] | None = None) -> None:
+                 surface_many: Callable[[np.ndarray], np.ndarray] | None = None,
+                 prepared: dict | None = None) -> None:
         if residual not in KERNELS:
             raise ValueError(f"Unknown residual '{residual}': use one of {', '.join(KERNELS)}.")
         if retarget not in RETARGET:
@@ -449,15 +455,24 @@ class TakeSolver:
         self.rbf: RBFResidual | None = None
         self.residual_vertices = np.zeros(0, dtype=np.int64)
         if residual != "none":
-            from scipy.spatial import cKDTree
-            if residual_vertices is None:
-                d, _ = cKDTree(self.rest).query(self.neutral)
-                residual_vertices = np.flatnonzero(d < phantom_distance)
-            self.residual_vertices = np.asarray(residual_vertices, dtype=np.int64)
-            ph = phantom_points(self.neutral, self.rest, phantom_distance, n_phantoms) if n_phantoms else []
-            self.rbf = RBFResidual(self.rest, self.neutral[ph] if len(ph) else None,
-                                   self.neutral[self.residual_vertices], kernel=residual, scale=rbf_scale,
-                                   lam=rbf_lambda)
+            key = ("residual", self.rest.tobytes(), residual, float(rbf_scale), float(rbf_lambda), int(n_phantoms),
+                   float(phantom_distance),
+                   None if residual_vertices is None else np.asarray(residual_vertices, dtype=np.int64).tobytes())
+            hit = None if prepared is None else prepared.get(key)
+            if hit is not None:
+                self.residual_vertices, self.rbf = hit
+            else:
+                from scipy.spatial import cKDTree
+                if residual_vertices is None:
+                    d, _ = cKDTree(self.rest).query(self.neutral)
+                    residual_vertices = np.flatnonzero(d < phantom_distance)
+                self.residual_vertices = np.asarray(residual_vertices, dtype=np.int64)
+                ph = phantom_points(self.neutral, self.rest, phantom_distance, n_phantoms) if n_phantoms else []
+                self.rbf = RBFResidual(self.rest, self.neutral[ph] if len(ph) else None,
+                                       self.neutral[self.residual_vertices], kernel=residual, scale=rbf_scale,
+                                       lam=rbf_lambda)
+                if prepared is not None:
+                    prepared[key] = (self.residual_vertices, self.rbf)
 
     # --- the actor's model at the markers (ALGORITHMS.md §12) -------------------------------------
     def _set_actor(self, anchor: np.ndarray, jac: np.ndarray | None) -> None:

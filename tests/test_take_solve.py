@@ -44,6 +44,31 @@ def test_dense_accuracy_below_target(solution, take_setup):
     assert err <= 0.205, f"dense RMS {err:.4f} mm"
 
 
+def test_a_kept_preparation_solves_later_takes_exactly_as_a_fresh_solver(ict_rig, take_setup, solution):
+    """A batch worker keeps the take solver's per-rig preparation (``prepared``: the residual's vertices, phantoms
+    and RBF factorisations) across its takes: a take solved with it is the fresh solve bit for bit, the preparation
+    is reused (not made again) for the same markers and settings, and other residual settings get their own."""
+    take, mm, _, _, _ = take_setup
+    prepared: dict = {}
+    first = solve_take(ict_rig, take, mm, prepared=prepared)
+    assert len(prepared) == 1
+    (rbf_vertices, rbf), = prepared.values()
+    turned = take.positions.copy()
+    turned[..., 0] += 3.0                                  # another take of the same markers: moved
+    from model.takes import MarkerTake
+    other = MarkerTake(turned, take.labels, take.rate, take.units)
+    second = solve_take(ict_rig, other, mm, prepared=prepared)
+    assert len(prepared) == 1 and second.solver.rbf is rbf        # reused
+    fresh = solve_take(ict_rig, other, mm)
+    assert fresh.solver.rbf is not rbf
+    for kept, new in ((first, solution), (second, fresh)):
+        assert np.array_equal(kept.weights, new.weights)
+        assert np.array_equal(kept.coefficients, new.coefficients)
+        assert np.array_equal(kept.dense(200), new.dense(200))
+    solve_take(ict_rig, take, mm, prepared=prepared, rbf_scale=3.0)
+    assert len(prepared) == 2                               # another residual: its own preparation
+
+
 def test_no_antagonist_pair_is_both_strongly_on(ict_rig, solution):
     """ALGORITHMS.md §13: no frame has both shapes of a rig's antagonist pair above 0.2 (jawLeft + jawRight ...);
     the pairs real faces use together (mouthClose with jawOpen) are not on the list."""
