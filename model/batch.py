@@ -11,10 +11,11 @@ Qt-free; the ``batch`` command (app.cli_batch) and the GUI's File ▸ Batch Solv
   that does not fit) returns a failed row with its one-sentence error.
 - ``completed_row`` is the resumability check: a take whose done-marker matches the take file and the settings
   is skipped unless forced.
-- ``run_batch`` runs the jobs on a ``LocalCluster`` (processes forked from one fork server that imported what a take
-  needs, started early by the command: ``start_fork_server``; one thread each, Dask's housekeeping made rarer:
-  ``local_cluster_config``) or a scheduler address, with retries, and reports progress; ``write_summary`` writes
-  ``batch.json`` and ``batch.csv``.
+- ``run_batch`` runs the jobs on a local cluster (worker processes forked from one fork server that imported what a
+  take needs, started early by the command: ``start_fork_server``; the scheduler forked from it too,
+  ``model.batch_scheduler``; one thread each, Dask's housekeeping made rarer: ``local_cluster_config``) or a
+  scheduler address, with retries, and reports progress; ``write_summary`` writes ``batch.json`` and ``batch.csv``.
+  Each worker keeps the take solver's per-rig preparation across its takes (``BatchJob.prepared``).
 """
 from __future__ import annotations
 
@@ -445,24 +446,23 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
         _skip_dask_forkserver_preload()
     # One core a worker: Dask's nanny already sets one BLAS/OpenMP thread; llvmpipe, which draws the previews
     # off screen, would otherwise rasterise on every core of the machine from each worker at once.
-    options = dict(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                   dashboard_address=dashboard_address, silence_logs=logging.ERROR, env={"LP_NUM_THREADS": "1"})
-    cluster = _forked_scheduler_cluster(**options) if forked else LocalCluster(**options)
+    options = dict(n_workers=n, threads_per_worker=1, host="127.0.0.1", dashboard_address=dashboard_address,
+                   silence_logs=logging.ERROR, env={"LP_NUM_THREADS": "1"})
+    cluster = _forked_scheduler_cluster(**options) if forked else LocalCluster(processes=True, **options)
     return Client(cluster), cluster
 
 
-def _forked_scheduler_cluster(*, n_workers: int, threads_per_worker: int, processes: bool, host: str,
-                              dashboard_address: str | None, silence_logs: int, env: dict):
-    """The ``LocalCluster`` of these arguments with its scheduler in a process forked from the fork server
-    (``model.batch_scheduler``) instead of this one: Dask's ``SpecCluster`` with the scheduler and the workers
-    (nannies, their processes forked from the fork server) that ``LocalCluster`` would make."""
+def _forked_scheduler_cluster(*, n_workers: int, threads_per_worker: int, host: str, dashboard_address: str | None,
+                              silence_logs: int, env: dict):
+    """The ``LocalCluster`` of these arguments (worker processes) with its scheduler in a process forked from the
+    fork server (``model.batch_scheduler``) instead of this one: Dask's ``SpecCluster`` with the scheduler and the
+    workers (nannies, their processes forked from the fork server) that ``LocalCluster`` would make."""
     import logging
 
     from distributed import Nanny, SpecCluster
     from distributed.worker_memory import parse_memory_limit
 
     from .batch_scheduler import ForkedScheduler
-    assert processes
     scheduler = {"cls": ForkedScheduler, "options": dict(
         log_level=silence_logs, host=host, port=0, protocol="tcp://", dashboard=dashboard_address is not None,
         dashboard_address=dashboard_address)}

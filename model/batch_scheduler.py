@@ -2,10 +2,10 @@
 
 Why: a scheduler with its dashboard imports bokeh and Dask's dashboard (~0.4 s of CPU, measured on the 2-core
 development machine); inside the ``batch`` command that import was the longest step of the cluster's start, on the
-command's own core, after it had loaded the rig. The fork server (``model.fork_server``) imports it on the other core
-while the command starts (it and ``distributed.dashboard.scheduler`` are among its ``WORKER_MODULES``), so the scheduler forked from it is up in a
-few milliseconds. Used by ``model.batch.start_client`` where the fork server runs; elsewhere (no fork server) the
-scheduler runs in the command's process as Dask's ``LocalCluster`` runs it.
+command's own core, after it had loaded the rig. The fork server (``model.fork_server``) imports it on the other
+core while the command starts (it and ``distributed.dashboard.scheduler`` are among its ``WORKER_MODULES``), so the
+scheduler forked from it is up in a few milliseconds. Used by ``model.batch.start_client`` where the fork server
+runs; elsewhere (no fork server) the scheduler runs in the command's process as Dask's ``LocalCluster`` runs it.
 
 ``ForkedScheduler`` is a ``distributed.deploy.spec.ProcessInterface`` (Dask's interface for a cluster's scheduler or
 worker started some other way: ``SSHCluster`` uses it), so ``distributed.SpecCluster`` starts, watches and closes it

@@ -17,9 +17,10 @@ import numpy as np
 
 from solvers.normals import VertexNormals
 
-from .scene import (AMBIENT, BACKGROUND_BOTTOM, BACKGROUND_TOP, DIFFUSE, EDGE_COLOR, EDGE_WIDTH, FILL_LIGHT_INTENSITY,
-                    KEY_LIGHT_INTENSITY, KEY_LIGHT_POSITION, SKIN, SPECULAR_POWER, SurfaceArrays, blend_only_when_needed,
-                    camera_placement, shade_surface_actor, use_offscreen_backend_if_headless, vtk_faces)
+from .scene import (AMBIENT, BACKGROUND_BOTTOM, BACKGROUND_TOP, DIFFUSE, EDGE_COLOR, EDGE_WIDTH,
+                    FILL_LIGHT_INTENSITY, KEY_LIGHT_INTENSITY, KEY_LIGHT_POSITION, SKIN, SPECULAR_POWER, SurfaceArrays,
+                    blend_only_when_needed, camera_placement, shade_surface_actor, use_offscreen_backend_if_headless,
+                    vtk_faces)
 
 MULTI_SAMPLES = 8      # pyvista's default anti-aliasing for an off-screen plotter (its theme's ``multi_samples``)
 
