@@ -436,6 +436,14 @@ def test_local_workers_draw_previews_through_egl_beside_a_display_and_fall_back_
     assert proc.returncode != 0 and "no EGL device" in proc.stderr    # not EGL's failure to recover from: raised
 
 
+def _numpy_asks_for_huge_pages() -> bool:
+    """Whether numpy madvises transparent huge pages for its large arrays in this process (its setting, unchanged)."""
+    toggle = np._core.multiarray._set_madvise_hugepage
+    before = toggle(False)
+    toggle(before)
+    return bool(before)
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
 def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collection():
     """The local cluster's workers come from the fork server with everything it imported frozen for the garbage
@@ -452,10 +460,14 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
         try:
             frozen = client.run(gc.get_freeze_count)
             walked = client.run(lambda: len(gc.get_objects()))
+            huge_pages = client.run(_numpy_asks_for_huge_pages)
         finally:
             client.close()
             cluster.close()
     assert len(frozen) == 2
+    # and numpy in the workers leaves transparent huge pages alone (model.batch_env: their compaction on first touch
+    # doubled a take's kernel time with two workers side by side)
+    assert list(huge_pages.values()) == [False, False]
     for worker, n in frozen.items():
         assert n > 50_000, f"{worker}: only {n} objects frozen"    # Dask, numpy, scipy, the solver (no VTK here)
         assert walked[worker] < n / 2, f"{worker}: a full collection still walks {walked[worker]} objects"
