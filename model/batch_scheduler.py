@@ -83,6 +83,7 @@ class ForkedScheduler(ProcessInterface):
         import multiprocessing
 
         import dask
+        from dask.utils import parse_timedelta
         ctx = multiprocessing.get_context("forkserver")
         ours, theirs = ctx.Pipe(duplex=True)
         self.process = ctx.Process(target=_serve, args=(theirs, self.options, dask.config.config, self.log_level),
@@ -91,13 +92,18 @@ class ForkedScheduler(ProcessInterface):
         theirs.close()
         self._conn = ours
         loop = asyncio.get_running_loop()
+        timeout = parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"), default="s")
         try:
-            address, error = await loop.run_in_executor(None, ours.recv)
+            if await loop.run_in_executor(None, ours.poll, timeout):
+                address, error = ours.recv()
+            else:
+                address, error = None, f"it did not answer within {timeout:g} s"
         except EOFError:
             address, error = None, f"the process ended (exit code {self.process.exitcode})"
         if address is None:
             await self.close()
-            raise RuntimeError(f"The local cluster's scheduler did not start: {error}.")
+            host = self.options.get("host")
+            raise RuntimeError(f"The local cluster's scheduler did not start{f' on {host}' if host else ''}: {error}.")
         self.address = address
         await super().start()
 

@@ -436,6 +436,37 @@ def test_local_workers_draw_previews_through_egl_beside_a_display_and_fall_back_
     assert proc.returncode != 0 and "no EGL device" in proc.stderr    # not EGL's failure to recover from: raised
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
+def test_a_scheduler_that_cannot_start_is_one_sentence_and_no_process_is_left():
+    """The local cluster's scheduler runs in a process forked from the fork server (``model.batch_scheduler``): when
+    it cannot start (here: an address no machine has), its error comes back as one sentence and its process is
+    gone; a good one answers with its address and ends when it is closed."""
+    import asyncio
+
+    from model.batch_scheduler import ForkedScheduler
+    from model.fork_server import start_fork_server
+    assert start_fork_server()
+
+    async def run():
+        bad = ForkedScheduler(host="256.0.0.1", port=0, dashboard=False)
+        with pytest.raises(RuntimeError, match=r"^The local cluster's scheduler did not start on 256\.0\.0\.1: \w+"):
+            await bad.start()
+        assert bad.process.exitcode is not None
+        good = ForkedScheduler(host="127.0.0.1", port=0, dashboard=False)
+        await good.start()
+        assert good.address.startswith("tcp://127.0.0.1:") and good.process.is_alive()
+        from contextlib import suppress
+
+        from distributed.core import rpc
+        async with rpc(good.address) as comm:   # as SpecCluster closes it: the comm closes before any answer
+            with suppress(OSError):
+                await comm.terminate()
+        await good.close()
+        assert good.process.exitcode == 0
+
+    asyncio.run(run())
+
+
 def _numpy_asks_for_huge_pages() -> bool:
     """Whether numpy madvises transparent huge pages for its large arrays in this process (its setting, unchanged)."""
     toggle = np._core.multiarray._set_madvise_hugepage
