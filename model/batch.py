@@ -473,6 +473,19 @@ def _forked_scheduler_cluster(*, n_workers: int, threads_per_worker: int, host: 
                        silence_logs=silence_logs)
 
 
+def longest_first(indices: list[int], takes: list[Path]) -> list[int]:
+    """``indices`` of ``takes`` in the order to submit them: the largest files (the longest takes) first, ties in the
+    given order. The workers take the submitted takes in order, so the last ones to start are the shortest, and a
+    worker that runs out of takes waits less for the last one to end (longest processing time first, Graham 1969).
+    A file that cannot be read sorts last (its take fails fast)."""
+    def size(i: int) -> int:
+        try:
+            return takes[i].stat().st_size
+        except OSError:
+            return -1
+    return sorted(indices, key=lambda i: -size(i))
+
+
 def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: list[str] | None = None,
               force: bool = False, workers: int | None = None, scheduler: str | None = None, retries: int = 2,
               progress: Callable[[BatchProgress], None] | None = None, cancel: Callable[[], bool] | None = None,
@@ -487,7 +500,7 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
     for i, (path, name) in enumerate(zip(takes, names)):
         if not force:
             rows[i] = completed_row(job, path, out_dir / name, name)
-    pending = [i for i, r in enumerate(rows) if r is None]
+    pending = longest_first([i for i, r in enumerate(rows) if r is None], takes)
     t0 = time.perf_counter()
     frames = 0
     done = len(takes) - len(pending)

@@ -504,6 +504,35 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
         assert walked[worker] < n / 2, f"{worker}: a full collection still walks {walked[worker]} objects"
 
 
+def test_the_longest_takes_are_solved_first_and_the_summary_keeps_the_given_order(tmp_path, ict_rig, take_dir):
+    """Takes go to the workers longest first (``model.batch.longest_first``: the largest files), so that the last takes
+    to start are the shortest and a worker out of takes waits less for the last one; the summary's rows stay in the
+    order the takes were given. On one worker the takes end in the order they were submitted."""
+    import argparse
+
+    from app.cli_batch import prepare_job
+    from app.cli_solve import add_solve_options
+    from model.batch import run_batch
+    from model.take_c3d import write_c3d
+    from model.takes import MarkerTake, load_take
+    t = load_take(take_dir / "take.c3d")
+    takes = []
+    for name, n in (("a_short", 40), ("b_long", 160), ("c_mid", 90)):
+        takes.append(tmp_path / f"{name}.c3d")
+        write_c3d(takes[-1], MarkerTake(t.positions[:n], t.labels, t.rate, t.units))
+    p = argparse.ArgumentParser()
+    add_solve_options(p)
+    job = prepare_job(ict_rig, p.parse_args(["--map", str(take_dir / "marker_map.json")]))
+    ended = []
+    rows = run_batch(job, takes, tmp_path / "out", workers=1, dashboard_address="127.0.0.1:0",
+                     progress=lambda pr: pr.row is not None and ended.append(pr.row["take"]))
+    assert ended == ["b_long", "c_mid", "a_short"]
+    assert [r["take"] for r in rows] == ["a_short", "b_long", "c_mid"]
+    assert [r["frames"] for r in rows] == [40, 160, 90]
+    summary = json.loads((tmp_path / "out" / "batch.json").read_text())
+    assert [r["take"] for r in summary["takes"]] == ["a_short", "b_long", "c_mid"]
+
+
 def test_a_second_batch_in_the_same_process_runs(tmp_path, ict_rig, take_dir):
     """The GUI runs every Batch Solve in its own process: a second batch there must find Dask's settings intact (the
     first one's configuration block used to take distributed's defaults out with it: KeyError 'comm')."""
