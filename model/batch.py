@@ -492,7 +492,8 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
               on_client: Callable | None = None, dashboard_address: str = "127.0.0.1:8787") -> list[dict]:
     """Solve ``takes`` into ``out_dir/<name>/`` and write the summary; returns the rows in the order of ``takes``.
     Complete takes are skipped unless ``force``; the rest go to the cluster with the job scattered once.
-    ``cancel()`` true stops the run (unfinished takes are failed rows, 'cancelled')."""
+    ``cancel()`` true stops the run (unfinished takes are failed rows, 'cancelled'); so does Ctrl-C (SIGINT:
+    'interrupted'), after which the summary is written and KeyboardInterrupt raised again."""
     out_dir = Path(out_dir)
     takes = [Path(t).resolve() for t in takes]
     names = names or take_names(takes)
@@ -501,10 +502,12 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
         if not force:
             rows[i] = completed_row(job, path, out_dir / name, name)
     pending = longest_first([i for i, r in enumerate(rows) if r is None], takes)
+    started = time.time()
     t0 = time.perf_counter()
     frames = 0
     done = len(takes) - len(pending)
     dashboard = None
+    interrupted = False
     if progress is not None and not pending:
         progress(BatchProgress(done, len(takes), 0, 0.0))
     if pending:
@@ -534,30 +537,38 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
                            for i in pending}
                 t0 = time.perf_counter()
                 finished = 0
-                for fut in as_completed(list(futures)):
-                    i = futures[fut]
-                    try:
-                        row = fut.result()
-                    except Exception as exc:       # retried and still failing, or every worker it met died
-                        row = _row(names[i], takes[i], None, "failed", _unexpected(takes[i], exc))
-                    rows[i] = row
-                    done += 1
-                    finished += 1
-                    if row["status"] == "solved":
-                        frames += int(row["frames"] or 0)
-                    if progress is not None:
-                        progress(BatchProgress(done, len(takes), frames, time.perf_counter() - t0, finished, row, dashboard))
-                    if cancel is not None and cancel():
-                        client.cancel(list(futures))
-                        break
+                try:
+                    for fut in as_completed(list(futures)):
+                        i = futures[fut]
+                        try:
+                            row = fut.result()
+                        except Exception as exc:       # retried and still failing, or every worker it met died
+                            row = _row(names[i], takes[i], None, "failed", _unexpected(takes[i], exc))
+                        rows[i] = row
+                        done += 1
+                        finished += 1
+                        if row["status"] == "solved":
+                            frames += int(row["frames"] or 0)
+                        if progress is not None:
+                            progress(BatchProgress(done, len(takes), frames, time.perf_counter() - t0, finished, row,
+                                                   dashboard))
+                        if cancel is not None and cancel():
+                            client.cancel(list(futures))
+                            break
+                except KeyboardInterrupt:  # Ctrl-C: the cluster closes, the summary says what was done, then it stops
+                    interrupted = True
             finally:
                 client.close()
                 if cluster is not None:
                     cluster.close()
+    stopped = "interrupted" if interrupted else "cancelled"
     for i, r in enumerate(rows):
-        if r is None:
-            rows[i] = _row(names[i], takes[i], None, "failed",
-                           f"{takes[i]}: cancelled before it was solved.")
+        if r is None:       # a take a worker finished after the last one this process heard of is complete on disk
+            r = completed_row(job, takes[i], out_dir / names[i], names[i])
+            if r is not None and (out_dir / names[i] / DONE).stat().st_mtime >= started:
+                r["status"] = "solved"
+                frames += int(r["frames"] or 0)
+            rows[i] = r or _row(names[i], takes[i], None, "failed", f"{takes[i]}: {stopped} before it was solved.")
     out_dir.mkdir(parents=True, exist_ok=True)
     meta = {"rig": job.rig.name, "rig_units": job.rig.units, "settings": job.signature["settings"],
             "marker_map": job.marker_map.source if job.marker_map is not None else "automatic",
@@ -566,4 +577,7 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
             "frames_per_second": frames / max(time.perf_counter() - t0, 1e-9) if frames else None,
             "dashboard": dashboard}
     write_summary(out_dir, rows, meta)
+    if interrupted:
+        raise KeyboardInterrupt
     return rows
+

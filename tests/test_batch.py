@@ -308,8 +308,8 @@ def test_batch_says_when_no_scheduler_answers(tmp_path, ict_dir, take_dir, takes
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
 def test_ctrl_c_stops_a_batch_without_tracebacks_and_leaves_no_process(tmp_path, ict_dir, take_dir, takes):
-    """Ctrl-C in a terminal sends SIGINT to the command's whole process group: the command closes the cluster and
-    says 'interrupted' (exit 130); the workers and the scheduler forked from the fork server print nothing (they each
+    """Ctrl-C in a terminal sends SIGINT to the command's whole process group: the command closes the cluster, writes
+    the summary of what was done and says 'interrupted' (exit 130); the workers and the scheduler forked from the fork server print nothing (they each
     printed a KeyboardInterrupt traceback), and no process of the batch is left running."""
     import psutil
     out = tmp_path / "out"
@@ -333,6 +333,15 @@ def test_ctrl_c_stops_a_batch_without_tracebacks_and_leaves_no_process(tmp_path,
     assert "Traceback" not in stderr and "KeyboardInterrupt" not in stderr, stderr
     gone, alive = psutil.wait_procs(group, timeout=10)
     assert not alive, [c.cmdline() for c in alive]
+    # the summary says what was done: every complete take solved, every other one interrupted, nothing else
+    rows = {r["take"]: r for r in json.loads((out / "batch.json").read_text())["takes"]}
+    assert len(rows) == len(takes) - 1
+    complete = {d.parent.name for d in out.glob("*/done.json")}
+    assert complete and {t for t, r in rows.items() if r["status"] == "solved"} == complete, rows
+    for take, r in rows.items():
+        if take not in complete:
+            assert r["status"] == "failed" and r["error"].endswith("interrupted before it was solved."), r
+    assert len((out / "batch.csv").read_text().splitlines()) == len(takes)
 
 
 def test_a_killed_writers_private_folder_is_removed_by_the_next_write(tmp_path, ict_rig, take_dir):
