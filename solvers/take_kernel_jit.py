@@ -30,21 +30,27 @@ def available() -> bool:
     return numba is not None
 
 
+# Floating-point reassociation for the kernels' dot products (so that they vectorise), without numba's no-NaN and
+# no-infinity assumptions of fastmath=True: solve_pass tests the markers for NaN (missing ones).
+_REASSOC = {"reassoc", "contract", "nsz", "arcp"}
+
+
 if numba is not None:
-    @njit(cache=True, nogil=True)
+    @njit(cache=True, nogil=True, fastmath=True)
     def _cho_solve(L, rhs, out, n):
         """Solve L Lᵀ out = rhs[:n] with the lower triangle L[:n, :n] (forward, then back substitution); ``out``
-        may be ``rhs`` itself."""
+        may be ``rhs`` itself. Both read L by rows, as it is stored: the forward pass as dot products, the back
+        substitution (Lᵀ's columns) as row updates, so neither strides down a column."""
         for i in range(n):
             v = rhs[i]
             for k in range(i):
                 v -= L[i, k] * out[k]
             out[i] = v / L[i, i]
         for i in range(n - 1, -1, -1):
-            v = out[i]
-            for k in range(i + 1, n):
-                v -= L[k, i] * out[k]
-            out[i] = v / L[i, i]
+            v = out[i] / L[i, i]
+            out[i] = v
+            for k in range(i):
+                out[k] -= L[i, k] * v
 
     @njit(cache=True, nogil=True)
     def _bound_ratio(xi, cur, lo, hi, none):
@@ -55,7 +61,7 @@ if numba is not None:
             return (hi - cur) / (xi - cur)
         return none
 
-    @njit(cache=True, nogil=True)
+    @njit(cache=True, nogil=True, fastmath=_REASSOC)
     def _chol_append(L, order, nf, H, j):
         """Append variable j to the factor of H over ``order[:nf]``: returns False when the block would not be
         positive definite (the caller refactors)."""
@@ -75,7 +81,7 @@ if numba is not None:
         order[nf] = j
         return True
 
-    @njit(cache=True, nogil=True)
+    @njit(cache=True, nogil=True, fastmath=_REASSOC)
     def _chol_delete(L, order, nf, p):
         """Delete position p from the factor over ``order[:nf]`` (rows shift up, Givens rotations on columns
         k, k+1 restore the lower triangle)."""
@@ -109,8 +115,8 @@ if numba is not None:
                     nf += 1
         return nf
 
-    @njit(cache=True, nogil=True)
-    def box_qp(H, g, w, lo, hi, tol, max_iter, L, order, pos, x, r, nf_in):
+    @njit(cache=True, nogil=True, fastmath=_REASSOC)
+    def box_qp(H, g, w, lo, hi, tol, max_iter, L, order, pos, x, r, nf_in, pd_max=8):
         """Minimise ½wᵀHw − gᵀw over lo ≤ w ≤ hi from ``w`` (changed in place; clipped into the box first).
         L (K, K), order/pos (K,) int, x/r (K,): work space. ``nf_in`` ≥ 0: L already holds the factor of the
         same H over ``order[:nf_in]`` (the last call's free set), updated here to this start's free set by
@@ -146,6 +152,11 @@ if numba is not None:
                         break
         held = np.empty(K, dtype=np.int64)
         nz = np.empty(K, dtype=np.int64)
+        it_pd, nf = _primal_dual_dense(H, g, w, s, lo, hi, tol, L, order, pos, x, r, nf, held, nz, pd_max)
+        if it_pd < 0:                            # converged: w is the minimiser
+            for k in range(K):
+                w[k] = min(max(w[k], lo), hi)
+            return -it_pd, nf
         for it in range(max_iter):
             if nf:
                 nh = 0                       # bound variables away from 0 (at the upper bound) pull on the free
@@ -212,7 +223,82 @@ if numba is not None:
                 nf += 1
         for k in range(K):
             w[k] = min(max(w[k], lo), hi)
-        return it + 1, nf
+        return it_pd + it + 1, nf
+
+    @njit(cache=True, nogil=True, fastmath=_REASSOC)
+    def _primal_dual_dense(H, g, w, s, lo, hi, tol, L, order, pos, x, r, nf, held, nz, n_max):
+        """``box_qp_lowrank``'s primal-dual active set phase (Hintermüller, Ito & Kunisch 2002) on the dense
+        factor of ``box_qp``: per iteration one solve of the free block, then every variable that leaves the box
+        is held at its bound (its row deleted from the factor) and every held one whose multiplier has the wrong
+        sign is freed (appended). Returns (-(iterations), nf) when the working set did not change, else
+        (iterations, nf) with w feasible and the factor over the free set for the primal method. Stops at once
+        when the factor does not hold every free variable (a block that is not positive definite)."""
+        K = H.shape[0]
+        drop = np.empty(K, dtype=np.int64)
+        for it in range(n_max):
+            n_free = 0
+            for k in range(K):
+                if s[k] == 0.0:
+                    n_free += 1
+            if n_free != nf:
+                return it, nf
+            nh = 0
+            for j in range(K):
+                if s[j] != 0.0 and w[j] != 0.0:
+                    held[nh] = j
+                    nh += 1
+            for i in range(nf):
+                a = order[i]
+                v = g[a]
+                for q in range(nh):
+                    v -= H[a, held[q]] * w[held[q]]
+                r[i] = v
+            _cho_solve(L, r, x, nf)
+            nnz = 0
+            for q in range(nh):
+                nz[nnz] = held[q]
+                nnz += 1
+            n_drop = 0
+            for i in range(nf):          # the candidate: x on the free variables, the bounds on the others
+                a = order[i]
+                pos[a] = i
+                if x[i] != 0.0:
+                    nz[nnz] = a
+                    nnz += 1
+                if x[i] < lo or x[i] > hi:
+                    drop[n_drop] = i
+                    n_drop += 1
+            n_add = 0
+            for j in range(K):           # held variables whose multiplier has the wrong sign (``held`` reused)
+                if s[j] != 0.0:
+                    v = -g[j]
+                    for q in range(nnz):
+                        b = nz[q]
+                        v += H[j, b] * (x[pos[b]] if s[b] == 0.0 else w[b])
+                    if v * s[j] > tol:
+                        held[n_add] = j
+                        n_add += 1
+            for i in range(nf):
+                a = order[i]
+                w[a] = min(max(x[i], lo), hi)
+                if x[i] < lo:
+                    s[a] = -1.0
+                elif x[i] > hi:
+                    s[a] = 1.0
+            if n_drop == 0 and n_add == 0:
+                return -(it + 1), nf
+            for q in range(n_drop - 1, -1, -1):      # the last position first: the earlier ones stay put
+                _chol_delete(L, order, nf, drop[q])
+                nf -= 1
+            for q in range(n_add):
+                j = held[q]
+                s[j] = 0.0
+                if _chol_append(L, order, nf, H, j):
+                    nf += 1
+                else:
+                    nf = _chol_build(L, order, H, s)
+                    break
+        return n_max, nf
 
     @njit(cache=True, nogil=True)
     def _kabsch(P, Y, p, weighted, Rout, tout):
@@ -301,7 +387,7 @@ if numba is not None:
                 Lg[j, k] = 0.0
 
     @njit(cache=True, nogil=True, fastmath=True)
-    def box_qp_lowrank(Bt, mu, g, w, lo, hi, tol, max_iter, Lg, s, fresh, work):
+    def box_qp_lowrank(Bt, mu, g, w, lo, hi, tol, max_iter, Lg, s, fresh, work, pd_max=8):
         """The box QP of ``box_qp`` for H = BᵀB + μI given as Bt = Bᵀ (K, m): the same steps and pivot rules.
         ``s`` holds the last call's working set and Lg its Gram factor unless ``fresh``; both are updated to this
         start and kept for the next call. Returns the number of iterations. Compiled with fastmath (the
@@ -332,6 +418,11 @@ if numba is not None:
                 _gram_build(Lg, Bt, s_new, mu)
         for k in range(K):
             s[k] = s_new[k]
+        it_pd = _primal_dual_phase(Bt, mu, g, w, lo, hi, tol, Lg, s, x, r, v, t, tmp, pd_max)
+        if it_pd < 0:                            # converged: w is the minimiser
+            for k in range(K):
+                w[k] = min(max(w[k], lo), hi)
+            return -it_pd
         for it in range(max_iter):
             nfree = 0
             nheld = 0
@@ -420,9 +511,83 @@ if numba is not None:
             _chol_rank1(Lg, tmp, 1.0)
         for k in range(K):
             w[k] = min(max(w[k], lo), hi)
-        return it + 1
+        return it_pd + it + 1
 
-    @njit(cache=True, nogil=True)
+    @njit(cache=True, nogil=True, fastmath=True)
+    def _primal_dual_phase(Bt, mu, g, w, lo, hi, tol, Lg, s, x, r, v, t, tmp, n_max):
+        """Up to ``n_max`` iterations of the primal-dual active set method (Hintermüller, Ito & Kunisch 2002,
+        Alg. 1; a semismooth Newton method for box constraints) on the QP of ``box_qp_lowrank``: solve the free
+        variables with the bound ones held, then change every variable whose value leaves the box or whose
+        multiplier has the wrong sign at once (the primal method changes one a solve). With a warm start (the
+        previous frame's or alternation's working set) it typically stops after one or two solves.
+        Returns -(iterations) when the working set did not change (w, s: the minimiser and its working set, to
+        ``tol``), else the iterations run, with w feasible and s, Lg consistent for the primal method to go on."""
+        K, m = Bt.shape
+        for it in range(n_max):
+            nfree = 0
+            nheld = 0
+            for a in range(m):
+                v[a] = 0.0
+            for j in range(K):                   # v = B_b w_b
+                if s[j] == 0.0:
+                    nfree += 1
+                elif w[j] != 0.0:
+                    nheld += 1
+                    for a in range(m):
+                        v[a] += Bt[j, a] * w[j]
+            if nfree:
+                for a in range(m):
+                    t[a] = 0.0
+                for j in range(K):               # r = g_f − (BᵀB w_b)_f, t = B_f r
+                    if s[j] == 0.0:
+                        q = g[j]
+                        if nheld:
+                            for a in range(m):
+                                q -= Bt[j, a] * v[a]
+                        r[j] = q
+                        for a in range(m):
+                            t[a] += Bt[j, a] * q
+                _cho_solve(Lg, t, t, m)
+                for j in range(K):               # x_f = (r − B_fᵀ y) / μ
+                    if s[j] == 0.0:
+                        q = r[j]
+                        for a in range(m):
+                            q -= Bt[j, a] * t[a]
+                        x[j] = q / mu
+                for a in range(m):               # u = B w at the candidate: B_f x_f = y (see box_qp_lowrank)
+                    v[a] += t[a]
+            changes = 0
+            rebuild = False
+            for j in range(K):
+                if s[j] == 0.0:
+                    xj = x[j]
+                    if xj < lo or xj > hi:       # leaves the box: held at the bound it crossed
+                        w[j], s[j] = (lo, -1.0) if xj < lo else (hi, 1.0)
+                        changes += 1
+                        if not rebuild:
+                            for a in range(m):
+                                tmp[a] = Bt[j, a]
+                            rebuild = not _chol_rank1(Lg, tmp, -1.0)
+                    else:
+                        w[j] = xj
+                else:
+                    q = mu * w[j] - g[j]         # its multiplier at the candidate
+                    for a in range(m):
+                        q += Bt[j, a] * v[a]
+                    if q * s[j] > tol:           # the wrong sign: freed (its value comes from the next solve)
+                        s[j] = 0.0
+                        changes += 1
+                        if not rebuild:
+                            for a in range(m):
+                                tmp[a] = Bt[j, a]
+                            _chol_rank1(Lg, tmp, 1.0)
+            if rebuild:
+                _gram_build(Lg, Bt, s, mu)
+            if changes == 0:
+                return -(it + 1)
+        return n_max
+
+    @njit(cache=True, nogil=True, fastmath=_REASSOC)
     def solve_pass(Y, order, w, R, t, rest, Dm, At, Hs, Bts, mu, tols, mask_of, lam_t, iterations, rw, rw0, lo,
                    hi, max_iter, W, Rs, ts, solved, first_solved_before):
         """One causal sweep over ``order`` (see the module docstring). Y (F, M, 3) calibrated markers (NaN
