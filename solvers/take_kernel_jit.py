@@ -7,7 +7,9 @@ the same step and pivot rules: a blocked step stops at the first bound on the wa
 the most violated multiplier frees its variable), with the Cholesky factor of the free block updated by one
 row per change of the working set (append a row for a freed variable, delete a row and restore the triangle
 by Givens rotations for a bound one: O(n_free²) a change, Golub & Van Loan §6.5.4 / §12.5) instead of a cache
-of inverses. Compiled by numba (``cache=True``: compiled once per machine, then loaded from ``__pycache__``);
+of inverses. Each QP first runs a few iterations of the primal-dual active set method (Hintermüller, Ito &
+Kunisch 2002), which changes every wrongly placed variable per solve instead of one; the primal method finishes
+when they do not settle. Compiled by numba (``cache=True``: compiled once per machine, then loaded from ``__pycache__``);
 where numba is missing, ``available()`` is False and the solver keeps its Python loop.
 
 This module is the kernel's source: ``solvers.take_kernel`` compiles it ahead of time into an extension module
@@ -388,7 +390,7 @@ if numba is not None:
 
     @njit(cache=True, nogil=True, fastmath=True)
     def box_qp_lowrank(Bt, mu, g, w, lo, hi, tol, max_iter, Lg, s, fresh, work, pd_max=8):
-        """The box QP of ``box_qp`` for H = BᵀB + μI given as Bt = Bᵀ (K, m): the same steps and pivot rules.
+        """The box QP of ``box_qp`` for H = BᵀB + μI given as Bt = Bᵀ (K, m): the same phases, steps and pivot rules.
         ``s`` holds the last call's working set and Lg its Gram factor unless ``fresh``; both are updated to this
         start and kept for the next call. Returns the number of iterations. Compiled with fastmath (the
         dot products vectorise; inputs are finite, so sentinels are finite too)."""
