@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
+from app.launch import opens_window
 from app.cli_common import EXIT_INPUT, EXIT_UNEXPECTED, load_rig_arg, parse_size, pose_weights
 from model.errors import RigInputError
 
@@ -275,7 +276,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     from app.runtime import limit_blas_threads
     limit_blas_threads()
-    if not argv or (argv[0] not in _COMMANDS and not argv[0].startswith("-")):
+    if opens_window(argv):
         from app.gui import run_gui
         return run_gui(argv[0] if argv else None)
     parser = build_parser()
@@ -299,9 +300,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"error: {describe_unexpected(exc, f'{args.command!r}')}", file=sys.stderr)
         return EXIT_UNEXPECTED
 
-
-_COMMANDS = {"info", "take-info", "render", "export", "sample", "segment", "solve", "corrective", "pairs",
-             "personalize", "batch"}
 
 if __name__ == "__main__":
     sys.exit(main())

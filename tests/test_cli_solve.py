@@ -262,3 +262,29 @@ def test_a_weights_csv_as_a_take_keeps_time_or_says_why_not(ict_rig, tmp_path):
         with pytest.raises(RigInputError) as err:
             read_weights_take(tmp_path / name, names)
         assert name in str(err.value) and words in str(err.value), str(err.value)
+
+
+def test_a_command_asks_for_ordinary_pages_and_the_window_keeps_huge_pages():
+    """A command's large arrays are written once and dropped, so ``blendshape-studio COMMAND`` turns off numpy's
+    request for transparent huge pages before numpy loads (the kernel's compaction on first touch cost the CLI solve
+    up to twice the system time); the window, whose arrays live for the session, keeps numpy's default."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from app.launch import opens_window
+    code = ("import sys\n"
+            "from app import launch\n"
+            "try:\n"
+            "    launch.main(['info', '--help'])\n"
+            "except SystemExit:\n"
+            "    pass\n"
+            "import numpy\n"
+            "print(numpy._core.multiarray._set_madvise_hugepage(True))\n")
+    root = Path(__file__).resolve().parents[1]
+    env = {k: v for k, v in os.environ.items() if k != "NUMPY_MADVISE_HUGEPAGE"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=root, env=env, check=True)
+    assert out.stdout.splitlines()[-1] == "False", out.stdout
+    assert opens_window([]) and opens_window(["rig.bsproj"]) and opens_window(["faces/ict"])
+    assert not opens_window(["solve", "rig", "take.c3d"]) and not opens_window(["--help"])
