@@ -55,3 +55,40 @@ def test_the_command_imports_it_before_its_own_imports_and_the_fork_server_too()
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, check=True,
                          env={**os.environ, "PYTHONPATH": str(ROOT)})
     assert out.stdout.split("\n")[-2] == "[] True", out.stdout + out.stderr
+
+
+_DOC_PROBE = """
+import json, sys
+{first}
+import scipy._lib._docscrape as docscrape
+parses = []
+real_init = docscrape.NumpyDocString.__init__
+def counting_init(self, *args, **kwargs):
+    parses.append(1)
+    real_init(self, *args, **kwargs)
+docscrape.NumpyDocString.__init__ = counting_init
+import scipy.ndimage, scipy.spatial.distance
+from scipy._lib._array_api import xp_capabilities_table
+f = scipy.ndimage.gaussian_filter
+print(json.dumps({{"parses": len(parses), "registered": f in xp_capabilities_table,
+                  "first_line": f.__doc__.strip().splitlines()[0]}}))
+"""
+
+
+def test_scipy_subpackages_load_without_parsing_every_docstring():
+    """scipy's ``xp_capabilities`` decorator parses the docstring of every function it marks when its subpackage
+    loads (~0.1 s of a fresh process); after ``model.scipy_import`` it does not (but for a few that rewrite a
+    parameter's text), and the capabilities are still
+    registered and the docstrings still the functions' own."""
+    def probe(first: str) -> dict:
+        out = subprocess.run([sys.executable, "-c", _DOC_PROBE.format(first=first)], capture_output=True, text=True,
+                             cwd=ROOT, check=True, env={**os.environ, "PYTHONPATH": str(ROOT)})
+        return json.loads(out.stdout)
+    lean, plain = probe("import model.scipy_import"), probe("import scipy._lib._array_api")
+    # left: the few decorators that rewrite a parameter's text (they need the parse)
+    assert plain["parses"] > 50 and lean["parses"] < 0.05 * plain["parses"], (plain, lean)
+    assert lean["registered"] and plain["registered"]
+    assert lean["first_line"] == plain["first_line"] == "Multidimensional Gaussian filter."
+    from model.scipy_import import _UnparsedDoc
+    from scipy.ndimage import gaussian_filter
+    assert "sigma" in [p.name for p in _UnparsedDoc(gaussian_filter)["Parameters"]]   # asked more: parsed then
