@@ -3,7 +3,7 @@
 a take's preview needs, loaded once for every worker instead of in each worker's first take. The VTK modules of
 ``widgets.snapshots.SurfaceSnapshots`` (VTK alone: not pyvista, whose import with the matplotlib it loads cost the
 fork server ~0.7 s of CPU), with the render window backend the preview uses (EGL: ``prefer_egl``), Pillow's PNG
-writer, the graph search of the preview's hidden faces (``solvers.mesh.hidden_back_faces``), and the compiled solve
+writer and the plugins it loads on its first save, the graph search of the preview's hidden faces (``solvers.mesh.hidden_back_faces``), and the compiled solve
 kernel. Nothing is rendered here: an OpenGL context must not be shared across a fork.
 """
 from __future__ import annotations
@@ -51,6 +51,7 @@ def leave_egl() -> bool:
 prefer_egl()
 use_offscreen_backend_if_headless()
 
+import PIL.Image  # noqa: E402
 import PIL.PngImagePlugin  # noqa: E402,F401
 import scipy.sparse.csgraph  # noqa: E402,F401
 import vtkmodules.vtkRenderingOpenGL2  # noqa: E402,F401
@@ -59,3 +60,5 @@ import widgets.snapshots  # noqa: E402,F401
 from solvers import take_kernel  # noqa: E402
 
 take_kernel.kernel()
+
+PIL.Image.preinit()    # the plugins Pillow loads on its first save (BMP, GIF, JPEG, PPM): ~10 ms of a first take
