@@ -370,6 +370,31 @@ class MocapController(QtCore.QObject):
             self._progress.deleteLater()
             self._progress = None
 
+    def _set_views_surface(self, solution, keep_camera: bool = False) -> None:
+        """The Mocap Views' faces for ``solution`` (the captured area's, of the parts View ▸ Parts shows) and the
+        frame cache of their vertices; the views frame the face unless ``keep_camera``."""
+        parts = getattr(self.window, "parts", None)
+        counts, indices = captured_area_faces(self.rig, solution.solver.residual_vertices,
+                                              parts.shown_faces() if parts is not None else None)
+        shown, local = compact_faces(indices)  # the views draw these vertices only
+        normals = VertexNormals(counts, local, len(shown))  # one for the cache and both views
+        self.cache = FrameCache(solution, self.take, self.rig.units, normals=normals, shown=shown)
+        first, _, _ = self.cache.frame(0)
+        self.views.set_surface(first, counts, indices, focus=self._face_box(solution.solver.rest),
+                               n_markers=len(solution.labels), clim=self._residual_clim(),
+                               residual_title="residual (mm)", normals=normals, keep_camera=keep_camera)
+
+    def parts_changed(self) -> None:
+        """View ▸ Parts changed: the Mocap Views of a solved take draw the parts now shown, at the same frame and
+        from the same camera; their frame cache is filled again in the background."""
+        solution = self.workspace.solution
+        if self.cache is None or solution is None:
+            return
+        self._stop_fill()
+        self._set_views_surface(solution, keep_camera=True)
+        self._show_frame(self.frame)
+        self._start_fill()
+
     def _on_solve_failed(self, message: str) -> None:
         self._close_progress()
         self._error("Could not solve", message)
@@ -389,15 +414,8 @@ class MocapController(QtCore.QObject):
             return
         self._drop_solution()
         self.workspace.accept(solution, settings)
-        counts, indices = captured_area_faces(self.rig, solution.solver.residual_vertices)
-        shown, local = compact_faces(indices)  # the views draw these vertices only
-        normals = VertexNormals(counts, local, len(shown))  # one for the cache and both views
-        self.cache = FrameCache(solution, self.take, self.rig.units, normals=normals, shown=shown)
+        self._set_views_surface(solution)
         mm = unit_scale(self.rig.units, "mm")
-        first, _, _ = self.cache.frame(0)
-        self.views.set_surface(first, counts, indices, focus=self._face_box(solution.solver.rest),
-                               n_markers=len(solution.labels), clim=self._residual_clim(),
-                               residual_title="residual (mm)", normals=normals)
         self._show_views_dock()
         err = solution.marker_rmse * mm
         self.error_plot.title = "marker error RMS (mm)"
@@ -652,6 +670,7 @@ def install(window) -> MocapController:
     controller = MocapController(window, panel, views, weight_plot, error_plot, window)
     controller.dock, controller.views_dock = dock, views_dock
     _add_take_actions(window, controller)
+    window.parts.changed.connect(controller.parts_changed)   # the views draw the parts View ▸ Parts shows
     return controller
 
 

@@ -13,18 +13,23 @@ from model.takes import MarkerTake
 from solvers.normals import VertexNormals
 
 
-def captured_area_faces(rig, area: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def captured_area_faces(rig, area: np.ndarray, shown: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The polygons whose corners all lie in ``area`` (the vertices the markers cover and the residual
     reaches), as counts + indices; all polygons when the area is empty. The side-by-side views draw only
-    these: that is where a capture says anything, and half the geometry renders twice as fast."""
-    if area is None or len(area) == 0:
-        return rig.face_counts, rig.face_indices
-    inside = np.zeros(rig.n_vertices, bool)
-    inside[area] = True
-    corner_in = inside[rig.face_indices]
-    starts = np.concatenate(([0], np.cumsum(rig.face_counts)[:-1]))
-    keep = np.logical_and.reduceat(corner_in, starts)
-    if not keep.any():
+    these: that is where a capture says anything, and half the geometry renders twice as fast. ``shown``: the
+    faces View ▸ Parts shows (``model.parts.shown_faces``; None: all), the only ones kept."""
+    keep = np.ones(len(rig.face_counts), bool)
+    if shown is not None:
+        keep[:] = False
+        keep[shown] = True
+    if area is not None and len(area):
+        inside = np.zeros(rig.n_vertices, bool)
+        inside[area] = True
+        starts = np.concatenate(([0], np.cumsum(rig.face_counts)[:-1]))
+        in_area = keep & np.logical_and.reduceat(inside[rig.face_indices], starts)
+        if in_area.any():
+            keep = in_area
+    if keep.all() or not keep.any():
         return rig.face_counts, rig.face_indices
     return rig.face_counts[keep], rig.face_indices[np.repeat(keep, rig.face_counts)]
 

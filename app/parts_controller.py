@@ -28,7 +28,10 @@ def _names(key: str) -> set[str]:
 
 class PartsController(QtCore.QObject):
     """Owns View ▸ Parts (a check per part, Show All Parts) and View ▸ Material Colours, and tells the viewport
-    the faces to draw and the parts' colours (``Viewport.set_parts``)."""
+    the faces to draw and the parts' colours (``Viewport.set_parts``); ``changed`` tells the other views (the
+    Mocap Views) that the parts shown changed."""
+
+    changed = QtCore.Signal()
 
     def __init__(self, window) -> None:
         super().__init__(window)
@@ -60,6 +63,10 @@ class PartsController(QtCore.QObject):
         self._fill_menu()
         return self._view()
 
+    def shown_faces(self) -> np.ndarray | None:
+        """The rig's faces of the parts shown (None: all of them)."""
+        return shown_faces(self.parts, self.hidden) if self.rig is not None else None
+
     def _view(self):
         rig = self.rig
         colors = None
@@ -70,6 +77,7 @@ class PartsController(QtCore.QObject):
     def _apply(self) -> None:
         if self.rig is not None:
             self.viewport.set_parts(*self._view())
+            self.changed.emit()
 
     # --- the menu ---------------------------------------------------------------------------------------
     def _fill_menu(self) -> None:

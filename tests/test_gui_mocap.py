@@ -211,6 +211,60 @@ def test_solve_without_map_or_segmentation_says_why(qtbot, tmp_path, take_dir):
     assert "marker map" in w.last_error and mc.solution is None
 
 
+def test_the_mocap_views_draw_the_parts_view_parts_shows(qtbot, tmp_path, ict_dir, take_dir):
+    """The Mocap Views draw what View ▸ Parts shows, as the viewport does: ICT's helper shells (hidden by default:
+    drawn opaque they cover the eyes) are not drawn after a solve, and hiding the teeth from the menu takes them
+    out of both views at once, at the same frame and from the same camera, with the picture changed in the mouth."""
+    from model.parts import rig_parts
+    w, mc = _install(qtbot, tmp_path)
+    open_and_wait(qtbot, w, ict_dir)
+    rig = w.document.rig
+    parts = rig_parts(rig)
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    with qtbot.waitSignal(mc.solved, timeout=120000):
+        mc.solve()
+
+    def drawn_parts() -> dict[str, int]:
+        """Faces of each part that the left view draws (its faces are the rig's, renumbered, in the rig's order)."""
+        views = mc.views
+        counts, local = views.left_mesh.n_cells, views.left_mesh.faces
+        ids = []
+        i = 0
+        while i < len(local):          # pyvista's faces: n, i0 .. in-1, back to the rig's vertex numbers
+            n = local[i]
+            ids.append(tuple(views.shown_vertices[local[i + 1:i + 1 + n]]))
+            i += n + 1
+        assert len(ids) == counts
+        starts = np.concatenate(([0], np.cumsum(rig.face_counts)[:-1]))
+        key = {tuple(rig.face_indices[a:a + n]): k for k, (a, n) in enumerate(zip(starts, rig.face_counts))}
+        faces = np.array([key[t] for t in ids])
+        names, n = np.unique(np.array(parts.names)[parts.face_part[faces]], return_counts=True)
+        return dict(zip(names.tolist(), n.tolist()))
+
+    drawn = drawn_parts()
+    for shell in ("M_EyeOcclusion", "M_LacrimalFluid", "M_EyeBlend"):
+        assert shell not in drawn, drawn          # hidden by default in the viewport: not drawn here either
+    assert drawn["M_Teeth"] > 1000 and drawn["M_Face"] > 5000 and drawn["M_IrisLeft"] > 500
+    mc.set_frame(180)
+    camera = mc.views.plotter.camera_position
+    before = mc.views.grab_image(size=(560, 440))
+    teeth = w.parts.part_actions["M_Teeth"]
+    assert teeth.isChecked()
+    teeth.trigger()                               # View ▸ Parts ▸ M_Teeth, as a click on the menu item does
+    assert not teeth.isChecked()
+    after_drawn = drawn_parts()
+    assert "M_Teeth" not in after_drawn and after_drawn["M_Face"] == drawn["M_Face"]
+    assert mc.frame == 180 and mc.views.plotter.camera_position == camera
+    after = mc.views.grab_image(size=(560, 440))
+    changed = np.abs(after.astype(int) - before.astype(int)).max(axis=2) > 40
+    rows, cols = np.nonzero(changed[:, :280])     # the left view: the teeth between the lips, nothing else
+    assert 100 < rows.size < 0.05 * 440 * 280, rows.size
+    assert rows.mean() > 0.5 * 440                # the mouth is in the face's lower half
+    teeth.trigger()                               # shown again: the same picture as before
+    again = mc.views.grab_image(size=(560, 440))
+    assert np.abs(again.astype(int) - before.astype(int)).max() <= 2
+
+
 def test_side_by_side_culls_the_faces_turned_away_whatever_the_winding():
     """The views cull back faces of a mesh wound counter-clockwise seen from the front (+Z), front faces of
     one wound the other way: the face the camera looks at is never the culled side."""

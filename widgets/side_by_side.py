@@ -60,10 +60,12 @@ class SideBySideView(QtWidgets.QWidget):
     # --- content -----------------------------------------------------------------------------------
     def set_surface(self, points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray, *,
                     focus: np.ndarray | None = None, n_markers: int = 0, clim: tuple[float, float] = (0.0, 1.0),
-                    residual_title: str = "residual (mm)", normals: VertexNormals | None = None) -> None:
+                    residual_title: str = "residual (mm)", normals: VertexNormals | None = None,
+                    keep_camera: bool = False) -> None:
         """Upload a surface's faces with the vertices they use (both views), ``n_markers`` marker spheres and
         error vectors, the colour range. ``normals``: the VertexNormals of these faces renumbered by
-        ``compact_faces`` if the caller has one (both views share it; so may the caller's frame cache)."""
+        ``compact_faces`` if the caller has one (both views share it; so may the caller's frame cache).
+        ``keep_camera``: the views keep where they look (other faces of the same solve), else they frame ``focus``."""
         import pyvista as pv
         p = self.plotter
         self.residual_title = residual_title
@@ -104,7 +106,8 @@ class SideBySideView(QtWidgets.QWidget):
         self._culling = None
         self._update_culling()
         self._focus = np.asarray(points if focus is None else focus)
-        self.set_camera(self._camera)
+        if not keep_camera:
+            self.set_camera(self._camera)
 
     def clear(self) -> None:
         """Show nothing: the surfaces, markers, error vectors and residual bar of the last solve go (a new take,
