@@ -39,6 +39,7 @@ _SIGNATURE = ("i8(f8[:,:,::1], i8[::1], f8[::1], f8[:,::1], f8[::1], f8[:,::1], 
 _PARSE_SIGNATURE = "i8(u1[::1], f8[:,::1], i8[:,::1], i8[::1])"   # decimal_kernel_jit.parse_vertex_lines
 _MAPS_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,::1], f8[::1], f8[::1])"   # shape_kernels_jit.shape_maps
 _PAIRS_SIGNATURE = "i8(f8[:,:,::1], f8[:,::1], b1[:,::1], f8[:,::1], f8[:,::1], f8[:,::1])"   # .antagonist_sums
+_QP_SIGNATURE = "i8(f8[:,::1], f8[::1], f8[::1], f8, f8, f8, i8)"   # take_kernel_jit.box_qp_fresh
 _impl = None           # the loaded kernel: the extension module, or take_kernel_jit
 _load_lock = threading.RLock()
 
@@ -71,6 +72,16 @@ def solve_pass(Y, order, w, R, t, rest, Dm, At, Hs, Bts, mu, tols, mask_of, lam_
         c(Hs, np.float64), c(Bts, np.float64), float(mu), c(tols, np.float64), c(mask_of, np.int64),
         float(lam_t), int(iterations), float(rw), float(rw0), float(lo), float(hi), int(max_iter), W, Rs, ts,
         solved, bool(first_solved_before)))
+
+
+def box_qp_fresh(H, g, w, lo, hi, tol, max_iter=200) -> int:
+    """``take_kernel_jit.box_qp_fresh`` in the compiled kernel: the box QP ½wᵀHw − gᵀw over lo ≤ w ≤ hi of a
+    one-off H from ``w`` (C-contiguous float64, changed in place to the minimiser); returns the iterations."""
+    if not (w.flags.c_contiguous and w.dtype == np.float64):
+        raise ValueError("box_qp_fresh writes the weights in place: pass a C-contiguous float64 array")
+    c = np.ascontiguousarray
+    return int(kernel().box_qp_fresh(c(H, np.float64), c(g, np.float64), w, float(lo), float(hi), float(tol),
+                                     int(max_iter)))
 
 
 def ready() -> bool:
@@ -147,7 +158,8 @@ def _cpu() -> str:
 @functools.lru_cache(maxsize=1)
 def _key() -> str:
     h = hashlib.sha256(_SOURCE.read_bytes() + _DECIMAL_SOURCE.read_bytes() + _SHAPES_SOURCE.read_bytes())
-    for part in (_SIGNATURE, _PARSE_SIGNATURE, _MAPS_SIGNATURE, _PAIRS_SIGNATURE, np.__version__, _cpu()):
+    for part in (_SIGNATURE, _PARSE_SIGNATURE, _MAPS_SIGNATURE, _PAIRS_SIGNATURE, _QP_SIGNATURE, np.__version__,
+                 _cpu()):
         h.update(part.encode())
     return h.hexdigest()[:16]
 
@@ -252,6 +264,7 @@ def _compile(folder: Path, name: str) -> None:
             cc.export("parse_vertex_lines", _PARSE_SIGNATURE)(decimal_kernel_jit.parse_vertex_lines.py_func)
             cc.export("shape_maps", _MAPS_SIGNATURE)(shape_kernels_jit.shape_maps.py_func)
             cc.export("antagonist_sums", _PAIRS_SIGNATURE)(shape_kernels_jit.antagonist_sums.py_func)
+            cc.export("box_qp_fresh", _QP_SIGNATURE)(take_kernel_jit.box_qp_fresh.py_func)
             cc.compile()
         os.replace(Path(tmp) / name, folder / name)   # atomic: a concurrent build wins or loses whole
 

@@ -227,6 +227,15 @@ if numba is not None:
             w[k] = min(max(w[k], lo), hi)
         return it_pd + it + 1, nf
 
+    @njit(cache=True, nogil=True)
+    def box_qp_fresh(H, g, w, lo, hi, tol, max_iter):
+        """``box_qp`` of a one-off H (a Gauss–Newton step's, ``TakeSolver._weights`` with correctives), from ``w``
+        (changed in place) with its own work space; returns the iterations."""
+        K = H.shape[0]
+        n_it, _ = box_qp(H, g, w, lo, hi, tol, max_iter, np.zeros((K, K)), np.zeros(K, dtype=np.int64),
+                         np.zeros(K, dtype=np.int64), np.zeros(K), np.zeros(K), -1)
+        return n_it
+
     @njit(cache=True, nogil=True, fastmath=_REASSOC)
     def _primal_dual_dense(H, g, w, s, lo, hi, tol, L, order, pos, x, r, nf, held, nz, n_max):
         """``box_qp_lowrank``'s primal-dual active set phase (Hintermüller, Ito & Kunisch 2002) on the dense

@@ -912,7 +912,12 @@ class TakeSolver:
                 H[np.ix_(d, d)] += Jd.T @ Jd
                 g = At @ r + self.lam_temporal * w_prev
                 g[d] += Jd.T @ r
-                step = _CachedBoxQP(H, self.lower, self.upper, cache=False).solve(g, w.copy())
+                if self._kernel is not None:     # the compiled box QP (the same optimum as _CachedBoxQP's)
+                    step = w.copy()
+                    self._kernel.box_qp_fresh(H, g, step, self.lower, self.upper,
+                                              1e-12 * max(float(np.abs(H).max()), 1e-300))
+                else:
+                    step = _CachedBoxQP(H, self.lower, self.upper, cache=False).solve(g, w.copy())
             done = np.abs(step - w).max() < 1e-7
             w = step
             if done:

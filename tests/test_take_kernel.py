@@ -109,6 +109,42 @@ def test_box_qp_reaches_the_optimum_of_problems_that_need_hundreds_of_pivots(for
     assert iterations[0] < 60 and max(iterations) < 100, iterations
 
 
+def test_a_take_solve_with_correctives_steps_through_the_compiled_qp_to_the_python_steps_weights(ict_rig, take_setup):
+    """With correctives each Gauss–Newton step solves a QP of its own H; the compiled kernel (``box_qp_fresh``,
+    exported by the ahead-of-time build) and the Python active set (``_CachedBoxQP``) give the same take."""
+    from model.correctives import Corrective, set_correctives, solver_correctives
+    from solvers.correctives import driver_region
+    assert hasattr(take_kernel.kernel(), "box_qp_fresh")
+    rig = ict_rig.copy()
+    cs = []
+    for drivers in (["browInnerUp_L", "browInnerUp_R"], ["mouthFunnel", "mouthPucker"]):
+        d = rig.deltas[[rig.shape_index(n) for n in drivers]]
+        cs.append(Corrective(drivers=drivers, delta=-0.2 * driver_region(d)[:, None] * d.sum(axis=0)))
+    set_correctives(rig, cs)
+    _, _, B, X = take_setup
+    s = TakeSolver(rig.neutral, rig.deltas, B, correctives=solver_correctives(rig), residual="none")
+    kernel = s._kernel
+    calls = []
+    real = take_kernel.box_qp_fresh
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+    out = {}
+    try:
+        take_kernel.box_qp_fresh = counted
+        for name in ("compiled", "python"):
+            s._kernel = kernel if name == "compiled" else None
+            out[name] = s.solve(X[:120], unit_factor=0.1)
+    finally:
+        s._kernel = kernel
+        take_kernel.box_qp_fresh = real
+    assert len(calls) > 200                     # every step of the compiled sweep went through the kernel
+    a, b = out["compiled"], out["python"]
+    assert np.abs(a.weights - b.weights).max() < 1e-8
+    assert a.weights.max() > 0.3
+
+
 def test_compiled_sweep_equals_the_python_sweep_on_the_ict_take(ict_rig, take_setup):
     """Both sweeps (forward and backward, gaps in the take) give the same weights and head motion."""
     _, _, B, X = take_setup
