@@ -9,14 +9,7 @@ from __future__ import annotations
 import os
 import sys
 
-COMMANDS = {"info", "take-info", "render", "export", "sample", "segment", "solve", "corrective", "pairs",
-            "personalize", "batch"}
-
-
-def opens_window(argv: list[str]) -> bool:
-    """Whether the command line opens the window (no arguments, or a rig or project to open) rather than running a
-    command."""
-    return not argv or (argv[0] not in COMMANDS and not argv[0].startswith("-"))
+from app.commands import opens_window
 
 
 def starts_local_cluster(argv: list[str]) -> bool:
