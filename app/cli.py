@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
-from app.commands import opens_window
+from app.command_line import opens_window
 from app.cli_common import EXIT_INPUT, EXIT_UNEXPECTED, load_rig_arg, parse_size, pose_weights
 from model.errors import RigInputError
 

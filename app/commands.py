@@ -1,12 +1,231 @@
-"""The ``blendshape-studio`` command's names, and whether a command line opens the window instead: shared by the entry
-point (``app.launch``, standard library only) and the parser (``app.cli``)."""
+"""Undo commands: every edit a user makes goes through one of these (Qt's QUndoStack).
+
+Each command stores what it needs to undo exactly (old and new values), never a diff to recompute.
+"""
 from __future__ import annotations
 
-COMMANDS = {"info", "take-info", "render", "export", "sample", "segment", "solve", "corrective", "pairs",
-            "personalize", "batch"}
+import numpy as np
+from PySide6.QtGui import QUndoCommand
 
 
-def opens_window(argv: list[str]) -> bool:
-    """Whether the command line opens the window (no arguments, or a rig or project to open) rather than running a
-    command."""
-    return not argv or (argv[0] not in COMMANDS and not argv[0].startswith("-"))
+class SetWeightsCommand(QUndoCommand):
+    """Set the global pose weights (a slider drag, a typed value, a preset, a reset)."""
+
+    def __init__(self, document, old: np.ndarray, new: np.ndarray, text: str) -> None:
+        super().__init__(text)
+        self.document = document
+        self.old = np.array(old, dtype=np.float64)
+        self.new = np.array(new, dtype=np.float64)
+
+    def redo(self) -> None:
+        self.document.set_weights(self.new)
+
+    def undo(self) -> None:
+        self.document.set_weights(self.old)
+
+
+class SetSectionCommand(QUndoCommand):
+    """Replace a project section (e.g. the segmentation settings) with a new value."""
+
+    def __init__(self, document, name: str, old, new, text: str) -> None:
+        super().__init__(text)
+        import copy
+        self.document, self.name = document, name
+        self.old, self.new = copy.deepcopy(old), copy.deepcopy(new)
+
+    def redo(self) -> None:
+        self.document.set_section(self.name, self.new)
+
+    def undo(self) -> None:
+        self.document.set_section(self.name, self.old)
+
+
+class SetEditOffsetCommand(QUndoCommand):
+    """A sculpt stroke or a region nudge: the pending offset before and after."""
+
+    def __init__(self, document, old, new, text: str) -> None:
+        super().__init__(text)
+        self.document = document
+        self.old = None if old is None else np.array(old)
+        self.new = None if new is None else np.array(new)
+
+    def redo(self) -> None:
+        self.document.set_edit_offset(self.new)
+
+    def undo(self) -> None:
+        self.document.set_edit_offset(self.old)
+
+
+class AddShapeCommand(QUndoCommand):
+    """Add a new shape (e.g. from a nudged region) with weight 0, taking the pending offset with it."""
+
+    def __init__(self, document, name: str, delta: np.ndarray, text: str | None = None,
+                 takes_offset: bool = True, weight: float = 0.0, evaluator=None) -> None:
+        super().__init__(text or f"Add shape {name}")
+        self.document, self.name = document, name
+        self.delta = np.array(delta, dtype=np.float64)
+        self.takes_offset = takes_offset   # the pending nudge became the shape; a mirrored shape leaves it
+        self.weight = float(weight)        # the new shape's weight (in every region of a regional pose)
+        self.evaluator = evaluator         # a PoseEvaluator of the rig with the shape, built in the background
+        self.offset = None if document.edit_offset is None else document.edit_offset.copy()
+
+    def redo(self) -> None:
+        doc = self.document
+        rig, project = doc.rig, doc.project
+        rig.shape_names = rig.shape_names + [self.name]
+        rig.deltas = np.concatenate([rig.deltas, self.delta[None]], axis=0)
+        project.weights = np.append(project.weights, self.weight)
+        if doc.region_weights is not None:   # a regional pose keeps its regions, the new shape a column
+            doc.region_weights = np.column_stack([doc.region_weights, np.full(len(doc.region_weights), self.weight)])
+        if self.takes_offset:
+            doc.edit_offset = None
+        evaluator, self.evaluator = self.evaluator, None   # only for the first redo: later ones rebuild
+        doc.rig_edited(evaluator)
+
+    def undo(self) -> None:
+        doc = self.document
+        rig, project = doc.rig, doc.project
+        k = rig.shape_names.index(self.name)
+        rig.shape_names = rig.shape_names[:k] + rig.shape_names[k + 1:]
+        rig.deltas = np.delete(rig.deltas, k, axis=0)
+        project.weights = np.delete(project.weights, k)
+        if doc.region_weights is not None and doc.region_weights.shape[1] == rig.n_shapes + 1:
+            doc.region_weights = np.delete(doc.region_weights, k, axis=1)
+        if self.takes_offset:
+            self.document.edit_offset = self.offset
+        self.document.rig_edited()
+
+
+class SetShapeDeltaCommand(QUndoCommand):
+    """Replace one shape's displacements (e.g. with the mirror image of its other side)."""
+
+    def __init__(self, document, name: str, delta: np.ndarray, text: str) -> None:
+        super().__init__(text)
+        self.document, self.name = document, name
+        k = document.rig.shape_names.index(name)
+        self.old = document.rig.deltas[k].copy()
+        self.new = np.array(delta, dtype=document.rig.deltas.dtype)
+
+    def _set(self, delta: np.ndarray) -> None:
+        rig = self.document.rig
+        deltas = rig.deltas.copy()   # a new array: whatever kept the old one (an evaluator, a cache) keeps it whole
+        deltas[rig.shape_names.index(self.name)] = delta
+        rig.deltas = deltas
+        self.document.rig_edited()
+
+    def redo(self) -> None:
+        self._set(self.new)
+
+    def undo(self) -> None:
+        self._set(self.old)
+
+
+# --- the Shapes list (model.shape_edits) ------------------------------------------------------------------
+class _ShapeListCommand(QUndoCommand):
+    """Runs a ``model.shape_edits`` edit on the document's project with the live regional pose in it, then
+    tells every view: the evaluator is rebuilt and the keyed animation reloaded (its columns follow the shapes)."""
+
+    def __init__(self, document, text: str) -> None:
+        super().__init__(text)
+        self.document = document
+
+    def _edit(self, fn, *args):
+        doc = self.document
+        p = doc.project
+        # the document holds the live regional pose; the project gets all of it, as Document.save does
+        p.region_weights, p.region_blend, p.region_level = doc.region_weights, doc.region_blend, doc.region_level
+        try:
+            result = fn(p, *args)
+        finally:
+            doc.region_weights = p.region_weights
+        doc.rig_edited()
+        doc.section_changed.emit("keyframes")
+        return result
+
+
+class ReorderShapesCommand(_ShapeListCommand):
+    """Move or sort shapes: ``order`` lists the old indices in their new places."""
+
+    def __init__(self, document, order, text: str) -> None:
+        super().__init__(document, text)
+        self.order = list(order)
+        self.inverse: list[int] | None = None
+
+    def redo(self) -> None:
+        from model.shape_edits import reorder_shapes
+        self.inverse = self._edit(reorder_shapes, self.order)
+
+    def undo(self) -> None:
+        from model.shape_edits import reorder_shapes
+        self._edit(reorder_shapes, self.inverse)
+
+
+class RenameShapeCommand(_ShapeListCommand):
+    def __init__(self, document, old: str, new: str) -> None:
+        super().__init__(document, f"Rename {old} to {new}")
+        self.old, self.new = old, new
+        self.record = None
+
+    def redo(self) -> None:
+        from model.shape_edits import rename_shape
+        self.record = self._edit(rename_shape, self.old, self.new)
+
+    def undo(self) -> None:
+        from model.shape_edits import undo_rename
+        self._edit(undo_rename, self.record)
+
+
+class DeleteShapesCommand(_ShapeListCommand):
+    """Delete shapes with the correctives that need them; undo puts all of it back bit for bit."""
+
+    def __init__(self, document, names: list[str], text: str) -> None:
+        super().__init__(document, text)
+        self.names = list(names)
+        self.record = None
+
+    def redo(self) -> None:
+        from model.shape_edits import delete_shapes
+        self.record = self._edit(delete_shapes, self.names)
+
+    def undo(self) -> None:
+        from model.shape_edits import restore_shapes
+        self._edit(restore_shapes, self.record)
+
+
+class DuplicateShapeCommand(_ShapeListCommand):
+    def __init__(self, document, name: str, new_name: str) -> None:
+        super().__init__(document, f"Duplicate {name} as {new_name}")
+        self.name, self.new_name = name, new_name
+
+    def redo(self) -> None:
+        from model.shape_edits import duplicate_shape
+        self._edit(duplicate_shape, self.name, self.new_name)
+
+    def undo(self) -> None:
+        from model.shape_edits import delete_shapes
+        self._edit(delete_shapes, [self.new_name])
+
+
+class SetShapeSettingsCommand(_ShapeListCommand):
+    """Mute, solo, a slider range or an in-between (``model.shape_edits.ShapeSettings`` before and after);
+    ``takes_offset``: an in-between made from the shown surface takes the pending sculpt with it."""
+
+    def __init__(self, document, old, new, text: str, takes_offset: bool = False) -> None:
+        super().__init__(document, text)
+        self.old, self.new = old, new
+        self.takes_offset = takes_offset
+        self.offset = None if document.edit_offset is None else document.edit_offset.copy()
+
+    def _apply(self, settings, offset_after) -> None:
+        doc = self.document
+        settings.apply(doc.rig)
+        if self.takes_offset:
+            doc.edit_offset = offset_after
+            doc.offset_changed.emit()
+        doc.shape_settings_edited()
+
+    def redo(self) -> None:
+        self._apply(self.new, None)
+
+    def undo(self) -> None:
+        self._apply(self.old, self.offset)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 import sys
 
-from app.commands import opens_window
+from app.command_line import opens_window
 
 
 def starts_local_cluster(argv: list[str]) -> bool:

@@ -273,7 +273,7 @@ def test_a_command_asks_for_ordinary_pages_and_the_window_keeps_huge_pages():
     import sys
     from pathlib import Path
 
-    from app.commands import opens_window
+    from app.command_line import opens_window
     code = ("import sys\n"
             "from app import launch\n"
             "try:\n"
