@@ -398,6 +398,45 @@ if numba is not None:
                 Lg[j, k] = 0.0
 
     @njit(cache=True, nogil=True, fastmath=True)
+    def _lowrank_free_solve(Bt, mu, g, w, s, Lg, x, r, v, t):
+        """The free variables' values x_f with the held ones fixed, for H = BᵀB + μI (Woodbury, with Lg the Cholesky
+        factor of G = μI + B_f B_fᵀ): v = B_b w_b (the held variables' pull), r = g_f − (BᵀB w_b)_f (μI has no
+        off-diagonal pull), t = G⁻¹ B_f r (= y), x_f = (r − B_fᵀ y) / μ. Returns the number of free variables
+        (nothing but v is written when there are none)."""
+        K, m = Bt.shape
+        nfree = 0
+        nheld = 0
+        for a in range(m):
+            v[a] = 0.0
+        for j in range(K):
+            if s[j] == 0.0:
+                nfree += 1
+            elif w[j] != 0.0:
+                nheld += 1
+                for a in range(m):
+                    v[a] += Bt[j, a] * w[j]
+        if nfree:
+            for a in range(m):
+                t[a] = 0.0
+            for j in range(K):
+                if s[j] == 0.0:
+                    q = g[j]
+                    if nheld:
+                        for a in range(m):
+                            q -= Bt[j, a] * v[a]
+                    r[j] = q
+                    for a in range(m):
+                        t[a] += Bt[j, a] * q
+            _cho_solve(Lg, t, t, m)          # G Gᵀ y = t, in place
+            for j in range(K):
+                if s[j] == 0.0:
+                    q = r[j]
+                    for a in range(m):
+                        q -= Bt[j, a] * t[a]
+                    x[j] = q / mu
+        return nfree
+
+    @njit(cache=True, nogil=True, fastmath=True)
     def box_qp_lowrank(Bt, mu, g, w, lo, hi, tol, max_iter, Lg, s, fresh, work, pd_max=8):
         """The box QP of ``box_qp`` for H = BᵀB + μI given as Bt = Bᵀ (K, m): the same phases, steps and pivot rules.
         ``s`` holds the last call's working set and Lg its Gram factor unless ``fresh``; both are updated to this
@@ -435,40 +474,14 @@ if numba is not None:
                 w[k] = min(max(w[k], lo), hi)
             return -it_pd
         for it in range(max_iter):
-            nfree = 0
-            nheld = 0
-            for a in range(m):
-                v[a] = 0.0
-            for j in range(K):                   # v = B_b w_b: the held (upper-bound) variables' pull
-                if s[j] == 0.0:
-                    nfree += 1
-                elif w[j] != 0.0:
-                    nheld += 1
-                    for a in range(m):
-                        v[a] += Bt[j, a] * w[j]
+            nfree = _lowrank_free_solve(Bt, mu, g, w, s, Lg, x, r, v, t)
             have_u = False
             if nfree:
-                for a in range(m):
-                    t[a] = 0.0
-                for j in range(K):               # r = g_f − (BᵀB w_b)_f (μI has no off-diagonal pull); t = B_f r
-                    if s[j] == 0.0:
-                        q = g[j]
-                        if nheld:
-                            for a in range(m):
-                                q -= Bt[j, a] * v[a]
-                        r[j] = q
-                        for a in range(m):
-                            t[a] += Bt[j, a] * q
-                _cho_solve(Lg, t, t, m)          # G Gᵀ y = t, in place
                 blocked = False
                 for j in range(K):
-                    if s[j] == 0.0:
-                        q = r[j]
-                        for a in range(m):
-                            q -= Bt[j, a] * t[a]
-                        x[j] = q / mu
-                        if x[j] < lo or x[j] > hi:
-                            blocked = True
+                    if s[j] == 0.0 and (x[j] < lo or x[j] > hi):
+                        blocked = True
+                        break
                 if blocked:
                     best, jb = _BIG, -1
                     for j in range(K):
@@ -535,36 +548,7 @@ if numba is not None:
         ``tol``), else the iterations run, with w feasible and s, Lg consistent for the primal method to go on."""
         K, m = Bt.shape
         for it in range(n_max):
-            nfree = 0
-            nheld = 0
-            for a in range(m):
-                v[a] = 0.0
-            for j in range(K):                   # v = B_b w_b
-                if s[j] == 0.0:
-                    nfree += 1
-                elif w[j] != 0.0:
-                    nheld += 1
-                    for a in range(m):
-                        v[a] += Bt[j, a] * w[j]
-            if nfree:
-                for a in range(m):
-                    t[a] = 0.0
-                for j in range(K):               # r = g_f − (BᵀB w_b)_f, t = B_f r
-                    if s[j] == 0.0:
-                        q = g[j]
-                        if nheld:
-                            for a in range(m):
-                                q -= Bt[j, a] * v[a]
-                        r[j] = q
-                        for a in range(m):
-                            t[a] += Bt[j, a] * q
-                _cho_solve(Lg, t, t, m)
-                for j in range(K):               # x_f = (r − B_fᵀ y) / μ
-                    if s[j] == 0.0:
-                        q = r[j]
-                        for a in range(m):
-                            q -= Bt[j, a] * t[a]
-                        x[j] = q / mu
+            if _lowrank_free_solve(Bt, mu, g, w, s, Lg, x, r, v, t):
                 for a in range(m):               # u = B w at the candidate: B_f x_f = y (see box_qp_lowrank)
                     v[a] += t[a]
             changes = 0
