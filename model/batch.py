@@ -580,4 +580,3 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
     if interrupted:
         raise KeyboardInterrupt
     return rows
-
