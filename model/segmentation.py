@@ -276,23 +276,12 @@ class SegmentationCache:
 
     def shape_groups(self) -> np.ndarray:
         """(K,) groups of shapes that act on the same part of the face."""
-        def make():
-            if "support" in self._derived:
-                return _seg.shape_groups(self._derived["support"])
-            # the support made here, its memory lent to the groups' normalised maps and then filled again:
-            # one (V, K) array instead of two (190 MB of fresh pages each on a 422k-vertex rig)
-            disp, scales = self.maps().per_shape_displacement, self.scales("displacement")
-            S = _seg.shape_support(disp, scales)
-            groups = _seg.shape_groups(S, overwrite_support=True)
-            self._derived["support"] = _seg.shape_support(disp, scales, out=S)
-            return groups
-        return self._get("groups", make)
+        return self._get("groups", lambda: _seg.shape_groups(self.support()))
 
     def split_graph(self) -> sp.csr_matrix:
         """The mesh graph cut where the dominant shape group changes."""
         def make():
-            groups = self.shape_groups()  # first: it makes the support too
-            return _seg.split_graph(self.adjacency, _seg.dominant_group(self.support(), groups))
+            return _seg.split_graph(self.adjacency, _seg.dominant_group(self.support(), self.shape_groups()))
         return self._get("split", make)
 
     def vertex_mirror(self, vertices: np.ndarray) -> np.ndarray:

@@ -107,30 +107,36 @@ def _norm_rows(x: np.ndarray, out: np.ndarray, tmp: np.ndarray) -> None:
 
 
 def _compiled_shape_maps(L: sp.csr_matrix):
-    """``shape_kernels_jit.shape_maps`` bound to ``L``'s arrays, as ``f(d (V, 3), lap (V,), disp (V,))``; None when
-    the compiled module is not built on this machine (``solvers.take_kernel.built``) or ``L`` has 64-bit
-    indices (over 2^31 entries)."""
+    """(``shape_kernels_jit.shape_maps``, ``.shape_maps4``) bound to ``L``'s arrays, as ``f(d, lap, disp)`` for one
+    shape ((V, 3) deltas, (V,) outputs) and for four ((4, V, 3), (4, V)); None when the compiled module is not built
+    on this machine (``solvers.take_kernel.built``) or ``L`` has 64-bit indices (over 2^31 entries)."""
     from . import take_kernel
     module = take_kernel.built()
     if module is None or L.indices.dtype != np.int32 or L.indptr.dtype != np.int32:
         return None
     data = np.ascontiguousarray(L.data, dtype=np.float64)
-    return lambda d, lap, disp: module.shape_maps(L.indptr, L.indices, data, d, lap, disp)
+    return (lambda d, lap, disp: module.shape_maps(L.indptr, L.indices, data, d, lap, disp),
+            lambda d, lap, disp: module.shape_maps4(L.indptr, L.indices, data, d, lap, disp))
 
 
 def _shape_maps(L: sp.csr_matrix, d: np.ndarray, displacement: bool = True
                 ) -> tuple[np.ndarray, np.ndarray | None]:
     """(K, V) ``m_k(v) = ‖L d_k(v)‖`` (Joshi et al. 2003, §2) and, with ``displacement``, (K, V) ``‖d_k(v)‖``:
-    per shape, one compiled pass over its (V, 3) deltas where the kernel is built here, else its deltas copied
-    to (3, V) rows and one sparse matrix-vector product per coordinate (the same bits)."""
+    where the kernel is built here, one compiled pass over the Laplacian per four shapes (then one per shape left),
+    reading their (V, 3) deltas as the rig holds them; else each shape's deltas copied to (3, V) rows and one sparse
+    matrix-vector product per coordinate (the same bits)."""
     K, V = d.shape[0], L.shape[0]
     per_shape = np.empty((K, V))
     disp = np.empty((K, V)) if displacement else None
     compiled = _compiled_shape_maps(L)
-    if compiled is not None:            # the same bits, the Laplacian read once per shape (shape_kernels_jit)
-        scratch = None if displacement else np.empty(V)
-        for k in range(K):
-            compiled(np.ascontiguousarray(d[k]), per_shape[k], disp[k] if displacement else scratch)
+    if compiled is not None:            # the same bits, the Laplacian read once per four shapes (shape_kernels_jit)
+        one, four = compiled
+        scratch = None if displacement else np.empty((4, V))
+        d = np.ascontiguousarray(d)
+        for k in range(0, K - 3, 4):
+            four(d[k:k + 4], per_shape[k:k + 4], disp[k:k + 4] if displacement else scratch)
+        for k in range(K - K % 4, K):
+            one(d[k], per_shape[k], disp[k] if displacement else scratch[0])
         return per_shape, disp
     dt, y, tmp = np.empty((3, V)), np.empty((3, V)), np.empty(V)
     for k in range(K):

@@ -1,5 +1,5 @@
 """Compiled passes over a rig's shapes, for what is computed once per rig: one shape's deformation maps
-(``shape_maps``) and the sums behind the antagonist pairs (``antagonist_sums``).
+(``shape_maps``, four shapes at once ``shape_maps4``) and the sums behind the antagonist pairs (``antagonist_sums``).
 
 **Deformation maps.** ``‖L d(v)‖`` and ``‖d(v)‖`` for every vertex v (Joshi et al. 2003, §2,
 ``m_k(v) = ‖L d_k(v)‖``; ALGORITHMS.md §2), from the shape's (V, 3) deltas as the rig holds them.
@@ -56,6 +56,41 @@ def shape_maps(indptr, indices, data, d, lap, disp):
     return V
 
 
+def shape_maps4(indptr, indices, data, d, lap, disp):
+    """``shape_maps`` of four shapes in one pass over the Laplacian: ``d`` (4, V, 3) their deltas, ``lap`` and
+    ``disp`` (4, V) written in place. Each row's entries are read once for the four (a Laplacian read 57 times
+    for ICT's shapes is then read 15 times), each shape's sums in the same order as ``shape_maps``'s, so the
+    maps are the same to the last bit. Returns V."""
+    V = lap.shape[1]
+    for v in range(V):
+        x0 = y0 = z0 = x1 = y1 = z1 = x2 = y2 = z2 = x3 = y3 = z3 = 0.0
+        for jj in range(indptr[v], indptr[v + 1]):
+            a = data[jj]
+            j = indices[jj]
+            x0 += a * d[0, j, 0]
+            y0 += a * d[0, j, 1]
+            z0 += a * d[0, j, 2]
+            x1 += a * d[1, j, 0]
+            y1 += a * d[1, j, 1]
+            z1 += a * d[1, j, 2]
+            x2 += a * d[2, j, 0]
+            y2 += a * d[2, j, 1]
+            z2 += a * d[2, j, 2]
+            x3 += a * d[3, j, 0]
+            y3 += a * d[3, j, 1]
+            z3 += a * d[3, j, 2]
+        lap[0, v] = math.sqrt((x0 * x0 + z0 * z0) + y0 * y0)
+        lap[1, v] = math.sqrt((x1 * x1 + z1 * z1) + y1 * y1)
+        lap[2, v] = math.sqrt((x2 * x2 + z2 * z2) + y2 * y2)
+        lap[3, v] = math.sqrt((x3 * x3 + z3 * z3) + y3 * y3)
+        for k in range(4):
+            x = d[k, v, 0]
+            y = d[k, v, 1]
+            z = d[k, v, 2]
+            disp[k, v] = math.sqrt((x * x + z * z) + y * y)
+    return V
+
+
 def antagonist_sums(D, n2, active, shared, dots, sq):
     """For every pair i < j of the (K, V, 3) deltas ``D``, over the vertices where both act (``active`` (V, K),
     row v: the shapes acting at v): ``shared[i, j]`` the count, ``dots[i, j]`` ``Σ d_i(v)·d_j(v)``, and
@@ -88,4 +123,5 @@ def antagonist_sums(D, n2, active, shared, dots, sq):
 
 if njit is not None:
     shape_maps = njit(cache=True, nogil=True)(shape_maps)
+    shape_maps4 = njit(cache=True, nogil=True)(shape_maps4)
     antagonist_sums = njit(cache=True, nogil=True)(antagonist_sums)

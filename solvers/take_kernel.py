@@ -38,6 +38,7 @@ _SIGNATURE = ("i8(f8[:,:,::1], i8[::1], f8[::1], f8[:,::1], f8[::1], f8[:,::1], 
               "b1[::1], b1)")
 _PARSE_SIGNATURE = "i8(u1[::1], f8[:,::1], i8[:,::1], i8[::1])"   # decimal_kernel_jit.parse_vertex_lines
 _MAPS_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,::1], f8[::1], f8[::1])"   # shape_kernels_jit.shape_maps
+_MAPS4_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,:,::1], f8[:,::1], f8[:,::1])"   # .shape_maps4
 _PAIRS_SIGNATURE = "i8(f8[:,:,::1], f8[:,::1], b1[:,::1], f8[:,::1], f8[:,::1], f8[:,::1])"   # .antagonist_sums
 _QP_SIGNATURE = "i8(f8[:,::1], f8[::1], f8[::1], f8, f8, f8, i8)"   # take_kernel_jit.box_qp_fresh
 _impl = None           # the loaded kernel: the extension module, or take_kernel_jit
@@ -158,8 +159,8 @@ def _cpu() -> str:
 @functools.lru_cache(maxsize=1)
 def _key() -> str:
     h = hashlib.sha256(_SOURCE.read_bytes() + _DECIMAL_SOURCE.read_bytes() + _SHAPES_SOURCE.read_bytes())
-    for part in (_SIGNATURE, _PARSE_SIGNATURE, _MAPS_SIGNATURE, _PAIRS_SIGNATURE, _QP_SIGNATURE, np.__version__,
-                 _cpu()):
+    for part in (_SIGNATURE, _PARSE_SIGNATURE, _MAPS_SIGNATURE, _MAPS4_SIGNATURE, _PAIRS_SIGNATURE, _QP_SIGNATURE,
+                 np.__version__, _cpu()):
         h.update(part.encode())
     return h.hexdigest()[:16]
 
@@ -263,6 +264,7 @@ def _compile(folder: Path, name: str) -> None:
             cc.export("solve_pass", _SIGNATURE)(take_kernel_jit.solve_pass.py_func)
             cc.export("parse_vertex_lines", _PARSE_SIGNATURE)(decimal_kernel_jit.parse_vertex_lines.py_func)
             cc.export("shape_maps", _MAPS_SIGNATURE)(shape_kernels_jit.shape_maps.py_func)
+            cc.export("shape_maps4", _MAPS4_SIGNATURE)(shape_kernels_jit.shape_maps4.py_func)
             cc.export("antagonist_sums", _PAIRS_SIGNATURE)(shape_kernels_jit.antagonist_sums.py_func)
             cc.export("box_qp_fresh", _QP_SIGNATURE)(take_kernel_jit.box_qp_fresh.py_func)
             cc.compile()

@@ -222,11 +222,14 @@ def test_compiled_maps_are_the_scipy_products_bit_for_bit(ict_rig, kind, monkeyp
         pytest.skip("the kernel cannot be compiled ahead of time here (no C compiler): scipy's products are used")
     L = mesh_laplacian(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, kind)
     assert dm._compiled_shape_maps(L) is not None
-    # a few shapes, and a shape whose deltas are a view with strides (a rig's float32 deltas converted)
-    d = np.concatenate([ict_rig.deltas[[0, 20, 40]], ict_rig.deltas[[5]].astype(np.float32).astype(np.float64)])
+    # six shapes (one pass for four, then one each for the two left), one of them a rig's float32 deltas converted
+    d = np.concatenate([ict_rig.deltas[[0, 20, 40, 50, 56]], ict_rig.deltas[[5]].astype(np.float32).astype(np.float64)])
     compiled, compiled_disp = dm._shape_maps(L, d)
+    compiled_lap_only = dm.laplacian_magnitudes(L, d)
     monkeypatch.setattr(take_kernel, "built", lambda: None)
     scipy_maps, scipy_disp = dm._shape_maps(L, d)
     assert np.array_equal(compiled.view(np.int64), scipy_maps.view(np.int64))
     assert np.array_equal(compiled_disp.view(np.int64), scipy_disp.view(np.int64))
+    assert np.array_equal(compiled_lap_only.T, scipy_maps)
     assert (compiled > 0).any(axis=1).all()
+    assert not np.array_equal(compiled[1:5], compiled[:4])   # every shape its own row, none written twice

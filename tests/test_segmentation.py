@@ -127,6 +127,25 @@ def test_split_sits_at_the_requested_quantile_of_the_moving_skin(ict_rig, ict_ca
         assert np.all(dom[cr] != dom[cc])
 
 
+def test_shape_groups_are_the_average_linkage_of_the_support_maps_cosine_distances(ict_rig, ict_seg, ict_cache):
+    """The groups from the support's Gram matrix against scipy's own cosine distances (pdist) of its columns,
+    clustered the same way; and what a user sees of them on ICT: each brow's three shapes form one group, the
+    left and right brows two."""
+    from scipy.cluster.hierarchy import fcluster, linkage
+    from scipy.spatial.distance import pdist
+    support = ict_cache.support()
+    assert (np.linalg.norm(support, axis=0) > 0).all()   # ICT: every shape moves something
+    expected = fcluster(linkage(pdist(support.T, "cosine"), method="average"), 0.6, criterion="distance") - 1
+    groups = ict_cache.shape_groups()
+    assert np.array_equal(groups, expected)
+    assert not np.array_equal(groups, fcluster(linkage(pdist(support.T, "cosine"), method="average"), 0.4,
+                                               criterion="distance") - 1)   # the cut matters
+    g = {n: groups[k] for k, n in enumerate(ict_rig.shape_names)}
+    assert g["browDown_L"] == g["browOuterUp_L"] and g["browDown_R"] == g["browOuterUp_R"]
+    assert g["browDown_L"] != g["browDown_R"]
+    assert g["jawOpen"] != g["browDown_L"]
+
+
 def test_higher_t_gives_fewer_deforming_vertices(ict_cache):
     M = ict_cache.maps().combined
     counts = [(S.threshold_labels(M, ict_cache.adjacency, t)[0] >= 0).sum() for t in (0.25, 0.5, 0.75, 0.9)]
