@@ -83,7 +83,8 @@ class AutosaveController(QtCore.QObject):
         self.window.show_status(f"Autosave failed: {message}", 10000)
 
     def _remove(self) -> None:
-        self.runner.wait()
+        if self.runner.busy:      # a recovery file being written: let it finish first (it delivers by events)
+            self.runner.wait()
         if self._owner is not None:
             remove_recovery(*self._owner)
             self._owner = None

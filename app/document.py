@@ -15,6 +15,7 @@ from PySide6.QtGui import QUndoStack
 
 from model.pose import PoseEvaluator
 from model.project import Project, save_project
+from model import rig_prep
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,8 @@ class Document(QtCore.QObject):
         self.evaluator: PoseEvaluator | None = None   # float32, for display
         self.rig_version = 0   # bumped on every new rig and rig edit: what the float64 evaluator is keyed on
         self._evaluator64: tuple[int, PoseEvaluator] | None = None
+        self._shapes_version = 0   # bumped on every new rig and every edit of its shapes' deltas
+        self._reach: tuple[int, np.ndarray] | None = None   # (shapes version, the shapes' reach)
         self._surface: np.ndarray | None = None
         self.edit_offset: np.ndarray | None = None  # pending sculpt/nudge (V, 3), shown on top of the pose
         # Regional pose (Joshi §4): per-region weights of one segmentation level, or None for a global pose.
@@ -73,12 +76,17 @@ class Document(QtCore.QObject):
         self._mirror: np.ndarray | None = None   # the rig's vertex mirror map, computed on first use
 
     # --- whole document ----------------------------------------------------------------------------
-    def set_project(self, project: Project, path: str | Path | None) -> None:
-        """Replace the document (after a successful load: nothing is replaced on a failed one)."""
+    def set_project(self, project: Project, path: str | Path | None, prep: rig_prep.RigPrep | None = None) -> None:
+        """Replace the document (after a successful load: nothing is replaced on a failed one). ``prep``: the
+        rig's evaluator and reach, made off the GUI thread (``model.rig_prep``); made here when not given."""
         self.project = project
         self.path = Path(path) if path else None
-        self.evaluator = PoseEvaluator(project.rig)
+        if prep is None or not prep.is_for(project.rig):
+            prep = None
+        self.evaluator = prep.evaluator if prep is not None else PoseEvaluator(project.rig)
         self.rig_version += 1
+        self._shapes_version += 1
+        self._reach = (self._shapes_version, prep.reach) if prep is not None else None
         self._surface = None
         self._mirror = None
         self.edit_offset = None
@@ -203,6 +211,13 @@ class Document(QtCore.QObject):
             self._evaluator64 = (self.rig_version, PoseEvaluator(self.project.rig, dtype=np.float64))
         return self._evaluator64[1]
 
+    def shape_reach(self) -> np.ndarray:
+        """(V,) each vertex's largest displacement over the rig's shapes (``model.rig_prep.shape_reach``): where the
+        camera frames and how much a marker drag is damped; made once per rig and per edit of its shapes."""
+        if self._reach is None or self._reach[0] != self._shapes_version:
+            self._reach = (self._shapes_version, rig_prep.shape_reach(self.project.rig))
+        return self._reach[1]
+
     def evaluate_state(self, state: PoseState, dtype=np.float32) -> np.ndarray:
         """(V, 3) surface of any pose state (for export and playback), without touching the document."""
         ev = self.evaluator if dtype == np.float32 else self.evaluator64()
@@ -266,6 +281,7 @@ class Document(QtCore.QObject):
         self._collapsed = None
         self.evaluator = evaluator if evaluator is not None else PoseEvaluator(self.project.rig)
         self.rig_version += 1
+        self._shapes_version += 1
         self._surface = None
         self.shapes_changed.emit()
         self.pose_changed.emit()

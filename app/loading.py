@@ -8,6 +8,7 @@ from PySide6 import QtCore
 from model.errors import RigInputError
 from model.project import Project, load_project
 from model.readers import load_rig
+from model.rig_prep import prepare_rig
 
 
 def open_project_or_rig(path: str | Path, progress=None) -> Project:
@@ -48,10 +49,11 @@ def sort_dropped(paths) -> list[tuple[str, Path]]:
 
 
 class LoadWorker(QtCore.QThread):
-    """Loads in a thread; the GUI stays responsive and shows progress."""
+    """Loads in a thread, and prepares what the window derives from the rig (``model.rig_prep``); the GUI stays
+    responsive and shows progress."""
 
     progress = QtCore.Signal(int, int, str)
-    loaded = QtCore.Signal(object)   # Project
+    loaded = QtCore.Signal(object, object)   # Project, RigPrep of its rig
     failed = QtCore.Signal(str)
 
     def __init__(self, path: str | Path, parent=None) -> None:
@@ -61,6 +63,8 @@ class LoadWorker(QtCore.QThread):
     def run(self) -> None:
         try:
             project = open_project_or_rig(self.path, progress=lambda d, t, w: self.progress.emit(d, t, w))
+            self.progress.emit(0, 0, "the shapes")
+            prep = prepare_rig(project.rig)
         except RigInputError as exc:
             self.failed.emit(str(exc))
         except MemoryError:
@@ -68,4 +72,4 @@ class LoadWorker(QtCore.QThread):
         except Exception as exc:  # an unexpected failure still must not take the open rig down
             self.failed.emit(f"{self.path}: could not be opened ({type(exc).__name__}: {exc}).")
         else:
-            self.loaded.emit(project)
+            self.loaded.emit(project, prep)

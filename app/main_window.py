@@ -71,6 +71,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self.shortcuts_dialog: QtWidgets.QDialog | None = None   # Help ▸ Keyboard Shortcuts, once opened
         self.image_size_dialog: QtWidgets.QDialog | None = None  # File ▸ Export Image's size, while open
         self._worker: LoadWorker | None = None
+        self._shut_down = False   # the window is going: a load finishing now is dropped
         self._after_open: list = []   # what a drop opens once its rig is open (a take, a marker map)
         self.setAcceptDrops(True)     # files dropped on the window open (open_dropped)
         self._progress: QtWidgets.QProgressDialog | None = None
@@ -336,8 +337,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self.mocap.views_dock.hide()   # a fresh rig has no solve to show (a solve shows the dock again)
         self.shapes_panel.set_shapes(rig.shape_names, sorted(rig.presets))
         shown, colors = self.parts.view_for(rig)
-        self.viewport.set_surface(self.document.surface(), rig.face_counts, rig.face_indices,
-                                  focus=focus_vertices(rig.neutral, rig.deltas), shown_faces=shown, base_colors=colors)
+        focus = focus_vertices(rig.neutral, self.document.shape_reach())
+        self.viewport.set_surface(self.document.surface(), rig.face_counts, rig.face_indices, focus=focus,
+                                  shown_faces=shown, base_colors=colors)
         self._update_counts()
         self._update_title()
 
@@ -525,7 +527,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self._progress.setWindowModality(QtCore.Qt.WindowModal)
         self._worker = LoadWorker(path, self)
         self._worker.progress.connect(self._on_load_progress)
-        self._worker.loaded.connect(lambda project: self._on_loaded(project, path))
+        self._worker.loaded.connect(lambda project, prep: self._on_loaded(project, path, prep))
         self._worker.failed.connect(self._on_load_failed)
         self._worker.finished.connect(self._on_worker_finished)
         self.show_status(f"Opening {path}…", 0)
@@ -534,12 +536,14 @@ class MainWindow(QtWidgets.QMainWindow):
     def _on_load_progress(self, done: int, total: int, what: str) -> None:
         dialog = self._progress  # setValue on a modal dialog processes events: it may close meanwhile
         if dialog is not None:
-            dialog.setLabelText(f"Reading {what} ({done}/{total})")
+            dialog.setLabelText(f"Reading {what} ({done}/{total})" if total else f"Preparing {what}…")
             dialog.setMaximum(total)
             dialog.setValue(done)
 
-    def _on_loaded(self, project: Project, path: Path) -> None:
-        self.document.set_project(project, path if path.suffix.lower() == ".bsproj" else None)
+    def _on_loaded(self, project: Project, path: Path, prep=None) -> None:
+        if self._shut_down:      # delivered after the window closed (the loader finished while it did)
+            return
+        self.document.set_project(project, path if path.suffix.lower() == ".bsproj" else None, prep)
         app_settings.add_recent_file(str(path))
         self._rebuild_recent_menu()
         self.show_status(f"Opened {path}")
@@ -883,6 +887,7 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def shutdown_background(self) -> None:
         """Finish or stop every background job before the window goes: a thread must not outlive it."""
+        self._shut_down = True
         if self._worker is not None:
             self._worker.wait()
         self.segmentation.runner.shutdown()

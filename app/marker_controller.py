@@ -24,7 +24,7 @@ from model.errors import RigInputError
 from model.markers import DRAG_LAM_REG, Marker, MarkerSet
 from model.wording import count
 from solvers.correctives import linearised_correctives
-from solvers.damping import damping_gains, point_mobility
+from solvers.damping import damping_gains
 from solvers.regional_solve import RegionalSolver, shape_region_max
 from widgets.marker_overlay import MarkerOverlay
 from widgets.markers_panel import MarkersPanel
@@ -203,34 +203,50 @@ class MarkerController(QtCore.QObject):
 
     def _on_rig_change(self) -> None:
         rig = self.document.rig
-        self._gains = damping_gains(point_mobility(rig.deltas)) if rig.n_shapes else np.zeros(rig.n_vertices)
+        self._gains = None            # made on a drag's first use (``gains``): on a studio rig they cost a pass over
+        self._tri_of_vertex = None    # the shapes, and the triangles around each vertex only a click needs
         self._region_max.clear()
         self._triangles = rig.triangles()
-        T = self._triangles
-        self._tri_of_vertex = sp.csr_matrix((np.ones(T.size), (T.reshape(-1), np.repeat(np.arange(len(T)), 3))),
-                                            shape=(rig.n_vertices, len(T)))
         self._face_size = float(np.linalg.norm(np.ptp(rig.neutral, axis=0)))
         self.drag = None
         self._load_markers()
 
     def _on_shapes_change(self) -> None:
         """Shapes edited, same topology: the damping gains and the markers' shape rows change, the triangles stay."""
-        rig = self.document.rig
-        self._gains = damping_gains(point_mobility(rig.deltas)) if rig.n_shapes else np.zeros(rig.n_vertices)
+        self._gains = None
         self._region_max.clear()
         self.drag = None
         self._load_markers()
 
+    @property
+    def gains(self) -> np.ndarray:
+        """(V,) the drag's damping gain at each vertex (Joshi et al. 2003, §4: ``solvers.damping``), from the
+        shapes' reach; made on first use after each rig or shape change."""
+        if self._gains is None:
+            rig = self.document.rig
+            self._gains = damping_gains(self.document.shape_reach()) if rig.n_shapes else np.zeros(rig.n_vertices)
+        return self._gains
+
+    def _triangles_of(self, vertex: int) -> np.ndarray:
+        """The triangles (indices into ``rig.triangles()``) around ``vertex``; their incidence made on first use."""
+        if self._tri_of_vertex is None:
+            T = self._triangles
+            self._tri_of_vertex = sp.csr_matrix((np.ones(T.size), (T.reshape(-1), np.repeat(np.arange(len(T)), 3))),
+                                                shape=(self.document.rig.n_vertices, len(T)))
+        return self._tri_of_vertex[vertex].indices
+
     def _load_markers(self) -> None:
         data = self.document.section(SECTION)
         self.markers = None
+        # the rig's triangles and moving vertices, known here already (on a studio rig each is a pass over it)
+        known = dict(triangles=self._triangles, moving=np.flatnonzero(self.document.shape_reach() > 0))
         if data:
             try:
-                self.markers = MarkerSet.from_dict(data, self.document.rig, source="project")
+                self.markers = MarkerSet.from_dict(data, self.document.rig, source="project", **known)
             except RigInputError as exc:
                 self.message(f"The project's markers were not loaded: {exc}")
         if self.markers is None:
-            self.markers = MarkerSet.for_rig(self.document.rig, [])
+            self.markers = MarkerSet.for_rig(self.document.rig, [], **known)
         if self._selected is not None and self._selected >= len(self.markers):
             self._selected = None
         self.panel.set_markers(self.markers.names, self.markers.background)
@@ -300,7 +316,7 @@ class MarkerController(QtCore.QObject):
         (barycentric), or the vertex itself when the point is on it."""
         X = self.document.surface().astype(np.float64)
         p = np.asarray(point, dtype=np.float64)
-        tris = self._tri_of_vertex[vertex].indices
+        tris = self._triangles_of(vertex)
         best, best_bary, best_score = None, None, -np.inf
         for t in tris:
             a, b, c = X[self._triangles[t]]
@@ -417,7 +433,7 @@ class MarkerController(QtCore.QObject):
         if blend is not None and not (old.is_regional and same_blend(old.blend, blend)):
             doc.set_pose_state(PoseState(old.weights, W0, blend, level))  # same pose, now per region
         start = self.marker_positions()
-        gain = float(np.asarray(ms.S[index] @ self._gains).reshape(-1)[0])
+        gain = float(np.asarray(ms.S[index] @ self.gains).reshape(-1)[0])
         live = solver_correctives(rig)
         correctives = None if live is None else \
             (live[0], np.ascontiguousarray(ms.delta_rows(live[1]).T), np.asarray(live[2], np.intp))

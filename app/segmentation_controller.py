@@ -122,7 +122,12 @@ class SegmentationController(QtCore.QObject):
         self.panel.set_shapes(self.document.rig.shape_names)
         self.panel.set_units(self.document.rig.units)
         self.panel.set_settings(self.settings())
-        self.recompute(self.settings())
+        self.panel.set_status("segmenting…")
+        # Started once the window has taken the new rig in (the layout and paint events the change posted are
+        # handled before a zero timer fires): a segmentation running meanwhile made each of the hundreds of Python
+        # calls those events make wait for the interpreter, ~3 s more of a frozen window on a 422k-vertex rig
+        arrays = self._segmented
+        QtCore.QTimer.singleShot(0, self, lambda: self._segmented is arrays and self.recompute(self.settings()))
 
     # --- background work ---------------------------------------------------------------------------
     def recompute(self, settings: dict) -> None:

@@ -11,6 +11,7 @@ import numpy as np
 from model.errors import RigInputError
 from model.pose import PoseEvaluator
 from model.rig import Rig
+from model.rig_prep import shape_reach
 from widgets.scene import ColorMap, focus_vertices
 
 VIEWS = ("shaded", "deformation", "deformation-rgb", "segmentation")
@@ -29,7 +30,7 @@ def build_view(rig: Rig, weights: np.ndarray, view: str = "shaded", *, threshold
     if view not in VIEWS:
         raise RigInputError(f"Unknown view '{view}': use one of {', '.join(VIEWS)}.")
     points = PoseEvaluator(rig).evaluate(weights)
-    focus = focus_vertices(rig.neutral, rig.deltas)
+    focus = focus_vertices(rig.neutral, shape_reach(rig))
     if view == "shaded":
         return View(points, focus, None, "shaded")
     from app.map_views import map_colormap

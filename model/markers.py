@@ -135,11 +135,16 @@ class MarkerSet:
             seen[key] = m.name
 
     @classmethod
-    def for_rig(cls, rig: Rig, markers: list[Marker], source: str = "") -> "MarkerSet":
-        """A marker set on ``rig`` (triangles from ``rig.triangles()``, background from the shapes)."""
-        moving = (np.flatnonzero((rig.deltas.reshape(rig.n_shapes, -1) != 0).any(axis=0).reshape(-1, 3).any(axis=1))
-                  if rig.n_shapes else np.zeros(0, int))
-        return cls(markers, rig.n_vertices, rig.triangles(), moving=moving, source=source)
+    def for_rig(cls, rig: Rig, markers: list[Marker], source: str = "", *, triangles: np.ndarray | None = None,
+                moving: np.ndarray | None = None) -> "MarkerSet":
+        """A marker set on ``rig`` (triangles from ``rig.triangles()``, background from the shapes). ``triangles``
+        and ``moving`` (the vertices some shape moves) when the caller has them already: on a studio rig the
+        search for the moving vertices is a pass over every shape's deltas."""
+        if moving is None:
+            moving = (np.flatnonzero((rig.deltas.reshape(rig.n_shapes, -1) != 0).any(axis=0).reshape(-1, 3).any(axis=1))
+                      if rig.n_shapes else np.zeros(0, int))
+        return cls(markers, rig.n_vertices, rig.triangles() if triangles is None else triangles, moving=moving,
+                   source=source)
 
     # --- sizes and lookups -----------------------------------------------------------------------
     def __len__(self) -> int:
@@ -200,10 +205,13 @@ class MarkerSet:
         return {"markers": [m.to_dict() for m in self.markers]}
 
     @classmethod
-    def from_dict(cls, d: dict, rig: Rig, source: str = "") -> "MarkerSet":
+    def from_dict(cls, d: dict, rig: Rig, source: str = "", *, triangles: np.ndarray | None = None,
+                  moving: np.ndarray | None = None) -> "MarkerSet":
+        """The markers of a project's section on ``rig`` (``triangles``, ``moving``: as ``for_rig``)."""
         if not isinstance(d, dict) or not isinstance(d.get("markers"), list):
             raise RigInputError(f"{source or 'project'}: the markers entry must be a list of markers.")
-        return cls.for_rig(rig, [Marker.from_dict(m) for m in d["markers"]], source=source)
+        return cls.for_rig(rig, [Marker.from_dict(m) for m in d["markers"]], source=source, triangles=triangles,
+                           moving=moving)
 
 
 # --- marker map JSON (polygon + per-corner bary in the file, triangle + bary here) ----------------

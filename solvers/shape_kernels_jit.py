@@ -34,11 +34,12 @@ except ImportError:                         # the callers keep their numpy and s
     njit = None
 
 
-def shape_maps(indptr, indices, data, d, lap, disp):
+def shape_maps(indptr, indices, data, d, lap, disp, v0, v1):
     """``lap[v] = ‖Σ_j L[v, j] d[j]‖`` over row v of the CSR Laplacian (``indptr``, ``indices``, ``data``) and
-    ``disp[v] = ‖d[v]‖`` for the (V, 3) deltas ``d``; ``lap`` and ``disp`` (V,) are written in place. Returns V."""
-    V = lap.shape[0]
-    for v in range(V):
+    ``disp[v] = ‖d[v]‖`` for the (V, 3) deltas ``d``, for the rows v0 <= v < v1; ``lap`` and ``disp`` (V,) are
+    written in place. Returns the number of rows. (A compiled call holds Python's lock: the callers go through a
+    large rig a block of rows at a time, so that a window stays responsive while it runs in the background.)"""
+    for v in range(v0, v1):
         x = 0.0
         y = 0.0
         z = 0.0
@@ -53,16 +54,15 @@ def shape_maps(indptr, indices, data, d, lap, disp):
         y = d[v, 1]
         z = d[v, 2]
         disp[v] = math.sqrt((x * x + z * z) + y * y)
-    return V
+    return v1 - v0
 
 
-def shape_maps4(indptr, indices, data, d, lap, disp):
+def shape_maps4(indptr, indices, data, d, lap, disp, v0, v1):
     """``shape_maps`` of four shapes in one pass over the Laplacian: ``d`` (4, V, 3) their deltas, ``lap`` and
-    ``disp`` (4, V) written in place. Each row's entries are read once for the four (a Laplacian read 57 times
-    for ICT's shapes is then read 15 times), each shape's sums in the same order as ``shape_maps``'s, so the
-    maps are the same to the last bit. Returns V."""
-    V = lap.shape[1]
-    for v in range(V):
+    ``disp`` (4, V) written in place, rows v0 <= v < v1. Each row's entries are read once for the four (a
+    Laplacian read 57 times for ICT's shapes is then read 15 times), each shape's sums in the same order as
+    ``shape_maps``'s, so the maps are the same to the last bit. Returns the number of rows."""
+    for v in range(v0, v1):
         x0 = y0 = z0 = x1 = y1 = z1 = x2 = y2 = z2 = x3 = y3 = z3 = 0.0
         for jj in range(indptr[v], indptr[v + 1]):
             a = data[jj]
@@ -88,7 +88,7 @@ def shape_maps4(indptr, indices, data, d, lap, disp):
             y = d[k, v, 1]
             z = d[k, v, 2]
             disp[k, v] = math.sqrt((x * x + z * z) + y * y)
-    return V
+    return v1 - v0
 
 
 def antagonist_sums(D, n2, active, shared, dots, sq):

@@ -37,8 +37,8 @@ _SIGNATURE = ("i8(f8[:,:,::1], i8[::1], f8[::1], f8[:,::1], f8[::1], f8[:,::1], 
               "f8[:,:,::1], f8, f8[::1], i8[::1], f8, i8, f8, f8, f8, f8, i8, f8[:,::1], f8[:,:,::1], f8[:,::1], "
               "b1[::1], b1)")
 _PARSE_SIGNATURE = "i8(u1[::1], f8[:,::1], i8[:,::1], i8[::1])"   # decimal_kernel_jit.parse_vertex_lines
-_MAPS_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,::1], f8[::1], f8[::1])"   # shape_kernels_jit.shape_maps
-_MAPS4_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,:,::1], f8[:,::1], f8[:,::1])"   # .shape_maps4
+_MAPS_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,::1], f8[::1], f8[::1], i8, i8)"   # shape_kernels_jit.shape_maps
+_MAPS4_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,:,::1], f8[:,::1], f8[:,::1], i8, i8)"   # .shape_maps4
 _PAIRS_SIGNATURE = "i8(f8[:,:,::1], f8[:,::1], b1[:,::1], f8[:,::1], f8[:,::1], f8[:,::1])"   # .antagonist_sums
 _QP_SIGNATURE = "i8(f8[:,::1], f8[::1], f8[::1], f8, f8, f8, i8)"   # take_kernel_jit.box_qp_fresh
 _impl = None           # the loaded kernel: the extension module, or take_kernel_jit

@@ -125,6 +125,40 @@ def test_open_obj_folder_in_background(qtbot, tmp_path):
     assert w.viewport.points().shape == (36, 3)
 
 
+def test_opening_a_rig_leaves_its_passes_over_the_shapes_to_the_loader_thread(qtbot, tmp_path, ict_dir, monkeypatch):
+    """The passes over every shape's deltas (the display evaluator's gather, the shapes' reach that frames the camera
+    and damps marker drags) run in the loader's thread, not the GUI thread: on a 228-shape, 422k-vertex rig they
+    froze the window for seconds after its progress dialog closed. And the segmentation starts only once the
+    window has taken the new rig in."""
+    import threading
+
+    import model.pose
+    import model.rig_prep
+    import app.segmentation_controller as seg_ctl
+    w = make_window(qtbot, tmp_path)
+    calls = []
+    for module, name in ((model.pose.PoseEvaluator, "__init__"), (model.rig_prep, "shape_reach"),
+                         (seg_ctl, "segment_rig")):
+        real = getattr(module, name)
+
+        def spy(*args, _real=real, _name=name, **kwargs):
+            calls.append((_name, threading.current_thread() is threading.main_thread(), w.is_loading))
+            return _real(*args, **kwargs)
+        monkeypatch.setattr(module, name, spy)
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=60000)
+    made = [c for c in calls if c[0] in ("__init__", "shape_reach")]
+    assert ("__init__", False, True) in made and ("shape_reach", False, True) in made   # in the loader, once each
+    assert [c for c in made if c[1]] == [], f"made on the GUI thread: {made}"
+    segmented = [c for c in calls if c[0] == "segment_rig"]
+    assert segmented == [("segment_rig", False, False)]   # one job, after the load had been taken in
+    # what they made is what the window uses: the camera framed on the face, the drag gains from the same reach
+    reach = w.document.shape_reach()
+    assert reach.shape == (26719,) and reach.max() > 0
+    assert np.array_equal(w.markers.gains, np.clip(reach / np.median(reach[reach > 0]), 0.05, 1.5))
+    assert [c for c in calls if c[0] == "shape_reach"] == [("shape_reach", False, True)]   # not again
+
+
 def test_every_shortcut_is_unambiguous_and_listed(qtbot, tmp_path):
     """Qt ignores a key bound to two actions ("ambiguous shortcut"): each key does one thing, and F1 lists it."""
     from PySide6 import QtGui

@@ -115,7 +115,7 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
     # Smooth shading comes from the mesh's own "Normals" (rig_mesh/SurfaceArrays), not VTK's filter.
     kwargs = dict(smooth_shading=False, interpolation="gouraud", name=name, show_edges=wireframe, edge_color=EDGE_COLOR,
                   line_width=EDGE_WIDTH, specular=specular, specular_power=SPECULAR_POWER, diffuse=DIFFUSE,
-                  ambient=AMBIENT, reset_camera=False)
+                  ambient=AMBIENT, reset_camera=False, render=False)   # the caller renders, once
     if colormap is None and base_colors is not None and len(base_colors) == mesh.n_points:
         colormap = ColorMap(base_colors, rgb=True)
     if colormap is None:
@@ -521,16 +521,17 @@ def camera_placement(name: str, focus_points: np.ndarray, size: tuple[int, int],
     return center, center + d * dist, true_up
 
 
-def focus_vertices(neutral: np.ndarray, deltas: np.ndarray) -> np.ndarray:
-    """The points a camera should frame: where the shapes act (the face), else all vertices.
+def focus_vertices(neutral: np.ndarray, reach: np.ndarray) -> np.ndarray:
+    """The points a camera should frame: where the shapes act (the face), else all vertices. ``reach`` (V,): each
+    vertex's largest displacement over the shapes (``model.rig_prep.shape_reach``).
 
     A vertex counts when some shape moves it by at least a tenth of what the shapes typically move the most
     (the 99th percentile of each vertex's largest displacement): on ICT FaceKit a few shapes drag the scalp
     and neck by a fraction of a millimetre, and framing every vertex that moves at all showed a small head
     and shoulders instead of the face. Interior parts that move (teeth, tongue) lie inside the face's box.
     """
-    if deltas.size:
-        reach = np.sqrt((np.asarray(deltas, dtype=np.float64) ** 2).sum(axis=2)).max(axis=0)   # (V,)
+    reach = np.asarray(reach, dtype=np.float64)
+    if reach.size:
         moving = reach > 1e-6 * max(1.0, float(np.abs(neutral).max()))
         if moving.sum() >= 3:
             acts = reach >= 0.1 * float(np.percentile(reach[moving], 99))

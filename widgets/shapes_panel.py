@@ -53,12 +53,21 @@ class _UndoShortcutFilter(QtCore.QObject):
 class _NumberBox(_WheelOnlyWhenFocused, QtWidgets.QDoubleSpinBox):
     _undo_filter: _UndoShortcutFilter | None = None
 
-    def __init__(self) -> None:
-        super().__init__()
+    def focusInEvent(self, event) -> None:  # Qt override
+        # The undo filter only while the box has the focus (the shortcuts go to the focus widget): on every box
+        # all the time it ran Python for every event of hundreds of boxes (a 228-shape rig's rows being laid out),
+        # each call waiting for the interpreter while a background job ran
         if _NumberBox._undo_filter is None:
             _NumberBox._undo_filter = _UndoShortcutFilter()
         self.installEventFilter(_NumberBox._undo_filter)            # the box has the focus, or
         self.lineEdit().installEventFilter(_NumberBox._undo_filter)  # its line edit does
+        super().focusInEvent(event)
+
+    def focusOutEvent(self, event) -> None:  # Qt override
+        if _NumberBox._undo_filter is not None:
+            self.removeEventFilter(_NumberBox._undo_filter)
+            self.lineEdit().removeEventFilter(_NumberBox._undo_filter)
+        super().focusOutEvent(event)
 
 
 class _ShapeRow(QtWidgets.QWidget):

@@ -1,0 +1,42 @@
+"""What the window derives from a rig it opens before it can show and pose it, computed with the load, off the GUI
+thread (``app.loading.LoadWorker``): on a studio-scale rig these are passes over every shape's deltas (228 shapes x
+106k vertices: 3 s; 422k vertices: four times that), and on the GUI thread they froze the window after the progress
+dialog had closed.
+
+- the display pose evaluator (``model.pose.PoseEvaluator``, float32: the deltas of the vertices that move, gathered);
+- the shapes' reach: each vertex's largest displacement over the shapes, ``max_k ‖d_k(v)‖`` (Joshi et al. 2003, §4:
+  the point mobility of ``solvers.damping``), which frames the camera on where the shapes act
+  (``widgets.scene.focus_vertices``) and damps marker drags (``solvers.damping.damping_gains``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from solvers.damping import point_mobility
+
+from .pose import PoseEvaluator
+from .rig import Rig
+
+
+@dataclass
+class RigPrep:
+    """``prepare_rig``'s results for ``rig`` (the same object: a preparation is used only for the rig it was made
+    from, as it was when made)."""
+    rig: Rig
+    evaluator: PoseEvaluator
+    reach: np.ndarray          # (V,) max_k ‖d_k(v)‖, zeros for a rig without shapes
+
+    def is_for(self, rig: Rig) -> bool:
+        return self.rig is rig
+
+
+def shape_reach(rig: Rig) -> np.ndarray:
+    """(V,) each vertex's largest displacement over the rig's shapes (``solvers.damping.point_mobility``)."""
+    return point_mobility(rig.deltas) if rig.n_shapes else np.zeros(rig.n_vertices)
+
+
+def prepare_rig(rig: Rig) -> RigPrep:
+    """The display evaluator and the shapes' reach of ``rig`` (seconds on a studio rig: call it off the GUI thread)."""
+    return RigPrep(rig=rig, evaluator=PoseEvaluator(rig), reach=shape_reach(rig))
