@@ -1,10 +1,11 @@
 """Run heavy work off the GUI thread and deliver the result back on it."""
 from __future__ import annotations
 
+import threading
 import traceback
 from typing import Any, Callable
 
-from PySide6 import QtCore
+from PySide6 import QtCore, QtWidgets
 
 from model.errors import RigInputError
 
@@ -131,3 +132,40 @@ class JobQueue(QtCore.QObject):
         """Let the running and queued jobs finish (a file being written is completed) and deliver nothing more."""
         self._closed = True
         self.pool.waitForDone()
+
+
+def run_modal(parent: QtWidgets.QWidget, title: str, label: str, fn: Callable[[], Any], *, show_after_ms: int = 200):
+    """``fn()`` on a worker thread while the window stays drawn but takes no input, as a modal save does; a busy
+    progress dialog shows after ``show_after_ms``. Returns what ``fn`` returned, or raises what it raised.
+
+    The window's events (paints, timers, background results) go on meanwhile; mouse and key input waits until
+    ``fn`` is done (``QEventLoop.ExcludeUserInputEvents``), so nothing can change what ``fn`` reads or writes."""
+    out: dict[str, Any] = {}
+
+    def work() -> None:
+        try:
+            out["value"] = fn()
+        except BaseException as exc:  # handed to the caller on the GUI thread
+            out["error"] = exc
+
+    thread = threading.Thread(target=work, name=title, daemon=True)
+    dialog = QtWidgets.QProgressDialog(label, None, 0, 0, parent)   # 0..0: a busy indicator, no Cancel
+    dialog.setWindowTitle(title)
+    dialog.setWindowModality(QtCore.Qt.WindowModal)
+    dialog.setMinimumDuration(show_after_ms)
+    loop = QtCore.QEventLoop()
+    timer = QtCore.QTimer()
+    timer.setInterval(15)
+    timer.timeout.connect(lambda: thread.is_alive() or loop.quit())
+    thread.start()
+    timer.start()
+    if thread.is_alive():
+        loop.exec(QtCore.QEventLoop.ExcludeUserInputEvents)
+    timer.stop()
+    thread.join()
+    dialog.reset()      # stops its show-after timer too
+    dialog.close()
+    dialog.deleteLater()
+    if "error" in out:
+        raise out["error"]
+    return out.get("value")

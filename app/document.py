@@ -100,11 +100,16 @@ class Document(QtCore.QObject):
         self.path_changed.emit()
         self.pose_changed.emit()
 
-    def save(self, path: str | Path) -> None:
+    def save(self, path: str | Path, write=None) -> None:
+        """Write the project to ``path``; ``write(callable)`` runs the writing (the window runs it off the GUI thread
+        with its input held, ``app.background.run_modal``), else it runs here. The document is then saved there."""
         assert self.project is not None
         p = self.project
         p.region_weights, p.region_blend, p.region_level = self.region_weights, self.region_blend, self.region_level
-        save_project(p, path)
+        if write is None:
+            save_project(p, path)
+        else:
+            write(lambda: save_project(p, path))
         self.path = Path(path)
         self.undo_stack.setClean()
         self.path_changed.emit()

@@ -14,7 +14,7 @@ from app import batch_controller, corrective_controller, mocap_controller, perso
 from app import session_state
 from app import settings as app_settings
 from app.autosave import AutosaveController
-from app.background import JobQueue
+from app.background import JobQueue, run_modal
 from app.commands import SetWeightsCommand
 from app.document import Document
 from app.export_controller import ExportController
@@ -641,8 +641,8 @@ class MainWindow(QtWidgets.QMainWindow):
 
     def save_to(self, path: str | Path) -> bool:
         session_state.store(self)   # the view, the take and the marker map come back with the project
-        try:
-            self.document.save(path)
+        try:   # off the GUI thread, the window drawn but holding input (a studio rig's project takes seconds)
+            self.document.save(path, write=lambda fn: run_modal(self, "Saving", f"Saving {Path(path).name}…", fn))
         except OSError as exc:
             self.show_error("Could not save", f"{path}: could not be written ({exc.strerror or exc}).")
             return False

@@ -86,6 +86,37 @@ def test_save_and_reopen_project(qtbot, tmp_path):
     assert str(path) in [a.text() for a in w.recent_menu.actions()][0]
 
 
+def test_save_writes_off_the_gui_thread_and_the_window_keeps_drawing(qtbot, tmp_path, monkeypatch):
+    """A studio rig's project takes seconds to write: the writing runs off the GUI thread while the window goes on
+    drawing and running its timers, and save_to returns once the file is whole."""
+    import threading
+    import time
+
+    import app.document
+    from model.project import load_project
+    w = make_window(qtbot, tmp_path)
+    real, seen = app.document.save_project, {}
+
+    def slow(project, path):
+        seen["gui thread"] = threading.current_thread() is threading.main_thread()
+        time.sleep(0.6)
+        real(project, path)
+    monkeypatch.setattr(app.document, "save_project", slow)
+    w.set_pose(np.full(w.document.rig.n_shapes, 0.25), "pose")
+    ticks = []
+    timer = QtCore.QTimer()
+    timer.setInterval(20)
+    timer.timeout.connect(lambda: ticks.append(1))
+    timer.start()
+    path = tmp_path / "saved.bsproj"
+    assert w.save_to(path)
+    timer.stop()
+    assert seen == {"gui thread": False}
+    assert len(ticks) >= 10, f"{len(ticks)} timer ticks during a 0.6 s write"
+    assert not w.document.is_modified and w.document.path == path
+    np.testing.assert_array_equal(load_project(path).weights, w.document.weights)
+
+
 def test_lengths_show_the_rigs_units(qtbot, tmp_path):
     """Brush radius, nudge step and RBF kernel length are in rig units: each box says which."""
     w = make_window(qtbot, tmp_path)
