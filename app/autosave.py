@@ -11,15 +11,14 @@ are model.recovery's.
 """
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 
 from PySide6 import QtCore, QtWidgets
 
 from app import settings as app_settings
 from app.background import BackgroundRunner
-from model.recovery import (Recovery, describe_owner, find_recoveries, load_recovery, release_lock, remove_recovery,
-                            take_lock, write_recovery)
+from model.recovery import (Recovery, describe_owner, find_recoveries, load_recovery, recovery_snapshot, release_lock,
+                            remove_recovery, take_lock, write_recovery)
 
 DEFAULT_INTERVAL_S = 120
 DEFAULT_IDLE_S = 10
@@ -67,7 +66,7 @@ class AutosaveController(QtCore.QObject):
         if doc.project is None or not self._dirty or not doc.is_modified or self.runner.busy:
             return
         self._dirty = False
-        snapshot = copy.deepcopy(doc.project)
+        snapshot = recovery_snapshot(doc.project)   # the rig's large arrays shared, not copied
         snapshot.region_weights, snapshot.region_blend, snapshot.region_level = \
             doc.region_weights, doc.region_blend, doc.region_level
         path = doc.path if doc.path is not None and doc.path.suffix.lower() == ".bsproj" else None

@@ -11,7 +11,7 @@ import pytest
 
 from model.project import Project, save_project
 from model.recovery import (describe_owner, find_recoveries, load_recovery, lock_owner, lock_path, recovery_path,
-                            release_lock, remove_recovery, take_lock, write_recovery)
+                            recovery_snapshot, release_lock, remove_recovery, take_lock, write_recovery)
 
 
 @pytest.fixture(autouse=True)
@@ -33,6 +33,28 @@ def test_autosave_beside_a_project_restores_the_edits(tmp_path, sample_rig):
     assert np.array_equal(restored.rig.deltas, sample_rig.deltas)
     remove_recovery(path)
     assert find_recoveries(path) == []
+
+
+def test_the_autosave_snapshot_shares_the_rigs_arrays_and_keeps_the_state_it_was_taken_in(tmp_path, sample_rig):
+    """The autosave writes a snapshot off the GUI thread while editing goes on: the rig's large arrays are shared (a
+    studio rig's deltas are not copied on the GUI thread), everything else is copied, and the edits made after it (which
+    replace the rig's arrays, as the undo commands do, and change the pose and sections in place) do not reach it."""
+    project = Project(rig=sample_rig.copy(), sections={"markers": {"markers": [{"name": "M00", "vertex": 3}]}})
+    before = project.rig.deltas.copy()
+    snap = recovery_snapshot(project)
+    assert snap.rig.deltas is project.rig.deltas and snap.rig.neutral is project.rig.neutral
+    assert snap.rig is not project.rig and snap.weights is not project.weights and snap.sections is not project.sections
+    edited = project.rig.deltas.copy()                # an edit, as SetShapeDeltaCommand makes it: a new array
+    edited[0] += 1.0
+    project.rig.deltas = edited
+    project.rig.shape_names[0] = "renamed"
+    project.weights[2] = 0.9
+    project.sections["markers"]["markers"][0]["vertex"] = 7
+    path = tmp_path / "face.bsproj"
+    write_recovery(snap, path)
+    restored = load_recovery(find_recoveries(path)[0])
+    assert np.array_equal(restored.rig.deltas, before) and restored.rig.shape_names[0] == sample_rig.shape_names[0]
+    assert restored.weights[2] == 0.0 and restored.sections["markers"]["markers"][0]["vertex"] == 3
 
 
 def test_autosave_of_a_rig_never_saved_goes_to_the_data_folder(tmp_path, sample_rig):
