@@ -81,7 +81,7 @@ class Document(QtCore.QObject):
         rig's evaluator and reach, made off the GUI thread (``model.rig_prep``); made here when not given."""
         self.project = project
         self.path = Path(path) if path else None
-        if prep is None or not prep.is_for(project.rig):
+        if prep is not None and not prep.is_for(project.rig):
             prep = None
         self.evaluator = prep.evaluator if prep is not None else PoseEvaluator(project.rig)
         self.rig_version += 1

@@ -33,8 +33,9 @@ class RigPrep:
 
 
 def shape_reach(rig: Rig) -> np.ndarray:
-    """(V,) each vertex's largest displacement over the rig's shapes (``solvers.damping.point_mobility``)."""
-    return point_mobility(rig.deltas) if rig.n_shapes else np.zeros(rig.n_vertices)
+    """(V,) each vertex's largest displacement over the rig's shapes (``solvers.damping.point_mobility``; zeros
+    for a rig without shapes, whose deltas are (0, V, 3))."""
+    return point_mobility(rig.deltas)
 
 
 def prepare_rig(rig: Rig) -> RigPrep:
