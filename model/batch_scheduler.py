@@ -1,11 +1,14 @@
 """A local cluster's Dask scheduler in a process of its own, forked from the batch's fork server.
 
-Why: a scheduler with its dashboard imports bokeh and Dask's dashboard (~0.4 s of CPU, measured on the 2-core
-development machine); inside the ``batch`` command that import was the longest step of the cluster's start, on the
-command's own core, after it had loaded the rig. The fork server (``model.fork_server``) imports it on the other
-core while the command starts (it and ``distributed.dashboard.scheduler`` are among its ``WORKER_MODULES``), so the
-scheduler forked from it is up in a few milliseconds. Used by ``model.batch.start_client`` where the fork server
-runs; elsewhere (no fork server) the scheduler runs in the command's process as Dask's ``LocalCluster`` runs it.
+Why: the scheduler is up in a few milliseconds when it is forked from a process that has imported Dask
+(``model.fork_server``), where the ``batch`` command would otherwise import it, and start it, on its own core after
+it has loaded the rig. Used by ``model.batch.start_client`` where the fork server runs; elsewhere (no fork server)
+the scheduler runs in the command's process as Dask's ``LocalCluster`` runs it.
+
+Its dashboard is built when it is first opened (``serve_dashboard_on_demand``): Dask's dashboard imports bokeh
+(~0.6 s of CPU on the 2-core development machine), which the fork server imported before any worker could be
+forked from it; a batch on 2 workers waited that long for its first take (issue 21). The link is the same, and the
+page answers once built.
 
 ``ForkedScheduler`` is a ``distributed.deploy.spec.ProcessInterface`` (Dask's interface for a cluster's scheduler or
 worker started some other way: ``SSHCluster`` uses it), so ``distributed.SpecCluster`` starts, watches and closes it
@@ -48,6 +51,11 @@ def _serve(conn, options: dict, config: dict, log_level: int) -> None:
     _name_process(PROCESS_NAME)
     dask.config.update(dask.config.config, config, priority="new")
 
+    import importlib.util
+    on_demand = bool(options.get("dashboard")) and importlib.util.find_spec("bokeh") is not None
+    if on_demand:            # its HTTP server still listens on the dashboard's address: only the pages wait
+        options = {**options, "dashboard": False}
+
     async def main() -> None:
         loop = asyncio.get_running_loop()
         try:
@@ -55,6 +63,8 @@ def _serve(conn, options: dict, config: dict, log_level: int) -> None:
         except Exception as exc:                        # e.g. the dashboard's port is taken and cannot move
             conn.send((None, f"{type(exc).__name__}: {exc}"))
             return
+        if on_demand:
+            serve_dashboard_on_demand(scheduler, options.get("http_prefix") or "/")
         conn.send((scheduler.address, None))
         closing = []
 
@@ -67,6 +77,30 @@ def _serve(conn, options: dict, config: dict, log_level: int) -> None:
 
     with silence_logging_cmgr(level=log_level), silence_logging_cmgr(level=log_level, root="bokeh"):
         asyncio.run(main())
+
+
+def serve_dashboard_on_demand(scheduler, prefix: str = "/") -> None:
+    """Build ``scheduler``'s Dask dashboard on the first request for a page its HTTP server does not otherwise
+    serve, then send the browser to the same address again, which the dashboard now answers (Dask's
+    ``distributed.dashboard.scheduler.connect``, as ``Scheduler(dashboard=True)`` calls it at its start). The
+    scheduler's own routes (health, metrics, the JSON API) answer from the start. ``scheduler`` was made with
+    ``dashboard=False`` and a dashboard address, so that its HTTP server listens there."""
+    from tornado import web
+
+    server = scheduler.http_application
+
+    class BuildDashboard(web.RequestHandler):
+        def get(self, *_) -> None:
+            if on_demand in server.applications:     # the first request: build it (two requests may both land here)
+                server.applications.remove(on_demand)
+                import distributed.dashboard.scheduler
+                distributed.dashboard.scheduler.connect(server, scheduler.http_server, scheduler, prefix=prefix)
+            self.redirect(self.request.uri)
+
+        head = get
+
+    on_demand = web.Application([(r".*", BuildDashboard)])
+    server.add_application(on_demand)      # asked after the scheduler's own routes, as the dashboard would be
 
 
 class ForkedScheduler(ProcessInterface):

@@ -12,12 +12,12 @@ import os
 # (``model.scipy_import``), then Dask, the solve and its exports, and what a take imports on
 # first use (the take readers, the weights CSV, the antagonist pairs, the temporal smoothing's scipy.ndimage,
 # threadpoolctl), which would otherwise cost every worker's first take ~0.1 s; last the local cluster's scheduler
-# (``model.batch_scheduler``, forked from here too) and its dashboard (bokeh, ~0.4 s: off the command's own path), and
-# numpy.ma, which np.unique loads on its first call in a take (~20 ms).
+# (``model.batch_scheduler``, forked from here too; not its dashboard, which it builds when first opened: bokeh's
+# ~0.6 s of imports here made every batch wait for them), and numpy.ma, which np.unique loads on its first call in a
+# take (~20 ms).
 WORKER_MODULES = ("model.batch_env", "model.scipy_import", "distributed", "model.batch", "model.take_workspace",
                   "model.take_exports", "solvers.take_kernel", "model.take_c3d", "model.livelink", "model.weights_csv",
-                  "model.antagonists", "scipy.ndimage", "threadpoolctl", "model.batch_scheduler",
-                  "distributed.dashboard.scheduler", "numpy.ma")
+                  "model.antagonists", "scipy.ndimage", "threadpoolctl", "model.batch_scheduler", "numpy.ma")
 _FORK_SERVER_HASH_SEED = "6640"         # a nanny's choice when none is set, so that every worker hashes alike
 
 

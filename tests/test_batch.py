@@ -486,7 +486,7 @@ def _numpy_asks_for_huge_pages() -> bool:
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
 def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collection():
-    """The local cluster's workers come from the fork server with everything it imported frozen for the garbage
+    """(And the local cluster's dashboard answers.) The local cluster's workers come from the fork server with everything it imported frozen for the garbage
     collector (``model.batch_preloaded``): a full collection in a worker walks only what the worker made itself, not
     the ~220,000 objects of Dask, numpy, VTK and the solver (85-180 ms with the GIL held, taken from a take)."""
     import gc
@@ -501,6 +501,7 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
             frozen = client.run(gc.get_freeze_count)
             walked = client.run(lambda: len(gc.get_objects()))
             huge_pages = client.run(_numpy_asks_for_huge_pages)
+            dashboard = _fetch_dashboard(client.dashboard_link)
         finally:
             client.close()
             cluster.close()
@@ -511,6 +512,26 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
     for worker, n in frozen.items():
         assert n > 50_000, f"{worker}: only {n} objects frozen"    # Dask, numpy, scipy, the solver (no VTK here)
         assert walked[worker] < n / 2, f"{worker}: a full collection still walks {walked[worker]} objects"
+    # the dashboard link answers with Dask's status page, built when first asked for (``model.batch_scheduler``:
+    # bokeh is not imported before the workers can start); the scheduler's own routes answer as before
+    health, status, workers = dashboard
+    assert health == (200, "ok")
+    assert status[0] == 200 and status[1].endswith("/status") and "bokeh" in status[2] and "Dask" in status[2]
+    assert workers[0] == 200 and workers[2].count("tcp://127.0.0.1:") >= 2
+
+
+def _fetch_dashboard(link: str):
+    """(code, text) of the scheduler's /health, then (code, final address, page) of the dashboard's link and of its
+    workers page: what a browser opening the printed link gets."""
+    import urllib.request
+    root = link.rsplit("/", 1)[0]
+    with urllib.request.urlopen(root + "/health", timeout=60) as r:
+        health = (r.status, r.read().decode())
+    pages = []
+    for address in (link, root + "/info/main/workers.html"):
+        with urllib.request.urlopen(address, timeout=60) as r:
+            pages.append((r.status, r.geturl(), r.read().decode(errors="replace")))
+    return health, *pages
 
 
 def test_the_longest_takes_are_solved_first_and_the_summary_keeps_the_given_order(tmp_path, ict_rig, take_dir):
