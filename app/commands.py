@@ -80,7 +80,7 @@ class AddShapeCommand(QUndoCommand):
         if self.takes_offset:
             doc.edit_offset = None
         evaluator, self.evaluator = self.evaluator, None   # only for the first redo: later ones rebuild
-        doc.rig_edited(evaluator)
+        doc.rig_edited(evaluator, shape_rows=[*range(rig.n_shapes - 1), -1])
 
     def undo(self) -> None:
         doc = self.document
@@ -93,7 +93,7 @@ class AddShapeCommand(QUndoCommand):
             doc.region_weights = np.delete(doc.region_weights, k, axis=1)
         if self.takes_offset:
             self.document.edit_offset = self.offset
-        self.document.rig_edited()
+        self.document.rig_edited(shape_rows=[i for i in range(rig.n_shapes + 1) if i != k])
 
 
 class SetShapeDeltaCommand(QUndoCommand):
@@ -109,9 +109,12 @@ class SetShapeDeltaCommand(QUndoCommand):
     def _set(self, delta: np.ndarray) -> None:
         rig = self.document.rig
         deltas = rig.deltas.copy()   # a new array: whatever kept the old one (an evaluator, a cache) keeps it whole
-        deltas[rig.shape_names.index(self.name)] = delta
+        k = rig.shape_names.index(self.name)
+        deltas[k] = delta
         rig.deltas = deltas
-        self.document.rig_edited()
+        rows = np.arange(rig.n_shapes)
+        rows[k] = -1                 # the evaluator's other rows are kept
+        self.document.rig_edited(shape_rows=rows)
 
     def redo(self) -> None:
         self._set(self.new)
@@ -132,13 +135,16 @@ class _ShapeListCommand(QUndoCommand):
     def _edit(self, fn, *args):
         doc = self.document
         p = doc.project
+        before = {n: i for i, n in enumerate(p.rig.shape_names)}
         # the document holds the live regional pose; the project gets all of it, as Document.save does
         p.region_weights, p.region_blend, p.region_level = doc.region_weights, doc.region_blend, doc.region_level
         try:
             result = fn(p, *args)
         finally:
             doc.region_weights = p.region_weights
-        doc.rig_edited()
+        # these edits move, remove or add whole shapes and never change a kept shape's deltas: each shape's are those
+        # of the shape of its name before (-1: a new one; a rename keeps the very arrays, which the evaluator sees)
+        doc.rig_edited(shape_rows=[before.get(n, -1) for n in p.rig.shape_names])
         doc.section_changed.emit("keyframes")
         return result
 

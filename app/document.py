@@ -271,22 +271,39 @@ class Document(QtCore.QObject):
     def shape_settings_edited(self) -> None:
         """The shapes' mute, solo, ranges or in-betweens changed (names and deltas did not): a new evaluator,
         reusing the old one's matrices when the in-betweens are the same, and a new pose."""
-        self.evaluator = self.evaluator.with_settings(self.project.rig)
-        self.rig_version += 1
+        self._edited_evaluators()
         self._surface = None
         self.shape_settings_changed.emit()
         self.pose_changed.emit()
 
-    def rig_edited(self, evaluator: PoseEvaluator | None = None) -> None:
-        """Shapes or correctives changed in place (same topology): rebuild the evaluator (or take ``evaluator``,
-        one built off the GUI thread for the edited arrays)."""
-        if self.region_weights is not None and self.region_weights.shape[1] != self.project.rig.n_shapes:
+    def _edited_evaluators(self, evaluator: PoseEvaluator | None = None, shape_rows=None) -> None:
+        """After an edit of the rig: the display evaluator (``evaluator`` if given) and the float64 one of the edited
+        rig, made of their predecessors' matrices where they can be (``PoseEvaluator.with_settings``: shared when
+        the edit replaced none of the arrays they were made of, else copied row by row with ``shape_rows``); the
+        rig's version bumped, and the shapes' version when the set of their deltas may have changed (the reach is
+        made again on its next use: not after a rename, a reorder or a duplicate)."""
+        rig, old = self.project.rig, self.evaluator
+        self.evaluator = evaluator if evaluator is not None else old.with_settings(rig, shape_rows)
+        same_set = shape_rows is not None and set(np.asarray(shape_rows).tolist()) == set(range(old.K))
+        if not (self.evaluator.shares_matrices(old) or same_set):
+            self._shapes_version += 1
+        if self._evaluator64 is not None and self._evaluator64[0] == self.rig_version:   # kept only if shared
+            ev64 = self._evaluator64[1].with_settings(rig)
+            self._evaluator64 = (self.rig_version + 1, ev64) if ev64.shares_matrices(self._evaluator64[1]) else None
+        self.rig_version += 1
+
+    def rig_edited(self, evaluator: PoseEvaluator | None = None, shape_rows=None) -> None:
+        """Shapes or correctives changed in place (same topology): a new evaluator (or ``evaluator``, one built off
+        the GUI thread for the edited arrays). An edit that replaced none of the arrays the evaluators are made of
+        (a rename, other drivers) keeps their matrices and the shapes' reach; one of the shape list says which of
+        the shapes before the edit each shape's deltas are (``shape_rows``: an index, or -1 for new deltas), and
+        the new evaluator is copied from the old one's rows (``PoseEvaluator.with_settings``)."""
+        rig = self.project.rig
+        if self.region_weights is not None and self.region_weights.shape[1] != rig.n_shapes:
             self.region_weights = self.region_blend = self.region_level = None  # the shape set changed
             self.edit_region = None
         self._collapsed = None
-        self.evaluator = evaluator if evaluator is not None else PoseEvaluator(self.project.rig)
-        self.rig_version += 1
-        self._shapes_version += 1
+        self._edited_evaluators(evaluator, shape_rows)
         self._surface = None
         self.shapes_changed.emit()
         self.pose_changed.emit()
