@@ -65,18 +65,43 @@ def violations(doc: dict, blob: bytes) -> list[str]:
         if v.get("target") not in (None, 34962, 34963):
             bad.append(f"bufferView {i} has an invalid target")
 
+    def read(i, view_index, offset, ctype, w, count, what="accessor"):
+        v = views[view_index]
+        dt = np.dtype(COMPONENT[ctype])
+        start = v["byteOffset"] + offset
+        if start % dt.itemsize:
+            bad.append(f"{what} {i} is not aligned to its component size")
+        if offset + count * dt.itemsize * w > v["byteLength"]:
+            bad.append(f"{what} {i} reads past its bufferView")
+            return None
+        return np.frombuffer(blob, dt, count * w, start).reshape(count, w).astype(np.float64)
+
     def values(i):
         a = doc["accessors"][i]
-        v = views[a["bufferView"]]
-        dt = np.dtype(COMPONENT[a["componentType"]])
         w = WIDTH[a["type"]]
-        start = v["byteOffset"] + a.get("byteOffset", 0)
-        if start % dt.itemsize:
-            bad.append(f"accessor {i} is not aligned to its component size")
-        if a.get("byteOffset", 0) + a["count"] * dt.itemsize * w > v["byteLength"]:
-            bad.append(f"accessor {i} reads past its bufferView")
+        x = np.zeros((a["count"], w)) if "bufferView" not in a else \
+            read(i, a["bufferView"], a.get("byteOffset", 0), a["componentType"], w, a["count"])
+        if x is None:
             return np.zeros((0, w))
-        return np.frombuffer(blob, dt, a["count"] * w, start).reshape(a["count"], w).astype(np.float64)
+        sparse = a.get("sparse")
+        if sparse is not None:             # 3.6.2.3: count >= 1, indices unsigned and strictly increasing
+            n, si, sv = sparse["count"], sparse["indices"], sparse["values"]
+            if n < 1 or n > a["count"] or si["componentType"] not in (5121, 5123, 5125):
+                bad.append(f"accessor {i}: invalid sparse count or index type")
+                return x
+            for part in (si, sv):
+                if "target" in views[part["bufferView"]] or "byteStride" in views[part["bufferView"]]:
+                    bad.append(f"accessor {i}: a sparse buffer view has a target or a byteStride")
+            idx = read(i, si["bufferView"], si.get("byteOffset", 0), si["componentType"], 1, n, "sparse indices of")
+            val = read(i, sv["bufferView"], sv.get("byteOffset", 0), a["componentType"], w, n, "sparse values of")
+            if idx is None or val is None:
+                return x
+            idx = idx[:, 0].astype(np.int64)
+            if np.any(np.diff(idx) <= 0) or idx.max() >= a["count"]:
+                bad.append(f"accessor {i}: sparse indices must increase strictly and stay below its count")
+                return x
+            x[idx] = val
+        return x
 
     def bounds_exact(i, what):
         a = doc["accessors"][i]

@@ -112,6 +112,39 @@ def test_gltf_default_weights_are_the_current_pose(exported, rig_with_corrective
     assert np.allclose(w, expected, atol=1e-7)
 
 
+def test_glb_carries_smooth_normals_their_morph_offsets_and_a_dielectric_material(exported, rig_with_corrective,
+                                                                                  ict_dir):
+    """A glTF client shades a primitive without NORMAL flat (glTF 2.0, 3.7.2.1: Blender 3.4 imported every face of
+    ICT flat) and one without a material fully metallic (dark). Read with pygltflib: unit NORMALs, the area-weighted
+    vertex normals of the file's own positions (float64 reference), and each morph target's NORMAL offset the
+    normals of its surface at weight 1 less those (jawOpen, a smile, the corrective); a double-sided dielectric
+    material in the colour of ICT's largest part (its MTL Kd)."""
+    from solvers.normals import vertex_normals
+    from tests.gltf_reference import reference_accessors
+    g, values = reference_accessors(exported[0][".glb"])
+    prim = g.meshes[0].primitives[0]
+    pos, nrm = values(prim.attributes.POSITION), values(prim.attributes.NORMAL)
+    tris = values(prim.indices)[:, 0].astype(int).reshape(-1, 3)
+    ref = vertex_normals(pos, tris)
+    used = np.linalg.norm(ref, axis=1) > 0
+    assert used.sum() > 26000
+    np.testing.assert_allclose(np.linalg.norm(nrm, axis=1), 1.0, atol=1e-6)
+    assert np.abs(nrm[used] - ref[used]).max() < 1e-4
+    names = g.meshes[0].extras["targetNames"]
+    for name in ("jawOpen", "mouthSmile_L", rig_with_corrective.correctives[0].name):
+        t = prim.targets[names.index(name)]
+        d, dn = values(t["POSITION"]), values(t["NORMAL"])
+        moved = vertex_normals(pos + d, tris)
+        assert np.abs((nrm + dn)[used] - moved[used]).max() < 1e-4
+        assert np.abs(dn).max() > 0.05, name                    # the shape turns the surface: offsets not zero
+    material = g.materials[prim.material]
+    assert material.doubleSided and material.pbrMetallicRoughness.metallicFactor == 0.0
+    largest = Counter(material_of_each_face(ict_dir / "generic_neutral_mesh.obj")).most_common(1)[0][0]
+    assert material.name == largest
+    assert material.pbrMetallicRoughness.baseColorFactor == pytest.approx(
+        [*mtl_kd(ict_dir / "ICTFaceModelMaterial.mtl")[largest], 1.0], abs=1e-6)
+
+
 def test_glb_reads_back_in_trimesh_with_the_same_vertices(exported, rig_with_corrective):
     trimesh = pytest.importorskip("trimesh")
     scene = trimesh.load(exported[0][".glb"], process=False)
@@ -438,6 +471,7 @@ for kind, path in (("glb", sys.argv[-2]), ("obj", sys.argv[-1])):
     keys = o.data.shape_keys
     action = keys.animation_data.action if keys and keys.animation_data else None
     out[kind] = {"vertices": len(o.data.vertices), "polygons": len(o.data.polygons),
+                 "smooth": sum(p.use_smooth for p in o.data.polygons),
                  "shape_keys": [k.name for k in keys.key_blocks] if keys else [],
                  "frame_range": list(action.frame_range) if action else None,
                  "uv_layers": len(o.data.uv_layers), "materials": len(o.data.materials),
@@ -476,6 +510,7 @@ def test_blender_imports_the_glb_and_the_obj(blender, exported, rig_with_correct
     span = (glb["frame_range"][1] - glb["frame_range"][0]) / glb["fps"]
     assert span == pytest.approx(327 / 60, abs=1.5 / glb["fps"])
     assert glb["polygons"] == len(rig_with_corrective.triangles())
+    assert glb["smooth"] == glb["polygons"]       # shaded smooth from the file's normals (without them: all flat)
     assert seen["obj"]["vertices"] == 26719 and seen["obj"]["uv_layers"] == 1 and seen["obj"]["materials"] == 12
     # the OBJ's material library, written beside it: each part's faces in its MTL colour
     faces = Counter(material_of_each_face(ict_dir / "generic_neutral_mesh.obj"))
