@@ -41,7 +41,7 @@ class SetCorrectivesCommand(QUndoCommand):
         doc.rig.correctives = _copies(correctives)
         doc.edit_offset = None if offset is None else offset.copy()
         doc.offset_changed.emit()
-        doc.rig_edited()
+        doc.rig_edited(shape_rows=range(doc.rig.n_shapes))   # the shapes are untouched: their rows are kept
 
     def redo(self) -> None:
         self._apply(self.new, self.new_offset)

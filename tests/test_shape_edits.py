@@ -423,6 +423,15 @@ def test_a_rename_shares_the_evaluators_matrices_and_a_shape_list_edit_copies_it
     back = fewer.with_settings(rig, rows_by_name(after_delete))
     _check_against_fresh(back, rig, rng)
 
+    # a corrective edit (the commands copy the list, arrays too): the shapes' rows kept, the corrective's read
+    c = rig.correctives[0].copy()
+    c.delta = 2.0 * c.delta
+    rig.correctives = [c]
+    fixed = back.with_settings(rig, range(rig.n_shapes))
+    assert not fixed.shares_matrices(back)
+    _check_against_fresh(fixed, rig, rng)
+    back = fixed
+
     k = 4
     rig.deltas = rig.deltas.copy()
     rig.deltas[k] = 0.5 * rig.deltas[k]
