@@ -39,6 +39,38 @@ def test_active_shows_only_the_shapes_in_use(qtbot, tmp_path):
     assert all(r.isVisibleTo(panel) for r in panel.rows)
 
 
+def test_many_rows_shown_at_once_keep_the_keyboard_focus_where_it_was(qtbot, tmp_path):
+    """When many rows appear or disappear at once (a new rig, a filter, Active with a new pose), the panel lays
+    them out once instead of once per row (quadratic: 2 s for 700 shapes) by holding its rows' host hidden
+    meanwhile; the number box being typed in keeps the keyboard focus, and every row ends as it should be."""
+    from widgets.shapes_panel import ShapesPanel
+    from tests.gui_helpers import isolate_settings
+    isolate_settings(tmp_path)
+    panel = ShapesPanel()
+    qtbot.addWidget(panel)
+    panel.resize(420, 700)
+    panel.show()
+    qtbot.waitExposed(panel)
+    names = [f"shape{i:03d}" for i in range(120)]
+    panel.set_shapes(names)
+    QtWidgets.QApplication.processEvents()
+    assert all(r.isVisibleTo(panel) for r in panel.rows)
+    w = np.zeros(len(names))
+    w[0] = 0.5
+    panel.set_weights(w)
+    qtbot.mouseClick(panel.active_only, QtCore.Qt.LeftButton)
+    assert [r.name for r in panel.rows if r.isVisibleTo(panel)] == ["shape000"]
+    box = panel.rows[0].box
+    _focus(qtbot, box)
+    w[1:61] = 0.25                                     # 60 rows appear at once
+    panel.set_weights(w)
+    QtWidgets.QApplication.processEvents()
+    assert [r.name for r in panel.rows if r.isVisibleTo(panel)] == names[:61]
+    assert QtWidgets.QApplication.focusWidget() in (box, box.lineEdit())
+    qtbot.mouseClick(panel.active_only, QtCore.Qt.LeftButton)
+    assert all(r.isVisibleTo(panel) for r in panel.rows)
+
+
 def _wheel(widget, notches=-3) -> bool:
     """A wheel event over ``widget``; returns whether the widget kept it (accepted) or left it to its parents."""
     pos = QtCore.QPointF(widget.width() / 2, widget.height() / 2)

@@ -351,6 +351,34 @@ class _GroupHeader(QtWidgets.QToolButton):
         self.setObjectName(f"group_{name}")
 
 
+_MANY_ROWS = 16     # rows whose visibility changes at once, above which the host is hidden meanwhile
+
+
+class _layout_held:
+    """Hide ``host`` while its rows are shown or hidden (``many``), then show it again, keeping the keyboard focus
+    where it was. A row shown inside a visible host lays the host out again at once (~3 ms a row at 228 rows, and
+    more with more: 0.27 s for 228 rows, 2.0 s for 700); inside a hidden one it is only marked, and the host is laid
+    out once when shown."""
+
+    def __init__(self, host: QtWidgets.QWidget, many: bool) -> None:
+        self.host, self.many = host, many and host.isVisible()
+
+    def __enter__(self):
+        if self.many:
+            focus = QtWidgets.QApplication.focusWidget()
+            self.focus = focus if focus is not None and (focus is self.host or self.host.isAncestorOf(focus)) else None
+            self.host.setUpdatesEnabled(False)
+            self.host.hide()
+        return self
+
+    def __exit__(self, *_) -> None:
+        if self.many:
+            self.host.show()
+            self.host.setUpdatesEnabled(True)
+            if self.focus is not None and self.focus.isVisible():
+                self.focus.setFocus(QtCore.Qt.OtherFocusReason)
+
+
 class ShapesPanel(QtWidgets.QWidget):
     """Sliders for every shape, in the rig's order, optionally in collapsible groups (by face part or side).
     Every gesture on the pose is one ``pose_edited(PoseEdit)``; every gesture on the shape list one
@@ -555,14 +583,18 @@ class ShapesPanel(QtWidgets.QWidget):
         only_active = self.active_only.isChecked()
         folded = {i for g, idx in self._groups if not self.headers[g].isChecked() for i in idx}
         shown_in: dict[str, int] = {}
+        changes = []
         for r in self.rows:
             w = self._weights[r.index] if r.index < self._weights.size else 0.0
             match = bool(text in r.name.lower() and (not only_active or (np.isfinite(w) and w != 0)))
             visible = match and r.index not in folded
-            if r.isHidden() == visible:   # only the rows that change (setVisible costs ~3 ms a row)
-                r.setVisible(visible)
+            if r.isHidden() == visible:   # only the rows that change
+                changes.append((r, visible))
             if match:
                 shown_in[r.name] = 1
+        with _layout_held(self._rows_host, len(changes) > _MANY_ROWS):
+            for r, visible in changes:
+                r.setVisible(visible)
         for g, idx in self._groups:      # a group with no matching shape hides its header too
             any_match = any(self.rows[i].name in shown_in for i in idx)
             h = self.headers[g]
