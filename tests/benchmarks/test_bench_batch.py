@@ -45,8 +45,9 @@ def bench_takes(tmp_path_factory, take_dir):
 
 
 _BATCH = """
-import time
+import os, time
 command_t0 = time.perf_counter()
+os.environ.setdefault("NUMPY_MADVISE_HUGEPAGE", "0")   # as app.launch sets it for every command but the window
 from app.batch_preload import BATCH_PRELOAD
 from model.fork_server import start_fork_server
 start_fork_server(BATCH_PRELOAD)  # as the batch command does (app.launch) before it imports anything else
