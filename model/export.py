@@ -180,7 +180,8 @@ def write_posed_obj(rig: Rig, path: str | Path, weights: np.ndarray | None = Non
     """The posed surface (the application's pose evaluation) as an OBJ with the source's UVs, groups and
     materials (``write_surface_obj``).
 
-    The source's normals are kept for the rest pose only: a posed surface gets none (clients compute them).
+    The source's normals are kept for the rest pose only: a posed surface gets none (clients compute them, smooth:
+    without the source's own smoothing records the file says ``s 1``).
     """
     from .pose import PoseEvaluator
     if up not in UP_AXES:
@@ -216,12 +217,29 @@ def write_surface_obj(rig: Rig, path: str | Path, points: np.ndarray, *, header:
         mtl = mtl_bytes(parts.names if parts is not None else list(rig.materials), rig.materials, rig.name)
         records = [r for r in corners.records if not r[1].startswith("mtllib")]
         corners = dataclasses.replace(corners, records=[(0, f"mtllib {library.name}")] + records)
+    corners = _smooth_unless_said(corners, normals)
     obj = obj_bytes(points, rig.face_counts, rig.face_indices, header=header, corners=corners, normals=normals)
     if library is None:
         atomic_write(path, obj)
     else:
         from .output_set import write_set
         write_set({path: lambda f: f.write(obj), library: lambda f: f.write(mtl)})   # both new, or both as they were
+
+
+def _smooth_unless_said(corners, normals: bool):
+    """``corners`` with a smoothing group (``s 1``) before the first face when the OBJ written from them would say
+    nothing of its shading: no ``s`` record of the source's and no normals written. Blender's and Maya's importers
+    shade such an OBJ flat (Blender 3.4: every face of ICT's, whose files have neither); a face is smooth."""
+    import dataclasses
+
+    from .rig import CornerAttributes
+    c = corners or CornerAttributes()
+    if any(line.split(None, 1)[0] == "s" for _, line in c.records if line.strip()):
+        return corners
+    if normals and c.normals is not None:
+        return corners
+    first = [r for r in c.records if r[0] <= 0]
+    return dataclasses.replace(c, records=first + [(0, "s 1")] + [r for r in c.records if r[0] > 0])
 
 
 EXPORT_SUFFIXES = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".obj")

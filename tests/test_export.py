@@ -385,6 +385,30 @@ def test_cli_export_glb_with_animation_from_a_weights_csv(tmp_path, sample_rig):
 
 
 # --- OBJ: the source's UVs, normals and groups ------------------------------------------------------
+def test_obj_export_says_smooth_only_where_the_source_says_nothing_of_shading(sample_rig, tmp_path):
+    """An OBJ export adds a smoothing group ("s 1") only when the file would otherwise say nothing of its shading:
+    the source's own "s" records are kept as they are, and a rest pose written with the source's normals needs
+    none."""
+    import dataclasses
+
+    from model.rig import CornerAttributes
+    rig = sample_rig.copy()
+    rig.corners = CornerAttributes()
+    export_rig(rig, tmp_path / "plain.obj")
+    assert read_obj(tmp_path / "plain.obj").corners.records == [(0, "s 1")]
+    rig.corners = CornerAttributes(records=[(0, "g face"), (3, "s off")])
+    export_rig(rig, tmp_path / "said.obj", rig.weights_from_dict({"jawOpen": 0.5}))
+    assert read_obj(tmp_path / "said.obj").corners.records == [(0, "g face"), (3, "s off")]
+    n = np.tile([0.0, 0.0, 1.0], (rig.face_indices.size, 1))
+    rig.corners = dataclasses.replace(CornerAttributes(), normals=n, corner_normal=np.arange(rig.face_indices.size))
+    export_rig(rig, tmp_path / "normals.obj")                       # the rest pose: the source's normals
+    back = read_obj(tmp_path / "normals.obj").corners
+    assert back.records == [] and back.normals is not None
+    export_rig(rig, tmp_path / "posed.obj", rig.weights_from_dict({"jawOpen": 0.5}))   # posed: none, smooth
+    back = read_obj(tmp_path / "posed.obj").corners
+    assert back.records == [(0, "s 1")] and back.normals is None
+
+
 def test_ict_obj_export_keeps_uvs_and_materials(ict_dir, tmp_path):
     src = read_obj(ict_dir / "generic_neutral_mesh.obj")
     run_cli("export", ict_dir, "-o", tmp_path / "neutral.obj")
@@ -394,9 +418,12 @@ def test_ict_obj_export_keeps_uvs_and_materials(ict_dir, tmp_path):
     assert np.array_equal(back.face_indices, src.face_indices) and np.array_equal(back.face_counts, src.face_counts)
     assert np.allclose(back.corners.uvs, src.corners.uvs, atol=1e-6)
     assert np.array_equal(back.corners.corner_uv, src.corners.corner_uv)
-    # the records as in the source, the material library named by the one written beside the export
-    assert back.corners.records == [(0, "mtllib neutral.mtl")] + [r for r in src.corners.records
-                                                                   if not r[1].startswith("mtllib")]
+    # the records as in the source, the material library named by the one written beside the export, and a smoothing
+    # group before the first face (ICT's OBJ has no "s" record and no normals: importers would shade it flat)
+    kept = [r for r in src.corners.records if not r[1].startswith("mtllib")]
+    assert not any(line.startswith("s ") for _, line in kept)
+    assert back.corners.records == ([(0, "mtllib neutral.mtl")] + [r for r in kept if r[0] <= 0] + [(0, "s 1")]
+                                    + [r for r in kept if r[0] > 0])
     assert (tmp_path / "neutral.mtl").is_file()
     assert [r for r in src.corners.records if r[1].startswith("usemtl")][2] == (14034, "usemtl M_GumsTongue")
 
@@ -512,6 +539,7 @@ def test_blender_imports_the_glb_and_the_obj(blender, exported, rig_with_correct
     assert glb["polygons"] == len(rig_with_corrective.triangles())
     assert glb["smooth"] == glb["polygons"]       # shaded smooth from the file's normals (without them: all flat)
     assert seen["obj"]["vertices"] == 26719 and seen["obj"]["uv_layers"] == 1 and seen["obj"]["materials"] == 12
+    assert seen["obj"]["smooth"] == seen["obj"]["polygons"]   # ICT's OBJ says nothing of smoothing: written "s 1"
     # the OBJ's material library, written beside it: each part's faces in its MTL colour
     faces = Counter(material_of_each_face(ict_dir / "generic_neutral_mesh.obj"))
     kd = mtl_kd(ict_dir / "ICTFaceModelMaterial.mtl")
