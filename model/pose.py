@@ -95,9 +95,10 @@ class PoseEvaluator:
           one shape's deltas replaced), copied row by row: ``shape_rows[k]`` is the index among this evaluator's
           shapes of the one whose deltas the edited rig's shape k has, unchanged, or -1 where they are new (read
           from the rig); in-between and corrective rows are kept where their delta arrays are the same objects.
-          One pass over the gathered float matrix instead of the gather from the rig's deltas (3.5 -> ~0.5 s
-          for a reorder of that rig). Its moving vertices stay this one's: those of the shapes a delete took away
-          are kept (their columns are then zero). Made from scratch when a new row moves a vertex outside them;
+          One pass over the gathered float matrix instead of the gather and conversion of the rig's float64
+          deltas (on that rig 232 MB read instead of 580 MB, and no temporaries). Its moving vertices stay this
+          one's: those of the shapes a delete took away are kept (their columns are then zero). Made from scratch
+          when a new row moves a vertex outside them;
         - else made from scratch.
 
         ``rig`` may be this evaluator's own Rig object, edited in place since (edits replace its arrays)."""
