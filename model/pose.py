@@ -309,8 +309,10 @@ def _row_sources(rig: Rig) -> tuple:
 
 
 def _same_sources(a: tuple, b: tuple) -> bool:
+    """Whether two ``_row_sources`` make the same matrix: the same arrays in the same rows (an in-between's weight
+    is not in its row: ``ShapeWeights`` reads it from the rig)."""
     (na, da, ia, ca), (nb, db, ib, cb) = a, b
-    return (na is nb and da is db and len(ia) == len(ib) and all(x[0] == y[0] and x[1] is y[1] for x, y in zip(ia, ib))
+    return (na is nb and da is db and len(ia) == len(ib) and all(x[1] is y[1] for x, y in zip(ia, ib))
             and len(ca) == len(cb) and all(x is y for x, y in zip(ca, cb)))
 
 

@@ -405,6 +405,12 @@ def test_a_rename_shares_the_evaluators_matrices_and_a_shape_list_edit_copies_it
     assert renamed.shares_matrices(ev)
     _check_against_fresh(renamed, rig, rng)        # the corrective's driver follows the new name
     se.undo_rename(project, rec)
+    (ib,) = rig.inbetweens[names[2]]               # an in-between moved along its shape: the same row, a new weight
+    rig.inbetweens = {names[2]: [Inbetween(0.3, ib.delta)]}
+    moved_inbetween = ev.with_settings(rig)
+    assert moved_inbetween.shares_matrices(ev)
+    _check_against_fresh(moved_inbetween, rig, rng)
+    rig.inbetweens = {names[2]: [ib]}
 
     order = list(rng.permutation(rig.n_shapes))
     se.reorder_shapes(project, order)
