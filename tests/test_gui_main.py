@@ -380,6 +380,11 @@ def test_a_pose_change_draws_one_frame(qtbot, tmp_path):
         qtbot.wait(30)
         assert renders[0] == 1 and not w.redraw_pending
         np.testing.assert_allclose(w.viewport.points(), w.document.surface(), atol=1e-5)
+    # a new surface (a rig opened) is framed by the camera and drawn once, not once for the camera and again
+    renders[0] = 0
+    rig = w.document.rig
+    w.viewport.set_surface(w.document.surface(), rig.face_counts, rig.face_indices)
+    assert renders[0] == 1
 
 
 def _dock_tab_bars(w) -> list[list[str]]:

@@ -160,7 +160,7 @@ class Viewport(QtWidgets.QWidget):
         self._textured = None
         self._build_mesh(points, shown_faces, base_colors)
         if reset_camera:
-            self.set_camera(self._camera)
+            self.set_camera(self._camera, render=False)   # one render for the new surface, not two
         self.render()
 
     def set_parts(self, shown_faces: np.ndarray | None, base_colors: np.ndarray | None) -> None:
@@ -435,11 +435,13 @@ class Viewport(QtWidgets.QWidget):
         right /= np.linalg.norm(right)
         return CameraFrame(position, focal, up, forward, right)
 
-    def set_camera(self, name: str) -> None:
+    def set_camera(self, name: str, render: bool = True) -> None:
+        """Look at the face from camera preset ``name``; ``render=False``: the caller renders (once) after."""
         self._camera = name
         if self._focus is not None:
             set_camera(self.plotter, name, self._focus)
-            self.render()
+            if render:
+                self.render()
 
     def reset_view(self) -> None:
         self.set_camera(self._camera)
