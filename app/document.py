@@ -277,19 +277,21 @@ class Document(QtCore.QObject):
         self.pose_changed.emit()
 
     def _edited_evaluators(self, evaluator: PoseEvaluator | None = None, shape_rows=None) -> None:
-        """After an edit of the rig: the display evaluator (``evaluator`` if given) and the float64 one of the edited
-        rig, made of their predecessors' matrices where they can be (``PoseEvaluator.with_settings``: shared when
-        the edit replaced none of the arrays they were made of, else copied row by row with ``shape_rows``); the
-        rig's version bumped, and the shapes' version when the set of their deltas may have changed (the reach is
-        made again on its next use: not after a rename, a reorder or a duplicate)."""
+        """After an edit of the rig: the display evaluator (``evaluator`` if given), made of its predecessor's
+        matrices where it can be (``PoseEvaluator.with_settings``: shared when the edit replaced none of the arrays
+        they were made of, else copied row by row with ``shape_rows``); the float64 one kept (shared) only when its
+        matrices can be shared, else made on its next use, not here; the rig's version bumped, and the shapes'
+        version when the set of their deltas may have changed (the reach is made again on its next use: not after
+        a rename, a reorder or a duplicate)."""
         rig, old = self.project.rig, self.evaluator
         self.evaluator = evaluator if evaluator is not None else old.with_settings(rig, shape_rows)
         same_set = shape_rows is not None and set(np.asarray(shape_rows).tolist()) == set(range(old.K))
         if not (self.evaluator.shares_matrices(old) or same_set):
             self._shapes_version += 1
-        if self._evaluator64 is not None and self._evaluator64[0] == self.rig_version:   # kept only if shared
-            ev64 = self._evaluator64[1].with_settings(rig)
-            self._evaluator64 = (self.rig_version + 1, ev64) if ev64.shares_matrices(self._evaluator64[1]) else None
+        kept = self._evaluator64
+        self._evaluator64 = None
+        if kept is not None and kept[0] == self.rig_version and kept[1].made_of(rig):
+            self._evaluator64 = (self.rig_version + 1, kept[1].with_settings(rig))
         self.rig_version += 1
 
     def rig_edited(self, evaluator: PoseEvaluator | None = None, shape_rows=None) -> None:

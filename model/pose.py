@@ -103,7 +103,7 @@ class PoseEvaluator:
 
         ``rig`` may be this evaluator's own Rig object, edited in place since (edits replace its arrays)."""
         sources = _row_sources(rig)
-        if _same_sources(sources, self._sources):
+        if self.made_of(rig, sources):
             D = self._D
         elif shape_rows is not None and rig.neutral is self._sources[0]:
             D = self._rows_for(rig, sources, shape_rows)
@@ -154,6 +154,11 @@ class PoseEvaluator:
         for r, d in zip(new, fresh):
             D[r] = d
         return D
+
+    def made_of(self, rig: Rig, sources: tuple | None = None) -> bool:
+        """Whether ``rig``'s arrays now are the very ones this evaluator's matrices were made of (then
+        ``with_settings`` shares them; ``sources``: ``_row_sources(rig)`` when the caller has it)."""
+        return _same_sources(_row_sources(rig) if sources is None else sources, self._sources)
 
     def shares_matrices(self, other: "PoseEvaluator | None") -> bool:
         """Whether ``other`` evaluates with this one's very matrices (``with_settings`` kept them)."""

@@ -48,7 +48,7 @@ def test_f2_renames_in_place_and_the_correctives_follow(qtbot, window):
     rig = doc.rig
     set_correctives(rig, [Corrective(drivers=["browInnerUp_L", "browInnerUp_R"], delta=rig.deltas[0] * 0.1)])
     doc.rig_edited()
-    evaluator, reach = doc.evaluator, doc.shape_reach()
+    evaluator, evaluator64, reach = doc.evaluator, doc.evaluator64(), doc.shape_reach()
     _click_name(qtbot, window, "browInnerUp_L")
     assert window.shapes_panel.selected == ["browInnerUp_L"]
     _key(window, QtCore.Qt.Key_F2)
@@ -65,6 +65,7 @@ def test_f2_renames_in_place_and_the_correctives_follow(qtbot, window):
     # a rename replaces no array: the evaluator's matrices and the shapes' reach are kept, not made again (1-2 s on
     # a studio rig), and the corrective still acts under its driver's new name
     assert doc.evaluator.shares_matrices(evaluator) and doc.shape_reach() is reach
+    assert doc.evaluator64().shares_matrices(evaluator64)
     w = np.zeros(rig.n_shapes)
     w[[rig.shape_index("browRaiser_L"), rig.shape_index("browInnerUp_R")]] = 1.0
     window.set_pose(w, "pose")
