@@ -22,6 +22,18 @@ def make_window(qtbot, tmp_path, size=(1200, 800)):
     return w
 
 
+def shapes_panel_alone(qtbot, tmp_path, size=(420, 700)):
+    """A Shapes panel on its own, shown at ``size``, settings kept in a temp folder (no window, no rig)."""
+    from widgets.shapes_panel import ShapesPanel
+    isolate_settings(tmp_path)
+    panel = ShapesPanel()
+    qtbot.addWidget(panel)
+    panel.resize(*size)
+    panel.show()
+    qtbot.waitExposed(panel)
+    return panel
+
+
 def open_and_wait(qtbot, window, path, timeout=60000):
     """Open a rig or project through the window's background loader and wait until it is done."""
     window.open_path(path)

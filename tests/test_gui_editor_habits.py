@@ -43,14 +43,8 @@ def test_many_rows_shown_at_once_keep_the_keyboard_focus_where_it_was(qtbot, tmp
     """When many rows appear or disappear at once (a new rig, a filter, Active with a new pose), the panel lays
     them out once instead of once per row (quadratic: 2 s for 700 shapes) by holding its rows' host hidden
     meanwhile; the number box being typed in keeps the keyboard focus, and every row ends as it should be."""
-    from widgets.shapes_panel import ShapesPanel
-    from tests.gui_helpers import isolate_settings
-    isolate_settings(tmp_path)
-    panel = ShapesPanel()
-    qtbot.addWidget(panel)
-    panel.resize(420, 700)
-    panel.show()
-    qtbot.waitExposed(panel)
+    from tests.gui_helpers import shapes_panel_alone
+    panel = shapes_panel_alone(qtbot, tmp_path)
     names = [f"shape{i:03d}" for i in range(120)]
     panel.set_shapes(names)
     QtWidgets.QApplication.processEvents()

@@ -15,14 +15,8 @@ from PySide6 import QtWidgets
 
 @pytest.mark.parametrize("n_shapes", [228, 700])
 def test_bench_shapes_panel_rows(benchmark, qtbot, tmp_path, n_shapes):
-    from tests.gui_helpers import isolate_settings
-    from widgets.shapes_panel import ShapesPanel
-    isolate_settings(tmp_path)
-    panel = ShapesPanel()
-    qtbot.addWidget(panel)
-    panel.resize(420, 900)
-    panel.show()
-    qtbot.waitExposed(panel)
+    from tests.gui_helpers import shapes_panel_alone
+    panel = shapes_panel_alone(qtbot, tmp_path, (420, 900))
     names = [f"shape{i:03d}_{'L' if i % 2 else 'R'}" for i in range(n_shapes)]
     times = []
 
