@@ -42,6 +42,7 @@ from .marker_map import MarkerMap
 from .output_set import finish_interrupted_sets, write_set
 from .pose import PoseEvaluator
 from .rig import Rig
+from .rig_prep import shape_reach
 
 TAKE_SUFFIXES = (".c3d", ".trc", ".csv")
 DONE = "done.json"                      # the done-marker, written last in a take's set
@@ -263,7 +264,7 @@ def preview_focus(rig: Rig, fraction: float = 0.05) -> np.ndarray:
     rig's largest displacement (the face, not the still head and neck), else the whole neutral."""
     if not rig.n_shapes:
         return rig.neutral
-    reach = np.linalg.norm(rig.deltas, axis=2).max(axis=0)
+    reach = shape_reach(rig)        # one shape at a time: no (K, V, 3) temporaries on a studio rig
     face = reach > fraction * reach.max()
     return rig.neutral[face] if face.sum() >= 3 else rig.neutral
 
