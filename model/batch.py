@@ -13,9 +13,12 @@ Qt-free; the ``batch`` command (app.cli_batch) and the GUI's File ▸ Batch Solv
   is skipped unless forced.
 - ``run_batch`` runs the jobs on a local cluster (worker processes forked from one fork server that imported what a
   take needs, started early by the command: ``start_fork_server``; the scheduler forked from it too,
-  ``model.batch_scheduler``; one thread each, Dask's housekeeping made rarer: ``local_cluster_config``) or a
-  scheduler address, with retries, and reports progress; ``write_summary`` writes ``batch.json`` and ``batch.csv``.
-  Each worker keeps the take solver's per-rig preparation across its takes (``BatchJob.prepared``).
+  ``model.batch_scheduler``; one thread each, Dask's housekeeping made rarer: ``local_cluster_config``; the whole
+  cluster driven from a process forked from the same fork server, ``model.batch_driver``, so that the command never
+  imports Dask) or a scheduler address, with retries, and reports progress (``solve_on_cluster``, the same code in
+  the driver and in-process); ``write_summary`` writes ``batch.json`` and ``batch.csv``. Each worker readies its
+  preview window while the job is on its way (``app.batch_worker.dask_setup``) and keeps the take solver's per-rig
+  preparation across its takes (``BatchJob.prepared``).
 """
 from __future__ import annotations
 
@@ -446,15 +449,17 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
     if forked:
         _skip_dask_forkserver_preload()
     # One core a worker: Dask's nanny already sets one BLAS/OpenMP thread; llvmpipe, which draws the previews
-    # off screen, would otherwise rasterise on every core of the machine from each worker at once.
+    # off screen, would otherwise rasterise on every core of the machine from each worker at once. The workers
+    # also preload ``preload`` the Dask way: a module's ``dask_setup(worker)`` runs when the worker has started
+    # (``app.batch_worker.dask_setup`` readies the previews while the job is on its way).
     options = dict(n_workers=n, threads_per_worker=1, host="127.0.0.1", dashboard_address=dashboard_address,
-                   silence_logs=logging.ERROR, env={"LP_NUM_THREADS": "1"})
+                   silence_logs=logging.ERROR, env={"LP_NUM_THREADS": "1"}, preload=list(preload))
     cluster = _forked_scheduler_cluster(**options) if forked else LocalCluster(processes=True, **options)
     return Client(cluster), cluster
 
 
 def _forked_scheduler_cluster(*, n_workers: int, threads_per_worker: int, host: str, dashboard_address: str | None,
-                              silence_logs: int, env: dict):
+                              silence_logs: int, env: dict, preload: list):
     """The ``LocalCluster`` of these arguments (worker processes) with its scheduler in a process forked from the
     fork server (``model.batch_scheduler``) instead of this one: Dask's ``SpecCluster`` with the scheduler and the
     workers (nannies, their processes forked from the fork server) that ``LocalCluster`` would make."""
@@ -469,7 +474,7 @@ def _forked_scheduler_cluster(*, n_workers: int, threads_per_worker: int, host: 
         dashboard_address=dashboard_address)}
     worker = {"cls": Nanny, "options": dict(
         host=host, nthreads=threads_per_worker, protocol="tcp://", dashboard=False, silence_logs=silence_logs,
-        env=env, memory_limit=parse_memory_limit("auto", 1, n_workers, logger=logging.getLogger("distributed")))}
+        env=env, preload=preload, memory_limit=parse_memory_limit("auto", 1, n_workers, logger=logging.getLogger("distributed")))}
     return SpecCluster(scheduler=scheduler, workers={i: worker for i in range(n_workers)}, worker=worker,
                        silence_logs=silence_logs)
 
@@ -487,14 +492,97 @@ def longest_first(indices: list[int], takes: list[Path]) -> list[int]:
     return sorted(indices, key=lambda i: -size(i))
 
 
+@dataclass
+class ClusterOutcome:
+    """What the cluster did with a run's pending takes (``solve_on_cluster``): their rows by index in the run's takes
+    (a take the run stopped before is missing), the frames solved, the seconds from the submits to the last result,
+    the dashboard's link, and why it stopped early: None, 'cancelled' or 'interrupted' (Ctrl-C)."""
+
+    rows: dict = field(default_factory=dict)
+    frames: int = 0
+    seconds: float = 0.0
+    dashboard: str | None = None
+    stopped: str | None = None
+
+
+def solve_on_cluster(job_source: Callable[[], BatchJob], tasks: list[tuple[int, str, str, str]], *, total: int,
+                     done: int, preload: tuple = (), workers: int | None = None, scheduler: str | None = None,
+                     retries: int = 2, progress: Callable[[BatchProgress], None] | None = None,
+                     stop: Callable[[], str | None] | None = None,
+                     dashboard_address: str = "127.0.0.1:8787") -> ClusterOutcome:
+    """Solve ``tasks`` ((index, take file, output folder, name), in the order to submit them) on a local cluster of
+    ``workers`` (its workers' fork server imports ``preload``) or on ``scheduler``'s; ``job_source()`` gives the job
+    once the cluster is up (it may still be arriving meanwhile: ``model.batch_driver``). The job is scattered once;
+    each take is retried ``retries`` times where its worker died. ``progress`` after each take (``done`` of
+    ``total`` were finished before); ``stop()`` after each take: 'cancelled' stops the run (the takes still
+    queued are cancelled); Ctrl-C (KeyboardInterrupt) stops it as 'interrupted'. Either way the cluster is
+    closed before this returns."""
+    outcome = ClusterOutcome()
+    import dask
+    import distributed  # noqa: F401  (its defaults join Dask's configuration here, not inside the block below,
+    #                     whose end would take them out again: a second batch in this process would then fail)
+    with dask.config.set(local_cluster_config() if not scheduler else {}):   # for the cluster's whole life
+        client, cluster = start_client(workers, scheduler, dashboard_address=dashboard_address, preload=preload)
+        try:
+            from distributed import as_completed
+            try:
+                outcome.dashboard = client.dashboard_link
+            except Exception:   # no dashboard (bokeh missing, or the scheduler runs none)
+                outcome.dashboard = None
+            if progress is not None:
+                progress(BatchProgress(done, total, 0, 0.0, dashboard=outcome.dashboard))
+            # to every worker; from this process straight to the workers of a local cluster (through the
+            # scheduler, as for a remote one whose workers this process may not reach, it takes ~2x as long)
+            shared = client.scatter(job_source(), broadcast=True, hash=False, direct=cluster is not None)
+            run = uuid.uuid4().hex[:8]
+            futures = {client.submit(solve_take_file, shared, take, out, name, key=f"solve-{name}-{run}", pure=False,
+                                     retries=retries): i
+                       for i, take, out, name in tasks}
+            paths = {i: Path(take) for i, take, _, _ in tasks}
+            names = {i: name for i, _, _, name in tasks}
+            t0 = time.perf_counter()
+            finished = 0
+            try:
+                for fut in as_completed(list(futures)):
+                    i = futures[fut]
+                    try:
+                        row = fut.result()
+                    except Exception as exc:       # retried and still failing, or every worker it met died
+                        row = _row(names[i], paths[i], None, "failed", _unexpected(paths[i], exc))
+                    outcome.rows[i] = row
+                    done += 1
+                    finished += 1
+                    if row["status"] == "solved":
+                        outcome.frames += int(row["frames"] or 0)
+                    outcome.seconds = time.perf_counter() - t0
+                    if progress is not None:
+                        progress(BatchProgress(done, total, outcome.frames, outcome.seconds, finished, row,
+                                               outcome.dashboard))
+                    outcome.stopped = stop() if stop is not None else None
+                    if outcome.stopped:
+                        client.cancel(list(futures))
+                        break
+            except KeyboardInterrupt:  # Ctrl-C: the cluster closes, the summary says what was done, then it stops
+                outcome.stopped = "interrupted"
+            outcome.seconds = time.perf_counter() - t0
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
+    return outcome
+
+
 def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: list[str] | None = None,
               force: bool = False, workers: int | None = None, scheduler: str | None = None, retries: int = 2,
               progress: Callable[[BatchProgress], None] | None = None, cancel: Callable[[], bool] | None = None,
-              on_client: Callable | None = None, dashboard_address: str = "127.0.0.1:8787") -> list[dict]:
+              dashboard_address: str = "127.0.0.1:8787") -> list[dict]:
     """Solve ``takes`` into ``out_dir/<name>/`` and write the summary; returns the rows in the order of ``takes``.
-    Complete takes are skipped unless ``force``; the rest go to the cluster with the job scattered once.
+    Complete takes are skipped unless ``force``; the rest go to the cluster with the job scattered once
+    (``solve_on_cluster``). A local cluster is run from a process forked from the fork server where it can be
+    (``model.batch_driver``: this process then never imports Dask), else from this one.
     ``cancel()`` true stops the run (unfinished takes are failed rows, 'cancelled'); so does Ctrl-C (SIGINT:
     'interrupted'), after which the summary is written and KeyboardInterrupt raised again."""
+    from . import batch_driver
     out_dir = Path(out_dir)
     takes = [Path(t).resolve() for t in takes]
     names = names or take_names(takes)
@@ -504,65 +592,24 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
             rows[i] = completed_row(job, path, out_dir / name, name)
     pending = longest_first([i for i, r in enumerate(rows) if r is None], takes)
     started = time.time()
-    t0 = time.perf_counter()
-    frames = 0
     done = len(takes) - len(pending)
-    dashboard = None
-    interrupted = False
+    outcome = ClusterOutcome()
     if progress is not None and not pending:
         progress(BatchProgress(done, len(takes), 0, 0.0))
     if pending:
         out_dir.mkdir(parents=True, exist_ok=True)
-        import dask
-        import distributed  # noqa: F401  (its defaults join Dask's configuration here, not inside the block below,
-        #                     whose end would take them out again: a second batch in this process would then fail)
-        with dask.config.set(local_cluster_config() if not scheduler else {}):   # for the cluster's whole life
-            client, cluster = start_client(workers, scheduler, dashboard_address=dashboard_address,
-                                           preload=job.preload)
-            try:
-                from distributed import as_completed
-                try:
-                    dashboard = client.dashboard_link
-                except Exception:   # no dashboard (bokeh missing, or the scheduler runs none)
-                    dashboard = None
-                if on_client is not None:
-                    on_client(client, dashboard)
-                if progress is not None:
-                    progress(BatchProgress(done, len(takes), 0, 0.0, dashboard=dashboard))
-                # to every worker; from this process straight to the workers of a local cluster (through the
-                # scheduler, as for a remote one whose workers this process may not reach, it takes ~2x as long)
-                shared = client.scatter(job, broadcast=True, hash=False, direct=cluster is not None)
-                run = uuid.uuid4().hex[:8]
-                futures = {client.submit(solve_take_file, shared, str(takes[i]), str(out_dir / names[i]), names[i],
-                                         key=f"solve-{names[i]}-{run}", pure=False, retries=retries): i
-                           for i in pending}
-                t0 = time.perf_counter()
-                finished = 0
-                try:
-                    for fut in as_completed(list(futures)):
-                        i = futures[fut]
-                        try:
-                            row = fut.result()
-                        except Exception as exc:       # retried and still failing, or every worker it met died
-                            row = _row(names[i], takes[i], None, "failed", _unexpected(takes[i], exc))
-                        rows[i] = row
-                        done += 1
-                        finished += 1
-                        if row["status"] == "solved":
-                            frames += int(row["frames"] or 0)
-                        if progress is not None:
-                            progress(BatchProgress(done, len(takes), frames, time.perf_counter() - t0, finished, row,
-                                                   dashboard))
-                        if cancel is not None and cancel():
-                            client.cancel(list(futures))
-                            break
-                except KeyboardInterrupt:  # Ctrl-C: the cluster closes, the summary says what was done, then it stops
-                    interrupted = True
-            finally:
-                client.close()
-                if cluster is not None:
-                    cluster.close()
-    stopped = "interrupted" if interrupted else "cancelled"
+        tasks = [(i, str(takes[i]), str(out_dir / names[i]), names[i]) for i in pending]
+        options = dict(total=len(takes), done=done, preload=job.preload, workers=workers, retries=retries,
+                       dashboard_address=dashboard_address)
+        if not scheduler and batch_driver.available(job.preload):
+            outcome = batch_driver.solve_in_driver(job, tasks, progress=progress, cancel=cancel, **options)
+        else:
+            outcome = solve_on_cluster(lambda: job, tasks, scheduler=scheduler, progress=progress,
+                                       stop=lambda: "cancelled" if cancel is not None and cancel() else None,
+                                       **options)
+        for i, row in outcome.rows.items():
+            rows[i] = row
+    frames, stopped = outcome.frames, outcome.stopped or "cancelled"
     for i, r in enumerate(rows):
         if r is None:       # a take a worker finished after the last one this process heard of is complete on disk
             r = completed_row(job, takes[i], out_dir / names[i], names[i])
@@ -574,10 +621,10 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
     meta = {"rig": job.rig.name, "rig_units": job.rig.units, "settings": job.signature["settings"],
             "marker_map": job.marker_map.source if job.marker_map is not None else "automatic",
             "solved": sum(r["status"] == "solved" for r in rows), "skipped": sum(r["status"] == "skipped" for r in rows),
-            "failed": sum(r["status"] == "failed" for r in rows), "seconds": time.perf_counter() - t0,
-            "frames_per_second": frames / max(time.perf_counter() - t0, 1e-9) if frames else None,
-            "dashboard": dashboard}
+            "failed": sum(r["status"] == "failed" for r in rows), "seconds": outcome.seconds,
+            "frames_per_second": frames / max(outcome.seconds, 1e-9) if frames else None,
+            "dashboard": outcome.dashboard}
     write_summary(out_dir, rows, meta)
-    if interrupted:
+    if outcome.stopped == "interrupted":
         raise KeyboardInterrupt
     return rows

@@ -22,20 +22,10 @@ import logging
 
 from distributed.deploy.spec import ProcessInterface
 
+from .fork_server import name_process
+
 
 PROCESS_NAME = "dask-scheduler"     # the scheduler process's name in ``ps``/``top`` (Linux), beside the workers'
-
-
-def _name_process(name: str) -> None:
-    """Give this process ``name`` as the system shows it (Linux's ``prctl(PR_SET_NAME)``; elsewhere nothing): the
-    scheduler and the workers are all forked from the same fork server and would look alike."""
-    import ctypes
-    import sys
-    if sys.platform.startswith("linux"):
-        try:
-            ctypes.CDLL(None, use_errno=True).prctl(15, name.encode()[:15], 0, 0, 0)     # 15: PR_SET_NAME
-        except (OSError, AttributeError):
-            pass
 
 
 def _serve(conn, options: dict, config: dict, log_level: int) -> None:
@@ -48,7 +38,7 @@ def _serve(conn, options: dict, config: dict, log_level: int) -> None:
     from distributed import Scheduler
     from distributed.utils import silence_logging_cmgr
     signal.signal(signal.SIGINT, signal.SIG_IGN)        # Ctrl-C is the command's: it closes the cluster
-    _name_process(PROCESS_NAME)
+    name_process(PROCESS_NAME)
     dask.config.update(dask.config.config, config, priority="new")
 
     import importlib.util

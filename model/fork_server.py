@@ -39,3 +39,49 @@ def start_fork_server(preload: tuple = ()) -> bool:
         os.environ["PYTHONHASHSEED"] = _FORK_SERVER_HASH_SEED
     multiprocessing.forkserver.ensure_running()
     return True
+
+
+def fork_server_address() -> str | None:
+    """The address of this process's fork server, None where it has none running (``start_fork_server``)."""
+    import multiprocessing.forkserver
+    return getattr(multiprocessing.forkserver._forkserver, "_forkserver_address", None)
+
+
+def can_adopt_fork_server() -> bool:
+    """Whether a process forked from the fork server can have its own children forked by it (``adopt_fork_server``):
+    Python's fork server as 3.8-3.13 write it, where a child's request carries no key."""
+    import multiprocessing.forkserver
+    server = multiprocessing.forkserver._forkserver
+    return (hasattr(server, "_forkserver_address") and hasattr(server, "_forkserver_alive_fd")
+            and not hasattr(server, "_forkserver_authkey"))
+
+
+def adopt_fork_server(address: str) -> None:
+    """In a process forked from the fork server at ``address`` (``model.batch_driver``): let the processes it
+    starts with the 'forkserver' method be forked by that server too, as its parent's are, instead of starting a
+    fresh fork server here, which would import everything again (~2 s). Python gives such a process the server's
+    liveness pipe and resource tracker (``multiprocessing.forkserver._serve_one``) but not its address, and its
+    ``ensure_running`` only knows a server it started itself (it waits on the server's pid, which is not its
+    child): the address is set here, and ``ensure_running`` only checks the resource tracker."""
+    import multiprocessing.forkserver
+    from multiprocessing import resource_tracker
+    server = multiprocessing.forkserver._forkserver
+    server._forkserver_address = address
+
+    def ensure_running() -> None:
+        resource_tracker.ensure_running()
+
+    server.ensure_running = ensure_running              # what connect_to_new_process calls
+    multiprocessing.forkserver.ensure_running = ensure_running   # the module's name for it (start_fork_server's)
+
+
+def name_process(name: str) -> None:
+    """Give this process ``name`` as the system shows it (Linux's ``prctl(PR_SET_NAME)``; elsewhere nothing): the
+    batch's driver, the scheduler and the workers are all forked from the same fork server and would look alike."""
+    import ctypes
+    import sys
+    if sys.platform.startswith("linux"):
+        try:
+            ctypes.CDLL(None, use_errno=True).prctl(15, name.encode()[:15], 0, 0, 0)     # 15: PR_SET_NAME
+        except (OSError, AttributeError):
+            pass

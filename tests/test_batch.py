@@ -187,9 +187,11 @@ def test_batch_on_a_local_cluster_matches_solve_resumes_and_survives_a_killed_wo
         if sys.platform.startswith("linux"):
             assert len(servers) == 1, "the local cluster's workers are forked from one fork server"
         forked = servers[0].children() if servers else []
-        if sys.platform.startswith("linux"):   # beside the workers, the scheduler (model.batch_scheduler)
+        if sys.platform.startswith("linux"):   # beside the workers, the scheduler (model.batch_scheduler) and the
+            #                                    driver, which runs the cluster for the command (model.batch_driver)
             assert [c.name() for c in forked].count("dask-scheduler") == 1
-        workers = ([c for c in forked if c.name() != "dask-scheduler"] if servers else
+            assert [c.name() for c in forked].count("dask-batch") == 1
+        workers = ([c for c in forked if c.name() not in ("dask-scheduler", "dask-batch")] if servers else
                    [c for c in tree if "spawn_main" in " ".join(c.cmdline())])
         assert len(workers) == 2
         finished = sum((out / n / "done.json").exists() for n in stamps)
@@ -520,6 +522,42 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
     assert workers[0] == 200 and workers[2].count("tcp://127.0.0.1:") >= 2
 
 
+def _preview_window_ready() -> tuple[bool, bool]:
+    """(whether this process has its preview window, whether its OpenGL context is current on this thread)."""
+    import ctypes
+
+    import app.cli_batch
+    snapshots = app.cli_batch._snapshots
+    if snapshots is None:
+        return False, False
+    if type(snapshots.window).__name__ == "vtkEGLRenderWindow":   # VTK's IsCurrent() does not look at the thread
+        current = ctypes.CDLL("libEGL.so.1").eglGetCurrentContext
+    else:
+        current = ctypes.CDLL("libGL.so.1").glXGetCurrentContext
+    current.restype = ctypes.c_void_p
+    return True, bool(current())
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
+def test_a_local_worker_readies_its_preview_window_on_its_task_thread_before_its_first_take():
+    """A local worker runs ``app.batch_worker.warm_up`` on its task thread as it starts (Dask's preload hook,
+    ``dask_setup``): its first task finds the preview's window made and its OpenGL context current on that thread,
+    where every preview is drawn (~0.12 s less in the first take, done while the job was on its way)."""
+    import dask
+    import distributed  # noqa: F401  (before the configuration block, as run_batch does)
+
+    from app.batch_preload import BATCH_PRELOAD
+    from model.batch import local_cluster_config, start_client
+    with dask.config.set(local_cluster_config()):
+        client, cluster = start_client(1, dashboard_address="127.0.0.1:0", preload=BATCH_PRELOAD)
+        try:
+            ready = client.submit(_preview_window_ready, pure=False).result(timeout=120)
+        finally:
+            client.close()
+            cluster.close()
+    assert ready == (True, True)
+
+
 def _fetch_dashboard(link: str):
     """(code, text) of the scheduler's /health, then (code, final address, page) of the dashboard's link and of its
     workers page: what a browser opening the printed link gets."""
@@ -563,10 +601,16 @@ def test_the_longest_takes_are_solved_first_and_the_summary_keeps_the_given_orde
     assert [r["take"] for r in summary["takes"]] == ["a_short", "b_long", "c_mid"]
 
 
-def test_a_second_batch_in_the_same_process_runs(tmp_path, ict_rig, take_dir):
+@pytest.mark.parametrize("where", ["driver", "in-process"])
+def test_a_second_batch_in_the_same_process_runs(tmp_path, ict_rig, take_dir, monkeypatch, where):
     """The GUI runs every Batch Solve in its own process: a second batch there must find Dask's settings intact (the
-    first one's configuration block used to take distributed's defaults out with it: KeyError 'comm')."""
+    first one's configuration block used to take distributed's defaults out with it: KeyError 'comm'), whether the
+    cluster runs from a driver process forked from the same fork server each time or in this process."""
     import argparse
+
+    from model import batch_driver
+    if where == "in-process":
+        monkeypatch.setattr(batch_driver, "available", lambda preload=(): False)
 
     from app.cli_batch import prepare_job
     from app.cli_solve import add_solve_options
@@ -584,6 +628,97 @@ def test_a_second_batch_in_the_same_process_runs(tmp_path, ict_rig, take_dir):
         assert [r["status"] for r in rows] == ["solved"], rows
 
 
+def _short_takes(tmp_path, take_dir, n: int, frames: int = 40) -> list:
+    from model.take_c3d import write_c3d
+    from model.takes import MarkerTake, load_take
+    t = load_take(take_dir / "take.c3d")
+    paths = []
+    for k in range(n):
+        paths.append(tmp_path / f"short_{k}.c3d")
+        write_c3d(paths[-1], MarkerTake(t.positions[k:k + frames], t.labels, t.rate, t.units))
+    return paths
+
+
+def _job(rig, take_dir):
+    import argparse
+
+    from app.cli_batch import prepare_job
+    from app.cli_solve import add_solve_options
+    p = argparse.ArgumentParser()
+    add_solve_options(p)
+    return prepare_job(rig, p.parse_args(["--map", str(take_dir / "marker_map.json")]))
+
+
+@pytest.mark.parametrize("where", ["driver", "in-process"])
+def test_a_cancelled_batch_ends_the_takes_in_hand_and_fails_the_rest_as_cancelled(tmp_path, ict_rig, take_dir,
+                                                                                 monkeypatch, where):
+    """Cancel (the GUI's button: ``cancel()`` turns true) after the first take: the queued takes are not solved and
+    say 'cancelled', every take complete on disk is 'solved', the summary says the same; whether the local cluster
+    runs from its driver process (``model.batch_driver``: the cancel is passed on to it) or in this process."""
+    from model import batch_driver
+    from model.batch import run_batch
+    if where == "in-process":
+        monkeypatch.setattr(batch_driver, "available", lambda preload=(): False)
+    elif not batch_driver.available():
+        pytest.skip("no fork server a driver could adopt here")
+    takes = _short_takes(tmp_path, take_dir, 8)
+    first = []
+    rows = run_batch(_job(ict_rig, take_dir), takes, tmp_path / "out", workers=1, dashboard_address="127.0.0.1:0",
+                     progress=lambda p: p.row is not None and first.append(p.row), cancel=lambda: bool(first))
+    complete = {d.parent.name for d in (tmp_path / "out").glob("*/done.json")}
+    assert first and first[0]["status"] == "solved" and first[0]["take"] in complete
+    assert {r["take"] for r in rows if r["status"] == "solved"} == complete
+    cancelled = [r for r in rows if r["status"] == "failed"]
+    assert len(cancelled) >= 2 and len(cancelled) + len(complete) == 8
+    assert all(r["error"] == f"{r['path']}: cancelled before it was solved." for r in cancelled), cancelled
+    summary = json.loads((tmp_path / "out" / "batch.json").read_text())
+    assert [r["status"] for r in summary["takes"]] == [r["status"] for r in rows]
+    assert summary["solved"] == len(complete) and summary["failed"] == len(cancelled)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
+def test_a_batch_whose_driver_is_killed_still_writes_its_summary_and_leaves_no_process(tmp_path, ict_rig, take_dir):
+    """The local cluster runs from a driver process (``model.batch_driver``): killed mid-run, the batch still ends
+    with a summary (the takes complete on disk solved, the others failed with one sentence saying why), and the
+    scheduler and the workers it started end with it."""
+    import threading
+
+    import psutil
+
+    from model.batch import run_batch
+    from model.batch_driver import PROCESS_NAME
+    out = tmp_path / "out"
+    takes = _short_takes(tmp_path, take_dir, 10, frames=120)
+    killed = []
+
+    def kill_the_driver() -> None:
+        deadline = time.monotonic() + 300
+        while not list(out.glob("*/done.json")) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        tree = psutil.Process().children(recursive=True)
+        drivers = [c for c in tree if c.name() == PROCESS_NAME]
+        server = drivers[0].parent() if drivers else None
+        killed.append([c for c in (server.children() if server else []) if c.pid != drivers[0].pid])
+        for d in drivers:
+            d.kill()
+        killed.append(len(drivers))
+
+    threading.Thread(target=kill_the_driver, daemon=True).start()
+    rows = run_batch(_job(ict_rig, take_dir), takes, out, workers=2, dashboard_address="127.0.0.1:0")
+    assert killed and killed[1] == 1, "the batch ran without a driver to kill"
+    complete = {d.parent.name for d in out.glob("*/done.json")}
+    assert complete and {r["take"] for r in rows if r["status"] == "solved"} == complete
+    stopped = [r for r in rows if r["status"] == "failed"]
+    assert stopped, "every take was solved before the driver was killed"
+    assert all(r["error"] == f"{r['path']}: stopped unexpectedly (the batch's driver process ended) before it was "
+               f"solved." for r in stopped), stopped
+    assert json.loads((out / "batch.json").read_text())["failed"] == len(stopped)
+    started = killed[0]               # the scheduler and the two workers, forked from the fork server for the driver
+    assert len(started) == 3
+    gone, alive = psutil.wait_procs(started, timeout=30)
+    assert not alive, [c.cmdline() for c in alive]
+
+
 _KEPT_AND_FRESH = """
 import sys
 import numpy as np
@@ -596,8 +731,17 @@ rig = load_rig(sys.argv[1])
 ev, focus = PoseEvaluator(rig), preview_focus(rig)
 poses = [ev.pose(np.array([float(n in names) for n in rig.shape_names]))
          for names in (["jawOpen"], ["mouthSmile_L", "mouthSmile_R"], ["jawOpen"])]
+import app.cli_batch
+from widgets.snapshots import SurfaceSnapshots
+app.cli_batch.warm_up_preview()           # as a worker does before its first take (app.batch_worker.dask_setup)
+window = app.cli_batch._snapshots.window
 for k, pts in enumerate(poses):
     render_preview(pts, rig.face_counts, rig.face_indices, f"{sys.argv[2]}/kept{k}.png", focus=focus)
+assert app.cli_batch._snapshots.window is window, "the previews did not use the window made beforehand"
+fresh = SurfaceSnapshots(rig.face_counts, rig.face_indices, size=PREVIEW_SIZE)
+fresh.image(poses[0], focus=focus)
+n_actors = lambda s: s.renderer.GetActors().GetNumberOfItems()
+assert n_actors(app.cli_batch._snapshots) == n_actors(fresh), "the stand-in surface is still drawn"
 assert "pyvista" not in sys.modules, "a preview imported pyvista"
 for k, pts in enumerate(poses):
     render_png(pts, rig.face_counts, rig.face_indices, f"{sys.argv[2]}/fresh{k}.png", focus=focus, size=PREVIEW_SIZE,
@@ -607,9 +751,9 @@ for k, pts in enumerate(poses):
 
 def test_a_worker_draws_each_preview_as_a_fresh_render_would(tmp_path, ict_dir, ict_rig):
     """A worker keeps one off-screen render window for every preview (``render_preview``,
-    ``widgets.snapshots.SurfaceSnapshots``, VTK without pyvista): each picture is pixel for pixel what a fresh
-    ``render_png`` (pyvista's plotter) of that pose draws, never the previous take's. In a process of its own, as a
-    worker's."""
+    ``widgets.snapshots.SurfaceSnapshots``, VTK without pyvista), made with a stand-in surface before its first take
+    (``warm_up_preview``): each picture is pixel for pixel what a fresh ``render_png`` (pyvista's plotter) of that
+    pose draws, never the previous take's nor the stand-in. In a process of its own, as a worker's."""
     from model.batch import PREVIEW_SIZE
     from tests.image_compare import load_png
     assert {"jawOpen", "mouthSmile_L", "mouthSmile_R"} <= set(ict_rig.shape_names)

@@ -78,6 +78,15 @@ class SurfaceSnapshots:
         return (tuple(int(v) for v in size) == self.size and camera == self.camera
                 and np.array_equal(face_counts, self.face_counts) and np.array_equal(face_indices, self.face_indices))
 
+    def set_faces(self, face_counts: np.ndarray, face_indices: np.ndarray) -> None:
+        """Draw a surface of other faces from the next picture on, in the same window: its OpenGL context and the
+        shader programs it compiled stay (VTK keeps a window's programs by their source, which depends on the
+        material and lighting, not on the mesh). ``app.cli_batch.warm_up_preview`` draws a stand-in first so that
+        a worker's first take does not wait for them (~0.12 s on ICT)."""
+        self.renderer.RemoveAllViewProps()
+        self.face_counts, self.face_indices = np.array(face_counts), np.array(face_indices)
+        self._mesh = self._arrays = None
+
     def _add_surface(self, points: np.ndarray) -> None:
         """The surface as ``add_surface`` adds it without a colour map (material, per-vertex lighting, backs)."""
         from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
