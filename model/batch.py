@@ -3,7 +3,7 @@ Qt-free; the ``batch`` command (app.cli_batch) and the GUI's File ▸ Batch Solv
 
 - ``find_takes`` expands files, folders and glob patterns into take files; ``take_names`` names each take's
   output folder ``OUTDIR/<take>/``.
-- ``BatchJob`` is what every take shares: the rig, its float64 pose evaluator, the segmentation of a per-region
+- ``BatchJob`` is what every take shares: the rig (and, built where a take needs it, its float64 pose evaluator), the segmentation of a per-region
   solve, the marker map, the settings and the preview's framing. ``run_batch`` scatters it to every worker once.
 - ``solve_take_file`` is one take's job (on a worker): the same ``TakeWorkspace`` solve as ``solve``, its weights
   CSV, report, preview PNG and (optionally) PC2 cache written as one set (``model.output_set.write_set``) with a
@@ -140,7 +140,6 @@ class BatchJob:
 
     rig: Rig
     settings: dict
-    evaluator: PoseEvaluator
     segmentation: object = None
     marker_map: MarkerMap | None = None
     cache: bool = False
@@ -154,7 +153,8 @@ class BatchJob:
     def prepare(cls, rig: Rig, settings: dict, *, segmentation=None, marker_map: MarkerMap | None = None,
                 cache: bool = False, preview: Callable | None = None, focus: np.ndarray | None = None,
                 preload: tuple = ()) -> "BatchJob":
-        """The shared part of a batch: the rig's float64 pose evaluator is built here, once. ``preload``: modules
+        """The shared part of a batch. The rig's float64 pose evaluator is not built here but where a take first
+        needs it (``evaluator``: in each worker; at studio scale it is the rig's deltas again). ``preload``: modules
         whose import readies a worker for ``preview`` (see ``start_client``)."""
         map_id = "automatic" if marker_map is None else hashlib.sha1(
             json.dumps(marker_map.to_json(), sort_keys=True).encode()).hexdigest()[:16]
@@ -162,7 +162,7 @@ class BatchJob:
                      "rig": _digest(rig.neutral, rig.deltas, *[c.delta for c in rig.correctives]),
                      "rig_units": rig.units, "cache": bool(cache), "preview": preview is not None}
         from .antagonists import solve_pairs
-        return cls(rig=rig, settings=dict(settings), evaluator=PoseEvaluator(rig, dtype=np.float64),
+        return cls(rig=rig, settings=dict(settings),
                    segmentation=segmentation, marker_map=marker_map, cache=cache, preview=preview,
                    focus=focus, signature=json.loads(json.dumps(signature)),
                    antagonists=solve_pairs(rig, settings),    # once per batch, not once per take
@@ -178,17 +178,14 @@ class BatchJob:
         return faces
 
     def __getstate__(self) -> dict:
-        """Pickled (scattered to every worker) without the evaluator: its matrix is the rig's deltas again, over
-        the moving vertices, and would nearly double what every worker receives (69 MB instead of 39 MB on ICT).
-        Where the job is unpickled, the evaluator is rebuilt from the rig (``PoseEvaluator(rig)``, as ``prepare``
-        built it: the same arrays, ~0.05 s on ICT) when first asked for, in the first take, not while the worker
-        receives the job: Dask's broadcast hands the job from one worker on to the next, which then gets it
-        sooner."""
+        """Pickled (scattered to every worker) without the evaluator, where one was built: its matrix is the rig's
+        deltas again, over the moving vertices, and would nearly double what every worker receives (69 MB instead
+        of 39 MB on ICT). Where the job is unpickled, the evaluator is built from the rig when first asked for
+        (the same arrays, ~0.05 s on ICT), in the first take, not while the worker receives the job: Dask's
+        broadcast hands the job from one worker on to the next, which then gets it sooner."""
         state = dict(self.__dict__)
         state.pop("prepared", None)                     # this process's own
-        evaluator = state.pop("evaluator", None)        # None: not rebuilt yet here (it keeps its dtype)
-        if evaluator is not None:
-            state["_evaluator_dtype"] = evaluator.dtype
+        state.pop("evaluator", None)
         return state
 
     def __setstate__(self, state: dict) -> None:
@@ -198,8 +195,8 @@ class BatchJob:
         if name == "prepared":      # the take solver's preparation for this rig, kept across this process's takes
             self.prepared = {}
             return self.prepared
-        if name == "evaluator" and "_evaluator_dtype" in self.__dict__:
-            self.evaluator = PoseEvaluator(self.rig, dtype=self.__dict__.pop("_evaluator_dtype"))
+        if name == "evaluator":     # the rig's float64 pose evaluator, built on first use in this process
+            self.evaluator = PoseEvaluator(self.rig, dtype=np.float64)
             return self.evaluator
         raise AttributeError(f"{type(self).__name__!r} object has no attribute {name!r}")
 

@@ -229,13 +229,15 @@ def test_a_take_that_does_not_fit_the_map_fails_alone(tmp_path, ict_rig, take_di
 def test_the_job_sent_to_the_workers_carries_the_deltas_once_and_rebuilds_the_same_evaluator(ict_rig, take_dir):
     """What ``run_batch`` scatters to every worker: the job pickled without the evaluator's matrix (the rig's
     deltas again, over the moving vertices), and where it is unpickled -- also after being passed on unused, as
-    Dask's broadcast passes it from one worker to the next -- an evaluator bit for bit the one the client built."""
+    Dask's broadcast passes it from one worker to the next -- an evaluator bit for bit the one the client would
+    build (which it does not: only where a take needs it)."""
     import pickle
 
     from model.batch import BatchJob
     from model.marker_map import load_marker_map
     job = BatchJob.prepare(ict_rig, {"mode": "global", "residual": None, "calibration_frames": 30,
                                      "fixed_head": False}, marker_map=load_marker_map(take_dir / "marker_map.json"))
+    assert "evaluator" not in vars(job)       # not built by the command, which never solves (a studio rig's is GBs)
     built = job.evaluator
     assert built._D.nbytes > ict_rig.deltas.nbytes / 2       # worth leaving out: most of the rig's size again
     data = pickle.dumps(job, protocol=5)
