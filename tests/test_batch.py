@@ -524,6 +524,27 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
     assert workers[0] == 200 and workers[2].count("tcp://127.0.0.1:") >= 2
 
 
+_NO_DASK_HERE = """
+import json, sys
+from app.launch import main
+code = main(sys.argv[1:])
+print(json.dumps({"code": code, "dask": sorted(m for m in ("dask", "distributed") if m in sys.modules)}))
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
+def test_the_batch_command_solves_on_a_local_cluster_without_importing_dask_itself(tmp_path, ict_dir, take_dir):
+    """The local cluster is driven from a process forked from the fork server (``model.batch_driver``), which has
+    Dask imported already: the ``batch`` command's own process never imports it (~0.3 s), and the takes are solved."""
+    takes = _short_takes(tmp_path, take_dir, 2)
+    proc = subprocess.run([sys.executable, "-c", _NO_DASK_HERE, "batch", str(ict_dir), *map(str, takes), "--map",
+                           str(take_dir / "marker_map.json"), "-o", str(tmp_path / "out"), "--workers", "1"],
+                          capture_output=True, text=True, timeout=300)
+    r = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert r == {"code": 0, "dask": []}, proc.stderr[-3000:]
+    assert [t["status"] for t in _summary(tmp_path / "out").values()] == ["solved", "solved"]
+
+
 def _preview_window_ready() -> tuple[bool, bool]:
     """(whether this process has its preview window, whether its OpenGL context is current on this thread)."""
     import ctypes
