@@ -85,6 +85,12 @@ def box_qp_fresh(H, g, w, lo, hi, tol, max_iter=200) -> int:
                                      int(max_iter)))
 
 
+def usable_now() -> bool:
+    """Whether the compiled kernel can run without being compiled first: loaded, or built for this machine (the
+    callers with a Python loop of their own use it only then: ``solvers.weight_solve``)."""
+    return _impl is not None or (available() and ready())
+
+
 def ready() -> bool:
     """Whether ``kernel()`` returns at once: the kernel is loaded, or built for this machine, or numba is missing
     (the Python loop then). False: the first solve compiles it first (``BUILD_MESSAGE``)."""

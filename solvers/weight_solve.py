@@ -19,7 +19,11 @@ subject to either
 
 which this module minimises with a primal active-set method (Nocedal & Wright, *Numerical Optimization*,
 Algorithm 16.3) on the K×K normal equations. Every iterate is feasible, so the answer never leaves the
-constraints; a final projection and an assertion make that hold under rounding too.
+constraints; a final projection and an assertion make that hold under rounding too. For the plain box (the same
+bounds for every shape, no shape held fixed, no sum limit) the compiled take kernel's box QP
+(``solvers.take_kernel.box_qp_fresh``: the same method with Cholesky factors updated as the working set changes,
+after a few primal-dual steps, Hintermüller, Ito & Kunisch 2002) runs instead where it is built: the same
+minimiser (to ~1e-15 on drag-sized problems), ~20x faster (a marker drag's 6 region solves ~3 ms → ~0.2 ms).
 
 Cost. Building a ``WeightSolver`` forms ``AᵀA`` once (O(M K²)). Each ``solve`` is one ``Aᵀb`` (O(M K)) plus
 one dense solve of the free-variable system (O(n_free³), n_free ≤ K ≤ ~60, about 10–30 µs) per change of
@@ -158,6 +162,9 @@ class WeightSolver:
         self._fixed = self.lower == self.upper
         self._has_fixed = bool(self._fixed.any())
         self._finite_hi = bool(np.isfinite(self.upper).any())
+        # the compiled box QP takes one lower and one upper bound for every shape (``_compiled_box_qp``)
+        self._plain_box = (self.sum_max is None and not self._has_fixed and bool(np.isfinite(self.upper).all())
+                           and np.ptp(self.lower) == 0.0 and np.ptp(self.upper) == 0.0) if K else False
         self.max_iter = int(max_iter) if max_iter is not None else 6 * K + 30
         self.last_iterations = 0
 
@@ -204,7 +211,14 @@ class WeightSolver:
             w0 = project_feasible(self._vector(w_start, "w_start"), self.lower, self.upper, self.sum_max)
         else:  # cold start: the projected unconstrained minimiser guesses the active set well
             w0 = project_feasible(np.linalg.solve(H, g), self.lower, self.upper, self.sum_max)
-        w = _active_set(H, g, self.lower, self.upper, self.sum_max, w0, self.max_iter, self._scale, self)
+        box_qp = _compiled_box_qp() if self._plain_box else None
+        if box_qp is not None:
+            w = np.ascontiguousarray(w0, dtype=np.float64).copy()
+            tol = 1e-12 * max(float(np.abs(H).max()), 1e-300)   # on the multipliers, as the take solver's
+            self.last_iterations = box_qp(np.ascontiguousarray(H), g, w, float(self.lower[0]), float(self.upper[0]),
+                                          tol, self.max_iter)
+        else:
+            w = _active_set(H, g, self.lower, self.upper, self.sum_max, w0, self.max_iter, self._scale, self)
         w = project_feasible(w, self.lower, self.upper, self.sum_max)  # clip-proof under rounding
         assert not ((w < self.lower) | (w > self.upper)).any() and (
             self.sum_max is None or w.sum() <= self.sum_max + 1e-12), "weight solve left the constraints"
@@ -223,6 +237,13 @@ class WeightSolver:
         if v.shape[0] != self.K or not np.isfinite(v).all():
             raise RigInputError(f"The weight solve's {name} must be {self.K} finite weights.")
         return v
+
+
+def _compiled_box_qp():
+    """``solvers.take_kernel.box_qp_fresh`` where the compiled kernel runs without compiling first, else None (the
+    Python active set below: no solve waits for a build)."""
+    from . import take_kernel
+    return take_kernel.box_qp_fresh if take_kernel.usable_now() else None
 
 
 def _spd_solve(M: np.ndarray, R: np.ndarray) -> np.ndarray:

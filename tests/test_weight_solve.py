@@ -172,3 +172,40 @@ def test_recovers_known_ict_pose_from_50_markers(ict_rig, lam_sparsity):
     print(f"ICT recovery (λ_s={lam_sparsity}): dense RMS {rms * 10:.2e} mm over {moving.size} face vertices")
     assert rms < 0.01  # cm: under 0.1 mm
     assert np.abs(w - w_true).max() < 0.01
+
+
+def test_the_plain_box_runs_the_compiled_qp_and_finds_the_python_active_sets_minimiser(monkeypatch):
+    """Where the compiled take kernel is built, a box with the same bounds for every shape (a marker drag's regions,
+    the take solver's global frames) is solved by its QP (``take_kernel.box_qp_fresh``): the minimiser the Python
+    active set finds, and lsq_linear's, for bounds other than [0, 1] too; per-shape bounds, a shape held fixed and
+    the convex mode keep the Python active set."""
+    from solvers import take_kernel, weight_solve
+    if not take_kernel.usable_now():
+        pytest.skip("the compiled kernel is not built here")
+    calls = []
+    real = take_kernel.box_qp_fresh
+    monkeypatch.setattr(take_kernel, "box_qp_fresh", lambda *a: calls.append(a[3:5]) or real(*a))
+    rng = np.random.default_rng(11)
+    for trial, (lo, hi) in enumerate([(0.0, 1.0), (-0.5, 2.0), (0.2, 0.6)] * 4):
+        A, b = _random_problem(rng, M=int(rng.integers(3, 25)), K=int(rng.integers(5, 60)))
+        K = A.shape[1]
+        s = WeightSolver(A, lam_sparsity=0.05, lam_reg=0.3, lower=lo, upper=hi)
+        w_ref = rng.uniform(lo, hi, K)
+        compiled = s.solve(b, w_ref=w_ref, w_start=w_ref)
+        assert calls[-1] == (lo, hi) and len(calls) == trial + 1
+        with monkeypatch.context() as m:
+            m.setattr(weight_solve, "_compiled_box_qp", lambda: None)
+            python = s.solve(b, w_ref=w_ref, w_start=w_ref)
+        np.testing.assert_allclose(compiled, python, atol=1e-10)
+        Aa = np.vstack([A, np.sqrt(0.05) * np.ones((1, K)), np.sqrt(0.3) * np.eye(K)])     # lsq_linear's form
+        reference = lsq_linear(Aa, np.concatenate([b, [0.0], np.sqrt(0.3) * w_ref]), bounds=(lo, hi), method="bvls",
+                               tol=1e-14).x
+        np.testing.assert_allclose(compiled, reference, atol=1e-7)
+        at_bounds = np.isclose(compiled, lo) | np.isclose(compiled, hi)
+        assert at_bounds.any() and not at_bounds.all()      # the bounds matter, and not only they
+    n = len(calls)
+    A, b = _random_problem(rng, M=10, K=20)
+    for options in (dict(lower=np.r_[0.0, np.zeros(19)], upper=np.r_[0.5, np.ones(19)]),
+                    dict(lower=np.r_[0.3, np.zeros(19)], upper=np.r_[0.3, np.ones(19)]), dict(mode="convex")):
+        WeightSolver(A, **options).solve(b)
+    assert len(calls) == n
