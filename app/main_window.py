@@ -77,6 +77,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self._progress: QtWidgets.QProgressDialog | None = None
         self._drag_old: np.ndarray | None = None
         self._redraw_pending = False
+        self._new_surface: np.ndarray | None = None   # the surface a rig change just drew (``_on_rig_change``)
         self._menus: dict[str, QtWidgets.QMenu] = {}
         self._menu_ends: dict[str, QtGui.QAction] = {}   # actions added to a menu go before its end (File: Quit)
         self.document = Document(self)
@@ -174,10 +175,15 @@ class MainWindow(QtWidgets.QMainWindow):
             self.redraw_now()
 
     def redraw_now(self) -> None:
-        """Redraw the viewport with the current pose now (a requested render still to come is then dropped)."""
+        """Redraw the viewport with the current pose now (a requested render still to come is then dropped). Not
+        when it is the very surface a rig change has just drawn (``_on_rig_change``): the document announces a
+        new rig and then its pose, and the new surface is drawn once (~50 ms a render at 106k vertices)."""
         self._redraw_pending = False
+        drawn, self._new_surface = self._new_surface, None
         if self.document.project is not None:
-            self.viewport.update_points(self.document.surface())
+            surface = self.document.surface()
+            if surface is not drawn:
+                self.viewport.update_points(surface)
 
     @property
     def redraw_pending(self) -> bool:
@@ -338,8 +344,10 @@ class MainWindow(QtWidgets.QMainWindow):
         self.shapes_panel.set_shapes(rig.shape_names, sorted(rig.presets))
         shown, colors = self.parts.view_for(rig)
         focus = focus_vertices(rig.neutral, self.document.shape_reach())
-        self.viewport.set_surface(self.document.surface(), rig.face_counts, rig.face_indices, focus=focus,
-                                  shown_faces=shown, base_colors=colors)
+        surface = self.document.surface()
+        self.viewport.set_surface(surface, rig.face_counts, rig.face_indices, focus=focus, shown_faces=shown,
+                                  base_colors=colors)
+        self._new_surface = surface     # drawn: the pose change announced next need not draw it again
         self._update_counts()
         self._update_title()
 

@@ -385,6 +385,25 @@ def test_a_pose_change_draws_one_frame(qtbot, tmp_path):
     rig = w.document.rig
     w.viewport.set_surface(w.document.surface(), rig.face_counts, rig.face_indices)
     assert renders[0] == 1
+    # and a rig opened into the document (its rig, then its pose, announced) is drawn once, in its pose
+    from model.project import Project
+    project = Project(rig=rig.copy())
+    project.weights[:] = 0.0
+    project.weights[rig.shape_index("jawOpen")] = 0.8
+    renders[0] = 0
+    w.document.set_project(project, None)
+    QtWidgets.QApplication.processEvents()    # the turn of the event loop on which a requested render would come
+    QtWidgets.QApplication.processEvents()
+    assert renders[0] == 1 and not w.redraw_pending
+    np.testing.assert_allclose(w.viewport.points(), w.document.surface(), atol=1e-5)
+    # the next pose change is drawn as before (once the new rig's segmentation, which recolours the view, is in)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=60000)
+    qtbot.wait(100)
+    renders[0] = 0
+    w.set_pose(np.zeros(rig.n_shapes), "close")
+    qtbot.wait(50)
+    assert renders[0] == 1
+    np.testing.assert_allclose(w.viewport.points(), w.document.surface(), atol=1e-5)
 
 
 def _dock_tab_bars(w) -> list[list[str]]:
