@@ -87,6 +87,9 @@ class Document(QtCore.QObject):
         self.rig_version += 1
         self._shapes_version += 1
         self._reach = (self._shapes_version, prep.reach) if prep is not None else None
+        # the default view's hidden back faces, found with the load (the viewport culls them; the faces and parts
+        # of a rig never change while it is open)
+        self.back_faces = prep.back_faces if prep is not None else None
         self._surface = None
         self._mirror = None
         self.edit_offset = None

@@ -346,7 +346,7 @@ class MainWindow(QtWidgets.QMainWindow):
         focus = focus_vertices(rig.neutral, self.document.shape_reach())
         surface = self.document.surface()
         self.viewport.set_surface(surface, rig.face_counts, rig.face_indices, focus=focus, shown_faces=shown,
-                                  base_colors=colors)
+                                  base_colors=colors, back_faces=self.document.back_faces)
         self._new_surface = surface     # drawn: the pose change announced next need not draw it again
         self._update_counts()
         self._update_title()

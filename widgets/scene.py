@@ -238,8 +238,11 @@ def _back_sides(mesh):
 
         from solvers.mesh import hidden_back_faces
         counts, indices = mesh._faces
-        points = vtk_to_numpy(mesh.GetPoints().GetData())     # a pyvista mesh's ``points``, or a plain vtkPolyData's
-        faces = np.flatnonzero(~hidden_back_faces(points, counts, indices))
+        hidden = getattr(mesh, "_hidden_faces", None)   # found beforehand, off the GUI thread (``model.rig_prep``)
+        if hidden is None or len(hidden) != len(counts):
+            points = vtk_to_numpy(mesh.GetPoints().GetData())   # a pyvista mesh's ``points``, or a plain vtkPolyData's
+            hidden = hidden_back_faces(points, counts, indices)
+        faces = np.flatnonzero(~hidden)
         cached = (None, None)
         if faces.size:
             counts = np.asarray(counts, dtype=np.int64)

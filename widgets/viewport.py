@@ -132,6 +132,7 @@ class Viewport(QtWidgets.QWidget):
         self._texture_split = None   # its model.textures.DisplaySplit (of every face)
         self._face_counts: np.ndarray | None = None   # of the faces drawn
         self._all_faces: tuple[np.ndarray, np.ndarray] | None = None   # the surface's faces, every part
+        self._known_back_faces: tuple | None = None   # (faces, flags) of the default view's hidden back faces
         self._shown_faces: np.ndarray | None = None   # the faces drawn (set_parts), None: all
         self._base_colors: np.ndarray | None = None   # the parts' colours (set_parts)
         self._camera = "front"
@@ -149,10 +150,13 @@ class Viewport(QtWidgets.QWidget):
     # --- content -----------------------------------------------------------------------------------
     def set_surface(self, points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
                     focus: np.ndarray | None = None, *, reset_camera: bool = True,
-                    shown_faces: np.ndarray | None = None, base_colors: np.ndarray | None = None) -> None:
+                    shown_faces: np.ndarray | None = None, base_colors: np.ndarray | None = None,
+                    back_faces: tuple | None = None) -> None:
         """Show a new surface (a new rig): topology is uploaded once here. ``shown_faces`` and ``base_colors``:
-        see ``set_parts``."""
+        see ``set_parts``. ``back_faces``: (faces, flags) of ``model.rig_prep.default_back_faces``, found off the
+        GUI thread: the surface's hidden back faces whenever the faces drawn are those ``faces``."""
         self._focus = focus if focus is not None else points
+        self._known_back_faces = back_faces
         if self._colormap is not None and len(self._colormap.scalars) != len(points):
             self._colormap = None   # the last rig's colours: its owner sets the new rig's when they are ready
         self._all_faces = (np.asarray(face_counts), np.asarray(face_indices))
@@ -183,6 +187,11 @@ class Viewport(QtWidgets.QWidget):
         self._shown_faces = None if shown_faces is None else np.asarray(shown_faces, dtype=np.int64)
         self._base_colors = base_colors
         self.mesh = rig_mesh(points, counts, indices)
+        known = self._known_back_faces
+        if known is not None and len(known[1]) == len(counts) and (
+                (known[0] is None and self._shown_faces is None) or (
+                known[0] is not None and self._shown_faces is not None and np.array_equal(known[0], self._shown_faces))):
+            object.__setattr__(self.mesh, "_hidden_faces", known[1])   # ``scene._back_sides`` takes them
         self._face_counts = np.asarray(counts)
         self._arrays = SurfaceArrays(self.mesh)
         if self._texture_split is not None and self._textured is not None:
