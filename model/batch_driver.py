@@ -79,28 +79,32 @@ def solve_in_driver(job, tasks: list, *, progress: Callable | None = None, cance
             send_handle(ours, fd, process.pid)
         finally:
             os.close(fd)
-        while outcome is None:
+        error = None
+        while outcome is None and error is None:
             try:
-                if not ours.poll(_POLL):
-                    if cancel is not None and cancel():
-                        tell("cancelled")
-                    continue
-                kind, value = ours.recv()
-            except KeyboardInterrupt:
+                try:
+                    if not ours.poll(_POLL):
+                        if cancel is not None and cancel():
+                            tell("cancelled")
+                        continue
+                    kind, value = ours.recv()
+                except (EOFError, OSError):         # the driver is gone without its outcome (killed)
+                    outcome = ClusterOutcome(stopped="stopped unexpectedly (the batch's driver process ended)")
+                    break
+                if kind == "progress":
+                    if progress is not None:
+                        progress(value)
+                elif kind == "outcome":
+                    outcome = value
+                elif kind == "error":
+                    error = value
+            except KeyboardInterrupt:               # the driver stops in order and says what it did
                 tell("interrupted")
-                continue
-            except (EOFError, OSError):             # the driver is gone without its outcome (killed)
-                outcome = ClusterOutcome(stopped="stopped unexpectedly (the batch's driver process ended)")
-                break
-            if kind == "progress":
-                if progress is not None:
-                    progress(value)
-            elif kind == "outcome":
-                outcome = value
-            elif kind == "error":
-                raise value
+        if error is not None:
+            raise error
     except KeyboardInterrupt:                       # before the driver had the job: it cannot stop in order
-        process.kill()
+        if process.pid is not None:
+            process.kill()
         raise
     finally:
         ours.close()
