@@ -38,7 +38,9 @@ from typing import Callable
 
 import numpy as np
 
+from . import batch_driver
 from .atomic import process_alive
+from .batch_driver import ClusterOutcome
 from .errors import RigInputError
 from .fork_server import start_fork_server
 from .marker_map import MarkerMap
@@ -489,19 +491,6 @@ def longest_first(indices: list[int], takes: list[Path]) -> list[int]:
     return sorted(indices, key=lambda i: -size(i))
 
 
-@dataclass
-class ClusterOutcome:
-    """What the cluster did with a run's pending takes (``solve_on_cluster``): their rows by index in the run's takes
-    (a take the run stopped before is missing), the frames solved, the seconds from the submits to the last result,
-    the dashboard's link, and why it stopped early: None, 'cancelled' or 'interrupted' (Ctrl-C)."""
-
-    rows: dict = field(default_factory=dict)
-    frames: int = 0
-    seconds: float = 0.0
-    dashboard: str | None = None
-    stopped: str | None = None
-
-
 def solve_on_cluster(job_source: Callable[[], BatchJob], tasks: list[tuple[int, str, str, str]], *, total: int,
                      done: int, preload: tuple = (), workers: int | None = None, scheduler: str | None = None,
                      retries: int = 2, progress: Callable[[BatchProgress], None] | None = None,
@@ -579,7 +568,6 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
     (``model.batch_driver``: this process then never imports Dask), else from this one.
     ``cancel()`` true stops the run (unfinished takes are failed rows, 'cancelled'); so does Ctrl-C (SIGINT:
     'interrupted'), after which the summary is written and KeyboardInterrupt raised again."""
-    from . import batch_driver
     out_dir = Path(out_dir)
     takes = [Path(t).resolve() for t in takes]
     names = names or take_names(takes)
@@ -599,7 +587,8 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
         options = dict(total=len(takes), done=done, preload=job.preload, workers=workers, retries=retries,
                        dashboard_address=dashboard_address)
         if not scheduler and batch_driver.available(job.preload):
-            outcome = batch_driver.solve_in_driver(job, tasks, progress=progress, cancel=cancel, **options)
+            outcome = batch_driver.solve_in_driver(job, tasks, solve=solve_on_cluster, progress=progress,
+                                                   cancel=cancel, **options)
         else:
             outcome = solve_on_cluster(lambda: job, tasks, scheduler=scheduler, progress=progress,
                                        stop=lambda: "cancelled" if cancel is not None and cancel() else None,

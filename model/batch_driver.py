@@ -29,10 +29,24 @@ from __future__ import annotations
 
 import os
 import threading
+from dataclasses import dataclass, field
 from typing import Callable
 
 PROCESS_NAME = "dask-batch"         # the driver's name in ``ps``/``top`` (Linux), beside the scheduler and workers
 _POLL = 0.1                          # seconds between looks at the caller's ``cancel()`` while the driver works
+
+
+@dataclass
+class ClusterOutcome:
+    """What the cluster did with a run's pending takes (``solve_on_cluster``): their rows by index in the run's takes
+    (a take the run stopped before is missing), the frames solved, the seconds from the submits to the last result,
+    the dashboard's link, and why it stopped early: None, 'cancelled' or 'interrupted' (Ctrl-C)."""
+
+    rows: dict = field(default_factory=dict)
+    frames: int = 0
+    seconds: float = 0.0
+    dashboard: str | None = None
+    stopped: str | None = None
 
 
 def available(preload: tuple = ()) -> bool:
@@ -42,9 +56,10 @@ def available(preload: tuple = ()) -> bool:
     return hasattr(os, "memfd_create") and can_adopt_fork_server() and start_fork_server(preload)
 
 
-def solve_in_driver(job, tasks: list, *, progress: Callable | None = None, cancel: Callable[[], bool] | None = None,
-                    **options):
-    """``model.batch.solve_on_cluster(job, tasks, **options)`` run by a driver process forked from the fork server;
+def solve_in_driver(job, tasks: list, *, solve: Callable, progress: Callable | None = None,
+                    cancel: Callable[[], bool] | None = None, **options) -> ClusterOutcome:
+    """``solve(lambda: job, tasks, progress=..., stop=..., **options)`` (``model.batch.solve_on_cluster``, passed in:
+    this module is below ``model.batch``) run by a driver process forked from the fork server;
     ``progress`` is called here for each of its reports, ``cancel()`` is asked every ``_POLL`` seconds. Returns the
     ``ClusterOutcome``; raises what the driver raised (e.g. the scheduler could not start), KeyboardInterrupt
     after the driver has stopped on a Ctrl-C that came before the cluster's start."""
@@ -52,12 +67,11 @@ def solve_in_driver(job, tasks: list, *, progress: Callable | None = None, cance
     import pickle
     from multiprocessing.reduction import send_handle
 
-    from .batch import ClusterOutcome
     from .fork_server import fork_server_address
     ctx = multiprocessing.get_context("forkserver")
     ours, theirs = ctx.Pipe(duplex=True)        # a socket pair: it can carry a descriptor
-    process = ctx.Process(target=_drive, args=(theirs, fork_server_address(), tasks, options), name=PROCESS_NAME,
-                          daemon=False)         # not daemonic: it starts the cluster's processes
+    process = ctx.Process(target=_drive, args=(theirs, fork_server_address(), solve, tasks, options),
+                          name=PROCESS_NAME, daemon=False)   # not daemonic: it starts the cluster's processes
     outcome, said = None, None
 
     def tell(what: str) -> None:
@@ -118,13 +132,12 @@ def solve_in_driver(job, tasks: list, *, progress: Callable | None = None, cance
     return outcome
 
 
-def _drive(conn, address: str, tasks: list, options: dict) -> None:
+def _drive(conn, address: str, solve: Callable, tasks: list, options: dict) -> None:
     """The driver process: adopt the fork server at ``address``, start the cluster while the job arrives on
-    ``conn``, solve ``tasks`` on it and send the outcome (or the error that stopped it)."""
+    ``conn``, solve ``tasks`` on it with ``solve`` and send the outcome (or the error that stopped it)."""
     import _thread
     import pickle
 
-    from .batch import ClusterOutcome, solve_on_cluster
     from .fork_server import adopt_fork_server, name_process
     name_process(PROCESS_NAME)
     adopt_fork_server(address)
@@ -173,8 +186,7 @@ def _drive(conn, address: str, tasks: list, options: dict) -> None:
     outcome = None
     try:
         try:
-            outcome = solve_on_cluster(job, tasks, progress=progress, stop=lambda: said[0] if said else None,
-                                       **options)
+            outcome = solve(job, tasks, progress=progress, stop=lambda: said[0] if said else None, **options)
         except KeyboardInterrupt:       # before the takes were submitted, or while the cluster closed
             outcome = ClusterOutcome(stopped="interrupted")
         with ending:                    # no interruption after this
