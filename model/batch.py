@@ -3,8 +3,9 @@ Qt-free; the ``batch`` command (app.cli_batch) and the GUI's File ▸ Batch Solv
 
 - ``find_takes`` expands files, folders and glob patterns into take files; ``take_names`` names each take's
   output folder ``OUTDIR/<take>/``.
-- ``BatchJob`` is what every take shares: the rig (and, built where a take needs it, its float64 pose evaluator), the segmentation of a per-region
-  solve, the marker map, the settings and the preview's framing. ``run_batch`` scatters it to every worker once.
+- ``BatchJob`` is what every take shares: the rig (and, built where a take needs it, its float64 pose evaluator),
+  the segmentation of a per-region solve, the marker map, the settings and the preview's framing. ``run_batch``
+  scatters it to every worker once.
 - ``solve_take_file`` is one take's job (on a worker): the same ``TakeWorkspace`` solve as ``solve``, its weights
   CSV, report, preview PNG and (optionally) PC2 cache written as one set (``model.output_set.write_set``) with a
   done-marker (``done.json``) last, so a killed run never leaves half a take. A bad take (unreadable, a map
@@ -473,7 +474,8 @@ def _forked_scheduler_cluster(*, n_workers: int, threads_per_worker: int, host: 
         dashboard_address=dashboard_address)}
     worker = {"cls": Nanny, "options": dict(
         host=host, nthreads=threads_per_worker, protocol="tcp://", dashboard=False, silence_logs=silence_logs,
-        env=env, preload=preload, memory_limit=parse_memory_limit("auto", 1, n_workers, logger=logging.getLogger("distributed")))}
+        env=env, preload=preload,
+        memory_limit=parse_memory_limit("auto", 1, n_workers, logger=logging.getLogger("distributed")))}
     return SpecCluster(scheduler=scheduler, workers={i: worker for i in range(n_workers)}, worker=worker,
                        silence_logs=silence_logs)
 

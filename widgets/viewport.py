@@ -188,9 +188,10 @@ class Viewport(QtWidgets.QWidget):
         self._base_colors = base_colors
         self.mesh = rig_mesh(points, counts, indices)
         known = self._known_back_faces
-        if known is not None and len(known[1]) == len(counts) and (
-                (known[0] is None and self._shown_faces is None) or (
-                known[0] is not None and self._shown_faces is not None and np.array_equal(known[0], self._shown_faces))):
+        same_faces = known is not None and (
+            known[0] is None and self._shown_faces is None
+            or known[0] is not None and self._shown_faces is not None and np.array_equal(known[0], self._shown_faces))
+        if same_faces and len(known[1]) == len(counts):
             object.__setattr__(self.mesh, "_hidden_faces", known[1])   # ``scene._back_sides`` takes them
         self._face_counts = np.asarray(counts)
         self._arrays = SurfaceArrays(self.mesh)
