@@ -65,6 +65,7 @@ class Document(QtCore.QObject):
         self._evaluator64: tuple[int, PoseEvaluator] | None = None
         self._shapes_version = 0   # bumped on every new rig and every edit of its shapes' deltas
         self._reach: tuple[int, np.ndarray] | None = None   # (shapes version, the shapes' reach)
+        self.back_faces: tuple | None = None   # the default view's hidden back faces (``model.rig_prep``), or None
         self._surface: np.ndarray | None = None
         self.edit_offset: np.ndarray | None = None  # pending sculpt/nudge (V, 3), shown on top of the pose
         # Regional pose (Joshi §4): per-region weights of one segmentation level, or None for a global pose.

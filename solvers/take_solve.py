@@ -40,7 +40,7 @@ from .rbf import KERNEL_LENGTH_POWER, KERNELS, RBFResidual, phantom_points
 from .regional_solve import shape_region_max
 from .retarget import SmoothWarp, neutral_stretch
 from .rigid import to_matrix, umeyama
-from .weight_solve import WeightSolver
+from .weight_solve import WeightSolver, qp_tol
 
 Progress = Optional[Callable[[int, int, str], None]]
 
@@ -173,11 +173,6 @@ def _kabsch(P: np.ndarray, Y: np.ndarray, p: np.ndarray | None = None) -> tuple[
     return R, my - R @ mp
 
 
-def _qp_tol(H: np.ndarray) -> float:
-    """The box QP's stopping tolerance on the multipliers for H: relative, as H scales with the rig's units²."""
-    return 1e-12 * max(float(np.abs(H).max()), 1e-300)
-
-
 class _CachedBoxQP:
     """Box-constrained QP ``min ½wᵀHw − gᵀw, lo ≤ w ≤ hi`` for one fixed H (one marker subset), by the
     primal active-set method (Nocedal & Wright, *Numerical Optimization*, Algorithm 16.3) with the
@@ -195,7 +190,7 @@ class _CachedBoxQP:
         self._factors: dict[bytes, tuple] = {}
         self._seen: dict[bytes, int] = {}
         self._posv = _POSV
-        self.tol = _qp_tol(H)
+        self.tol = qp_tol(H)
 
     def _factor(self, free: np.ndarray):
         if not self.cache:
@@ -919,7 +914,7 @@ class TakeSolver:
                 g[d] += Jd.T @ r
                 if self._kernel is not None:     # the compiled box QP (the same optimum as _CachedBoxQP's)
                     step = w.copy()
-                    self._kernel.box_qp_fresh(H, g, step, self.lower, self.upper, _qp_tol(H))
+                    self._kernel.box_qp_fresh(H, g, step, self.lower, self.upper, qp_tol(H))
                 else:
                     step = _CachedBoxQP(H, self.lower, self.upper, cache=False).solve(g, w.copy())
             done = np.abs(step - w).max() < 1e-7

@@ -44,7 +44,7 @@ from .errors import RigInputError
 
 MODES = ("box", "convex")
 
-__all__ = ["WeightSolver", "solve_weights", "project_feasible", "weight_objective", "MODES"]
+__all__ = ["WeightSolver", "solve_weights", "project_feasible", "weight_objective", "qp_tol", "MODES"]
 
 
 def _as_bounds(value, K: int, name: str) -> np.ndarray:
@@ -214,9 +214,8 @@ class WeightSolver:
         box_qp = _compiled_box_qp() if self._plain_box else None
         if box_qp is not None:
             w = np.ascontiguousarray(w0, dtype=np.float64).copy()
-            tol = 1e-12 * max(float(np.abs(H).max()), 1e-300)   # on the multipliers, as the take solver's
             self.last_iterations = box_qp(np.ascontiguousarray(H), g, w, float(self.lower[0]), float(self.upper[0]),
-                                          tol, self.max_iter)
+                                          qp_tol(H), self.max_iter)
         else:
             w = _active_set(H, g, self.lower, self.upper, self.sum_max, w0, self.max_iter, self._scale, self)
         w = project_feasible(w, self.lower, self.upper, self.sum_max)  # clip-proof under rounding
@@ -237,6 +236,12 @@ class WeightSolver:
         if v.shape[0] != self.K or not np.isfinite(v).all():
             raise RigInputError(f"The weight solve's {name} must be {self.K} finite weights.")
         return v
+
+
+def qp_tol(H: np.ndarray) -> float:
+    """The compiled box QP's stopping tolerance on the multipliers for H (here and in ``solvers.take_solve``):
+    relative, as H scales with the rig's units²."""
+    return 1e-12 * max(float(np.abs(H).max()), 1e-300)
 
 
 def _compiled_box_qp():

@@ -187,11 +187,9 @@ class Viewport(QtWidgets.QWidget):
         self._shown_faces = None if shown_faces is None else np.asarray(shown_faces, dtype=np.int64)
         self._base_colors = base_colors
         self.mesh = rig_mesh(points, counts, indices)
-        known = self._known_back_faces
-        same_faces = known is not None and (
-            known[0] is None and self._shown_faces is None
-            or known[0] is not None and self._shown_faces is not None and np.array_equal(known[0], self._shown_faces))
-        if same_faces and len(known[1]) == len(counts):
+        known = self._known_back_faces   # (faces drawn or None for all, their flags): only for those faces
+        if known is not None and len(known[1]) == len(counts) and (
+                known[0] is self._shown_faces is None or np.array_equal(known[0], self._shown_faces)):
             object.__setattr__(self.mesh, "_hidden_faces", known[1])   # ``scene._back_sides`` takes them
         self._face_counts = np.asarray(counts)
         self._arrays = SurfaceArrays(self.mesh)
