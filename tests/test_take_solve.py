@@ -192,6 +192,36 @@ def test_rbf_interpolates_and_phantoms_hold(ict_rig):
     assert np.allclose(batch[0], C) and np.allclose(batch[1], 2 * C)
 
 
+@pytest.mark.parametrize("kernel", ["joshi", "gaussian", "multiquadric"])
+def test_the_kernel_matrix_is_the_kernel_of_the_distances_made_in_one_array(ict_rig, kernel):
+    """``kernel_matrix`` against the kernels applied to scipy's own distances (``cdist``), over ICT's vertices and
+    markers on its face; and made in one array of its size: a temporary of that size on the way (the evaluation
+    matrix of a 422k-vertex rig is 365 MB) shows in the peak."""
+    import tracemalloc
+
+    from scipy.spatial.distance import cdist
+
+    from solvers.rbf import eck_stiffness, kernel_matrix
+    rng = np.random.default_rng(1)
+    points = ict_rig.neutral[:20000]
+    centres = ict_rig.neutral[rng.choice(9000, 90, replace=False)]
+    scale = 1.7
+    r = cdist(points, centres)
+    s = np.array([np.sort(cdist(centres[i:i + 1], centres)[0])[1] for i in range(len(centres))])
+    want = {"joshi": np.exp(-r / scale), "gaussian": np.exp(-(r / scale) ** 2),
+            "multiquadric": np.sqrt(r ** 2 + s[None, :] ** 2)}[kernel]
+    assert np.allclose(eck_stiffness(centres), s)
+    tracemalloc.start()
+    try:
+        got = kernel_matrix(points, centres, kernel, scale)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-6)   # sqrt of a rounded d² near a centre: ~1e-7
+    assert got.shape == (len(points), len(centres)) and got.dtype == np.float64
+    assert peak < 1.25 * got.nbytes, f"peak {peak / 1e6:.1f} MB for a {got.nbytes / 1e6:.1f} MB matrix"
+
+
 def test_a_rig_with_correctives_is_solved_and_played_with_them(ict_rig, take_dir):
     """Smith's inner-brow corrective on ICT (it takes back 40% of the doubled motion where both brows act):
     markers made by the rig with the corrective are fitted exactly when the solve knows it, the weights come
