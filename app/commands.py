@@ -107,14 +107,19 @@ class SetShapeDeltaCommand(QUndoCommand):
         self.new = np.array(delta, dtype=document.rig.deltas.dtype)
 
     def _set(self, delta: np.ndarray) -> None:
-        rig = self.document.rig
-        deltas = rig.deltas.copy()   # a new array: whatever kept the old one (an evaluator, a cache) keeps it whole
-        k = rig.shape_names.index(self.name)
-        deltas[k] = delta
-        rig.deltas = deltas
-        rows = np.arange(rig.n_shapes)
-        rows[k] = -1                 # the evaluator's other rows are kept
-        self.document.rig_edited(shape_rows=rows)
+        k = self.document.rig.shape_names.index(self.name)
+
+        def edit(project) -> None:
+            deltas = project.rig.deltas.copy()   # a new array: whatever kept the old one (an evaluator, a cache) keeps it
+            deltas[k] = delta
+            project.rig.deltas = deltas
+
+        def rows(rig) -> list[int]:
+            rows = list(range(rig.n_shapes))
+            rows[k] = -1                 # the evaluator's other rows are kept
+            return rows
+
+        self.document.edit_rig(self.text(), edit, rows)   # off the GUI thread in the window (Document.edit_rig)
 
     def redo(self) -> None:
         self._set(self.new)
@@ -126,13 +131,26 @@ class SetShapeDeltaCommand(QUndoCommand):
 # --- the Shapes list (model.shape_edits) ------------------------------------------------------------------
 class _ShapeListCommand(QUndoCommand):
     """Runs a ``model.shape_edits`` edit on the document's project with the live regional pose in it, then
-    tells every view: the evaluator is rebuilt and the keyed animation reloaded (its columns follow the shapes)."""
+    tells every view: the evaluator is rebuilt and the keyed animation reloaded (its columns follow the shapes).
+    The edits that copy the shapes' deltas (reorder, delete and its undo, duplicate) run through
+    ``Document.edit_rig``: in the window, on a worker thread while the window stays drawn."""
 
     def __init__(self, document, text: str) -> None:
         super().__init__(text)
         self.document = document
 
     def _edit(self, fn, *args):
+        doc = self.document
+        # each shape's deltas after the edit are those of the shape of its name before (-1: a new one)
+        before = {n: i for i, n in enumerate(doc.project.rig.shape_names)}
+        result = doc.edit_rig(self.text(), lambda project: fn(project, *args),
+                              lambda rig: [before.get(n, -1) for n in rig.shape_names])
+        doc.section_changed.emit("keyframes")
+        return result
+
+    def _edit_here(self, fn, *args):
+        """``_edit`` on the document's own project, on this thread: for a rename, which copies no array but
+        renames the correctives' drivers in their (shared) objects."""
         doc = self.document
         p = doc.project
         before = {n: i for i, n in enumerate(p.rig.shape_names)}
@@ -174,11 +192,11 @@ class RenameShapeCommand(_ShapeListCommand):
 
     def redo(self) -> None:
         from model.shape_edits import rename_shape
-        self.record = self._edit(rename_shape, self.old, self.new)
+        self.record = self._edit_here(rename_shape, self.old, self.new)
 
     def undo(self) -> None:
         from model.shape_edits import undo_rename
-        self._edit(undo_rename, self.record)
+        self._edit_here(undo_rename, self.record)
 
 
 class DeleteShapesCommand(_ShapeListCommand):

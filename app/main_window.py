@@ -81,6 +81,9 @@ class MainWindow(QtWidgets.QMainWindow):
         self._menus: dict[str, QtWidgets.QMenu] = {}
         self._menu_ends: dict[str, QtGui.QAction] = {}   # actions added to a menu go before its end (File: Quit)
         self.document = Document(self)
+        # an edit that copies the shapes' arrays (a reorder on a studio rig: seconds) runs off the GUI thread, the
+        # window drawn and its input held, a busy dialog after 0.2 s (Document.edit_rig)
+        self.document.run_edit = lambda label, fn: run_modal(self, "Shapes", f"{label}…", fn)
         self.jobs = JobQueue(self)   # exports and saves off the GUI thread (run_in_background)
         self.viewport = Viewport(self)
         self.setCentralWidget(self.viewport)

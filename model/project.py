@@ -83,6 +83,46 @@ class Project:
         return rig_antagonists(self.rig)
 
 
+class DetachedEdit:
+    """An edit run on a copy of a project away from the one in use, then taken over (``adopt``).
+
+    ``project`` is the copy: its own Project and Rig objects and ``arrays`` dict, sharing every array and value
+    with the original. An edit that replaces what it changes (``model.shape_edits``' list edits: every array,
+    list and dict they change is a new one) leaves the original as it was, so another thread may run it while
+    the original is read and drawn. ``adopt`` then sets on the original (and on its very Rig object, which the
+    views and evaluators know) the attributes and arrays the edit replaced, and only those: a few assignments,
+    nothing copied, and what changed in the original meanwhile (the pose a playback set) is not put back."""
+
+    def __init__(self, project: Project) -> None:
+        self._start = dict(project.__dict__)
+        self._rig_start = dict(project.rig.__dict__)
+        self._arrays_start = dict(project.arrays)
+        rig = object.__new__(type(project.rig))
+        rig.__dict__.update(self._rig_start)
+        copy = object.__new__(type(project))
+        copy.__dict__.update(self._start)
+        copy.rig, copy.arrays = rig, dict(self._arrays_start)
+        self.project = copy
+
+    def adopt(self, project: Project) -> None:
+        """Set on ``project`` what the edit replaced in the copy."""
+        edited = self.project
+        for name, value in edited.rig.__dict__.items():
+            if self._rig_start.get(name, _UNSET) is not value:
+                setattr(project.rig, name, value)
+        for name, value in edited.__dict__.items():
+            if name not in ("rig", "arrays") and self._start.get(name, _UNSET) is not value:
+                setattr(project, name, value)
+        for key, value in edited.arrays.items():
+            if self._arrays_start.get(key, _UNSET) is not value:
+                project.arrays[key] = value
+        for key in self._arrays_start.keys() - edited.arrays.keys():
+            project.arrays.pop(key, None)
+
+
+_UNSET = object()
+
+
 MAX_PAIRS = 100_000   # more pairs than any rig's K(K-1)/2 of a few hundred shapes: a damaged file
 
 

@@ -388,3 +388,44 @@ def test_a_rename_keeps_the_segmentation_and_remove_inbetweens_undoes(qtbot, win
     QTest.mouseClick(window.shapes_panel.row("jawDrop").solo, QtCore.Qt.LeftButton, QtCore.Qt.ControlModifier)
     assert doc.rig.solo == ["jawDrop"]
     assert [r.name for r in window.shapes_panel.rows if r.solo.isChecked()] == ["jawDrop"]
+
+
+def test_a_move_copies_the_shapes_off_the_gui_thread_while_the_window_goes_on(qtbot, window, monkeypatch):
+    """Alt+Down on a shape: the reorder and its copies (``Document.edit_rig``) run on a worker thread while the
+    GUI thread goes on: a timer on it fires while the edit waits for it (on the GUI thread the edit would wait in
+    vain and fail). The moved rig, the drawn face and Ctrl+Z (off the GUI thread too) are what an edit in place
+    makes, bit for bit, on the same Rig object."""
+    import threading
+
+    import model.shape_edits as se
+    doc = window.document
+    real, on_gui_thread = se.reorder_shapes, []
+    ticked = threading.Event()
+
+    def reorder_waiting_for_the_gui_thread(project, order):
+        on_gui_thread.append(threading.current_thread() is threading.main_thread())
+        assert ticked.wait(10), "the GUI thread's timer did not fire while the edit ran"
+        ticked.clear()
+        return real(project, order)
+
+    monkeypatch.setattr(se, "reorder_shapes", reorder_waiting_for_the_gui_thread)
+    rig, names, deltas = doc.rig, list(doc.rig.shape_names), doc.rig.deltas.copy()
+    _click_name(qtbot, window, "jawOpen")
+    k = names.index("jawOpen")
+    row = window.shapes_panel.row("jawOpen")
+    row.box.setValue(0.8)                           # the face opens its jaw: the move must keep drawing it
+    drawn = _surface(window)
+    QtCore.QTimer.singleShot(50, ticked.set)
+    _key(window, QtCore.Qt.Key_Down, QtCore.Qt.AltModifier)
+    assert on_gui_thread == [False]
+    order = list(range(len(names)))
+    order[k], order[k + 1] = order[k + 1], order[k]
+    assert doc.rig is rig and rig.shape_names == [names[i] for i in order]
+    assert np.array_equal(rig.deltas, deltas[order]) and doc.weights[k + 1] == 0.8
+    assert [r.name for r in window.shapes_panel.rows][k:k + 2] == [names[k + 1], "jawOpen"]
+    np.testing.assert_allclose(_surface(window), drawn, rtol=0, atol=1e-6)   # float32 display rows, moved
+    np.testing.assert_allclose(window.viewport.points(), PoseEvaluator(rig).evaluate(doc.weights), rtol=0, atol=1e-5)
+    QtCore.QTimer.singleShot(50, ticked.set)
+    window.undo_action.trigger()                    # the move back
+    assert on_gui_thread == [False, False]
+    assert rig.shape_names == names and np.array_equal(rig.deltas, deltas) and doc.weights[k] == 0.8

@@ -166,3 +166,41 @@ def test_inbetweens_mute_and_ranges_reach_every_entry_point(qtbot, sample_rig, t
     np.testing.assert_allclose(written, expected, atol=1.5e-6)
     assert np.abs(written - (rig.neutral + 0.25 * d + rig.deltas[rig.shape_index("mouthSmile_L")]
                              + 0.9 * rig.deltas[f])).max() > 0.05   # the plain linear pose is far from it
+
+
+def test_a_float64_evaluator_reads_the_rigs_own_deltas_in_place_and_poses_as_the_gathered_matrix_does(ict_rig):
+    """A float64 evaluator of a rig without in-betweens or correctives (ICT) holds no copy of the rig's deltas
+    (a batch worker's, the solves' and the exports'); its global, many-frame and regional poses are those of the
+    evaluator made over the moving vertices only (the float32 display evaluator's layout, here in float64), and
+    a rig with a corrective gets its own matrix."""
+    import tracemalloc
+    rig = ict_rig
+    tracemalloc.start()
+    try:
+        ev = PoseEvaluator(rig, dtype=np.float64)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert np.shares_memory(ev._D, rig.deltas) and peak < 0.2 * rig.deltas.nbytes, peak
+    gathered = PoseEvaluator(rig, dtype=np.float32)          # the moving vertices' matrix, made the usual way
+    gathered._D = np.take(rig.deltas.reshape(rig.n_shapes, -1), gathered._cols, axis=1)   # ...in float64
+    gathered.dtype, gathered._neutral = np.float64, rig.neutral.reshape(-1).astype(np.float64)
+    assert gathered.moving_vertices.size < rig.n_vertices    # ICT's back of the head moves in no shape
+    rng = np.random.default_rng(3)
+    for w in (rng.uniform(0, 1, rig.n_shapes), np.eye(rig.n_shapes)[rig.shape_index("jawOpen")]):
+        np.testing.assert_allclose(ev.evaluate(w), gathered.evaluate(w), rtol=0, atol=1e-12)
+    W = rng.uniform(0, 1, (5, rig.n_shapes))
+    np.testing.assert_allclose(ev.evaluate_many(W, dtype=np.float64), gathered.evaluate_many(W, dtype=np.float64),
+                               rtol=0, atol=1e-12)
+    labels = (rig.neutral[:, 0] > 0).astype(int)              # two regions: left and right of the face
+    blend = sp.csr_matrix((np.ones(rig.n_vertices), (np.arange(rig.n_vertices), labels)), shape=(rig.n_vertices, 2))
+    R = rng.uniform(0, 1, (2, rig.n_shapes))
+    regional = ev.pose(R, blend)
+    np.testing.assert_allclose(regional, gathered.pose(R, blend), rtol=0, atol=1e-12)
+    left = labels == 0
+    np.testing.assert_allclose(regional[left], ev.evaluate(R[0])[left], rtol=0, atol=1e-12)
+    assert not np.allclose(regional[~left], ev.evaluate(R[0])[~left])
+    with_corrective = rig.copy()
+    set_correctives(with_corrective, [Corrective(drivers=["jawOpen", "mouthClose"], delta=np.full((rig.n_vertices, 3), 0.1))])
+    own = PoseEvaluator(with_corrective, dtype=np.float64)
+    assert not np.shares_memory(own._D, with_corrective.deltas) and own._D.shape[0] == rig.n_shapes + 1

@@ -494,3 +494,50 @@ def test_the_projects_antagonist_pairs_follow_a_rename_and_a_delete_and_come_bac
     assert p.antagonists == [before[0], before[2]]
     se.restore_shapes(p, removed)
     assert p.antagonists == before
+
+
+def _settings(rig) -> tuple:
+    """The rig's name-keyed settings and names, by value (in-betweens as weight and delta bytes)."""
+    return (json.dumps(rig.presets, sort_keys=True), dict(rig.ranges), list(rig.muted), list(rig.solo),
+            list(rig.shape_names), {n: [(i.weight, i.delta.tobytes()) for i in v] for n, v in rig.inbetweens.items()})
+
+
+@pytest.mark.parametrize("edit", ["reorder", "delete", "restore", "duplicate"])
+def test_a_detached_edit_leaves_the_project_as_it_was_until_adopted_then_matches_the_edit_in_place(rig, edit):
+    """``model.project.DetachedEdit`` (the window runs the shape list's copying edits on another thread): the list
+    edits replace what they change, so the project in use is untouched while the copy is edited -- every
+    attribute, array and setting the very same object; adopted, the project is what the edit in place makes, bit
+    for bit, on the same Rig object; and an attribute the edit did not change but the window did meanwhile (the
+    pose a playback set during a deltas-only edit) is not put back."""
+    from model.project import DetachedEdit
+    p, twin = _project(rig), _project(rig.copy())
+    if edit == "restore":
+        rec, twin_rec = se.delete_shapes(p, ["mouthFunnel", "eyeWide_L"]), se.delete_shapes(twin, ["mouthFunnel", "eyeWide_L"])
+    run = {"reorder": lambda q, r: se.reorder_shapes(q, se.sorted_order(q.rig.shape_names, "name")),
+           "delete": lambda q, r: se.delete_shapes(q, ["mouthFunnel", "eyeWide_L"]),
+           "restore": lambda q, r: se.restore_shapes(q, r),
+           "duplicate": lambda q, r: se.duplicate_shape(q, "jawOpen")}[edit]
+    seen = ({k: v for k, v in vars(p).items() if k != "arrays"}, dict(vars(p.rig)), dict(p.arrays),
+            _settings(rig))
+    job, rig_object = DetachedEdit(p), p.rig
+    run(job.project, rec if edit == "restore" else None)
+    assert all(getattr(p, k) is v for k, v in seen[0].items()) and all(getattr(p.rig, k) is v for k, v in seen[1].items())
+    assert all(p.arrays[k] is v for k, v in seen[2].items()) and p.arrays.keys() == seen[2].keys()
+    assert _settings(rig) == seen[3]
+    assert job.project.rig.shape_names != rig.shape_names     # the copy was edited
+    run(twin, twin_rec if edit == "restore" else None)        # the same edit in place, on a twin project
+    job.adopt(p)
+    assert p.rig is rig_object and p.rig.shape_names == twin.rig.shape_names
+    for a, b in [(p.rig.deltas, twin.rig.deltas), (p.weights, twin.weights), (p.region_weights, twin.region_weights),
+                 (p.arrays["keyframes/weights"], twin.arrays["keyframes/weights"])]:
+        assert a.dtype == b.dtype and np.array_equal(a, b)
+    assert [c.name for c in p.rig.correctives] == [c.name for c in twin.rig.correctives]
+    assert _settings(p.rig) == _settings(twin.rig)
+    # new deltas for one shape, while the pose changes in the project in use: the pose stays the new one
+    job = DetachedEdit(p)
+    deltas = p.rig.deltas.copy()
+    deltas[0] *= 2.0
+    job.project.rig.deltas = deltas
+    p.weights = np.full(p.rig.n_shapes, 0.25)
+    job.adopt(p)
+    assert p.rig.deltas is deltas and np.all(p.weights == 0.25)
