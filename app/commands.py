@@ -110,7 +110,7 @@ class SetShapeDeltaCommand(QUndoCommand):
         k = self.document.rig.shape_names.index(self.name)
 
         def edit(project) -> None:
-            deltas = project.rig.deltas.copy()   # a new array: whatever kept the old one (an evaluator, a cache) keeps it
+            deltas = project.rig.deltas.copy()   # a new array: whatever kept the old one (an evaluator) keeps it
             deltas[k] = delta
             project.rig.deltas = deltas
 

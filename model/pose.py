@@ -226,8 +226,8 @@ class PoseEvaluator:
     def evaluate_many(self, weights: np.ndarray, dtype=np.float32) -> np.ndarray:
         """(n, V, 3) surfaces for global weight vectors (n, K) as one matrix product (take exports, PC2 caches),
         in ``dtype``. Uses a copy of the deltas over all 3V columns (zero where nothing moves) in ``dtype``, made
-        on first use and kept (the rig's deltas themselves where they are read in place and in ``dtype``): one GEMM and one add, no scatter (a scatter into the moving columns costs more
-        than the product)."""
+        on first use and kept (the rig's deltas themselves where they are read in place and in ``dtype``): one
+        GEMM and one add, no scatter (a scatter into the moving columns costs more than the product)."""
         W = self._rows(np.atleast_2d(np.asarray(weights, dtype=np.float64)))
         dtype = np.dtype(dtype)
         full = self._D_full

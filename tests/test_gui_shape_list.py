@@ -429,3 +429,30 @@ def test_a_move_copies_the_shapes_off_the_gui_thread_while_the_window_goes_on(qt
     window.undo_action.trigger()                    # the move back
     assert on_gui_thread == [False, False]
     assert rig.shape_names == names and np.array_equal(rig.deltas, deltas) and doc.weights[k] == 0.8
+
+
+def test_new_deltas_for_a_shape_are_made_off_the_gui_thread_with_the_shapes_reach(qtbot, window, monkeypatch):
+    """One shape's new deltas (as Mirror Shape pushes them): the copy of the deltas, the evaluator's rows and the
+    shapes' reach (where the camera frames, how a marker drag is damped) are made on the worker thread, and the
+    reach the views then use is that of the edited rig; undo puts the deltas and the reach back."""
+    import threading
+
+    from app.commands import SetShapeDeltaCommand
+    from model import rig_prep
+    doc = window.document
+    real, threads = rig_prep.shape_reach, []
+
+    def recorded(rig):
+        threads.append(threading.current_thread() is threading.main_thread())
+        return real(rig)
+
+    monkeypatch.setattr(rig_prep, "shape_reach", recorded)
+    k = doc.rig.shape_index("jawOpen")
+    before, reach_before = doc.rig.deltas.copy(), doc.shape_reach().copy()
+    doc.undo_stack.push(SetShapeDeltaCommand(doc, "jawOpen", 3.0 * before[k], "Triple the jaw"))
+    reach = doc.shape_reach()
+    assert threads == [False] and reach.max() > reach_before.max()
+    assert np.array_equal(reach, real(doc.rig)) and np.array_equal(doc.rig.deltas[k], 3.0 * before[k])
+    window.undo_action.trigger()
+    assert threads == [False, False] and np.array_equal(doc.rig.deltas, before)
+    assert np.array_equal(doc.shape_reach(), reach_before)

@@ -201,6 +201,7 @@ def test_a_float64_evaluator_reads_the_rigs_own_deltas_in_place_and_poses_as_the
     np.testing.assert_allclose(regional[left], ev.evaluate(R[0])[left], rtol=0, atol=1e-12)
     assert not np.allclose(regional[~left], ev.evaluate(R[0])[~left])
     with_corrective = rig.copy()
-    set_correctives(with_corrective, [Corrective(drivers=["jawOpen", "mouthClose"], delta=np.full((rig.n_vertices, 3), 0.1))])
+    set_correctives(with_corrective, [Corrective(drivers=["jawOpen", "mouthClose"],
+                                                 delta=np.full((rig.n_vertices, 3), 0.1))])
     own = PoseEvaluator(with_corrective, dtype=np.float64)
     assert not np.shares_memory(own._D, with_corrective.deltas) and own._D.shape[0] == rig.n_shapes + 1

@@ -512,7 +512,7 @@ def test_a_detached_edit_leaves_the_project_as_it_was_until_adopted_then_matches
     from model.project import DetachedEdit
     p, twin = _project(rig), _project(rig.copy())
     if edit == "restore":
-        rec, twin_rec = se.delete_shapes(p, ["mouthFunnel", "eyeWide_L"]), se.delete_shapes(twin, ["mouthFunnel", "eyeWide_L"])
+        rec, twin_rec = (se.delete_shapes(q, ["mouthFunnel", "eyeWide_L"]) for q in (p, twin))
     run = {"reorder": lambda q, r: se.reorder_shapes(q, se.sorted_order(q.rig.shape_names, "name")),
            "delete": lambda q, r: se.delete_shapes(q, ["mouthFunnel", "eyeWide_L"]),
            "restore": lambda q, r: se.restore_shapes(q, r),
@@ -521,7 +521,8 @@ def test_a_detached_edit_leaves_the_project_as_it_was_until_adopted_then_matches
             _settings(rig))
     job, rig_object = DetachedEdit(p), p.rig
     run(job.project, rec if edit == "restore" else None)
-    assert all(getattr(p, k) is v for k, v in seen[0].items()) and all(getattr(p.rig, k) is v for k, v in seen[1].items())
+    assert all(getattr(p, k) is v for k, v in seen[0].items())
+    assert all(getattr(p.rig, k) is v for k, v in seen[1].items())
     assert all(p.arrays[k] is v for k, v in seen[2].items()) and p.arrays.keys() == seen[2].keys()
     assert _settings(rig) == seen[3]
     assert job.project.rig.shape_names != rig.shape_names     # the copy was edited
