@@ -242,11 +242,17 @@ class SetShapeSettingsCommand(_ShapeListCommand):
 
     def _apply(self, settings, offset_after) -> None:
         doc = self.document
-        settings.apply(doc.rig)
         if self.takes_offset:
             doc.edit_offset = offset_after
             doc.offset_changed.emit()
-        doc.shape_settings_edited()
+        arrays = lambda inbetweens: {n: [id(i.delta) for i in v] for n, v in inbetweens.items()}   # noqa: E731
+        if arrays(settings.inbetweens) != arrays(doc.rig.inbetweens):
+            # new evaluator rows (a studio rig's 232 MB copied): off the GUI thread, as the shape list's edits
+            doc.edit_rig(self.text(), lambda project: settings.apply(project.rig),
+                         lambda rig: list(range(rig.n_shapes)), settings=True)
+        else:                  # mute, solo, a range: the evaluator's matrices are shared
+            settings.apply(doc.rig)
+            doc.shape_settings_edited()
 
     def redo(self) -> None:
         self._apply(self.new, None)

@@ -278,10 +278,11 @@ class Document(QtCore.QObject):
             self.project.sections[name] = copy.deepcopy(value)
         self.section_changed.emit(name)
 
-    def shape_settings_edited(self) -> None:
-        """The shapes' mute, solo, ranges or in-betweens changed (names and deltas did not): a new evaluator,
-        reusing the old one's matrices when the in-betweens are the same, and a new pose."""
-        self._edited_evaluators()
+    def shape_settings_edited(self, evaluator: PoseEvaluator | None = None, shape_rows=None) -> None:
+        """The shapes' mute, solo, ranges or in-betweens changed (names and deltas did not): a new evaluator
+        (``evaluator``, made off the GUI thread by ``edit_rig``, else here), reusing the old one's matrices when the
+        in-betweens are the same, and a new pose."""
+        self._edited_evaluators(evaluator, shape_rows)
         self._surface = None
         self.shape_settings_changed.emit()
         self.pose_changed.emit()
@@ -304,15 +305,17 @@ class Document(QtCore.QObject):
             self._evaluator64 = (self.rig_version + 1, kept[1].with_settings(rig))
         self.rig_version += 1
 
-    def edit_rig(self, label: str, edit: Callable[[Project], Any], shape_rows: Callable[[Rig], list[int]]) -> Any:
+    def edit_rig(self, label: str, edit: Callable[[Project], Any], shape_rows: Callable[[Rig], list[int]], *,
+                 settings: bool = False) -> Any:
         """Run ``edit(project)`` -- an edit of the shapes' arrays that replaces what it changes (``model.shape_edits``'
         list edits, a shape's new deltas) -- on a copy of the project (``model.project.DetachedEdit``) with the live
         regional pose in it, and make the display evaluator of the result from this one's rows
         (``PoseEvaluator.with_settings`` with ``shape_rows(edited rig)``: see ``rig_edited``), both through
         ``run_edit``: in the window, on a worker thread while the window stays drawn (on the 106k-vertex,
         228-shape rig a reorder copies 580 MB of deltas and 232 MB of evaluator rows: seconds of new memory).
-        Then the edit is taken over and the views told (``rig_edited``). Returns what ``edit`` returned; an
-        error (a refused edit) leaves the document as it was."""
+        Then the edit is taken over and the views told (``rig_edited``; with ``settings``, an edit of the shapes'
+        in-betweens only, as ``shape_settings_edited``). Returns what ``edit`` returned; an error (a refused edit)
+        leaves the document as it was."""
         run = self.run_edit
         while True:
             p = self.project
@@ -337,8 +340,11 @@ class Document(QtCore.QObject):
             run = lambda _label, fn: fn()   # noqa: E731
         job.adopt(p)
         evaluator.rig = p.rig            # made for the copy's Rig object, whose arrays ``p.rig`` now has
-        self.region_weights = p.region_weights
-        self.rig_edited(evaluator=evaluator, shape_rows=rows, reach=reach)
+        if settings:
+            self.shape_settings_edited(evaluator, rows)
+        else:
+            self.region_weights = p.region_weights
+            self.rig_edited(evaluator=evaluator, shape_rows=rows, reach=reach)
         return result
 
     def rig_edited(self, evaluator: PoseEvaluator | None = None, shape_rows=None,

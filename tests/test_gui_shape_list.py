@@ -456,3 +456,37 @@ def test_new_deltas_for_a_shape_are_made_off_the_gui_thread_with_the_shapes_reac
     window.undo_action.trigger()
     assert threads == [False, False] and np.array_equal(doc.rig.deltas, before)
     assert np.array_equal(doc.shape_reach(), reach_before)
+
+
+def test_an_inbetween_copies_the_evaluators_rows_off_the_gui_thread_and_poses_as_a_fresh_evaluator(qtbot, window,
+                                                                                                   monkeypatch):
+    """An in-between (as Add In-between pushes it): the display evaluator's new rows are copied on the worker
+    thread (``PoseEvaluator._rows_for``), and the face then poses through the in-between as an evaluator made
+    from scratch does; undo takes it out."""
+    import threading
+
+    import model.shape_edits as se
+    from app.commands import SetShapeSettingsCommand
+    doc = window.document
+    real, threads = PoseEvaluator._rows_for, []
+
+    def recorded(self, *args):
+        threads.append(threading.current_thread() is threading.main_thread())
+        return real(self, *args)
+
+    monkeypatch.setattr(PoseEvaluator, "_rows_for", recorded)
+    k = doc.rig.shape_index("jawOpen")
+    bent = 0.5 * doc.rig.deltas[k] + 0.3 * np.roll(doc.rig.deltas[k], 1, axis=1)
+    old = se.ShapeSettings.of(doc.rig)
+    doc.undo_stack.push(SetShapeSettingsCommand(doc, old, se.with_inbetween(doc.rig, "jawOpen", 0.5, bent), "In-between"))
+    assert threads == [False] and list(doc.rig.inbetweens) == ["jawOpen"]
+    w = np.zeros(doc.rig.n_shapes)
+    w[k] = 0.5
+    doc.set_weights(w)
+    fresh = PoseEvaluator(doc.rig)
+    np.testing.assert_allclose(_surface(window), fresh.evaluate(w), rtol=0, atol=1e-5)
+    np.testing.assert_allclose(_surface(window), doc.rig.neutral + bent, rtol=0, atol=1e-5)   # on the in-between
+    assert doc.undo_stack.count() == 1
+    doc.undo_stack.undo()
+    assert doc.rig.inbetweens == {} and threads == [False, False]
+    np.testing.assert_allclose(_surface(window), doc.rig.neutral + 0.5 * doc.rig.deltas[k], rtol=0, atol=1e-5)
