@@ -57,43 +57,79 @@ class SetEditOffsetCommand(QUndoCommand):
 
 
 class AddShapeCommand(QUndoCommand):
-    """Add a new shape (e.g. from a nudged region) with weight 0, taking the pending offset with it."""
+    """Add a new shape (e.g. from a nudged region) with weight 0, taking the pending offset with it.
+
+    ``prepared``: (the rig's deltas with the new shape's appended, the display evaluator of that rig), made in the
+    background by the caller (``added_shape``) for the first redo; every other redo and undo copies the deltas and
+    the evaluator's rows through ``Document.edit_rig`` (in the window: off the GUI thread)."""
 
     def __init__(self, document, name: str, delta: np.ndarray, text: str | None = None,
-                 takes_offset: bool = True, weight: float = 0.0, evaluator=None) -> None:
+                 takes_offset: bool = True, weight: float = 0.0, prepared=None) -> None:
         super().__init__(text or f"Add shape {name}")
         self.document, self.name = document, name
         self.delta = np.array(delta, dtype=np.float64)
         self.takes_offset = takes_offset   # the pending nudge became the shape; a mirrored shape leaves it
         self.weight = float(weight)        # the new shape's weight (in every region of a regional pose)
-        self.evaluator = evaluator         # a PoseEvaluator of the rig with the shape, built in the background
+        self.prepared = prepared
         self.offset = None if document.edit_offset is None else document.edit_offset.copy()
+
+    def _add(self, project, deltas=None) -> None:
+        rig = project.rig
+        rig.shape_names = rig.shape_names + [self.name]
+        rig.deltas = np.concatenate([rig.deltas, self.delta[None]], axis=0) if deltas is None else deltas
+        project.weights = np.append(project.weights, self.weight)
+        if project.region_weights is not None:   # a regional pose keeps its regions, the new shape a column
+            R = project.region_weights
+            project.region_weights = np.column_stack([R, np.full(len(R), self.weight)])
 
     def redo(self) -> None:
         doc = self.document
-        rig, project = doc.rig, doc.project
-        rig.shape_names = rig.shape_names + [self.name]
-        rig.deltas = np.concatenate([rig.deltas, self.delta[None]], axis=0)
-        project.weights = np.append(project.weights, self.weight)
-        if doc.region_weights is not None:   # a regional pose keeps its regions, the new shape a column
-            doc.region_weights = np.column_stack([doc.region_weights, np.full(len(doc.region_weights), self.weight)])
         if self.takes_offset:
             doc.edit_offset = None
-        evaluator, self.evaluator = self.evaluator, None   # only for the first redo: later ones rebuild
-        doc.rig_edited(evaluator, shape_rows=[*range(rig.n_shapes - 1), -1])
+        prepared, self.prepared = self.prepared, None      # only for the first redo
+        rows = lambda rig: [*range(rig.n_shapes - 1), -1]   # noqa: E731  (the new shape's row is new)
+        if prepared is not None and prepared[1].made_of(_added(doc.rig, self.name, prepared[0])):
+            doc.project.region_weights = doc.region_weights
+            self._add(doc.project, prepared[0])
+            doc.region_weights = doc.project.region_weights
+            prepared[1].rig = doc.rig
+            doc.rig_edited(prepared[1], shape_rows=rows(doc.rig))
+        else:
+            doc.edit_rig(self.text(), self._add, rows)
 
     def undo(self) -> None:
         doc = self.document
-        rig, project = doc.rig, doc.project
-        k = rig.shape_names.index(self.name)
-        rig.shape_names = rig.shape_names[:k] + rig.shape_names[k + 1:]
-        rig.deltas = np.delete(rig.deltas, k, axis=0)
-        project.weights = np.delete(project.weights, k)
-        if doc.region_weights is not None and doc.region_weights.shape[1] == rig.n_shapes + 1:
-            doc.region_weights = np.delete(doc.region_weights, k, axis=1)
+        k = doc.rig.shape_names.index(self.name)
+
+        def remove(project) -> None:
+            rig = project.rig
+            rig.shape_names = rig.shape_names[:k] + rig.shape_names[k + 1:]
+            rig.deltas = np.delete(rig.deltas, k, axis=0)
+            project.weights = np.delete(project.weights, k)
+            R = project.region_weights
+            if R is not None and R.shape[1] == rig.n_shapes + 1:
+                project.region_weights = np.delete(R, k, axis=1)
+
         if self.takes_offset:
-            self.document.edit_offset = self.offset
-        self.document.rig_edited(shape_rows=[i for i in range(rig.n_shapes + 1) if i != k])
+            doc.edit_offset = self.offset
+        doc.edit_rig(self.text(), remove, lambda rig: [i for i in range(rig.n_shapes + 1) if i != k])
+
+
+def _added(rig, name: str, deltas: np.ndarray):
+    """A view of ``rig`` with a shape ``name`` of ``deltas``' last row appended (its Rig object not changed)."""
+    import copy
+    view = copy.copy(rig)
+    view.shape_names, view.deltas = rig.shape_names + [name], deltas
+    return view
+
+
+def added_shape(document, name: str, delta: np.ndarray):
+    """``AddShapeCommand``'s ``prepared`` for ``document``'s rig with shape ``name`` of ``delta`` appended: its
+    deltas and display evaluator (the old one's rows copied). For a background job: reads the document's arrays
+    and evaluator, changes nothing."""
+    rig = document.rig
+    deltas = np.concatenate([rig.deltas, np.asarray(delta, dtype=np.float64)[None]], axis=0)
+    return deltas, document.evaluator.with_settings(_added(rig, name, deltas), [*range(rig.n_shapes), -1])
 
 
 class SetShapeDeltaCommand(QUndoCommand):

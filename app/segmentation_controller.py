@@ -5,17 +5,15 @@ SegmentationCache, so moving the threshold or the level redraws live (ALGORITHMS
 """
 from __future__ import annotations
 
-import copy
 import time
 
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from app.background import BackgroundRunner
-from app.commands import AddShapeCommand, SetEditOffsetCommand, SetSectionCommand
+from app.commands import AddShapeCommand, SetEditOffsetCommand, SetSectionCommand, added_shape
 from app.map_views import deformation_colormap, region_palette, segmentation_colormap
 from model.errors import RigInputError
-from model.pose import PoseEvaluator
 from model.segmentation import SegmentationCache, SegmentationSettings, region_statistics, segment_rig
 from model.wording import count
 from solvers.laplacian import mesh_adjacency
@@ -284,16 +282,15 @@ class SegmentationController(QtCore.QObject):
             self.window.show_error("Could not add the shape", f"A shape named '{name}' already exists.")
             return
         delta = np.asarray(doc.edit_offset, dtype=np.float64)
-        rig_with = copy.copy(rig)
-        rig_with.shape_names, rig_with.deltas = rig.shape_names + [name], np.concatenate([rig.deltas, delta[None]])
         version, offset = doc.rig_version, doc.edit_offset
 
-        def add(evaluator) -> None:   # back on the GUI thread
+        def add(prepared) -> None:   # back on the GUI thread
             if doc.rig_version != version or doc.edit_offset is not offset or name in doc.rig.shape_names:
                 self.window.show_status(f"The rig or the nudge changed meanwhile: {name} was not added.")
                 return
             doc.undo_stack.push(AddShapeCommand(doc, name, delta, f"Save nudge as shape {name}", weight=1.0,
-                                                evaluator=evaluator))
+                                                prepared=prepared))
             self.window.show_status(f"Added shape {name}, set to 1.")
-        # the new rig's evaluator (~0.3 s on ICT) is built off the GUI thread; the edit is applied when it is ready
-        self.window.run_in_background(f"Adding shape {name}…", lambda: PoseEvaluator(rig_with), add)
+        # the new rig's deltas and evaluator (a studio rig's hundreds of MB) are made off the GUI thread; the edit is
+        # applied when they are ready
+        self.window.run_in_background(f"Adding shape {name}…", lambda: added_shape(doc, name, delta), add)
