@@ -38,10 +38,15 @@ class SetCorrectivesCommand(QUndoCommand):
 
     def _apply(self, correctives, offset) -> None:
         doc = self.document
-        doc.rig.correctives = _copies(correctives)
         doc.edit_offset = None if offset is None else offset.copy()
         doc.offset_changed.emit()
-        doc.rig_edited(shape_rows=range(doc.rig.n_shapes))   # the shapes are untouched: their rows are kept
+
+        def edit(project) -> None:
+            project.rig.correctives = _copies(correctives)
+
+        # the shapes are untouched: their rows are kept (copied, with the correctives' new rows: a studio rig's
+        # 232 MB, off the GUI thread in the window; ``Document.edit_rig``)
+        doc.edit_rig(self.text(), edit, lambda rig: list(range(rig.n_shapes)))
 
     def redo(self) -> None:
         self._apply(self.new, self.new_offset)

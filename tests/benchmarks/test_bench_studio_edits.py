@@ -1,7 +1,7 @@
 """Shape edits on a studio rig in the window (issue 20's studio scale; the brief: never a frozen window): the
 106k-vertex, 228-shape project of ``test_bench_studio_memory`` open in the main window at its default size, then a
-rename and its undo, a reorder (two shapes swapped), one shape's deltas replaced and undone and an in-between added
-and undone (since the sixteenth session), each pushed on the
+rename and its undo, a reorder (two shapes swapped), one shape's deltas replaced and undone, and (since the sixteenth
+session) an in-between and a corrective added and undone, each pushed on the
 document's undo stack as the Shapes panel pushes it, while a 5 ms timer ticks on the GUI thread: the longest gap
 between ticks from the push until the window has settled is how long the edit froze the window.
 
@@ -34,6 +34,8 @@ from tests.gui_helpers import make_window
 
 def test_bench_studio_shape_edits_longest_freeze(benchmark, qtbot, tmp_path):
     import model.shape_edits as se
+    from app.corrective_commands import SetCorrectivesCommand
+    from model.correctives import Corrective
     from app.commands import RenameShapeCommand, ReorderShapesCommand, SetShapeDeltaCommand, SetShapeSettingsCommand
     w = make_window(qtbot, tmp_path, size=(1400, 900))    # the main window's default size
     w.open_path(studio_project(1))
@@ -57,7 +59,11 @@ def test_bench_studio_shape_edits_longest_freeze(benchmark, qtbot, tmp_path):
              ("in-between", lambda: doc.undo_stack.push(SetShapeSettingsCommand(
                  doc, se.ShapeSettings.of(doc.rig),
                  se.with_inbetween(doc.rig, doc.rig.shape_names[k], 0.5, doc.rig.deltas[k] * 0.4), "In-between"))),
-             ("undo in-between", doc.undo_stack.undo)]
+             ("undo in-between", doc.undo_stack.undo),
+             ("corrective", lambda: doc.undo_stack.push(SetCorrectivesCommand(
+                 doc, doc.rig.correctives, list(doc.rig.correctives) + [Corrective(
+                     drivers=doc.rig.shape_names[k:k + 2], delta=doc.rig.deltas[k] * 0.1)], "Corrective"))),
+             ("undo corrective", doc.undo_stack.undo)]
     freezes = {}
 
     def run():
