@@ -153,6 +153,7 @@ def run_modal(parent: QtWidgets.QWidget, title: str, label: str, fn: Callable[[]
     dialog.setWindowTitle(title)
     dialog.setWindowModality(QtCore.Qt.WindowModal)
     dialog.setMinimumDuration(show_after_ms)
+    dialog.setValue(0)    # starts its show-after timer: a bar never set shows only after Qt's default 4 s
     loop = QtCore.QEventLoop()
     timer = QtCore.QTimer()
     timer.setInterval(15)

@@ -88,7 +88,8 @@ def test_save_and_reopen_project(qtbot, tmp_path):
 
 def test_save_writes_off_the_gui_thread_and_the_window_keeps_drawing(qtbot, tmp_path, monkeypatch):
     """A studio rig's project takes seconds to write: the writing runs off the GUI thread while the window goes on
-    drawing and running its timers, and save_to returns once the file is whole."""
+    drawing and running its timers, a busy dialog naming the file shows after 0.2 s (it showed only after Qt's
+    default 4 s: its bar was never set), and save_to returns once the file is whole."""
     import threading
     import time
 
@@ -108,9 +109,14 @@ def test_save_writes_off_the_gui_thread_and_the_window_keeps_drawing(qtbot, tmp_
     timer.setInterval(20)
     timer.timeout.connect(lambda: ticks.append(1))
     timer.start()
+    shown = []
+    QtCore.QTimer.singleShot(400, lambda: shown.extend(
+        d.labelText() for d in w.findChildren(QtWidgets.QProgressDialog) if d.isVisible()))
     path = tmp_path / "saved.bsproj"
     assert w.save_to(path)
     timer.stop()
+    assert shown == ["Saving saved.bsproj…"]
+    assert not [d for d in w.findChildren(QtWidgets.QProgressDialog) if d.isVisible()]
     assert seen == {"gui thread": False}
     assert len(ticks) >= 10, f"{len(ticks)} timer ticks during a 0.6 s write"
     assert not w.document.is_modified and w.document.path == path
