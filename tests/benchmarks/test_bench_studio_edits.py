@@ -14,10 +14,12 @@ slowly), the new deltas 3.1-4.9 s -> 0.65-0.77 s, their undo 2.2-4.0 s -> 0.64 s
 1.7, 1.0, 4.3, 2.3 and 1.7 s before, and 0.1, 0.1, 2.4, 1.1 and 0.8 s after, earlier the same morning: fresh memory
 cost less then.
 
-Sixteenth session: the edits that copy the deltas (the reorder, the new deltas and their undo) run on a copy of the
-project off the GUI thread (``Document.edit_rig``; the shapes' reach made there too); alternated with the code before
-(three runs and two): the reorder 0.18-0.19 s against 4.8-8.2 s, the new deltas 0.21-0.32 s (0.46 before the reach
-moved too) against 1.0-3.8 s, their undo 0.15-0.21 s against 3.7-4.3 s; the rename and its undo unchanged.
+Sixteenth session: the edits that copy the deltas or the evaluator's rows (the reorder, the new deltas and their
+undo, the in-between and the corrective) run on a copy of the project off the GUI thread (``Document.edit_rig``; the
+shapes' reach made there too); alternated with the code before (five runs and four): the reorder 0.18-0.30 s against
+4.5-8.2 s, the new deltas 0.11-0.32 s (0.46 before the reach moved too) against 0.65-3.8 s, their undo 0.15-0.21 s
+against 0.72-4.3 s, the in-between 0.07-0.10 s against 1.8-6.8 s (its undo 0.05-0.07 against 0.29-0.34), the
+corrective 0.07 s against 0.26-0.30 s; the rename and its undo unchanged.
 
     PYTHONPATH=$PWD python -m pytest tests/benchmarks/test_bench_studio_edits.py --benchmark-only -s
 """
