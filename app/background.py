@@ -10,6 +10,19 @@ from PySide6 import QtCore, QtWidgets
 from model.errors import RigInputError
 
 
+_modal_depth = 0   # ``run_modal`` calls under way
+
+
+def after_modal(deliver: Callable[[], None]) -> None:
+    """Run ``deliver`` now, or once no ``run_modal`` is under way. A background job's result reaches the GUI thread
+    as a queued signal, which ``run_modal``'s event loop delivers like any other: its callback (a shape added,
+    a segmentation shown) would then change the document in the middle of an undo command's edit or a save."""
+    if _modal_depth:
+        QtCore.QTimer.singleShot(20, lambda: after_modal(deliver))
+    else:
+        deliver()
+
+
 class _Signals(QtCore.QObject):
     done = QtCore.Signal(object)
     failed = QtCore.Signal(str)
@@ -72,7 +85,7 @@ class BackgroundRunner(QtCore.QObject):
         if queued is not None:   # newer settings arrived meanwhile: this result is stale
             self._start(*queued)
             return
-        callback(value)
+        after_modal(lambda: None if self._closed else callback(value))
 
     def wait(self, msecs: int = 60000) -> None:
         self.pool.waitForDone(msecs)
@@ -119,7 +132,7 @@ class JobQueue(QtCore.QObject):
         if self._closed:
             return
         self.changed.emit(len(self._live), text)
-        callback(value)
+        after_modal(lambda: None if self._closed else callback(value))
 
     def wait(self, msecs: int = 120000) -> None:
         """Wait for every job and deliver its result (tests, benchmarks)."""
@@ -138,8 +151,10 @@ def run_modal(parent: QtWidgets.QWidget, title: str, label: str, fn: Callable[[]
     """``fn()`` on a worker thread while the window stays drawn but takes no input, as a modal save does; a busy
     progress dialog shows after ``show_after_ms``. Returns what ``fn`` returned, or raises what it raised.
 
-    The window's events (paints, timers, background results) go on meanwhile; mouse and key input waits until
-    ``fn`` is done (``QEventLoop.ExcludeUserInputEvents``), so nothing can change what ``fn`` reads or writes."""
+    The window's events (paints, timers) go on meanwhile; mouse and key input waits until ``fn`` is done
+    (``QEventLoop.ExcludeUserInputEvents``), and so do the results of background jobs (``after_modal``), so nothing
+    can change what ``fn`` reads or writes."""
+    global _modal_depth
     out: dict[str, Any] = {}
 
     def work() -> None:
@@ -158,12 +173,16 @@ def run_modal(parent: QtWidgets.QWidget, title: str, label: str, fn: Callable[[]
     timer = QtCore.QTimer()
     timer.setInterval(15)
     timer.timeout.connect(lambda: thread.is_alive() or loop.quit())
-    thread.start()
-    timer.start()
-    if thread.is_alive():
-        loop.exec(QtCore.QEventLoop.ExcludeUserInputEvents)
-    timer.stop()
-    thread.join()
+    _modal_depth += 1
+    try:
+        thread.start()
+        timer.start()
+        if thread.is_alive():
+            loop.exec(QtCore.QEventLoop.ExcludeUserInputEvents)
+        timer.stop()
+        thread.join()
+    finally:
+        _modal_depth -= 1
     dialog.reset()      # stops its show-after timer too
     dialog.close()
     dialog.deleteLater()

@@ -336,7 +336,8 @@ class Document(QtCore.QObject):
             result, rows, evaluator, reach = run(label, work)
             if self.project is p and self.evaluator is old:
                 break
-            # the rig was edited under the copy (by something the window ran meanwhile): the edit again, here
+            # the rig was edited under the copy by something the window ran meanwhile (background results wait
+            # for ``run_edit``, ``app.background.after_modal``, so nothing is expected to): the edit again, here
             run = lambda _label, fn: fn()   # noqa: E731
         job.adopt(p)
         evaluator.rig = p.rig            # made for the copy's Rig object, whose arrays ``p.rig`` now has

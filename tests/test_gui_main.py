@@ -525,3 +525,31 @@ def test_the_window_compiles_the_take_solver_in_the_background_and_says_so_meanw
     monkeypatch.setattr(take_kernel, "ready", lambda: True)        # built
     window.prepare_take_solver()
     assert not label.isVisible()
+
+
+def test_a_background_result_waits_for_an_edit_under_way(qtbot, tmp_path):
+    """A background job's result (e.g. Save as new shape's) arriving while an undo command's edit runs off the GUI
+    thread (``run_modal``, whose event loop goes on) is delivered after the edit, never in its middle."""
+    import threading
+    import time
+
+    from app.background import run_modal
+    w = make_window(qtbot, tmp_path)
+    order, started = [], threading.Event()
+
+    def job():
+        started.wait(5)
+        return "result"
+
+    w.run_in_background("Job…", job, lambda r: order.append(("delivered", r)))
+
+    def edit():
+        started.set()
+        time.sleep(0.5)                    # the job's result reaches the GUI thread meanwhile
+        order.append(("edit done",))
+        return 1
+
+    assert run_modal(w, "Shapes", "Move…", edit) == 1
+    order.append(("returned",))
+    qtbot.waitUntil(lambda: len(order) == 3, timeout=5000)
+    assert order == [("edit done",), ("returned",), ("delivered", "result")]
