@@ -143,16 +143,14 @@ class SetShapeDeltaCommand(QUndoCommand):
         self.new = np.array(delta, dtype=document.rig.deltas.dtype)
 
     def _set(self, delta: np.ndarray) -> None:
-        k = self.document.rig.shape_names.index(self.name)
-
         def edit(project) -> None:
             deltas = project.rig.deltas.copy()   # a new array: whatever kept the old one (an evaluator) keeps it
-            deltas[k] = delta
+            deltas[project.rig.shape_names.index(self.name)] = delta
             project.rig.deltas = deltas
 
         def rows(rig) -> list[int]:
             rows = list(range(rig.n_shapes))
-            rows[k] = -1                 # the evaluator's other rows are kept
+            rows[rig.shape_names.index(self.name)] = -1     # the evaluator's other rows are kept
             return rows
 
         self.document.edit_rig(self.text(), edit, rows)   # off the GUI thread in the window (Document.edit_rig)
