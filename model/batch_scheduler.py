@@ -13,12 +13,14 @@ page answers once built.
 ``ForkedScheduler`` is a ``distributed.deploy.spec.ProcessInterface`` (Dask's interface for a cluster's scheduler or
 worker started some other way: ``SSHCluster`` uses it), so ``distributed.SpecCluster`` starts, watches and closes it
 as its own. The scheduler process never outlives the command: it closes when the command's end of its pipe closes,
-however the command ended, and leaves Ctrl-C to the command.
+however the command ended (and ends ``CLOSE_GRACE`` seconds later if its close has not), and leaves Ctrl-C to the
+command.
 """
 from __future__ import annotations
 
 import asyncio
 import logging
+import os
 
 from distributed.deploy.spec import ProcessInterface
 
@@ -26,6 +28,7 @@ from .fork_server import name_process
 
 
 PROCESS_NAME = "dask-scheduler"     # the scheduler process's name in ``ps``/``top`` (Linux), beside the workers'
+CLOSE_GRACE = 5.0                   # seconds the scheduler process has to close once the command has gone
 
 
 def _serve(conn, options: dict, config: dict, log_level: int) -> None:
@@ -61,6 +64,9 @@ def _serve(conn, options: dict, config: dict, log_level: int) -> None:
         def command_gone() -> None:                     # EOF on the pipe: the command has ended
             loop.remove_reader(conn.fileno())
             closing.append(asyncio.ensure_future(scheduler.close()))
+            # nobody is left to wait for a graceful close: should it hang (once, after a driver was killed in the
+            # middle of a gather, it outlived the 30 s a test gives it), the process ends anyway
+            loop.call_later(CLOSE_GRACE, os._exit, 0)
 
         loop.add_reader(conn.fileno(), command_gone)
         await scheduler.finished()
