@@ -89,11 +89,7 @@ class AddShapeCommand(QUndoCommand):
         prepared, self.prepared = self.prepared, None      # only for the first redo
         rows = lambda rig: [*range(rig.n_shapes - 1), -1]   # noqa: E731  (the new shape's row is new)
         if prepared is not None and prepared[1].made_of(_added(doc.rig, self.name, prepared[0])):
-            doc.project.region_weights = doc.region_weights
-            self._add(doc.project, prepared[0])
-            doc.region_weights = doc.project.region_weights
-            prepared[1].rig = doc.rig
-            doc.rig_edited(prepared[1], shape_rows=rows(doc.rig))
+            doc.edit_rig(self.text(), lambda project: self._add(project, prepared[0]), rows, made=prepared[1])
         else:
             doc.edit_rig(self.text(), self._add, rows)
 

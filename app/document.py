@@ -49,6 +49,13 @@ class PoseState:
                 and np.array_equal(self.region_weights, other.region_weights))
 
 
+def _same_deltas(old: PoseEvaluator, new: PoseEvaluator, shape_rows) -> bool:
+    """Whether the shapes' deltas after an edit are the same set as before (so is their reach): ``new`` shares
+    ``old``'s matrices, or ``shape_rows`` (see ``Document.rig_edited``) takes every old shape's row and no new one."""
+    return new.shares_matrices(old) or (shape_rows is not None
+                                        and set(np.asarray(shape_rows).tolist()) == set(range(old.K)))
+
+
 class Document(QtCore.QObject):
     rig_changed = QtCore.Signal()      # a new rig (topology, shapes) — rebuild everything
     shapes_changed = QtCore.Signal()   # shapes or correctives edited on the same topology
@@ -296,8 +303,7 @@ class Document(QtCore.QObject):
         a rename, a reorder or a duplicate)."""
         rig, old = self.project.rig, self.evaluator
         self.evaluator = evaluator if evaluator is not None else old.with_settings(rig, shape_rows)
-        same_set = shape_rows is not None and set(np.asarray(shape_rows).tolist()) == set(range(old.K))
-        if not (self.evaluator.shares_matrices(old) or same_set):
+        if not _same_deltas(old, self.evaluator, shape_rows):
             self._shapes_version += 1
         kept = self._evaluator64
         self._evaluator64 = None
@@ -306,7 +312,7 @@ class Document(QtCore.QObject):
         self.rig_version += 1
 
     def edit_rig(self, label: str, edit: Callable[[Project], Any], shape_rows: Callable[[Rig], list[int]], *,
-                 settings: bool = False) -> Any:
+                 settings: bool = False, made: PoseEvaluator | None = None) -> Any:
         """Run ``edit(project)`` -- an edit of the shapes' arrays that replaces what it changes (``model.shape_edits``'
         list edits, a shape's new deltas) -- on a copy of the project (``model.project.DetachedEdit``) with the live
         regional pose in it, and make the display evaluator of the result from this one's rows
@@ -314,9 +320,10 @@ class Document(QtCore.QObject):
         ``run_edit``: in the window, on a worker thread while the window stays drawn (on the 106k-vertex,
         228-shape rig a reorder copies 580 MB of deltas and 232 MB of evaluator rows: seconds of new memory).
         Then the edit is taken over and the views told (``rig_edited``; with ``settings``, an edit of the shapes'
-        in-betweens only, as ``shape_settings_edited``). Returns what ``edit`` returned; an error (a refused edit)
-        leaves the document as it was."""
-        run = self.run_edit
+        in-betweens only, as ``shape_settings_edited``). ``made``: the edited rig's display evaluator, made
+        beforehand with the arrays ``edit`` assigns (Save as new shape's background job): nothing is copied, so the
+        edit runs here. Returns what ``edit`` returned; an error (a refused edit) leaves the document as it was."""
+        run = self.run_edit if made is None else (lambda _label, fn: fn())
         while True:
             p = self.project
             # the project gets the live regional pose, as save does
@@ -327,10 +334,12 @@ class Document(QtCore.QObject):
             def work():
                 result = edit(job.project)
                 rows = list(shape_rows(job.project.rig))
+                if made is not None:
+                    return result, rows, made, None
                 evaluator = old.with_settings(job.project.rig, rows)
                 # the shapes' reach, where the set of deltas changed (``_edited_evaluators``): made here, not by the
                 # views' first ``shape_reach`` after the edit (228 shapes x 106k vertices: 0.2-0.3 s)
-                same = evaluator.shares_matrices(old) or set(rows) == set(range(old.K))
+                same = _same_deltas(old, evaluator, rows)
                 return result, rows, evaluator, None if same else rig_prep.shape_reach(job.project.rig)
 
             result, rows, evaluator, reach = run(label, work)
