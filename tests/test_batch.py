@@ -685,7 +685,7 @@ def test_a_cancelled_batch_ends_the_takes_in_hand_and_fails_the_rest_as_cancelle
         monkeypatch.setattr(batch_driver, "available", lambda preload=(): False)
     elif not batch_driver.available():
         pytest.skip("no fork server a driver could adopt here")
-    takes = _short_takes(tmp_path, take_dir, 8)
+    takes = _short_takes(tmp_path, take_dir, 8, frames=240)   # long enough that the cancel arrives first
     first = []
     rows = run_batch(_job(ict_rig, take_dir), takes, tmp_path / "out", workers=1, dashboard_address="127.0.0.1:0",
                      progress=lambda p: p.row is not None and first.append(p.row), cancel=lambda: bool(first))
