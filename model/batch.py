@@ -39,7 +39,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import batch_driver
+from . import batch_driver, shared_pickle
 from .atomic import process_alive
 from .batch_driver import ClusterOutcome
 from .errors import RigInputError
@@ -132,8 +132,8 @@ def take_names(paths: list[Path]) -> list[str]:
 # --- what every take shares -------------------------------------------------------------------------
 def _digest(*arrays) -> str:
     h = hashlib.sha1()
-    for a in arrays:
-        h.update(np.ascontiguousarray(a).tobytes())
+    for a in arrays:     # the array's own memory, not a copy of it (2.3 GB for the 422k-vertex studio rig's deltas)
+        h.update(np.ascontiguousarray(a).reshape(-1).view(np.uint8))
     return h.hexdigest()[:16]
 
 
@@ -188,7 +188,17 @@ class BatchJob:
         state = dict(self.__dict__)
         state.pop("prepared", None)                     # this process's own
         state.pop("evaluator", None)
+        state.pop(shared_pickle.HANDLE_ATTRIBUTE, None)
         return state
+
+    def __reduce_ex__(self, protocol):
+        """A job mapped from a local batch's memory file (``model.batch_driver``) is passed on as that file's handle
+        (``model.shared_pickle.SharedObject``): Dask's broadcast scatters it to one worker, which hands it to the
+        next; that one maps the file too instead of unpickling a copy of the rig."""
+        handle = self.__dict__.get(shared_pickle.HANDLE_ATTRIBUTE)
+        if handle is not None:
+            return handle.__reduce__()
+        return super().__reduce_ex__(protocol)
 
     def __setstate__(self, state: dict) -> None:
         self.__dict__.update(state)                      # no evaluator yet: ``__getattr__`` builds it

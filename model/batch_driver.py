@@ -64,9 +64,9 @@ def solve_in_driver(job, tasks: list, *, solve: Callable, progress: Callable | N
     ``ClusterOutcome``; raises what the driver raised (e.g. the scheduler could not start), KeyboardInterrupt
     after the driver has stopped on a Ctrl-C that came before the cluster's start."""
     import multiprocessing
-    import pickle
     from multiprocessing.reduction import send_handle
 
+    from . import shared_pickle
     from .fork_server import fork_server_address
     ctx = multiprocessing.get_context("forkserver")
     ours, theirs = ctx.Pipe(duplex=True)        # a socket pair: it can carry a descriptor
@@ -89,7 +89,7 @@ def solve_in_driver(job, tasks: list, *, solve: Callable, progress: Callable | N
         fd = os.memfd_create("blendshape-studio-batch-job", os.MFD_CLOEXEC)
         try:
             with open(fd, "wb", closefd=False) as f:
-                pickle.dump(job, f, protocol=5)
+                shared_pickle.dump(job, f)
             send_handle(ours, fd, process.pid)
         finally:
             os.close(fd)
@@ -136,8 +136,8 @@ def _drive(conn, address: str, solve: Callable, tasks: list, options: dict) -> N
     """The driver process: adopt the fork server at ``address``, start the cluster while the job arrives on
     ``conn``, solve ``tasks`` on it with ``solve`` and send the outcome (or the error that stopped it)."""
     import _thread
-    import pickle
 
+    from . import shared_pickle
     from .fork_server import adopt_fork_server, name_process
     name_process(PROCESS_NAME)
     adopt_fork_server(address)
@@ -148,15 +148,16 @@ def _drive(conn, address: str, solve: Callable, tasks: list, options: dict) -> N
     def listen() -> None:
         """The job first, then the caller's stop messages; a Ctrl-C (or the caller gone) interrupts the main thread
         as a Ctrl-C interrupts an in-process run, until the main thread has its outcome."""
-        import mmap
         from multiprocessing.reduction import recv_handle
         try:
             fd = recv_handle(conn)
-            try:
-                with mmap.mmap(fd, 0, prot=mmap.PROT_READ) as mm:
-                    arrived["job"] = pickle.loads(mm)
-            finally:
-                os.close(fd)
+            if shared_pickle.reachable(fd):     # kept open while this process lives: the workers map it
+                arrived["job"] = shared_pickle.SharedObject(os.getpid(), fd)
+            else:
+                try:
+                    arrived["job"] = shared_pickle.load(fd)
+                finally:
+                    os.close(fd)
         except BaseException as exc:     # noqa: BLE001  (handed to the main thread, which raises it)
             arrived["error"] = exc
         finally:

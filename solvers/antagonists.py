@@ -24,9 +24,10 @@ def antagonist_pairs(deltas: np.ndarray, *, cosine: float = -0.5, support: float
     D = np.asarray(deltas, dtype=np.float64)
     K = D.shape[0]
     n2 = np.einsum("kvc,kvc->kv", D, D)                                # (K, V) squared norms
-    n = np.sqrt(n2)
-    top = n.max(axis=1) if K else np.zeros(0)
-    act = n > support * np.maximum(top, 1e-300)[:, None]
+    top = np.sqrt(n2.max(axis=1)) if K else np.zeros(0)                # the largest norm of each shape
+    act = np.empty(n2.shape, dtype=bool)
+    for k in range(K):      # row by row: the norms of all shapes at once would be another (K, V) array
+        np.greater(np.sqrt(n2[k]), support * max(top[k], 1e-300), out=act[k])
     size = act.sum(axis=1)
     sums = _compiled_sums(D, n2, act)
     if sums is not None:
