@@ -147,6 +147,21 @@ class JobQueue(QtCore.QObject):
         self.pool.waitForDone()
 
 
+def _give_focus_back(parent: QtWidgets.QWidget | None, focus: QtWidgets.QWidget | None) -> None:
+    """After ``run_modal``'s busy dialog, which took the keyboard when it showed: the window active again and the
+    focus where it was (or on the window, where the edit removed that widget), so that the key pressed next goes
+    where it went before the edit (Ctrl+D, then Alt+Up moves the copy). Without a window manager to do it, closing
+    the dialog left no window active."""
+    import shiboken6
+    window = parent.window() if parent is not None else None
+    if window is None or not window.isVisible():
+        return
+    if QtWidgets.QApplication.activeWindow() is None:
+        window.activateWindow()
+    if focus is not None and shiboken6.isValid(focus) and focus.isVisible() and focus.window() is window:
+        focus.setFocus(QtCore.Qt.OtherFocusReason)
+
+
 def run_modal(parent: QtWidgets.QWidget, title: str, label: str, fn: Callable[[], Any], *, show_after_ms: int = 200):
     """``fn()`` on a worker thread while the window stays drawn but takes no input, as a modal save does; a busy
     progress dialog shows after ``show_after_ms``. Returns what ``fn`` returned, or raises what it raised.
@@ -164,6 +179,7 @@ def run_modal(parent: QtWidgets.QWidget, title: str, label: str, fn: Callable[[]
             out["error"] = exc
 
     thread = threading.Thread(target=work, name=title, daemon=True)
+    focus = QtWidgets.QApplication.focusWidget()
     dialog = QtWidgets.QProgressDialog(label, None, 0, 0, parent)   # 0..0: a busy indicator, no Cancel
     dialog.setWindowTitle(title)
     dialog.setWindowModality(QtCore.Qt.WindowModal)
@@ -183,9 +199,12 @@ def run_modal(parent: QtWidgets.QWidget, title: str, label: str, fn: Callable[[]
         thread.join()
     finally:
         _modal_depth -= 1
+    shown = dialog.isVisible()
     dialog.reset()      # stops its show-after timer too
     dialog.close()
     dialog.deleteLater()
+    if shown:
+        _give_focus_back(parent, focus)
     if "error" in out:
         raise out["error"]
     return out.get("value")

@@ -490,3 +490,36 @@ def test_an_inbetween_copies_the_evaluators_rows_off_the_gui_thread_and_poses_as
     doc.undo_stack.undo()
     assert doc.rig.inbetweens == {} and threads == [False, False]
     np.testing.assert_allclose(_surface(window), doc.rig.neutral + 0.5 * doc.rig.deltas[k], rtol=0, atol=1e-5)
+
+
+def test_after_a_slow_edit_shows_its_busy_dialog_the_next_key_goes_to_the_shapes_list(qtbot, window, monkeypatch):
+    """On a studio rig Ctrl+D runs long enough for its busy dialog to show; the dialog takes the keyboard. When it
+    closes, the window is active again with the focus where it was, so Alt+Up then moves the copy as on a small rig
+    (without a window manager, closing the dialog had left no window active: the key went nowhere)."""
+    import time
+
+    import model.shape_edits as se
+    doc = window.document
+    real = se.duplicate_shape
+
+    def slow_duplicate(*args, **kwargs):            # as long as a studio rig's copies take: the dialog shows
+        time.sleep(0.5)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(se, "duplicate_shape", slow_duplicate)
+    _click_name(qtbot, window, "mouthSmile_L")
+    k = doc.rig.shape_index("mouthSmile_L")
+    focus = QtWidgets.QApplication.focusWidget()
+    assert focus is not None and window.shapes_panel.isAncestorOf(focus)
+    shown = []
+    QtCore.QTimer.singleShot(350, lambda: shown.extend(w for w in QtWidgets.QApplication.topLevelWidgets()
+                                                       if isinstance(w, QtWidgets.QProgressDialog) and w.isVisible()))
+    QTest.keyClick(focus, QtCore.Qt.Key_D, QtCore.Qt.ControlModifier)
+    QtWidgets.QApplication.processEvents()
+    assert shown, "the busy dialog did not show"
+    assert doc.rig.shape_names[k + 1] == "mouthSmile_L_copy"
+    assert QtWidgets.QApplication.activeWindow() is window
+    assert QtWidgets.QApplication.focusWidget() is focus
+    QTest.keyClick(QtWidgets.QApplication.focusWidget(), QtCore.Qt.Key_Up, QtCore.Qt.AltModifier)
+    QtWidgets.QApplication.processEvents()
+    assert doc.rig.shape_names[k:k + 2] == ["mouthSmile_L_copy", "mouthSmile_L"]

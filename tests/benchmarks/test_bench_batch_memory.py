@@ -1,6 +1,6 @@
 """Memory of a batch on a studio-scale rig (issues 20 and 21): ``blendshape-studio batch`` of 4 takes on the
-106,117-vertex, 228-shape studio project (``test_bench_studio_memory.studio_project``: ICT subdivided once, its
-shapes split into local ones; 0.54 GiB of float64 deltas) with 2 workers. The command's processes -- the command,
+228-shape studio projects (``test_bench_studio_memory.studio_project``: ICT subdivided once and twice, 106,117 and
+422,121 vertices, its shapes split into local ones; 0.54 and 2.15 GiB of float64 deltas) with 2 workers. The command's processes -- the command,
 the local cluster's fork server, the driver, the scheduler and the workers -- are sampled every 0.1 s while it runs:
 the peak of their summed proportional set size (PSS: a page shared by n processes counts 1/n in each, so the sum
 is the batch's physical memory), with their maps of in-memory files taken out and those files (the job's,
@@ -75,10 +75,13 @@ def _sample(procs: list[psutil.Process], root: psutil.Process) -> tuple[dict[int
     return out, sum(files.values())
 
 
-def test_bench_batch_memory_on_the_studio_rig(benchmark, take_dir, tmp_path):
-    rig = studio_project(1)
+@pytest.mark.parametrize("levels", [1, 2], ids=["106k", "422k"])
+def test_bench_batch_memory_on_the_studio_rig(benchmark, take_dir, tmp_path, levels):
+    rig = studio_project(levels)
     from model.readers import load_rig
-    deltas = load_rig(rig).deltas.nbytes
+    loaded = load_rig(rig)
+    deltas, vertices = loaded.deltas.nbytes, loaded.n_vertices
+    del loaded
     takes = []
     for i in range(4):
         takes.append(shutil.copy(take_dir / "take.c3d", tmp_path / f"take_{i}.c3d"))   # four files, one take
@@ -110,7 +113,7 @@ def test_bench_batch_memory_on_the_studio_rig(benchmark, take_dir, tmp_path):
     ranked = sorted(peak_uss.items(), key=lambda kv: -kv[1])
     benchmark.extra_info.update(deltas_gib=deltas / GiB, peak_pss_total_gib=peak_total / GiB,
                                 peak_uss_gib=[(roles[pid], uss / GiB) for pid, uss in ranked[:6]], at_peak=at_peak)
-    print(f"\nbatch of 4 takes on 2 workers, 106k-vertex 228-shape studio rig (deltas {deltas / GiB:.2f} GiB): "
+    print(f"\nbatch of 4 takes on 2 workers, {vertices:,}-vertex 228-shape studio rig (deltas {deltas / GiB:.2f} GiB): "
           f"the batch's processes together peaked at {peak_total / GiB:.2f} GiB ({peak_total / deltas:.2f}x the "
           f"deltas; GiB at that moment: {at_peak}); private memory (USS) peaks: "
           + ", ".join(f"{roles[pid]} {uss / GiB:.2f}" for pid, uss in ranked[:6]) + " GiB")
