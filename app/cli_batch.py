@@ -145,7 +145,7 @@ class ProgressPrinter:
 
 
 def cmd_batch(args) -> int:
-    from model.batch import find_takes, run_batch, start_fork_server, take_names
+    from model.batch import find_takes, run_batch, share_job, start_fork_server, take_names
 
     if args.workers is not None and args.workers < 1:
         raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
@@ -154,8 +154,11 @@ def cmd_batch(args) -> int:
         start_fork_server(BATCH_PRELOAD)   # running already when the command came through app.launch (a no-op then)
     rig = load_solve_rig(args)
     job = prepare_job(rig, args)
+    if not args.scheduler:      # the local workers map the job's file: this process keeps no copy of its own beside it
+        job = share_job(job)
+    del rig
     names = take_names(takes)
-    print(f"{len(takes)} take(s) onto {rig.name} into {args.output}", flush=True)
+    print(f"{len(takes)} take(s) onto {job.rig.name} into {args.output}", flush=True)
     if not args.scheduler:
         announce_solver_build()      # the local workers' fork server compiles it before the first take
     rows = run_batch(job, takes, args.output, names=names, force=args.force, workers=args.workers,

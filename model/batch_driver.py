@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 PROCESS_NAME = "dask-batch"         # the driver's name in ``ps``/``top`` (Linux), beside the scheduler and workers
+JOB_FILE = "blendshape-studio-batch-job"     # the job's in-memory file, as /proc/<pid>/fd shows it
 _POLL = 0.1                          # seconds between looks at the caller's ``cancel()`` while the driver works
 
 
@@ -86,13 +87,17 @@ def solve_in_driver(job, tasks: list, *, solve: Callable, progress: Callable | N
     try:
         process.start()
         theirs.close()
-        fd = os.memfd_create("blendshape-studio-batch-job", os.MFD_CLOEXEC)
-        try:
-            with open(fd, "wb", closefd=False) as f:
-                shared_pickle.dump(job, f)
-            send_handle(ours, fd, process.pid)
-        finally:
-            os.close(fd)
+        handle = shared_pickle.handle_of(job)
+        if handle is not None and handle.pid == os.getpid():    # mapped from this process's file already (share_job)
+            send_handle(ours, handle.fd, process.pid)
+        else:
+            fd = os.memfd_create(JOB_FILE, os.MFD_CLOEXEC)
+            try:
+                with open(fd, "wb", closefd=False) as f:
+                    shared_pickle.dump(job, f)
+                send_handle(ours, fd, process.pid)
+            finally:
+                os.close(fd)
         error = None
         while outcome is None and error is None:
             try:

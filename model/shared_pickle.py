@@ -99,6 +99,29 @@ def _open_shared(pid: int, fd: int):
     return obj
 
 
+def share(obj, name: str):
+    """(``obj`` written to a new anonymous memory file and mapped back from it, its descriptor): the returned object
+    reads its arrays from the file, so the caller can drop ``obj`` and keep the arrays in memory once, shared with
+    every process that maps the file (``SharedObject``). The descriptor stays open for this process's life (the
+    handle names it); the file lives as long as a process holds or maps it. Linux only (``os.memfd_create``)."""
+    fd = os.memfd_create(name, os.MFD_CLOEXEC)
+    try:
+        with open(fd, "wb", closefd=False) as f:
+            dump(obj, f)
+        mapped = load(fd)
+    except BaseException:
+        os.close(fd)
+        raise
+    if reachable(fd) and hasattr(mapped, "__dict__"):    # other processes can open it: passed on as its handle
+        mapped.__dict__[HANDLE_ATTRIBUTE] = SharedObject(os.getpid(), fd)
+    return mapped, fd
+
+
+def handle_of(obj) -> "SharedObject | None":
+    """The handle of an object mapped from a shared file (``share``, ``SharedObject``), else None."""
+    return getattr(obj, "__dict__", {}).get(HANDLE_ATTRIBUTE)
+
+
 class SharedObject:
     """The object ``dump`` wrote to the file that process ``pid`` holds open as descriptor ``fd``, by reference:
     pickling it pickles the reference; unpickling it (in any process of this user on this machine, while ``pid``

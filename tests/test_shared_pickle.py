@@ -119,3 +119,30 @@ def test_a_batch_job_opened_from_the_file_is_passed_on_as_its_handle():
         np.testing.assert_allclose(opened.evaluator.pose(w), rig.neutral + np.tensordot(w, opened.rig.deltas, 1))
     finally:
         os.close(fd)
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="/proc descriptors: Linux")
+def test_the_batch_command_keeps_only_the_shared_file_and_a_remote_cluster_gets_the_job_whole():
+    """``share_job`` (the ``batch`` command on a local cluster): the job comes back mapped from a new in-memory file
+    held by this process, passed on as its handle; ``portable_job`` (a scheduler's address: other machines) gives a
+    job that pickles whole again, equal to the original."""
+    from model.batch import BatchJob, portable_job, share_job
+    rig = _rig()
+    job = BatchJob.prepare(rig, {"mode": "global", "residual": None, "calibration_frames": 0, "fixed_head": False})
+    shared = share_job(job)
+    handle = shared_pickle.handle_of(shared)
+    assert handle is not None and handle.pid == os.getpid()
+    assert os.readlink(shared_pickle.descriptor_path(os.getpid(), handle.fd)).startswith("/memfd:")
+    np.testing.assert_array_equal(shared.rig.deltas, rig.deltas)
+    raw = os.pread(handle.fd, os.fstat(handle.fd).st_size, 0)
+    os.pwrite(handle.fd, np.float64(-7.0).tobytes(), raw.find(rig.deltas.tobytes()))
+    assert shared.rig.deltas.ravel()[0] == -7.0            # its arrays are the file's
+    assert len(pickle.dumps(shared, protocol=5)) < 200
+    whole = portable_job(shared)
+    data = pickle.dumps(whole, protocol=5)
+    assert len(data) > rig.deltas.nbytes
+    back = pickle.loads(data)
+    assert shared_pickle.handle_of(back) is None and back.signature == job.signature
+    assert back.rig.deltas.ravel()[0] == -7.0 and np.array_equal(back.rig.neutral, rig.neutral)
+    assert portable_job(job) is job                         # a job of this process's own arrays: as it is
+    os.close(handle.fd)
