@@ -5,7 +5,8 @@ The takes are the shared ICT Live Link take (358 frames) turned and shifted 24 w
 options and the shared marker map, previews on. Each configuration runs in a fresh process in the order the ``batch``
 command runs: the local cluster's fork server started first (``app.launch``, ``model.fork_server``: its imports of
 what a worker needs run in its own process, on the other core, while this one imports and loads the rig), the rig
-loaded and the job prepared, then the clock started around ``model.batch.run_batch``. Figures per configuration:
+loaded, the job prepared and mapped back from the in-memory file the cluster will map (``share_job``), then the
+clock started around ``model.batch.run_batch``. Figures per configuration:
 the wall time of the whole run (the scheduler and its dashboard started, the workers forked from the fork server --
 waiting for its imports if they are not done --, the job scattered, the takes, the cluster's shutdown, the summary),
 of the takes alone (from the submits to the last result), and of the whole command (from the script's first line:
@@ -57,12 +58,12 @@ from app.runtime import limit_blas_threads
 limit_blas_threads()              # as the command line's main does
 from app.cli_batch import prepare_job
 from app.cli_solve import add_solve_options
-from model.batch import run_batch
+from model.batch import run_batch, share_job
 from model.readers import load_rig
 rig_dir, map_path, out, workers, *takes = sys.argv[1:]
 p = argparse.ArgumentParser()
 add_solve_options(p)
-job = prepare_job(load_rig(rig_dir), p.parse_args(["--map", map_path]))
+job = share_job(prepare_job(load_rig(rig_dir), p.parse_args(["--map", map_path])))   # as the command does
 
 
 def cpu():
