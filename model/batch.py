@@ -189,7 +189,6 @@ class BatchJob:
         state = dict(self.__dict__)
         state.pop("prepared", None)                     # this process's own
         state.pop("evaluator", None)
-        state.pop(shared_pickle.HANDLE_ATTRIBUTE, None)
         return state
 
     def __reduce_ex__(self, protocol):

@@ -91,10 +91,8 @@ def solve_in_driver(job, tasks: list, *, solve: Callable, progress: Callable | N
         if handle is not None and handle.pid == os.getpid():    # mapped from this process's file already (share_job)
             send_handle(ours, handle.fd, process.pid)
         else:
-            fd = os.memfd_create(JOB_FILE, os.MFD_CLOEXEC)
+            fd = shared_pickle.memory_file(job, JOB_FILE)
             try:
-                with open(fd, "wb", closefd=False) as f:
-                    shared_pickle.dump(job, f)
                 send_handle(ours, fd, process.pid)
             finally:
                 os.close(fd)

@@ -99,22 +99,30 @@ def _open_shared(pid: int, fd: int):
     return obj
 
 
-def share(obj, name: str):
-    """(``obj`` written to a new anonymous memory file and mapped back from it, its descriptor): the returned object
-    reads its arrays from the file, so the caller can drop ``obj`` and keep the arrays in memory once, shared with
-    every process that maps the file (``SharedObject``). The descriptor stays open for this process's life (the
-    handle names it); the file lives as long as a process holds or maps it. Linux only (``os.memfd_create``)."""
+def memory_file(obj, name: str) -> int:
+    """The descriptor of a new anonymous memory file ``name`` holding ``obj`` as ``dump`` writes it (Linux:
+    ``os.memfd_create``); the caller closes it."""
     fd = os.memfd_create(name, os.MFD_CLOEXEC)
     try:
         with open(fd, "wb", closefd=False) as f:
             dump(obj, f)
-        mapped = load(fd)
     except BaseException:
         os.close(fd)
         raise
-    if reachable(fd) and hasattr(mapped, "__dict__"):    # other processes can open it: passed on as its handle
-        mapped.__dict__[HANDLE_ATTRIBUTE] = SharedObject(os.getpid(), fd)
-    return mapped, fd
+    return fd
+
+
+def share(obj, name: str):
+    """(``obj`` written to a new anonymous memory file and mapped back from it, its descriptor): the returned object
+    reads its arrays from the file, so the caller can drop ``obj`` and keep the arrays in memory once, shared with
+    every process that maps the file (``SharedObject``). The descriptor stays open for this process's life (the
+    handle names it); the file lives as long as a process holds or maps it."""
+    fd = memory_file(obj, name)
+    try:       # where other processes can open it, it is passed on as its handle
+        return (_open_shared(os.getpid(), fd) if reachable(fd) else load(fd)), fd
+    except BaseException:
+        os.close(fd)
+        raise
 
 
 def handle_of(obj) -> "SharedObject | None":
