@@ -6,6 +6,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from solvers.parallel import ordered_map
+
 from .errors import RigInputError
 from .obj_io import read_obj, read_obj_target
 from .rig import Rig, checked_presets
@@ -52,10 +54,12 @@ def load_obj_folder(folder: str | Path, neutral: str | None = None, units: str =
     if base.face_counts.size == 0:
         raise RigInputError(f"{neutral_path}: the neutral has no faces.")
     deltas = np.empty((len(targets), len(base.vertices), 3), dtype=np.float64)
-    for k, p in enumerate(targets):
+
+    def read_target(k: int) -> None:   # on the machine's cores: the reads and the number parsing release the GIL
+        np.subtract(read_obj_target(targets[k], base), base.vertices, out=deltas[k])
+    for k, _ in enumerate(ordered_map(read_target, range(len(targets)))):   # the first bad file in order stops it
         if progress:
-            progress(k + 1, total, p.name)
-        np.subtract(read_obj_target(p, base), base.vertices, out=deltas[k])
+            progress(k + 1, total, targets[k].name)
     if progress:
         progress(total, total, "done")
     rig = Rig(neutral=base.vertices, face_counts=base.face_counts, face_indices=base.face_indices,

@@ -13,12 +13,14 @@ quantile of itself, taken over the vertices that shape moves, gives every shape 
 from __future__ import annotations
 
 import math
+import threading
 from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
 
 from .errors import RigInputError
+from .parallel import ordered_map
 
 MAP_KINDS = ("laplacian", "displacement", "laplacian+displacement")
 NORMALISE_QUANTILE = 0.99   # each shape's map is divided by this quantile of itself over the vertices it moves
@@ -143,12 +145,21 @@ def _shape_maps(L: sp.csr_matrix, d: np.ndarray, displacement: bool = True
     compiled = _compiled_shape_maps(L)
     if compiled is not None:            # the same bits, the Laplacian read once per four shapes (shape_kernels_jit)
         one, four = compiled
-        scratch = None if displacement else np.empty((4, V))
         d = np.ascontiguousarray(d)
-        for k in range(0, K - 3, 4):
-            four(d[k:k + 4], per_shape[k:k + 4], disp[k:k + 4] if displacement else scratch)
-        for k in range(K - K % 4, K):
-            one(d[k], per_shape[k], disp[k] if displacement else scratch[0])
+
+        local = threading.local()      # each thread's scratch for the displacements not kept
+
+        def shapes(k: int) -> None:    # shapes k.. k + 3 (or k alone, past the last four)
+            scratch = None if displacement else getattr(local, "scratch", None)
+            if scratch is None and not displacement:
+                scratch = local.scratch = np.empty((4, V))
+            if k + 4 <= K - K % 4:
+                four(d[k:k + 4], per_shape[k:k + 4], disp[k:k + 4] if displacement else scratch)
+            else:
+                one(d[k], per_shape[k], disp[k] if displacement else scratch[0])
+        # on the machine's cores (the kernel runs outside the GIL), each shape's rows written by one thread
+        for _ in ordered_map(shapes, [*range(0, K - K % 4, 4), *range(K - K % 4, K)]):
+            pass
         return per_shape, disp
     dt, y, tmp = np.empty((3, V)), np.empty((3, V)), np.empty(V)
     for k in range(K):

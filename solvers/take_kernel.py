@@ -7,7 +7,9 @@ The kernel's source is ``solvers.take_kernel_jit`` (numba). Importing numba and 
 about 0.5 s of CPU in every fresh process (the command line's ``solve``, the GUI's first take), more than the
 whole solve of a 358-frame take; so the kernel is compiled ahead of time (numba.pycc) into a small extension
 module, once per machine and per version of the source, and later processes load that (well under 1 ms).
-The module is kept in ``solvers/__pycache__`` (or the user's cache folder when that is not writable) under a
+Like the just-in-time kernels (``nogil=True``), the built functions release the GIL while they run (``_compile``),
+so a loader's or a solver's thread leaves the GUI's event loop and other threads free, and the readers and the
+segmentation can run them on several cores at once. The module is kept in ``solvers/__pycache__`` (or the user's cache folder when that is not writable) under a
 name that carries a hash of the source, numpy's version and the processor it is compiled for (its own
 instruction set, as the just-in-time kernel uses), so an edited kernel, or another machine, gets a new build. When the
 ahead-of-time build cannot run (no C compiler), the kernel runs through numba's just-in-time dispatcher
@@ -41,6 +43,9 @@ _MAPS_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,::1], f8[::1], f8[::1], i8
 _MAPS4_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,:,::1], f8[:,::1], f8[:,::1], i8, i8)"   # .shape_maps4
 _PAIRS_SIGNATURE = "i8(f8[:,:,::1], f8[:,::1], b1[:,::1], f8[:,::1], f8[:,::1], f8[:,::1])"   # .antagonist_sums
 _QP_SIGNATURE = "i8(f8[:,::1], f8[::1], f8[::1], f8, f8, f8, i8)"   # take_kernel_jit.box_qp_fresh
+# the built module's Python wrappers release the GIL around each call: part of the cache key, so that a build
+# made without it is not loaded
+_RELEASES_GIL = "release_gil"
 _impl = None           # the loaded kernel: the extension module, or take_kernel_jit
 _load_lock = threading.RLock()
 
@@ -166,7 +171,7 @@ def _cpu() -> str:
 def _key() -> str:
     h = hashlib.sha256(_SOURCE.read_bytes() + _DECIMAL_SOURCE.read_bytes() + _SHAPES_SOURCE.read_bytes())
     for part in (_SIGNATURE, _PARSE_SIGNATURE, _MAPS_SIGNATURE, _MAPS4_SIGNATURE, _PAIRS_SIGNATURE, _QP_SIGNATURE,
-                 np.__version__, _cpu()):
+                 np.__version__, _cpu(), _RELEASES_GIL):
         h.update(part.encode())
     return h.hexdigest()[:16]
 
@@ -273,8 +278,30 @@ def _compile(folder: Path, name: str) -> None:
             cc.export("shape_maps4", _MAPS4_SIGNATURE)(shape_kernels_jit.shape_maps4.py_func)
             cc.export("antagonist_sums", _PAIRS_SIGNATURE)(shape_kernels_jit.antagonist_sums.py_func)
             cc.export("box_qp_fresh", _QP_SIGNATURE)(take_kernel_jit.box_qp_fresh.py_func)
-            cc.compile()
+            with _wrappers_release_gil():
+                cc.compile()
         os.replace(Path(tmp) / name, folder / name)   # atomic: a concurrent build wins or loses whole
+
+
+class _wrappers_release_gil:
+    """While open, numba.pycc compiles its exported functions' Python wrappers with the GIL released around the
+    call, as ``njit(nogil=True)`` does for the just-in-time ones: pycc has no option for it, but it builds each
+    function with ``numba.core.compiler.Flags()`` and the wrapper follows their ``release_gil``. The functions take
+    arrays and numbers only and touch no Python object, so they may run without it."""
+
+    def __enter__(self):
+        from numba.pycc import compiler
+
+        class ReleasingFlags(compiler.Flags):
+            def __init__(self, *args, **kwargs):
+                super().__init__(*args, **kwargs)
+                self.release_gil = True
+        self._module, self._flags = compiler, compiler.Flags
+        compiler.Flags = ReleasingFlags
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self._module.Flags = self._flags
 
 
 def _jit():

@@ -36,6 +36,7 @@ import scipy.sparse as sp
 
 from .antagonists import pair_penalty
 from .correctives import linearised_correctives
+from .parallel import ordered_map
 from .rbf import KERNEL_LENGTH_POWER, KERNELS, RBFResidual, phantom_points
 from .regional_solve import shape_region_max
 from .retarget import SmoothWarp, neutral_stretch
@@ -315,29 +316,41 @@ class TakeSolution:
         """Yield the dense surfaces of every frame in order as (n, V, 3) float32 blocks of at most ``frames``
         frames: with the solver's batch evaluator (``surface_many``, global solves) each block is two matrix
         products, the pose W (n, K) · D (K, 3V) and the residual Φ (N, M+P) · C (M+P, 3n); otherwise frame by
-        frame. The block bounds the memory: n × V × 3 × 4 bytes."""
+        frame. The blocks are computed on the machine's cores (``solvers.parallel``: the products run outside
+        the GIL), a few ahead of the one the caller is writing, so that its writes overlap them; that bounds the
+        memory: a few n × V × 3 × 4 bytes."""
+        step = max(1, int(frames))
+        starts = range(0, self.n_frames, step)
         s = self.solver
-        F = self.n_frames
         batch = s.surface_many is not None and self.region_weights is None
-        for start in range(0, F, max(1, int(frames))):
-            stop = min(F, start + max(1, int(frames)))
-            if not batch:
-                yield np.stack([self.dense(f) for f in range(start, stop)]).astype(np.float32)
-                continue
-            x = s.surface_many(self.weights[start:stop])
+        if batch and self.n_frames:   # the evaluator's and the residual's copies, made here before the threads
+            s.surface_many(self.weights[:1])    # share them
             if self.coefficients is not None and s.rbf is not None:
-                C = self.coefficients[start:stop]                                    # (n, M+P, 3)
-                n, P = C.shape[0], C.shape[1]
-                E = s.rbf.eval_matrix_as(np.float32)                                 # (N, M+P)
-                r = E @ C.transpose(1, 0, 2).reshape(P, n * 3).astype(np.float32)   # (N, 3n)
-                r = np.ascontiguousarray(r.reshape(-1, n, 3).transpose(1, 0, 2))    # (n, N, 3)
-                runs = s.residual_runs()
-                if runs is None:
-                    x[:, s.residual_vertices] += r
-                else:       # runs of consecutive vertices: slices, no gather and scatter of the whole block
-                    for a, b, v0, v1 in runs:
-                        x[:, v0:v1] += r[:, a:b]
-            yield x
+                s.rbf.eval_matrix_as(np.float32)
+                s.residual_runs()
+        # frame by frame (regional weights, correctives) the pose's caches are not for sharing: one thread
+        yield from ordered_map(lambda start: self._dense_block(start, min(self.n_frames, start + step)), starts,
+                               threads=None if batch else 1)
+
+    def _dense_block(self, start: int, stop: int) -> np.ndarray:
+        """(stop − start, V, 3) float32: ``dense_blocks``' block of frames start..stop."""
+        s = self.solver
+        if s.surface_many is None or self.region_weights is not None:
+            return np.stack([self.dense(f) for f in range(start, stop)]).astype(np.float32)
+        x = s.surface_many(self.weights[start:stop])
+        if self.coefficients is not None and s.rbf is not None:
+            C = self.coefficients[start:stop]                                    # (n, M+P, 3)
+            n, P = C.shape[0], C.shape[1]
+            E = s.rbf.eval_matrix_as(np.float32)                                 # (N, M+P)
+            r = E @ C.transpose(1, 0, 2).reshape(P, n * 3).astype(np.float32)   # (N, 3n)
+            r = np.ascontiguousarray(r.reshape(-1, n, 3).transpose(1, 0, 2))    # (n, N, 3)
+            runs = s.residual_runs()
+            if runs is None:
+                x[:, s.residual_vertices] += r
+            else:       # runs of consecutive vertices: slices, no gather and scatter of the whole block
+                for a, b, v0, v1 in runs:
+                    x[:, v0:v1] += r[:, a:b]
+        return x
 
 
 class TakeSolver:

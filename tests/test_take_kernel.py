@@ -46,6 +46,44 @@ def test_kernel_is_the_ahead_of_time_build_and_a_fresh_solve_does_not_import_num
     assert out.stdout.split() == ["358", "[]"], out.stdout + out.stderr
 
 
+def test_the_built_kernels_release_the_gil_while_they_run():
+    """A thread running a built kernel (here the deformation maps of a 2M-vertex ring graph, tens of ms) leaves
+    the GIL to the others: this thread's Python loop keeps running all through the call. With the GIL held, the
+    loop stops for the whole call (its longest pause is the call's length)."""
+    import threading
+    import time
+    module = take_kernel.kernel()
+    assert module.__name__ == "_take_kernel_aot"
+    V = 2_000_000
+    indptr = np.arange(0, 8 * V + 1, 8, dtype=np.int32)
+    indices = ((np.repeat(np.arange(V), 8) + np.tile(np.arange(8), V)) % V).astype(np.int32)
+    data, d = np.ones(8 * V), np.random.default_rng(0).random((V, 3))
+    lap, disp = np.empty(V), np.empty(V)
+    t0 = time.perf_counter()
+    module.shape_maps(indptr, indices, data, d, lap, disp, 0, V)
+    call = time.perf_counter() - t0
+    done = threading.Event()
+    started: list[float] = []
+
+    def run():
+        started.append(time.perf_counter())
+        module.shape_maps(indptr, indices, data, d, lap, disp, 0, V)
+        started.append(time.perf_counter())
+        done.set()
+    thread = threading.Thread(target=run)
+    ticks = []
+    thread.start()
+    while not done.is_set():
+        ticks.append(time.perf_counter())
+    thread.join()
+    inside = np.array([t for t in ticks if started[0] <= t <= started[1]])
+    span = started[1] - started[0]
+    gaps = np.diff(np.concatenate(([started[0]], inside, [started[1]])))
+    assert span > 0.02, f"the call took {span * 1000:.1f} ms ({call * 1000:.1f} ms alone): too short to tell"
+    assert gaps.max() < 0.5 * span, (f"this thread stood still {gaps.max() * 1000:.1f} ms of the kernel's "
+                                      f"{span * 1000:.1f} ms: the kernel held the GIL")
+
+
 def test_box_qp_matches_the_python_active_set_on_random_problems():
     rng = np.random.default_rng(3)
     K = 40

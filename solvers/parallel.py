@@ -1,0 +1,56 @@
+"""Work split over the machine's cores with threads, for work that runs outside the GIL: the compiled kernels
+(``solvers.take_kernel``: the built module and the just-in-time one both release the GIL while they run), file
+reads and most of numpy's array operations. The results are the same as the work done one piece after another.
+"""
+from __future__ import annotations
+
+import os
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from itertools import islice
+from typing import Callable, Iterable, Iterator, TypeVar
+
+T = TypeVar("T")
+R = TypeVar("R")
+
+
+def cores() -> int:
+    """How many threads work here may use: the cores this process may run on, capped by ``OMP_NUM_THREADS``
+    when it is set (a Dask worker's nanny sets it to its one core's share, so a worker never starts more)."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        n = os.cpu_count() or 1
+    limit = os.environ.get("OMP_NUM_THREADS", "")
+    if limit.isdigit() and int(limit) > 0:
+        n = min(n, int(limit))
+    return max(1, n)
+
+
+def ordered_map(fn: Callable[[T], R], items: Iterable[T], threads: int | None = None,
+                ahead: int | None = None) -> Iterator[R]:
+    """``fn`` of each item, yielded in the items' order, computed on up to ``threads`` threads (default
+    ``cores()``) at most ``ahead`` items (default twice the threads) ahead of the one yielded, which bounds the
+    memory of results not yet taken; one thread runs them here, one after another. The first exception in the
+    items' order is raised where its result would have been, and the items not yet started are cancelled, as a
+    loop would have stopped there; so are they when the caller stops taking results (the generator closed)."""
+    threads = max(1, threads or cores())
+    if threads == 1:
+        for item in items:
+            yield fn(item)
+        return
+    items = iter(items)
+    pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="parallel")
+    pending: deque = deque()
+    try:
+        for item in islice(items, max(1, ahead or 2 * threads)):
+            pending.append(pool.submit(fn, item))
+        while pending:
+            result = pending.popleft().result()
+            for item in islice(items, 1):
+                pending.append(pool.submit(fn, item))
+            yield result
+    finally:
+        for future in pending:
+            future.cancel()
+        pool.shutdown(wait=True)

@@ -1,0 +1,64 @@
+"""solvers.parallel: work on several threads gives what the loop gives, in order, errors and all."""
+from __future__ import annotations
+
+import threading
+import time
+
+import pytest
+
+from solvers.parallel import cores, ordered_map
+
+
+def test_results_come_in_the_items_order_whatever_order_they_finish_in():
+    def slow_first(i):
+        time.sleep(0.02 if i == 0 else 0.0)     # the first item finishes last
+        return i * i
+    assert list(ordered_map(slow_first, range(12), threads=3)) == [i * i for i in range(12)]
+
+
+def test_the_first_error_in_order_is_raised_where_its_result_was_and_later_items_are_not_started():
+    started: list[int] = []
+    lock = threading.Lock()
+
+    def work(i):
+        with lock:
+            started.append(i)
+        if i in (3, 5):
+            time.sleep(0.01 if i == 3 else 0.0)   # item 5 fails first in time, item 3 first in order
+            raise ValueError(f"item {i}")
+        return i
+    got = []
+    with pytest.raises(ValueError, match="item 3"):
+        for r in ordered_map(work, range(100), threads=2, ahead=4):
+            got.append(r)
+    assert got == [0, 1, 2]
+    assert max(started) < 10, f"items up to {max(started)} were started after the error"
+
+
+def test_no_more_than_ahead_items_are_computed_past_the_one_taken():
+    computed: list[int] = []
+
+    def work(i):
+        computed.append(i)
+        return i
+    gen = ordered_map(work, range(50), threads=2, ahead=3)
+    assert next(gen) == 0
+    time.sleep(0.05)
+    assert len(computed) <= 4            # item 0 and at most 3 ahead of it
+    gen.close()                          # the caller stops: nothing more is started
+    n = len(computed)
+    time.sleep(0.05)
+    assert len(computed) == n <= 4
+
+
+def test_one_thread_runs_the_items_here_in_order():
+    here = threading.get_ident()
+    assert list(ordered_map(lambda i: (i, threading.get_ident() == here), range(3), threads=1)) == \
+        [(0, True), (1, True), (2, True)]
+
+
+def test_cores_follows_omp_num_threads(monkeypatch):
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")
+    assert cores() == 1
+    monkeypatch.delenv("OMP_NUM_THREADS")
+    assert cores() >= 1
