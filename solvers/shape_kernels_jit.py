@@ -1,5 +1,6 @@
 """Compiled passes over a rig's shapes, for what is computed once per rig: one shape's deformation maps
-(``shape_maps``, four shapes at once ``shape_maps4``) and the sums behind the antagonist pairs (``antagonist_sums``).
+(``shape_maps``, four shapes at once ``shape_maps4``) and the sums behind the antagonist pairs (``antagonist_sums``);
+and, for every frame the viewport draws, the vertex normals of a moving surface (``vertex_normals32``).
 
 **Deformation maps.** ``‖L d(v)‖`` and ``‖d(v)‖`` for every vertex v (Joshi et al. 2003, §2,
 ``m_k(v) = ‖L d_k(v)‖``; ALGORITHMS.md §2), from the shape's (V, 3) deltas as the rig holds them.
@@ -37,8 +38,8 @@ except ImportError:                         # the callers keep their numpy and s
 def shape_maps(indptr, indices, data, d, lap, disp, v0, v1):
     """``lap[v] = ‖Σ_j L[v, j] d[j]‖`` over row v of the CSR Laplacian (``indptr``, ``indices``, ``data``) and
     ``disp[v] = ‖d[v]‖`` for the (V, 3) deltas ``d``, for the rows v0 <= v < v1; ``lap`` and ``disp`` (V,) are
-    written in place. Returns the number of rows. (A compiled call holds Python's lock: the callers go through a
-    large rig a block of rows at a time, so that a window stays responsive while it runs in the background.)"""
+    written in place. Returns the number of rows. (The callers go through a large rig a block of rows at a time,
+    so that a cancel is heard between blocks.)"""
     for v in range(v0, v1):
         x = 0.0
         y = 0.0
@@ -121,7 +122,59 @@ def antagonist_sums(D, n2, active, shared, dots, sq):
     return terms
 
 
+def vertex_normals32(x, a, b, c, out):
+    """``solvers.normals.VertexNormals``' normals in one pass: for the (V, 3) float32 points ``x`` and the
+    triangles (a[t], b[t], c[t]), ``out[v]`` (V, 3) float32 = the unit sum of e1 × e2 over the triangles at v
+    (zero where that sum is zero). The same float32 operations in the same order as the numpy path (each
+    triangle's cross product, the sums onto the corners in the triangles' order from 0, then
+    ``n · (1 / sqrt((n0² + n1²) + n2²))``), so the same bits. Returns the number of triangles."""
+    V = out.shape[0]
+    for v in range(V):
+        out[v, 0] = 0.0
+        out[v, 1] = 0.0
+        out[v, 2] = 0.0
+    T = a.shape[0]
+    for t in range(T):
+        i = a[t]
+        j = b[t]
+        k = c[t]
+        ax = x[i, 0]
+        ay = x[i, 1]
+        az = x[i, 2]
+        e1x = x[j, 0] - ax
+        e1y = x[j, 1] - ay
+        e1z = x[j, 2] - az
+        e2x = x[k, 0] - ax
+        e2y = x[k, 1] - ay
+        e2z = x[k, 2] - az
+        nx = e1y * e2z - e1z * e2y
+        ny = e1z * e2x - e1x * e2z
+        nz = e1x * e2y - e1y * e2x
+        out[i, 0] += nx
+        out[i, 1] += ny
+        out[i, 2] += nz
+        out[j, 0] += nx
+        out[j, 1] += ny
+        out[j, 2] += nz
+        out[k, 0] += nx
+        out[k, 1] += ny
+        out[k, 2] += nz
+    one = np.float32(1.0)
+    for v in range(V):
+        nx = out[v, 0]
+        ny = out[v, 1]
+        nz = out[v, 2]
+        length = np.sqrt(nx * nx + ny * ny + nz * nz)
+        if length > 0:
+            inv = one / length
+            out[v, 0] = nx * inv
+            out[v, 1] = ny * inv
+            out[v, 2] = nz * inv
+    return T
+
+
 if njit is not None:
     shape_maps = njit(cache=True, nogil=True)(shape_maps)
     shape_maps4 = njit(cache=True, nogil=True)(shape_maps4)
     antagonist_sums = njit(cache=True, nogil=True)(antagonist_sums)
+    vertex_normals32 = njit(cache=True, nogil=True)(vertex_normals32)

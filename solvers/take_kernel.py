@@ -43,6 +43,7 @@ _MAPS_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,::1], f8[::1], f8[::1], i8
 _MAPS4_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,:,::1], f8[:,::1], f8[:,::1], i8, i8)"   # .shape_maps4
 _PAIRS_SIGNATURE = "i8(f8[:,:,::1], f8[:,::1], b1[:,::1], f8[:,::1], f8[:,::1], f8[:,::1])"   # .antagonist_sums
 _QP_SIGNATURE = "i8(f8[:,::1], f8[::1], f8[::1], f8, f8, f8, i8)"   # take_kernel_jit.box_qp_fresh
+_NORMALS_SIGNATURE = "i8(f4[:,::1], i8[::1], i8[::1], i8[::1], f4[:,::1])"   # shape_kernels_jit.vertex_normals32
 # the built module's Python wrappers release the GIL around each call: part of the cache key, so that a build
 # made without it is not loaded
 _RELEASES_GIL = "release_gil"
@@ -171,6 +172,7 @@ def _cpu() -> str:
 def _key() -> str:
     h = hashlib.sha256(_SOURCE.read_bytes() + _DECIMAL_SOURCE.read_bytes() + _SHAPES_SOURCE.read_bytes())
     for part in (_SIGNATURE, _PARSE_SIGNATURE, _MAPS_SIGNATURE, _MAPS4_SIGNATURE, _PAIRS_SIGNATURE, _QP_SIGNATURE,
+                 _NORMALS_SIGNATURE,
                  np.__version__, _cpu(), _RELEASES_GIL):
         h.update(part.encode())
     return h.hexdigest()[:16]
@@ -278,6 +280,7 @@ def _compile(folder: Path, name: str) -> None:
             cc.export("shape_maps4", _MAPS4_SIGNATURE)(shape_kernels_jit.shape_maps4.py_func)
             cc.export("antagonist_sums", _PAIRS_SIGNATURE)(shape_kernels_jit.antagonist_sums.py_func)
             cc.export("box_qp_fresh", _QP_SIGNATURE)(take_kernel_jit.box_qp_fresh.py_func)
+            cc.export("vertex_normals32", _NORMALS_SIGNATURE)(shape_kernels_jit.vertex_normals32.py_func)
             with _wrappers_release_gil():
                 cc.compile()
         os.replace(Path(tmp) / name, folder / name)   # atomic: a concurrent build wins or loses whole
