@@ -20,6 +20,7 @@ from solvers import segmentation as _seg
 from solvers.deformation_maps import (MAP_KINDS, DeformationMaps, deformation_maps, normalised_map, shape_moves,
                                       shape_scales, smooth_map)
 from solvers.laplacian import mesh_adjacency, mesh_laplacian
+from solvers.parallel import Background
 from solvers.region_growing import grow_regions
 
 from .errors import RigInputError
@@ -287,13 +288,23 @@ class SegmentationCache:
     def vertex_mirror(self, vertices: np.ndarray) -> np.ndarray:
         """(V,) each vertex's mirror image across x = 0 (``solvers.symmetry.mirror_map``), looked up for
         ``vertices`` (and any asked for before) only: -1 at the others. The k-d tree is built once per rig."""
-        from solvers.symmetry import MirrorLookup
-        lookup = self._get("mirror-lookup", lambda: MirrorLookup(self._neutral))
+        lookup = self._get("mirror-lookup", lambda: self.start_mirror_lookup().result())
         mirror = self._get("mirror", lambda: np.full(self._neutral.shape[0], -1, dtype=np.int64))
         todo = vertices[mirror[vertices] < 0]
         if todo.size:
             mirror[todo] = lookup(todo)[1]
         return mirror
+
+    def start_mirror_lookup(self) -> Background:
+        """The mirror lookup (``solvers.symmetry.MirrorLookup`` of the neutral, its k-d tree built), started once per
+        rig on another core: it needs only the neutral, and its tree's build runs outside the GIL, so it overlaps
+        the threshold and clean-up stages (~5 ms on ICT FaceKit)."""
+        def make():
+            from solvers.symmetry import MirrorLookup
+            lookup = MirrorLookup(self._neutral)
+            lookup.tree   # noqa: B018  (built here, not on the first lookup)
+            return lookup
+        return self._get("mirror-lookup-started", lambda: Background(make))
 
     def mirror_partners(self) -> np.ndarray:
         return self._get("partners", lambda: _hier.mirror_partners(self._neutral, self.maps().per_shape_displacement))
@@ -390,6 +401,8 @@ def _segment_rig(neutral, face_counts, face_indices, deltas, settings, cache, fi
     values, sorted_values = cache.values(s.map_kind, s.laplacian, s.normalise, s.smoothing)
     secs["maps"] = time.perf_counter() - t0
     A = cache.adjacency
+    if not finest_only:
+        cache.start_mirror_lookup()    # the hierarchy's mirror images, on another core while the regions form
     piece, main = cache.pieces()
 
     t0 = time.perf_counter()

@@ -54,3 +54,30 @@ def ordered_map(fn: Callable[[T], R], items: Iterable[T], threads: int | None = 
         for future in pending:
             future.cancel()
         pool.shutdown(wait=True)
+
+
+class Background:
+    """``fn()`` started now on a thread of its own, for work that mostly runs outside the GIL (a k-d tree's build,
+    a compiled kernel) to overlap work on this thread; ``result()`` waits for it and returns its value or raises
+    its exception. With one core (``cores()``) nothing starts early: ``result()`` runs ``fn`` itself."""
+
+    def __init__(self, fn: Callable[[], R]) -> None:
+        self._fn, self._value, self._error, self._thread = fn, None, None, None
+        if cores() > 1:
+            import threading
+            self._thread = threading.Thread(target=self._run, name="background", daemon=True)
+            self._thread.start()
+
+    def _run(self) -> None:
+        try:
+            self._value = self._fn()
+        except BaseException as exc:   # raised again by result(), in its caller
+            self._error = exc
+
+    def result(self):
+        if self._thread is None:
+            return self._fn()
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._value

@@ -62,3 +62,23 @@ def test_cores_follows_omp_num_threads(monkeypatch):
     assert cores() == 1
     monkeypatch.delenv("OMP_NUM_THREADS")
     assert cores() >= 1
+
+
+def test_background_work_runs_beside_this_thread_and_hands_back_its_value_or_its_error(monkeypatch):
+    from solvers.parallel import Background
+    here = threading.get_ident()
+    ran_on: list[int] = []
+
+    def work():
+        ran_on.append(threading.get_ident())
+        return 42
+    assert Background(work).result() == 42
+    assert ran_on[-1] != here or cores() == 1
+
+    def fails():
+        raise ValueError("the work's own error")
+    job = Background(fails)
+    with pytest.raises(ValueError, match="the work's own error"):
+        job.result()
+    monkeypatch.setenv("OMP_NUM_THREADS", "1")       # one core: nothing starts early, result() runs it here
+    assert Background(work).result() == 42 and ran_on[-1] == here
