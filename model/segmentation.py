@@ -337,21 +337,23 @@ def _level(labels: np.ndarray, adjacency: sp.spmatrix, rings: int, edges=None) -
 
 _PAGES_LOCK = threading.Lock()
 _PAGES = [0, None]  # segmentations running without huge pages, numpy's setting before the first of them
-SMALL_PAGES_FROM = 1 << 24  # shapes × vertices from which a segmentation asks for ordinary pages (see below)
 
 
 @contextmanager
-def _small_pages(shapes_x_vertices: int):
+def _small_pages():
     """numpy asks Linux for transparent huge pages (madvise) for every array of 4 MB or more. Where the kernel
-    compacts memory on first touch to find them (THP defrag 'madvise', a common default), the (K, V) maps of a
-    large rig, written once and streamed through, cost up to 2 ms of kernel time per MB: 1.2 s of 2.9 s on the
-    422k-vertex, 57-shape rig (190 MB maps). Smaller rigs gain from huge pages (measured: 106k vertices 0.39 s
-    without, 0.29 s with; ICT 78 / 73 ms), so from ``SMALL_PAGES_FROM`` shapes × vertices on they are asked for
-    off while the segmentation runs (as ``NUMPY_MADVISE_HUGEPAGE=0`` would for the whole process; a count, so
+    compacts memory on first touch to find them (THP defrag 'madvise', a common default), a segmentation's fresh
+    (K, V) arrays, written once and streamed through, cost up to 2 ms of kernel time per MB: 1.2 s of 2.9 s on the
+    422k-vertex, 57-shape rig (190 MB maps); on the eighteenth session's VM, whose memory was fragmented, ICT took
+    82-228 ms (median 124, 72 ms of it in the kernel on average) with them against 72-123 ms (median 92, 19 ms)
+    without, and the 106k-vertex rig 1.0-2.4 s against 0.41-0.52 s, alternated in one process. Where compaction was
+    cheap they had saved a little (another VM: 106k vertices 0.39 s without, 0.29 s with; ICT 78 / 73 ms), which
+    does not pay for the risk, so they are asked for off while any segmentation runs (as ``NUMPY_MADVISE_HUGEPAGE=0``
+    would for the whole process, which the window keeps on for the arrays it holds for the session; a count, so
     overlapping runs in threads restore numpy's setting once)."""
     core = getattr(np, "_core", None) or getattr(np, "core", None)  # numpy 2 / numpy 1
     toggle = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
-    if toggle is None or shapes_x_vertices < SMALL_PAGES_FROM:
+    if toggle is None:
         yield
         return
     with _PAGES_LOCK:
@@ -378,8 +380,7 @@ def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.n
     ``cache`` on every call for the same rig to reuse the graph, Laplacian and maps. ``finest_only`` skips
     the hierarchy (level 0 only), for a live preview while a threshold slider moves.
     """
-    shape = np.shape(deltas)
-    with _small_pages(int(shape[0]) * int(shape[1]) if len(shape) == 3 else 0):
+    with _small_pages():
         return _segment_rig(neutral, face_counts, face_indices, deltas, settings, cache, finest_only)
 
 
@@ -398,7 +399,15 @@ def _segment_rig(neutral, face_counts, face_indices, deltas, settings, cache, fi
     if maps.values(kind).max() <= 1e-9 * float(maps.displacement.max()):  # zero up to rounding
         raise RigInputError(f"The {kind} map is zero everywhere: no shape deforms the surface, "
                             "so there is nothing to segment.")
+    split = None
+    if s.method == "threshold" and s.split_by_shapes:
+        # the graph cut by shape groups needs the maps only: made on another core while this one makes the
+        # thresholded map (and the shape scales both use, made first)
+        cache.scales("displacement")
+        split = Background(cache.split_graph)
     values, sorted_values = cache.values(s.map_kind, s.laplacian, s.normalise, s.smoothing)
+    if not finest_only:
+        cache.mirror_partners()
     secs["maps"] = time.perf_counter() - t0
     A = cache.adjacency
     if not finest_only:
@@ -408,7 +417,7 @@ def _segment_rig(neutral, face_counts, face_indices, deltas, settings, cache, fi
     t0 = time.perf_counter()
     if s.method == "threshold":
         labels, thr = _seg.threshold_labels(values, A, s.t, sorted_values=sorted_values, domain=cache.domain(),
-                                            split=cache.split_graph() if s.split_by_shapes else None)
+                                            split=split.result() if split is not None else None)
     else:
         labels, thr = _seg.relabel(grow_regions(values, A, s.growth_ratio, s.max_groups)), None
     secs["threshold"] = time.perf_counter() - t0

@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import RigInputError
-from .parallel import ordered_map
+from .parallel import cores, ordered_map
 
 MAP_KINDS = ("laplacian", "displacement", "laplacian+displacement")
 NORMALISE_QUANTILE = 0.99   # each shape's map is divided by this quantile of itself over the vertices it moves
@@ -202,15 +202,22 @@ def deformation_maps(laplacian: sp.spmatrix, deltas: np.ndarray) -> DeformationM
     # the arg-max shape of every vertex (the first of equal maxima, as np.argmax): no per-shape running update
     # over V, and no argmax across the (K, V) rows (numpy copies them to (V, K) for that); its Laplacian vector
     # is computed when the vector view asks for it (``argmax_vectors``)
-    combined = per_shape.max(axis=0)
-    arg = np.zeros(V, dtype=np.int64)
-    for k in range(K - 1, -1, -1):  # the last write is the smallest k at the maximum
-        np.copyto(arg, k, where=per_shape[k] == combined)
+    combined, arg, displacement = np.empty(V), np.zeros(V, dtype=np.int64), np.empty(V)
+
+    def columns(span: tuple[int, int]) -> None:     # the vertices a..b, on the machine's cores
+        a, b = span
+        np.max(per_shape[:, a:b], axis=0, out=combined[a:b])
+        for k in range(K - 1, -1, -1):  # the last write is the smallest k at the maximum
+            np.copyto(arg[a:b], k, where=per_shape[k, a:b] == combined[a:b])
+        np.max(disp[:, a:b], axis=0, out=displacement[a:b])
+    cuts = np.linspace(0, V, cores() + 1).astype(int)
+    for _ in ordered_map(columns, zip(cuts[:-1], cuts[1:])):
+        pass
     nan = np.isnan(combined)
     if nan.any():  # np.argmax's answer there: the first NaN
         arg[nan] = np.argmax(per_shape[:, nan], axis=0)
     return DeformationMaps(per_shape=per_shape.T, combined=combined, argmax_shape=arg,
-                           displacement=disp.max(axis=0), per_shape_displacement=disp.T, laplacian=L, deltas=deltas)
+                           displacement=displacement, per_shape_displacement=disp.T, laplacian=L, deltas=deltas)
 
 
 def argmax_vectors(laplacian: sp.spmatrix, deltas: np.ndarray, argmax_shape: np.ndarray) -> np.ndarray:

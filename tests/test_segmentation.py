@@ -610,20 +610,32 @@ def test_segment_command_options(tmp_path):
     assert bad.returncode == 2 and "smoothing" in bad.stderr and bad.stderr.strip().count("\n") == 0
 
 
-def test_large_rig_segmentation_gives_numpy_its_huge_page_setting_back():
-    """A large rig is segmented with ordinary pages (model.segmentation._small_pages); numpy's own setting comes
-    back after, also when two segmentations overlap in threads, and a small rig leaves it alone."""
-    from model.segmentation import SMALL_PAGES_FROM, _small_pages
+def test_segmentation_runs_with_ordinary_pages_and_gives_numpy_its_huge_page_setting_back(ict_rig):
+    """A segmentation asks for ordinary pages while it runs (model.segmentation._small_pages: the kernel's compaction
+    for huge pages cost more than they save); numpy's own setting comes back after, also when two segmentations
+    overlap in threads."""
+    from model import segmentation as S
     toggle = np._core.multiarray._set_madvise_hugepage
     before = toggle(True)
     try:
-        with _small_pages(SMALL_PAGES_FROM):
+        with S._small_pages():
             assert toggle(False) is False            # off inside (and left off)
-            with _small_pages(SMALL_PAGES_FROM):     # an overlapping run
+            with S._small_pages():                   # an overlapping run
                 pass
             assert toggle(False) is False            # still off: the outer run is not over
         assert toggle(True) is True                  # back on after the last run
-        with _small_pages(SMALL_PAGES_FROM - 1):
-            assert toggle(True) is True              # a small rig: untouched
+        seen = []
+        maps = S.deformation_maps
+
+        def spy(*args):                              # the setting while ICT's maps are made
+            seen.append(toggle(False))
+            return maps(*args)
+        S.deformation_maps = spy
+        try:
+            S.segment_rig(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, ict_rig.deltas)
+        finally:
+            S.deformation_maps = maps
+        assert seen == [False]                       # ordinary pages, on a rig of ICT's size too
+        assert toggle(True) is True                  # and numpy's setting back after it
     finally:
         toggle(before)
