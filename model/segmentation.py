@@ -288,7 +288,7 @@ class SegmentationCache:
     def vertex_mirror(self, vertices: np.ndarray) -> np.ndarray:
         """(V,) each vertex's mirror image across x = 0 (``solvers.symmetry.mirror_map``), looked up for
         ``vertices`` (and any asked for before) only: -1 at the others. The k-d tree is built once per rig."""
-        lookup = self._get("mirror-lookup", lambda: self.start_mirror_lookup().result())
+        lookup = self.start_mirror_lookup().result()
         mirror = self._get("mirror", lambda: np.full(self._neutral.shape[0], -1, dtype=np.int64))
         todo = vertices[mirror[vertices] < 0]
         if todo.size:

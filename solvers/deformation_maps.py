@@ -147,16 +147,20 @@ def _shape_maps(L: sp.csr_matrix, d: np.ndarray, displacement: bool = True
         one, four = compiled
         d = np.ascontiguousarray(d)
 
-        local = threading.local()      # each thread's scratch for the displacements not kept
+        local = threading.local()
 
-        def shapes(k: int) -> None:    # shapes k.. k + 3 (or k alone, past the last four)
-            scratch = None if displacement else getattr(local, "scratch", None)
-            if scratch is None and not displacement:
-                scratch = local.scratch = np.empty((4, V))
-            if k + 4 <= K - K % 4:
-                four(d[k:k + 4], per_shape[k:k + 4], disp[k:k + 4] if displacement else scratch)
+        def displacements(k: int, n: int) -> np.ndarray:   # shapes k..k+n-1's: kept, or each thread's scratch
+            if displacement:
+                return disp[k:k + n]
+            if not hasattr(local, "scratch"):
+                local.scratch = np.empty((4, V))
+            return local.scratch[:n]
+
+        def shapes(k: int) -> None:    # shapes k.. k + 3, or k alone past the last four
+            if k < K - K % 4:
+                four(d[k:k + 4], per_shape[k:k + 4], displacements(k, 4))
             else:
-                one(d[k], per_shape[k], disp[k] if displacement else scratch[0])
+                one(d[k], per_shape[k], displacements(k, 1)[0])
         # on the machine's cores (the kernel runs outside the GIL), each shape's rows written by one thread
         for _ in ordered_map(shapes, [*range(0, K - K % 4, 4), *range(K - K % 4, K)]):
             pass

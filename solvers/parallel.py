@@ -5,6 +5,7 @@ reads and most of numpy's array operations. The results are the same as the work
 from __future__ import annotations
 
 import os
+import threading
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from itertools import islice
@@ -59,13 +60,13 @@ def ordered_map(fn: Callable[[T], R], items: Iterable[T], threads: int | None = 
 class Background:
     """``fn()`` started now on a thread of its own, for work that mostly runs outside the GIL (a k-d tree's build,
     a compiled kernel) to overlap work on this thread; ``result()`` waits for it and returns its value or raises
-    its exception. With one core (``cores()``) nothing starts early: ``result()`` runs ``fn`` itself."""
+    its exception, every time it is asked. With one core (``cores()``) nothing starts early: the first ``result()``
+    runs ``fn`` itself."""
 
     def __init__(self, fn: Callable[[], R]) -> None:
-        self._fn, self._value, self._error, self._thread = fn, None, None, None
-        if cores() > 1:
-            import threading
-            self._thread = threading.Thread(target=self._run, name="background", daemon=True)
+        self._fn, self._value, self._error, self._ran = fn, None, None, False
+        self._thread = threading.Thread(target=self._run, name="background", daemon=True) if cores() > 1 else None
+        if self._thread is not None:
             self._thread.start()
 
     def _run(self) -> None:
@@ -73,11 +74,13 @@ class Background:
             self._value = self._fn()
         except BaseException as exc:   # raised again by result(), in its caller
             self._error = exc
+        self._ran = True
 
     def result(self):
-        if self._thread is None:
-            return self._fn()
-        self._thread.join()
+        if self._thread is not None:
+            self._thread.join()
+        elif not self._ran:
+            self._run()
         if self._error is not None:
             raise self._error
         return self._value

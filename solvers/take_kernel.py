@@ -9,7 +9,8 @@ whole solve of a 358-frame take; so the kernel is compiled ahead of time (numba.
 module, once per machine and per version of the source, and later processes load that (well under 1 ms).
 Like the just-in-time kernels (``nogil=True``), the built functions release the GIL while they run (``_compile``),
 so a loader's or a solver's thread leaves the GUI's event loop and other threads free, and the readers and the
-segmentation can run them on several cores at once. The module is kept in ``solvers/__pycache__`` (or the user's cache folder when that is not writable) under a
+segmentation can run them on several cores at once. The module is kept in ``solvers/__pycache__`` (or the user's
+cache folder when that is not writable) under a
 name that carries a hash of the source, numpy's version and the processor it is compiled for (its own
 instruction set, as the just-in-time kernel uses), so an edited kernel, or another machine, gets a new build. When the
 ahead-of-time build cannot run (no C compiler), the kernel runs through numba's just-in-time dispatcher

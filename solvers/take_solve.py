@@ -322,7 +322,7 @@ class TakeSolution:
         step = max(1, int(frames))
         starts = range(0, self.n_frames, step)
         s = self.solver
-        batch = s.surface_many is not None and self.region_weights is None
+        batch = self._batched()
         if batch and self.n_frames:   # the evaluator's and the residual's copies, made here before the threads
             s.surface_many(self.weights[:1])    # share them
             if self.coefficients is not None and s.rbf is not None:
@@ -332,10 +332,15 @@ class TakeSolution:
         yield from ordered_map(lambda start: self._dense_block(start, min(self.n_frames, start + step)), starts,
                                threads=None if batch else 1)
 
+    def _batched(self) -> bool:
+        """Whether the dense frames are matrix products over blocks (the solver's batch evaluator, global weights)
+        rather than one surface a frame."""
+        return self.solver.surface_many is not None and self.region_weights is None
+
     def _dense_block(self, start: int, stop: int) -> np.ndarray:
         """(stop − start, V, 3) float32: ``dense_blocks``' block of frames start..stop."""
         s = self.solver
-        if s.surface_many is None or self.region_weights is not None:
+        if not self._batched():
             return np.stack([self.dense(f) for f in range(start, stop)]).astype(np.float32)
         x = s.surface_many(self.weights[start:stop])
         if self.coefficients is not None and s.rbf is not None:

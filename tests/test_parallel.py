@@ -81,4 +81,7 @@ def test_background_work_runs_beside_this_thread_and_hands_back_its_value_or_its
     with pytest.raises(ValueError, match="the work's own error"):
         job.result()
     monkeypatch.setenv("OMP_NUM_THREADS", "1")       # one core: nothing starts early, result() runs it here
-    assert Background(work).result() == 42 and ran_on[-1] == here
+    job = Background(work)
+    n = len(ran_on)
+    assert job.result() == 42 and ran_on[-1] == here
+    assert job.result() == 42 and len(ran_on) == n + 1   # asked again: the value, not a second run

@@ -610,7 +610,7 @@ def test_segment_command_options(tmp_path):
     assert bad.returncode == 2 and "smoothing" in bad.stderr and bad.stderr.strip().count("\n") == 0
 
 
-def test_segmentation_runs_with_ordinary_pages_and_gives_numpy_its_huge_page_setting_back(ict_rig):
+def test_segmentation_runs_with_ordinary_pages_and_gives_numpy_its_huge_page_setting_back(ict_rig, monkeypatch):
     """A segmentation asks for ordinary pages while it runs (model.segmentation._small_pages: the kernel's compaction
     for huge pages cost more than they save); numpy's own setting comes back after, also when two segmentations
     overlap in threads."""
@@ -630,11 +630,8 @@ def test_segmentation_runs_with_ordinary_pages_and_gives_numpy_its_huge_page_set
         def spy(*args):                              # the setting while ICT's maps are made
             seen.append(toggle(False))
             return maps(*args)
-        S.deformation_maps = spy
-        try:
-            S.segment_rig(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, ict_rig.deltas)
-        finally:
-            S.deformation_maps = maps
+        monkeypatch.setattr(S, "deformation_maps", spy)
+        S.segment_rig(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, ict_rig.deltas)
         assert seen == [False]                       # ordinary pages, on a rig of ICT's size too
         assert toggle(True) is True                  # and numpy's setting back after it
     finally:
