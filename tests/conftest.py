@@ -4,7 +4,9 @@ Tests that need the real data skip with a reason when it is absent, and fail whe
 """
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
 import tempfile
 from pathlib import Path
 
@@ -13,6 +15,7 @@ import pytest
 # Autosaves and crash logs of the windows and commands the tests start go to a private folder, never into the
 # user's home (model.recovery, app.crash).
 _PRIVATE = tempfile.mkdtemp(prefix="bs-tests-")
+atexit.register(shutil.rmtree, _PRIVATE, ignore_errors=True)
 os.environ.setdefault("XDG_DATA_HOME", os.path.join(_PRIVATE, "data"))
 os.environ.setdefault("BLENDSHAPE_STUDIO_LOGS", os.path.join(_PRIVATE, "crashes"))
 

@@ -70,6 +70,8 @@ def main(argv=None) -> int:
         s = fuzz(a.per_reader, a.seed, a.readers.split(",") if a.readers else None, out, tmp / "work", a.timeout)
     finally:
         shutil.rmtree(tmp / "work", ignore_errors=True)
+        if not any(tmp.iterdir()):    # no failing input kept there
+            tmp.rmdir()
     for name, r in s["readers"].items():
         print(f"{name:12s} {r['seconds']:7.1f} s  " + "  ".join(f"{k} {v}" for k, v in sorted(r["counts"].items())),
               file=sys.stderr)
