@@ -30,6 +30,7 @@ import numpy as np
 from .errors import RigInputError, shown
 from .input_files import read_input_bytes, regular_file
 from .json_file import parse_json_text
+from .pages import LARGE, small_pages
 from .rig import CornerAttributes, Rig
 
 from .export_gltf import CHUNK_BIN as _CHUNK_BIN, CHUNK_JSON as _CHUNK_JSON, GLB_MAGIC as _GLB_MAGIC
@@ -440,6 +441,12 @@ def _load(path: Path, units: str, mesh: str | None) -> Rig:
     doc = _parse(path)
     mesh_index = _choose_mesh(doc, mesh)
     mesh = doc.gltf["meshes"][mesh_index]
+    n_targets, n_vertices = _mesh_sizes(doc, mesh)
+    with small_pages(n_targets * n_vertices * 24 >= LARGE):   # a studio-scale rig's deltas (model.pages)
+        return _load_mesh(doc, path, units, mesh_index, mesh)
+
+
+def _load_mesh(doc: _Doc, path: Path, units: str, mesh_index: int, mesh: dict) -> Rig:
     label = _mesh_label(mesh, mesh_index)
     prims = [p for p in mesh.get("primitives", []) if "POSITION" in (p.get("attributes") or {})]
     if not prims:

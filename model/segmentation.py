@@ -7,9 +7,7 @@ depends only on the rig (graph, Laplacian, maps, sorted values) so the GUI can r
 """
 from __future__ import annotations
 
-import threading
 import time
-from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
@@ -24,6 +22,7 @@ from solvers.parallel import Background
 from solvers.region_growing import grow_regions
 
 from .errors import RigInputError
+from .pages import small_pages
 
 METHODS = ("threshold", "region-growing")
 LAPLACIANS = ("uniform", "cotangent")
@@ -335,40 +334,6 @@ def _level(labels: np.ndarray, adjacency: sp.spmatrix, rings: int, edges=None) -
                              background=np.flatnonzero(labels < 0), blend=blend)
 
 
-_PAGES_LOCK = threading.Lock()
-_PAGES = [0, None]  # segmentations running without huge pages, numpy's setting before the first of them
-
-
-@contextmanager
-def _small_pages():
-    """numpy asks Linux for transparent huge pages (madvise) for every array of 4 MB or more. Where the kernel
-    compacts memory on first touch to find them (THP defrag 'madvise', a common default), a segmentation's fresh
-    (K, V) arrays, written once and streamed through, cost up to 2 ms of kernel time per MB: 1.2 s of 2.9 s on the
-    422k-vertex, 57-shape rig (190 MB maps); on the eighteenth session's VM, whose memory was fragmented, ICT took
-    82-228 ms (median 124, 72 ms of it in the kernel on average) with them against 72-123 ms (median 92, 19 ms)
-    without, and the 106k-vertex rig 1.0-2.4 s against 0.41-0.52 s, alternated in one process. Where compaction was
-    cheap they had saved a little (another VM: 106k vertices 0.39 s without, 0.29 s with; ICT 78 / 73 ms), which
-    does not pay for the risk, so they are asked for off while any segmentation runs (as ``NUMPY_MADVISE_HUGEPAGE=0``
-    would for the whole process, which the window keeps on for the arrays it holds for the session; a count, so
-    overlapping runs in threads restore numpy's setting once)."""
-    core = getattr(np, "_core", None) or getattr(np, "core", None)  # numpy 2 / numpy 1
-    toggle = getattr(getattr(core, "multiarray", None), "_set_madvise_hugepage", None)
-    if toggle is None:
-        yield
-        return
-    with _PAGES_LOCK:
-        if _PAGES[0] == 0:
-            _PAGES[1] = toggle(False)
-        _PAGES[0] += 1
-    try:
-        yield
-    finally:
-        with _PAGES_LOCK:
-            _PAGES[0] -= 1
-            if _PAGES[0] == 0:
-                toggle(_PAGES[1])
-
-
 def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray, deltas: np.ndarray,
                 settings: SegmentationSettings | None = None,
                 cache: SegmentationCache | None = None, *, finest_only: bool = False) -> Segmentation:
@@ -380,7 +345,7 @@ def segment_rig(neutral: np.ndarray, face_counts: np.ndarray, face_indices: np.n
     ``cache`` on every call for the same rig to reuse the graph, Laplacian and maps. ``finest_only`` skips
     the hierarchy (level 0 only), for a live preview while a threshold slider moves.
     """
-    with _small_pages():
+    with small_pages():   # its fresh (K, V) maps are written once and streamed through (model.pages)
         return _segment_rig(neutral, face_counts, face_indices, deltas, settings, cache, finest_only)
 
 

@@ -611,16 +611,17 @@ def test_segment_command_options(tmp_path):
 
 
 def test_segmentation_runs_with_ordinary_pages_and_gives_numpy_its_huge_page_setting_back(ict_rig, monkeypatch):
-    """A segmentation asks for ordinary pages while it runs (model.segmentation._small_pages: the kernel's compaction
+    """A segmentation asks for ordinary pages while it runs (model.pages.small_pages: the kernel's compaction
     for huge pages cost more than they save); numpy's own setting comes back after, also when two segmentations
     overlap in threads."""
     from model import segmentation as S
+    from model.pages import small_pages
     toggle = np._core.multiarray._set_madvise_hugepage
     before = toggle(True)
     try:
-        with S._small_pages():
+        with small_pages():
             assert toggle(False) is False            # off inside (and left off)
-            with S._small_pages():                   # an overlapping run
+            with small_pages():                      # an overlapping run
                 pass
             assert toggle(False) is False            # still off: the outer run is not over
         assert toggle(True) is True                  # back on after the last run
