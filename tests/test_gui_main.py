@@ -410,6 +410,19 @@ def test_a_pose_change_draws_one_frame(qtbot, tmp_path):
     qtbot.wait(50)
     assert renders[0] == 1
     np.testing.assert_allclose(w.viewport.points(), w.document.surface(), atol=1e-5)
+    # a view whose camera was never set (a new window's first rig) draws its first surface once too: pyvista's
+    # camera getter had framed the scene itself and rendered it twice before the preset's framing and render
+    from widgets.viewport import Viewport
+    fresh = Viewport()
+    qtbot.addWidget(fresh)
+    fresh.resize(400, 400)
+    fresh.show()
+    qtbot.wait(50)
+    drawn = [0]
+    fresh.plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: drawn.__setitem__(0, drawn[0] + 1))
+    fresh.set_surface(w.document.surface(), rig.face_counts, rig.face_indices)
+    assert drawn[0] == 1
+    fresh.close()
 
 
 def _dock_tab_bars(w) -> list[list[str]]:
