@@ -24,7 +24,9 @@ import numpy as np
 
 LARGE = 256 << 20
 """Bytes of arrays from which a load or a display evaluator asks for ordinary pages (``small_pages(n >= LARGE)``):
-a studio-scale rig's (106k vertices x 228 shapes: 0.54 GiB of deltas), not ICT's (37 MB)."""
+a studio-scale rig's (106k vertices x 228 shapes: 0.54 GiB of deltas), not ICT's (37 MB). Arrays this large always
+get a mapping of their own, made with the advice asked for then: glibc serves only smaller ones from its heap's free
+room (at most ~64 MB before it trims), whose pages keep whatever advice an earlier array there was given."""
 
 _LOCK = threading.Lock()
 _STATE = [0, None]   # runs asking for ordinary pages now, numpy's setting before the first of them
@@ -45,8 +47,9 @@ def small_pages(when: bool = True):
         yield
         return
     with _LOCK:
+        before = toggle(False)   # off on every entry: whatever set it on meanwhile, this block gets ordinary pages
         if _STATE[0] == 0:
-            _STATE[1] = toggle(False)
+            _STATE[1] = before
         _STATE[0] += 1
     try:
         yield
@@ -55,3 +58,9 @@ def small_pages(when: bool = True):
             _STATE[0] -= 1
             if _STATE[0] == 0:
                 toggle(_STATE[1])
+
+
+def active() -> int:
+    """How many ``small_pages`` blocks are running now, in all threads (numpy's setting comes back when none is)."""
+    with _LOCK:
+        return _STATE[0]

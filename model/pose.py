@@ -66,8 +66,12 @@ def _gathered_columns(full: np.ndarray, cols: np.ndarray, dtype) -> np.ndarray:
     without a float64 copy of every row first (a 422k-vertex, 228-shape rig: 2 GB of new memory less, which on a VM
     whose host backs new memory lazily cost seconds). A float64 evaluator gets the one gathered copy it keeps."""
     out = np.empty((full.shape[0], cols.size), dtype=dtype)
+    same = full.dtype == out.dtype
     for row, into in zip(full, out):
-        np.take(row, cols, out=into) if row.dtype == out.dtype else np.copyto(into, row[cols])
+        if same:
+            np.take(row, cols, out=into)
+        else:
+            np.copyto(into, row[cols])      # one row's float64 gather at a time, cast into its float32 row
     return out
 
 

@@ -616,6 +616,8 @@ def test_segmentation_runs_with_ordinary_pages_and_gives_numpy_its_huge_page_set
     overlap in threads."""
     from model import segmentation as S
     from model.pages import small_pages
+    from tests.test_pages import no_runs_in_flight
+    no_runs_in_flight()            # a segmentation an earlier test's window started holds numpy's setting till it ends
     toggle = np._core.multiarray._set_madvise_hugepage
     before = toggle(True)
     try:
