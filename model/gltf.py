@@ -30,7 +30,7 @@ import numpy as np
 from .errors import RigInputError, shown
 from .input_files import read_input_bytes, regular_file
 from .json_file import parse_json_text
-from .pages import LARGE, small_pages
+from .pages import small_pages_for
 from .rig import CornerAttributes, Rig
 
 from .export_gltf import CHUNK_BIN as _CHUNK_BIN, CHUNK_JSON as _CHUNK_JSON, GLB_MAGIC as _GLB_MAGIC
@@ -442,7 +442,7 @@ def _load(path: Path, units: str, mesh: str | None) -> Rig:
     mesh_index = _choose_mesh(doc, mesh)
     mesh = doc.gltf["meshes"][mesh_index]
     n_targets, n_vertices = _mesh_sizes(doc, mesh)
-    with small_pages(n_targets * n_vertices * 24 >= LARGE):   # a studio-scale rig's deltas (model.pages)
+    with small_pages_for(n_targets * n_vertices * 24):   # a studio-scale rig's deltas (model.pages)
         return _load_mesh(doc, path, units, mesh_index, mesh)
 
 

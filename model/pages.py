@@ -23,7 +23,7 @@ from contextlib import contextmanager
 import numpy as np
 
 LARGE = 256 << 20
-"""Bytes of arrays from which a load or a display evaluator asks for ordinary pages (``small_pages(n >= LARGE)``):
+"""Bytes of arrays from which a load or a display evaluator asks for ordinary pages (``small_pages_for``):
 a studio-scale rig's (106k vertices x 228 shapes: 0.54 GiB of deltas), not ICT's (37 MB). Arrays this large always
 get a mapping of their own, made with the advice asked for then: glibc serves only smaller ones from its heap's free
 room (at most ~64 MB before it trims), whose pages keep whatever advice an earlier array there was given."""
@@ -58,6 +58,12 @@ def small_pages(when: bool = True):
             _STATE[0] -= 1
             if _STATE[0] == 0:
                 toggle(_STATE[1])
+
+
+def small_pages_for(nbytes: int):
+    """``small_pages`` for work that makes ``nbytes`` of arrays: ordinary pages from ``LARGE`` on, numpy's own
+    setting below it."""
+    return small_pages(nbytes >= LARGE)
 
 
 def active() -> int:

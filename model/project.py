@@ -25,7 +25,7 @@ from .atomic import atomic_write_with
 from .errors import RigInputError, shown
 from .input_files import regular_file
 from .json_file import MAX_JSON_BYTES, parse_json_text
-from .pages import LARGE, small_pages
+from .pages import small_pages_for
 from .rig import MAX_WEIGHT, Rig
 
 FORMAT = "blendshape-studio-project"
@@ -337,7 +337,7 @@ def load_project(path: str | Path) -> Project:
     except (zipfile.BadZipFile, OSError) as exc:
         raise RigInputError(f"{path}: is not a readable project (damaged zip: {exc}).") from None
     # a studio-scale project's arrays are written once here: ordinary pages for them (model.pages)
-    with z, small_pages(sum(i.file_size for i in z.infolist() if i.filename.endswith(".npy")) >= LARGE):
+    with z, small_pages_for(sum(i.file_size for i in z.infolist() if i.filename.endswith(".npy"))):
         try:
             info = z.getinfo(MANIFEST)
             if info.file_size > MAX_JSON_BYTES:

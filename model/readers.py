@@ -10,7 +10,7 @@ from solvers.parallel import ordered_map
 
 from .errors import RigInputError
 from .obj_io import read_obj, read_obj_target
-from .pages import LARGE, small_pages
+from .pages import small_pages_for
 from .rig import Rig, checked_presets
 
 Progress = Optional[Callable[[int, int, str], None]]  # (done, total, what) -> None
@@ -55,7 +55,7 @@ def load_obj_folder(folder: str | Path, neutral: str | None = None, units: str =
     if base.face_counts.size == 0:
         raise RigInputError(f"{neutral_path}: the neutral has no faces.")
     shape = (len(targets), len(base.vertices), 3)
-    with small_pages(np.prod(shape) * 8 >= LARGE):   # a studio-scale rig's deltas: ordinary pages (model.pages)
+    with small_pages_for(int(np.prod(shape)) * 8):   # a studio-scale rig's deltas: ordinary pages (model.pages)
         deltas = np.empty(shape, dtype=np.float64)
 
     def read_target(k: int) -> None:   # on the machine's cores: the reads and the number parsing release the GIL

@@ -20,7 +20,7 @@ import numpy as np
 from solvers.damping import point_mobility
 from solvers.mesh import hidden_back_faces
 
-from .pages import LARGE, small_pages
+from .pages import small_pages_for
 from .parts import drawn_faces
 from .pose import PoseEvaluator
 from .rig import Rig
@@ -55,6 +55,6 @@ def prepare_rig(rig: Rig) -> RigPrep:
     """The display evaluator, the shapes' reach and the default view's hidden back faces of ``rig`` (seconds on a
     studio rig: call it off the GUI thread). The evaluator's float32 copy of a studio rig's deltas is written once
     here: ordinary pages for it (``model.pages``)."""
-    with small_pages(rig.deltas.nbytes >= LARGE):
+    with small_pages_for(rig.deltas.nbytes):
         evaluator, reach = PoseEvaluator(rig), shape_reach(rig)
     return RigPrep(rig=rig, evaluator=evaluator, reach=reach, back_faces=default_back_faces(rig))

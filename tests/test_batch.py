@@ -481,14 +481,6 @@ def test_a_scheduler_that_cannot_start_is_one_sentence_and_no_process_is_left():
     asyncio.run(run())
 
 
-def _numpy_asks_for_huge_pages() -> bool:
-    """Whether numpy madvises transparent huge pages for its large arrays in this process (its setting, unchanged)."""
-    toggle = np._core.multiarray._set_madvise_hugepage
-    before = toggle(False)
-    toggle(before)
-    return bool(before)
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
 def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collection():
     """(And the local cluster's dashboard answers.) The local cluster's workers come from the fork server with everything it imported frozen for the garbage
@@ -500,12 +492,13 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
     import distributed  # noqa: F401  (before the configuration block, as run_batch does)
 
     from model.batch import local_cluster_config, start_client
+    from tests.test_pages import numpy_asks_for_huge_pages_now
     with dask.config.set(local_cluster_config()):
         client, cluster = start_client(2, dashboard_address="127.0.0.1:0")
         try:
             frozen = client.run(gc.get_freeze_count)
             walked = client.run(lambda: len(gc.get_objects()))
-            huge_pages = client.run(_numpy_asks_for_huge_pages)
+            huge_pages = client.run(numpy_asks_for_huge_pages_now)
             dashboard = _fetch_dashboard(client.dashboard_link)
         finally:
             client.close()

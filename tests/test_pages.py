@@ -30,6 +30,13 @@ def huge_pages_asked(a: np.ndarray) -> bool:
     raise AssertionError("the array's mapping is not in /proc/self/smaps")
 
 
+def numpy_asks_for_huge_pages_now() -> bool:
+    """Whether numpy madvises transparent huge pages for its large arrays in this process (its setting, unchanged)."""
+    before = toggle(False)
+    toggle(before)
+    return bool(before)
+
+
 def no_runs_in_flight(timeout: float = 120.0) -> None:
     """Wait for the ``small_pages`` blocks other threads run (a segmentation an earlier test's window started) to
     end: numpy's setting is theirs until then."""
@@ -84,16 +91,16 @@ def test_a_large_project_is_read_into_ordinary_pages_and_a_smaller_one_keeps_hug
     """The project: ICT with its shapes four times over (146 MB of deltas). Arrays of that size always get a mapping
     of their own: glibc serves smaller ones (ICT's 37 MB) from its heap when it has room, whose pages keep the advice
     an earlier array there was given, so only a size like this shows what a load asks for."""
-    from model import project
+    from model import pages
     from model.project import Project, load_project, save_project
     from model.rig import Rig
     names = [f"{n}_{i}" for i in range(4) for n in ict_rig.shape_names]
     rig = Rig(neutral=ict_rig.neutral, face_counts=ict_rig.face_counts, face_indices=ict_rig.face_indices,
               shape_names=names, deltas=np.concatenate([ict_rig.deltas] * 4))
     save_project(Project(rig=rig), tmp_path / "four.bsproj")
-    assert 64 << 20 < rig.deltas.nbytes < project.LARGE
+    assert 64 << 20 < rig.deltas.nbytes < pages.LARGE
     assert huge_pages_asked(load_project(tmp_path / "four.bsproj").rig.deltas)     # under LARGE: numpy's request
-    monkeypatch.setattr(project, "LARGE", 64 << 20)                              # as a studio-scale rig is read
+    monkeypatch.setattr(pages, "LARGE", 64 << 20)                                # as a studio-scale rig is read
     big = load_project(tmp_path / "four.bsproj").rig
     assert not huge_pages_asked(big.deltas)
     np.testing.assert_array_equal(big.deltas, rig.deltas)
@@ -104,7 +111,7 @@ def test_an_obj_folder_of_a_large_rig_gets_its_deltas_on_ordinary_pages(ict_dir,
                                                                          numpy_asks_for_huge_pages):
     """The OBJ reader's deltas array is made with numpy asking for ordinary pages from ``LARGE`` on (numpy's setting
     at the moment the array is made; ICT's folder is too small for its own mapping, see above)."""
-    from model import readers
+    from model import pages, readers
     seen = []
 
     class Numpy:                   # numpy as the reader sees it, noting numpy's setting when the deltas are made
@@ -112,12 +119,11 @@ def test_an_obj_folder_of_a_large_rig_gets_its_deltas_on_ordinary_pages(ict_dir,
             return getattr(np, name)
 
         def empty(self, *args, **kwargs):
-            seen.append(toggle(False))
-            toggle(seen[-1])
+            seen.append(numpy_asks_for_huge_pages_now())
             return np.empty(*args, **kwargs)
     monkeypatch.setattr(readers, "np", Numpy())
     small = readers.load_rig(ict_dir)
-    monkeypatch.setattr(readers, "LARGE", 16 << 20)
+    monkeypatch.setattr(pages, "LARGE", 16 << 20)
     big = readers.load_rig(ict_dir)
     assert seen == [True, False]
     np.testing.assert_array_equal(big.deltas, small.deltas)
@@ -126,17 +132,16 @@ def test_an_obj_folder_of_a_large_rig_gets_its_deltas_on_ordinary_pages(ict_dir,
 
 def test_the_windows_preparation_of_a_large_rig_asks_for_ordinary_pages(
         ict_rig, monkeypatch, numpy_asks_for_huge_pages):
-    from model import rig_prep
+    from model import pages, rig_prep
     seen = []
     evaluator = rig_prep.PoseEvaluator
 
     def spy(rig, *args, **kwargs):             # numpy's setting while the display evaluator copies the deltas
-        seen.append(toggle(False))
-        toggle(seen[-1])
+        seen.append(numpy_asks_for_huge_pages_now())
         return evaluator(rig, *args, **kwargs)
     monkeypatch.setattr(rig_prep, "PoseEvaluator", spy)
     rig_prep.prepare_rig(ict_rig)                       # ICT: numpy's own setting
-    monkeypatch.setattr(rig_prep, "LARGE", 16 << 20)
+    monkeypatch.setattr(pages, "LARGE", 16 << 20)
     prep = rig_prep.prepare_rig(ict_rig)                # as a studio rig: ordinary pages
     assert seen == [True, False]
     assert toggle(True) is True
