@@ -269,8 +269,9 @@ class SegmentationCache:
         return self._get(f"scales-{kind}-{laplacian}", lambda: shape_scales(
             self.maps(laplacian).per_shape_values(kind), self.moves()))
 
-    def support(self) -> np.ndarray:
-        """(V, K) where each shape acts: its displacement over its own 99% quantile, at most 1."""
+    def support(self) -> _seg.ShapeSupport:
+        """(V, K) where each shape acts: its displacement over its own 99% quantile, at most 1 (read shape by
+        shape: ``solvers.segmentation.ShapeSupport``)."""
         return self._get("support", lambda: _seg.shape_support(self.maps().per_shape_displacement,
                                                                 self.scales("displacement")))
 

@@ -74,23 +74,36 @@ def relabel(labels: np.ndarray) -> np.ndarray:
     return out
 
 
-def group_sums(values: np.ndarray, vertices: np.ndarray, groups: np.ndarray, n_groups: int) -> np.ndarray:
-    """(n_groups, K) ``Σ_{i: groups[i] = g} values[vertices[i], k]`` of a (V, K) per-vertex, per-shape array.
+def group_sums(values, vertices: np.ndarray, groups: np.ndarray, n_groups: int) -> np.ndarray:
+    """(n_groups, K) ``Σ_{i: groups[i] = g} values[vertices[i], k]`` of a (V, K) per-vertex, per-shape array or a
+    ``ShapeSupport``.
 
     An (n_groups, V) 0/1 indicator times each shape's row of ``values.T`` (the maps are (K, V) arrays handed
     out as (V, K) views: gathering (V, K) rows would walk across them); every sum is taken in the order of
     ``vertices`` from 0, as ``np.add.at`` or ``np.bincount`` over the same vertices takes it."""
-    VT = np.asarray(values).T
+    values = values if isinstance(values, ShapeSupport) else np.asarray(values)
+    row = _shape_rows(values)
     vertices = np.asarray(vertices, dtype=np.int64)
     g = np.asarray(groups, dtype=np.int64)
     counts = np.bincount(g, minlength=n_groups)
     order = np.argsort(g.astype(np.uint16) if n_groups <= 1 << 16 else g, kind="stable")  # keeps vertex order
+    K, V = values.shape[1], values.shape[0]
     ind = sp.csr_matrix((np.ones(g.size), vertices[order], np.concatenate(([0], np.cumsum(counts)))),
-                        shape=(n_groups, VT.shape[1]))
-    out = np.empty((VT.shape[0], n_groups))
-    for k in range(VT.shape[0]):
-        out[k] = ind @ VT[k]
+                        shape=(n_groups, V))
+    out = np.empty((K, n_groups))
+    scratch = np.empty(V)
+    for k in range(K):
+        out[k] = ind @ row(k, scratch)
     return np.ascontiguousarray(out.T)
+
+
+def _shape_rows(values):
+    """``row(k, scratch)``: shape k's (V,) values of a (V, K) array (a view of its (K, V) memory's row) or of a
+    ``ShapeSupport`` (computed into ``scratch``)."""
+    if isinstance(values, ShapeSupport):
+        return values.row
+    VT = np.asarray(values).T
+    return lambda k, scratch: VT[k]
 
 
 _ROWS: list = [None, None]  # (weak reference to the last graph's indptr, its rows): a segmentation asks ~12 times
@@ -266,14 +279,49 @@ def mesh_pieces(adjacency: sp.spmatrix, main_fraction: float = 0.5) -> tuple[np.
     return piece.astype(np.int64), main
 
 
-def shape_support(per_shape_displacement: np.ndarray, scales: np.ndarray) -> np.ndarray:
-    """(V, K) where each shape acts: ``min(‖d_k(v)‖ / s_k, 1)``, its displacement over its own scale (the 99%
-    quantile over the vertices it moves), at most 1. Computed along the maps' (K, V) rows (a (V, K) view of them)."""
-    DT = np.asarray(per_shape_displacement).T
-    o = np.empty(DT.shape)
-    np.divide(DT, np.asarray(scales, dtype=np.float64)[:, None], out=o)
-    np.minimum(o, 1.0, out=o)
-    return o.T
+class ShapeSupport:
+    """(V, K) where each shape acts, ``min(‖d_k(v)‖ / s_k, 1)``: its displacement over its own scale (the 99%
+    quantile over the vertices it moves), at most 1. Read a shape's row at a time (``row``) from the
+    per-shape displacement maps and never held whole: on a 422k-vertex rig of 228 shapes the (V, K) array was
+    0.77 GB of new memory (seconds on a machine that backs new memory lazily), for four readers that each go
+    through it shape by shape (``group_sums``, ``dominant_group``) or in blocks of vertices (``gram``).
+    ``np.asarray(support)`` gives the whole array (the same values)."""
+
+    def __init__(self, per_shape_displacement: np.ndarray, scales: np.ndarray) -> None:
+        self._DT = np.asarray(per_shape_displacement).T         # the maps' (K, V) rows
+        self._scales = np.asarray(scales, dtype=np.float64)
+        self.shape = (self._DT.shape[1], self._DT.shape[0])
+        self.dtype = np.dtype(np.float64)
+
+    def row(self, k: int, out: np.ndarray | None = None) -> np.ndarray:
+        """(V,) shape k's support (into ``out``)."""
+        out = np.empty(self.shape[0]) if out is None else out
+        np.divide(self._DT[k], self._scales[k], out=out)
+        np.minimum(out, 1.0, out=out)
+        return out
+
+    def gram(self, block: int = 1 << 14) -> np.ndarray:
+        """(K, K) ``SᵀS``, summed over blocks of ``block`` vertices (one (K, block) scratch, no (V, K) array)."""
+        K, V = self._DT.shape
+        G = np.zeros((K, K))
+        scratch = np.empty((K, min(block, V)))
+        for a in range(0, V, block):
+            S = scratch[:, :min(block, V - a)]
+            np.divide(self._DT[:, a:a + block], self._scales[:, None], out=S)
+            np.minimum(S, 1.0, out=S)
+            G += S @ S.T
+        return G
+
+    def __array__(self, dtype=None, copy=None) -> np.ndarray:
+        o = np.empty(self.shape[::-1])
+        for k in range(self.shape[1]):
+            self.row(k, o[k])
+        return o.T if dtype is None else o.T.astype(dtype)
+
+
+def shape_support(per_shape_displacement: np.ndarray, scales: np.ndarray) -> ShapeSupport:
+    """Where each shape acts (``ShapeSupport``), from its (V, K) displacement maps and (K,) scales."""
+    return ShapeSupport(per_shape_displacement, scales)
 
 
 def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
@@ -284,11 +332,14 @@ def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
     ``n_i = √G_ii``: one product along the maps' (K, V) rows, no normalised (V, K) copy (190 MB on a 422k-vertex
     rig) and no second pass for the norms."""
     from scipy.cluster.hierarchy import fcluster, linkage
-    ST = np.asarray(support, dtype=np.float64).T
-    K = ST.shape[0]
+    K = support.shape[1]
     if K == 1:
         return np.zeros(1, dtype=np.int64)
-    G = ST @ ST.T
+    if isinstance(support, ShapeSupport):
+        G = support.gram()
+    else:
+        ST = np.asarray(support, dtype=np.float64).T
+        G = ST @ ST.T
     n = np.sqrt(np.diag(G).copy())
     scale = np.where(n > 0, n, 1.0)
     D = np.clip(1.0 - G / scale[:, None] / scale[None, :], 0.0, 2.0)
@@ -300,18 +351,18 @@ def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
 
 def dominant_group(support: np.ndarray, groups: np.ndarray) -> np.ndarray:
     """(V,) the shape group with the largest support at each vertex (``max_{k∈g} support(v, k)``)."""
-    ST = np.asarray(support).T  # the shapes' rows of the (K, V) maps: a running maximum, no (V, |g|) copies
+    row = _shape_rows(support)   # the shapes' rows: a running maximum, no (V, |g|) copies
     G = int(groups.max()) + 1
-    V = ST.shape[1]
+    V = support.shape[0]
     best = np.full(V, -1.0)
     out = np.zeros(V, dtype=np.int64)
-    m = np.empty(V)
+    m, scratch = np.empty(V), np.empty(V)
     better = np.empty(V, dtype=bool)
     for g in range(G):
         ks = np.flatnonzero(groups == g)
-        np.copyto(m, ST[ks[0]])
+        np.copyto(m, row(ks[0], scratch))
         for k in ks[1:]:
-            np.maximum(m, ST[k], out=m)
+            np.maximum(m, row(k, scratch), out=m)
         np.greater(m, best, out=better)
         np.copyto(best, m, where=better)
         np.copyto(out, g, where=better)
@@ -336,7 +387,7 @@ def attach_separate_meshes(labels: np.ndarray, piece: np.ndarray, main: np.ndarr
     its own (cosine ≥ ``min_similarity``): the lower teeth follow the jaw, an eyeball its eye. A piece no
     shape moves, or none like any region, stays in the background. Nothing is joined by proximity."""
     lab = np.asarray(labels, dtype=np.int64).copy()
-    S = np.asarray(support)
+    S = support if isinstance(support, ShapeSupport) else np.asarray(support)
     off = np.flatnonzero(~main)
     lab[off] = BACKGROUND
     R = int(lab.max()) + 1 if (lab >= 0).any() else 0

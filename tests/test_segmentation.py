@@ -127,13 +127,33 @@ def test_split_sits_at_the_requested_quantile_of_the_moving_skin(ict_rig, ict_ca
         assert np.all(dom[cr] != dom[cc])
 
 
+def test_shape_support_read_shape_by_shape_is_the_whole_array(ict_cache):
+    """The support is never held as a (V, K) array: its rows, Gram matrix and region sums are the same numbers as
+    those of the whole array ``min(‖d_k(v)‖ / s_k, 1)`` made at once from the maps (rows and sums to the bit)."""
+    D = ict_cache.maps().per_shape_displacement
+    s = ict_cache.scales("displacement")
+    whole = np.minimum(D / s[None, :], 1.0)
+    support = ict_cache.support()
+    assert support.shape == whole.shape
+    assert np.array_equal(np.asarray(support), whole)
+    assert np.array_equal(support.row(7), whole[:, 7]) and not np.array_equal(support.row(7), whole[:, 8])
+    G = support.gram(block=1000)            # blocks that do not divide V: the last one is partial
+    assert np.allclose(G, whole.T @ whole, rtol=1e-12, atol=0)
+    assert not np.allclose(G, whole.T @ np.minimum(D, 1.0), rtol=1e-3)   # the scales matter
+    labels = np.arange(whole.shape[0]) % 5
+    verts = np.flatnonzero(labels != 3)
+    assert np.array_equal(S.group_sums(support, verts, labels[verts], 5), S.group_sums(whole, verts, labels[verts], 5))
+    groups = ict_cache.shape_groups()
+    assert np.array_equal(S.dominant_group(support, groups), S.dominant_group(whole, groups))
+
+
 def test_shape_groups_are_the_average_linkage_of_the_support_maps_cosine_distances(ict_rig, ict_seg, ict_cache):
     """The groups from the support's Gram matrix against scipy's own cosine distances (pdist) of its columns,
     clustered the same way; and what a user sees of them on ICT: each brow's three shapes form one group, the
     left and right brows two."""
     from scipy.cluster.hierarchy import fcluster, linkage
     from scipy.spatial.distance import pdist
-    support = ict_cache.support()
+    support = np.asarray(ict_cache.support())
     assert (np.linalg.norm(support, axis=0) > 0).all()   # ICT: every shape moves something
     expected = fcluster(linkage(pdist(support.T, "cosine"), method="average"), 0.6, criterion="distance") - 1
     groups = ict_cache.shape_groups()
@@ -383,7 +403,7 @@ def test_hierarchy_pairs_mirror_shapes_and_merges_by_co_activation(ict_rig, ict_
     # so by contiguity alone it merges first; by co-activation the brows (mirror shapes) merge first
     x = ict_rig.neutral
     V = ict_rig.n_vertices
-    support = ict_cache.support()
+    support = np.asarray(ict_cache.support())
     _, main = ict_cache.pieces()
     lab = np.full(V, -1)
     lab[main & (support[:, names.index("browOuterUp_L")] > 0.9)] = 0
