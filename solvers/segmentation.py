@@ -496,11 +496,15 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int,
 # --- statistics ---------------------------------------------------------------------------------------
 
 def region_shape_activity(per_shape: np.ndarray, cores: list[np.ndarray]) -> np.ndarray:
-    """(R, K) activity of each shape in each region: ``Σ_{v∈core} m_k(v)`` (Joshi et al. 2003, §2 maps)."""
+    """(R, K) activity of each shape in each region: ``Σ_{v∈core} m_k(v)`` (Joshi et al. 2003, §2 maps), summed
+    in each core's vertex order along the shapes' rows (``group_sums``): a core's (n, K) gather walked across the
+    maps' (K, V) rows, 0.5 GB of new memory a level on a 422k-vertex rig of 228 shapes."""
     P = np.asarray(per_shape)
     if not cores:
         return np.zeros((0, P.shape[1]))
-    return np.stack([P[c].sum(axis=0) for c in cores])
+    vertices = np.concatenate(cores)
+    groups = np.repeat(np.arange(len(cores)), [c.size for c in cores])
+    return group_sums(P, vertices, groups, len(cores))
 
 
 def most_active_shapes(activity: np.ndarray, shape_names: list[str], n: int = 5,

@@ -427,6 +427,12 @@ def test_region_statistics_name_the_right_shapes(ict_rig, ict_cache, ict_seg, la
     assert mouth["vertices"] > mouth["core_vertices"]
     shares = [s for _, s in mouth["shapes"]]
     assert shares == sorted(shares, reverse=True) and 0 < sum(shares) <= 1
+    # the activity behind the shares: each core's sum of every shape's map, to the bit as numpy sums a gather
+    P = ict_cache.maps().per_shape
+    cores = [r.core for r in ict_seg.levels[1].regions]
+    act = S.region_shape_activity(P, cores)
+    assert np.array_equal(act, np.stack([P[c].sum(axis=0) for c in cores]))
+    assert not np.array_equal(act, np.stack([P[c[1:]].sum(axis=0) for c in cores]))
 
 
 def test_cache_reuses_maps_and_rethresholds(ict_rig, ict_cache, ict_seg):
