@@ -75,7 +75,7 @@ class Document(QtCore.QObject):
         self._evaluator64: tuple[int, PoseEvaluator] | None = None
         self._shapes_version = 0   # bumped on every new rig and every edit of its shapes' deltas
         self._reach: tuple[int, np.ndarray] | None = None   # (shapes version, the shapes' reach)
-        self.back_faces: tuple | None = None   # the default view's hidden back faces (``model.rig_prep``), or None
+        self.default_view: rig_prep.DefaultView | None = None   # prepared with the load (``model.rig_prep``), or None
         self._surface: np.ndarray | None = None
         self.edit_offset: np.ndarray | None = None  # pending sculpt/nudge (V, 3), shown on top of the pose
         # Regional pose (Joshi §4): per-region weights of one segmentation level, or None for a global pose.
@@ -101,9 +101,9 @@ class Document(QtCore.QObject):
         self.rig_version += 1
         self._shapes_version += 1
         self._reach = (self._shapes_version, prep.reach) if prep is not None else None
-        # the default view's hidden back faces, found with the load (the viewport culls them; the faces and parts
-        # of a rig never change while it is open)
-        self.back_faces = prep.back_faces if prep is not None else None
+        # the default view's hidden back faces and normals, prepared with the load (the faces and parts of a rig
+        # never change while it is open)
+        self.default_view = prep.view if prep is not None else None
         self._surface = None
         self._mirror = None
         self.edit_offset = None

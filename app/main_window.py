@@ -349,7 +349,7 @@ class MainWindow(QtWidgets.QMainWindow):
         focus = focus_vertices(rig.neutral, self.document.shape_reach())
         surface = self.document.surface()
         self.viewport.set_surface(surface, rig.face_counts, rig.face_indices, focus=focus, shown_faces=shown,
-                                  base_colors=colors, back_faces=self.document.back_faces)
+                                  base_colors=colors, prepared=self.document.default_view)
         self._new_surface = surface     # drawn: the pose change announced next need not draw it again
         self._update_counts()
         self._update_title()

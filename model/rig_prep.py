@@ -7,9 +7,10 @@ dialog had closed.
 - the shapes' reach: each vertex's largest displacement over the shapes, ``max_k ‖d_k(v)‖`` (Joshi et al. 2003, §4:
   the point mobility of ``solvers.damping``), which frames the camera on where the shapes act
   (``widgets.scene.focus_vertices``) and damps marker drags (``solvers.damping.damping_gains``);
-- which faces of the default view (``model.parts.drawn_faces``: the helper shells left out) have a back side no
-  one can see (``solvers.mesh.hidden_back_faces`` on the neutral), which the viewport culls: a graph search over
-  the faces, 0.17 s at 106k vertices and ~0.7 s at 422k.
+- the default view's faces (``model.parts.drawn_faces``: the helper shells left out): which of them have a back side
+  no one can see (``solvers.mesh.hidden_back_faces`` on the neutral), which the viewport culls, a graph search over
+  the faces, 0.17 s at 106k vertices and ~0.7 s at 422k; and their triangulation for the display's vertex normals
+  (``solvers.normals.VertexNormals``), 0.25 s at 422k.
 """
 from __future__ import annotations
 
@@ -19,11 +20,26 @@ import numpy as np
 
 from solvers.damping import point_mobility
 from solvers.mesh import hidden_back_faces
+from solvers.normals import VertexNormals
 
 from .pages import small_pages_for
 from .parts import drawn_faces
 from .pose import PoseEvaluator
 from .rig import Rig
+
+
+@dataclass
+class DefaultView:
+    """The faces the window's default view draws, prepared for the viewport (``widgets.viewport.set_surface``)."""
+    faces: np.ndarray | None      # indices into the rig's faces, in order; None: all of them
+    hidden_backs: np.ndarray      # (n,) bool over them: ``hidden_back_faces`` on the neutral
+    normals: VertexNormals        # the display normals of a surface of just those faces
+
+    def is_for(self, faces: np.ndarray | None, n_faces: int) -> bool:
+        """Whether this is of the faces ``faces`` (None: all), ``n_faces`` polygons."""
+        return len(self.hidden_backs) == n_faces and (
+            faces is self.faces is None or (faces is not None and self.faces is not None
+                                            and np.array_equal(faces, self.faces)))
 
 
 @dataclass
@@ -33,7 +49,7 @@ class RigPrep:
     rig: Rig
     evaluator: PoseEvaluator
     reach: np.ndarray          # (V,) max_k ‖d_k(v)‖, zeros for a rig without shapes
-    back_faces: tuple | None = None   # (the default view's faces or None for all, their hidden_back_faces flags)
+    view: DefaultView | None = None
 
     def is_for(self, rig: Rig) -> bool:
         return self.rig is rig
@@ -45,16 +61,17 @@ def shape_reach(rig: Rig) -> np.ndarray:
     return point_mobility(rig.deltas)
 
 
-def default_back_faces(rig: Rig) -> tuple:
-    """(faces the default view draws, or None for all; (n,) bool over them: ``hidden_back_faces`` on the neutral)."""
+def default_view(rig: Rig) -> DefaultView:
+    """The default view's faces, their hidden back sides and their display normals' triangulation."""
     faces, counts, indices = drawn_faces(rig)
-    return faces, hidden_back_faces(rig.neutral, counts, indices)
+    return DefaultView(faces, hidden_back_faces(rig.neutral, counts, indices),
+                       VertexNormals(counts, indices, rig.n_vertices))
 
 
 def prepare_rig(rig: Rig) -> RigPrep:
-    """The display evaluator, the shapes' reach and the default view's hidden back faces of ``rig`` (seconds on a
+    """The display evaluator, the shapes' reach and the default view (``DefaultView``) of ``rig`` (seconds on a
     studio rig: call it off the GUI thread). The evaluator's float32 copy of a studio rig's deltas is written once
     here: ordinary pages for it (``model.pages``)."""
     with small_pages_for(rig.deltas.nbytes):
         evaluator, reach = PoseEvaluator(rig), shape_reach(rig)
-    return RigPrep(rig=rig, evaluator=evaluator, reach=reach, back_faces=default_back_faces(rig))
+    return RigPrep(rig=rig, evaluator=evaluator, reach=reach, view=default_view(rig))

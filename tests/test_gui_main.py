@@ -164,21 +164,23 @@ def test_open_obj_folder_in_background(qtbot, tmp_path):
 
 def test_opening_a_rig_leaves_its_passes_over_the_shapes_to_the_loader_thread(qtbot, tmp_path, ict_dir, monkeypatch):
     """The passes over every shape's deltas (the display evaluator's gather, the shapes' reach that frames the camera
-    and damps marker drags) run in the loader's thread, not the GUI thread: on a 228-shape, 422k-vertex rig they
-    froze the window for seconds after its progress dialog closed. And the segmentation starts only once the
-    window has taken the new rig in."""
+    and damps marker drags) and the surface's triangulation for its normals run in the loader's thread, not the GUI
+    thread: on a 228-shape, 422k-vertex rig they froze the window for seconds after its progress dialog closed.
+    And the segmentation starts only once the window has taken the new rig in."""
     import threading
 
     import model.pose
     import model.rig_prep
     import app.segmentation_controller as seg_ctl
+    import solvers.normals
     w = make_window(qtbot, tmp_path)
     calls = []
-    for module, name in ((model.pose.PoseEvaluator, "__init__"), (model.rig_prep, "shape_reach"),
-                         (seg_ctl, "segment_rig")):
+    for module, name, label in ((model.pose.PoseEvaluator, "__init__", "__init__"),
+                                (model.rig_prep, "shape_reach", "shape_reach"), (seg_ctl, "segment_rig", "segment_rig"),
+                                (solvers.normals.VertexNormals, "__init__", "normals")):
         real = getattr(module, name)
 
-        def spy(*args, _real=real, _name=name, **kwargs):
+        def spy(*args, _real=real, _name=label, **kwargs):
             calls.append((_name, threading.current_thread() is threading.main_thread(), w.is_loading))
             return _real(*args, **kwargs)
         monkeypatch.setattr(module, name, spy)
@@ -194,6 +196,14 @@ def test_opening_a_rig_leaves_its_passes_over_the_shapes_to_the_loader_thread(qt
     assert reach.shape == (26719,) and reach.max() > 0
     assert np.array_equal(w.markers.gains, np.clip(reach / np.median(reach[reach > 0]), 0.05, 1.5))
     assert [c for c in calls if c[0] == "shape_reach"] == [("shape_reach", False, True)]   # not again
+    # the surface drawn shades with the normals the loader made for its faces, and none were made on the GUI thread
+    assert w.viewport.mesh._display_normals is w.document.default_view.normals
+    assert [c for c in calls if c[0] == "normals"] == [("normals", False, True)]
+    from solvers.mesh import fan_triangulate
+    from solvers.normals import vertex_normals
+    vp = w.viewport
+    drawn = vertex_normals(vp.points(), fan_triangulate(*vp.mesh._faces))   # of the faces drawn, made afresh
+    np.testing.assert_allclose(vp.mesh.point_data["Normals"], drawn, atol=1e-5)
 
 
 def test_every_shortcut_is_unambiguous_and_listed(qtbot, tmp_path):

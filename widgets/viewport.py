@@ -132,7 +132,7 @@ class Viewport(QtWidgets.QWidget):
         self._texture_split = None   # its model.textures.DisplaySplit (of every face)
         self._face_counts: np.ndarray | None = None   # of the faces drawn
         self._all_faces: tuple[np.ndarray, np.ndarray] | None = None   # the surface's faces, every part
-        self._known_back_faces: tuple | None = None   # (faces, flags) of the default view's hidden back faces
+        self._prepared = None   # the default view's faces prepared off the GUI thread (``model.rig_prep.DefaultView``)
         self._shown_faces: np.ndarray | None = None   # the faces drawn (set_parts), None: all
         self._base_colors: np.ndarray | None = None   # the parts' colours (set_parts)
         self._camera = "front"
@@ -151,12 +151,12 @@ class Viewport(QtWidgets.QWidget):
     def set_surface(self, points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
                     focus: np.ndarray | None = None, *, reset_camera: bool = True,
                     shown_faces: np.ndarray | None = None, base_colors: np.ndarray | None = None,
-                    back_faces: tuple | None = None) -> None:
+                    prepared=None) -> None:
         """Show a new surface (a new rig): topology is uploaded once here. ``shown_faces`` and ``base_colors``:
-        see ``set_parts``. ``back_faces``: (faces, flags) of ``model.rig_prep.default_back_faces``, found off the
-        GUI thread: the surface's hidden back faces whenever the faces drawn are those ``faces``."""
+        see ``set_parts``. ``prepared``: ``model.rig_prep.DefaultView``, made off the GUI thread: its hidden back
+        faces and normals are used whenever the faces drawn are its faces."""
         self._focus = focus if focus is not None else points
-        self._known_back_faces = back_faces
+        self._prepared = prepared
         if self._colormap is not None and len(self._colormap.scalars) != len(points):
             self._colormap = None   # the last rig's colours: its owner sets the new rig's when they are ready
         self._all_faces = (np.asarray(face_counts), np.asarray(face_indices))
@@ -186,11 +186,12 @@ class Viewport(QtWidgets.QWidget):
         counts, indices = subset_faces(*self._all_faces, shown_faces)
         self._shown_faces = None if shown_faces is None else np.asarray(shown_faces, dtype=np.int64)
         self._base_colors = base_colors
-        self.mesh = rig_mesh(points, counts, indices)
-        known = self._known_back_faces   # (faces drawn or None for all, their flags): only for those faces
-        if known is not None and len(known[1]) == len(counts) and (
-                known[0] is self._shown_faces is None or np.array_equal(known[0], self._shown_faces)):
-            object.__setattr__(self.mesh, "_hidden_faces", known[1])   # ``scene._back_sides`` takes them
+        known = self._prepared
+        if known is not None and not known.is_for(self._shown_faces, len(counts)):
+            known = None   # prepared for other faces
+        self.mesh = rig_mesh(points, counts, indices, normals=known.normals if known is not None else None)
+        if known is not None:
+            object.__setattr__(self.mesh, "_hidden_faces", known.hidden_backs)   # ``scene._back_sides`` takes them
         self._face_counts = np.asarray(counts)
         self._arrays = SurfaceArrays(self.mesh)
         if self._texture_split is not None and self._textured is not None:
