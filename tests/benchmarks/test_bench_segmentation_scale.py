@@ -1,7 +1,9 @@
 """Segmentation from scratch as the rig grows: ICT FaceKit (26,719 vertices) and the studio rigs made from it
 by midpoint subdivision (about 106k and 422k vertices, 57 shapes; tests/benchmarks/studio_rig.py, cached in
 the temporary folder). The studio-scale issue's targets: ICT under 0.1 s, the 422k rig under 3 s, time
-growing at most as V^1.2 (the fitted exponent is printed and kept in the benchmark's extra info).
+growing at most as V^1.2 (the fitted exponent is printed and kept in the benchmark's extra info). And what the window
+runs when the 228-shape studio projects open (106k / 422k vertices): the segmentation and every level's region
+statistics, with the peak memory they add (no target; the figures are in the README).
 
 Run: python -m pytest tests/benchmarks/test_bench_segmentation_scale.py --benchmark-only -s
 """
@@ -57,3 +59,60 @@ def test_segmentation_from_scratch_by_size(benchmark, levels):
         benchmark.extra_info["exponent"] = exponent
         print(f"\nsegmentation from scratch: {dict((k, round(s, 3)) for k, s in _TIMES.items())} s, "
               f"time ~ V^{exponent:.2f}")
+
+
+_STUDIO = """
+import json, sys, time
+from app.runtime import limit_blas_threads
+limit_blas_threads()                       # as the window and the command line run
+from model.readers import load_rig
+from model.segmentation import SegmentationCache, region_statistics, segment_rig
+def status(key):
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) * 1024 for line in f if line.startswith(key + ":"))
+rig = load_rig(sys.argv[1])
+with open("/proc/self/clear_refs", "w") as f:    # the peak (VmHWM) starts again from the resident size now
+    f.write("5")
+before = status("VmRSS")
+t0 = time.perf_counter()
+cache = SegmentationCache()
+seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, cache=cache)
+t1 = time.perf_counter()
+stats = [region_statistics(seg, cache.maps(), rig.shape_names, level=i) for i in range(len(seg.levels))]
+t2 = time.perf_counter()
+print(json.dumps({"segment_s": t1 - t0, "statistics_s": t2 - t1, "regions": [l.n_regions for l in seg.levels],
+                  "growth": status("VmHWM") - before, "deltas": rig.deltas.nbytes, "vertices": rig.n_vertices,
+                  "stages": seg.seconds}))
+"""
+
+
+@pytest.mark.parametrize("levels", [1, 2])
+def test_bench_segmentation_of_the_228_shape_studio_rig(benchmark, levels):
+    """What the window runs when a studio rig opens (``app.segmentation_controller``): the segmentation from scratch
+    and every level's region statistics, on the 228-shape projects of ``test_bench_studio_memory`` (106k / 422k
+    vertices), in a fresh process; its peak memory growth over the rig it segments is printed against the deltas."""
+    import json
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from tests.benchmarks.test_bench_studio_memory import studio_project
+    path = studio_project(levels)
+    root = str(Path(__file__).resolve().parents[2])
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root, os.environ.get("PYTHONPATH", "")]))
+
+    def run():
+        out = subprocess.run([sys.executable, "-c", _STUDIO, str(path)], capture_output=True, text=True, env=env,
+                             cwd=root, check=True, timeout=1800)
+        return json.loads(out.stdout.strip().splitlines()[-1])
+
+    r = benchmark.pedantic(run, rounds=1, iterations=1)
+    assert r["regions"][-1] == 1 and r["regions"][0] > 10
+    growth = r["growth"] / r["deltas"]
+    benchmark.extra_info.update(vertices=r["vertices"], segment_s=r["segment_s"], statistics_s=r["statistics_s"],
+                                peak_growth_over_deltas=growth, stages=r["stages"])
+    print(f"\n{r['vertices']:,} vertices, 228 shapes: segmented in {r['segment_s']:.2f} s "
+          f"({', '.join(f'{k} {v:.2f}' for k, v in r['stages'].items() if k != 'total')}), region statistics of "
+          f"{len(r['regions'])} levels {r['statistics_s']:.2f} s; peak memory +{r['growth'] / 2**30:.2f} GiB "
+          f"({growth:.2f}x the deltas' {r['deltas'] / 2**30:.2f} GiB)")
