@@ -100,6 +100,7 @@ def cmd_export(args) -> int:
 def cmd_segment(args) -> int:
     from model.atomic import atomic_write
     from model.segmentation import SegmentationSettings, segment_rig, segmentation_to_json
+    from model.wording import duration
     rig = load_rig_arg(args)
     chosen = {"t": args.threshold, "map_kind": args.map, "smoothing": args.smoothing,
               "separate_meshes": args.separate_meshes,
@@ -111,7 +112,7 @@ def cmd_segment(args) -> int:
     atomic_write(args.output, json.dumps(segmentation_to_json(seg)).encode("utf-8"))
     counts = ", ".join(str(lvl.n_regions) for lvl in seg.levels)
     print(f"wrote {args.output}: {len(seg.levels)} levels with {counts} regions "
-          f"({seg.seconds.get('total', 0.0) * 1000:.0f} ms)")
+          f"({duration(seg.seconds.get('total', 0.0))})")
     return 0
 
 

@@ -15,7 +15,7 @@ from app.commands import AddShapeCommand, SetEditOffsetCommand, SetSectionComman
 from app.map_views import deformation_colormap, region_palette, segmentation_colormap
 from model.errors import RigInputError
 from model.segmentation import SegmentationCache, SegmentationSettings, region_statistics, segment_rig
-from model.wording import count
+from model.wording import count, duration
 from solvers.laplacian import mesh_adjacency
 from solvers.region_nudge import nudge_region, ring_falloff
 
@@ -120,6 +120,8 @@ class SegmentationController(QtCore.QObject):
         self.panel.set_shapes(self.document.rig.shape_names)
         self.panel.set_units(self.document.rig.units)
         self.panel.set_settings(self.settings())
+        self.panel.set_levels([], 0)          # the last rig's regions are not this one's
+        self.panel.set_regions([], [])
         self.panel.set_status("segmenting…")
         # Started once the window has taken the new rig in (the layout and paint events the change posted are
         # handled before a zero timer fires): a segmentation running meanwhile made each of the hundreds of Python
@@ -173,7 +175,7 @@ class SegmentationController(QtCore.QObject):
         self.panel.set_regions(rows, region_palette(len(rows)))
         levels = self.segmentation.levels
         self.panel.set_status(f"{count(levels[self.level].n_regions, 'region')} at level {self.level} · "
-                              f"{count(len(levels), 'level')} · {self.last_seconds * 1000:.0f} ms")
+                              f"{count(len(levels), 'level')} · {duration(self.last_seconds)}")
 
     def _on_view_change(self, view: str) -> None:
         self.view = view

@@ -101,3 +101,21 @@ def test_settings_saved_in_project_and_bad_rig_message(qtbot, tmp_path):
     w.segmentation.wait()
     qtbot.waitUntil(lambda: "No segmentation" in w.segmentation_panel.status.text(), timeout=10000)
     assert "nothing to segment" in w.segmentation_panel.status.text()
+
+
+def test_a_new_rig_never_shows_the_last_rigs_regions(qtbot, tmp_path, ict_dir):
+    """While a newly opened rig is segmented (seconds on a studio rig), the panel shows no regions, no level count and
+    says it is segmenting: the sample face's regions, named after its shapes, are not the new rig's. Then the new rig's
+    regions appear, with the time the segmentation took."""
+    w = make_window(qtbot, tmp_path)
+    _ready(qtbot, w)
+    panel = w.segmentation_panel
+    assert panel.regions.topLevelItemCount() > 0 and panel.level_label.text()
+    seen = []
+    w.document.rig_changed.connect(lambda: seen.append((panel.regions.topLevelItemCount(), panel.level_label.text(),
+                                                        panel.status.text())))
+    open_and_wait(qtbot, w, ict_dir)
+    assert seen == [(0, "", "segmenting…")]
+    _ready(qtbot, w)
+    assert panel.regions.topLevelItemCount() == w.segmentation.segmentation.levels[0].n_regions == 11   # ICT's
+    assert panel.level_label.text().startswith("0 of ") and panel.status.text().endswith((" ms", " s"))

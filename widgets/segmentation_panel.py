@@ -192,8 +192,7 @@ class SegmentationPanel(QtWidgets.QWidget):
     def _update_level_label(self) -> None:
         counts = self._counts
         lv = self.level.value()
-        if counts:
-            self.level_label.setText(f"{lv} of {len(counts) - 1}: {count(counts[lv], 'region')}")
+        self.level_label.setText(f"{lv} of {len(counts) - 1}: {count(counts[lv], 'region')}" if counts else "")
 
     def set_regions(self, rows: list[dict], colors) -> None:
         """rows: {'region', 'core_vertices', 'vertices', 'shapes': [(name, share), ...]}; colors (R, 3) in [0,1]."""
