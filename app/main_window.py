@@ -536,6 +536,7 @@ class MainWindow(QtWidgets.QMainWindow):
         self._progress.setWindowTitle("Opening")
         self._progress.setMinimumDuration(300)
         self._progress.setWindowModality(QtCore.Qt.WindowModal)
+        self._progress.setValue(0)   # starts its show-after timer: a project's load reports no steps to show it by
         self._worker = LoadWorker(path, self)
         self._worker.progress.connect(self._on_load_progress)
         self._worker.loaded.connect(lambda project, prep: self._on_loaded(project, path, prep))

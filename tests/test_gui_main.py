@@ -86,6 +86,32 @@ def test_save_and_reopen_project(qtbot, tmp_path):
     assert str(path) in [a.text() for a in w.recent_menu.actions()][0]
 
 
+def test_opening_a_project_shows_its_progress_dialog(qtbot, tmp_path, monkeypatch):
+    """A studio rig's project takes seconds to read and reports no steps (an OBJ folder reports each file): the
+    "Opening" dialog shows after 0.3 s all the same (it never showed for a project: its bar was never set)."""
+    import time
+
+    import app.loading
+    from model.project import Project, save_project
+    from resources.sample_rig import build_sample_rig
+    path = tmp_path / "slow.bsproj"
+    save_project(Project(rig=build_sample_rig()), path)
+    w = make_window(qtbot, tmp_path)
+    real = app.loading.open_project_or_rig
+
+    def slow(*args, **kwargs):
+        time.sleep(1.0)
+        return real(*args, **kwargs)
+    monkeypatch.setattr(app.loading, "open_project_or_rig", slow)
+    shown = []
+    QtCore.QTimer.singleShot(700, lambda: shown.extend(
+        d.labelText() for d in w.findChildren(QtWidgets.QProgressDialog) if d.isVisible()))
+    open_and_wait(qtbot, w, path)
+    assert shown == ["Opening slow.bsproj…"]
+    assert w.document.path == path
+    assert not [d for d in w.findChildren(QtWidgets.QProgressDialog) if d.isVisible()]
+
+
 def test_save_writes_off_the_gui_thread_and_the_window_keeps_drawing(qtbot, tmp_path, monkeypatch):
     """A studio rig's project takes seconds to write: the writing runs off the GUI thread while the window goes on
     drawing and running its timers, a busy dialog naming the file shows after 0.2 s (it showed only after Qt's
