@@ -329,17 +329,17 @@ def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
     of the cosine distance between their (V,) support maps, cut at ``cut``), e.g. a brow's three shapes, an
     eye's lid and gaze shapes, one side of the mouth. Shapes that move nothing form one group each.
     The cosines come from the (K, K) Gram matrix ``G = SᵀS`` of the support as it is, ``G_ij / (n_i n_j)`` with
-    ``n_i = √G_ii``: one product along the maps' (K, V) rows, no normalised (V, K) copy (190 MB on a 422k-vertex
-    rig) and no second pass for the norms."""
+    ``n_i = √G_ii``: products along the maps' (K, V) rows (in blocks of vertices for a ``ShapeSupport``), no
+    normalised (V, K) copy (190 MB on a 422k-vertex rig) and no second pass for the norms."""
     from scipy.cluster.hierarchy import fcluster, linkage
+    support = support if isinstance(support, ShapeSupport) else np.asarray(support, dtype=np.float64)
     K = support.shape[1]
     if K == 1:
         return np.zeros(1, dtype=np.int64)
     if isinstance(support, ShapeSupport):
         G = support.gram()
     else:
-        ST = np.asarray(support, dtype=np.float64).T
-        G = ST @ ST.T
+        G = support.T @ support
     n = np.sqrt(np.diag(G).copy())
     scale = np.where(n > 0, n, 1.0)
     D = np.clip(1.0 - G / scale[:, None] / scale[None, :], 0.0, 2.0)
@@ -350,7 +350,9 @@ def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
 
 
 def dominant_group(support: np.ndarray, groups: np.ndarray) -> np.ndarray:
-    """(V,) the shape group with the largest support at each vertex (``max_{k∈g} support(v, k)``)."""
+    """(V,) the shape group with the largest support at each vertex (``max_{k∈g} support(v, k)``); ``support`` a
+    (V, K) array or a ``ShapeSupport``."""
+    support = support if isinstance(support, ShapeSupport) else np.asarray(support)
     row = _shape_rows(support)   # the shapes' rows: a running maximum, no (V, |g|) copies
     G = int(groups.max()) + 1
     V = support.shape[0]
