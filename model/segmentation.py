@@ -272,7 +272,7 @@ class SegmentationCache:
     def support(self) -> _seg.ShapeSupport:
         """(V, K) where each shape acts: its displacement over its own 99% quantile, at most 1 (read shape by
         shape: ``solvers.segmentation.ShapeSupport``)."""
-        return self._get("support", lambda: _seg.shape_support(self.maps().per_shape_displacement,
+        return self._get("support", lambda: _seg.ShapeSupport(self.maps().per_shape_displacement,
                                                                 self.scales("displacement")))
 
     def shape_groups(self) -> np.ndarray:

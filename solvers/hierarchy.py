@@ -22,7 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import RigInputError
-from .segmentation import ShapeSupport, _rows_cols, group_sums
+from .segmentation import _rows_cols, group_sums
 
 
 def level_targets(n_regions: int, levels: int | None = None) -> list[int]:
@@ -111,10 +111,9 @@ def region_activity(labels: np.ndarray, support: np.ndarray, partners: np.ndarra
     and its mirror partner count as one (they fire together in symmetric expressions), so the two brows,
     moved by browInnerUp_L and browInnerUp_R, move together."""
     lab = np.asarray(labels, dtype=np.int64)
-    S = support if isinstance(support, ShapeSupport) else np.asarray(support, dtype=np.float64)
     R = int(lab.max()) + 1 if (lab >= 0).any() else 0
     fg = np.flatnonzero(lab >= 0)
-    act = group_sums(S, fg, lab[fg], R)
+    act = group_sums(support, fg, lab[fg], R)
     if partners is not None:
         act = act + act[:, partners]
     return act

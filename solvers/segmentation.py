@@ -293,12 +293,16 @@ class ShapeSupport:
         self.shape = (self._DT.shape[1], self._DT.shape[0])
         self.dtype = np.dtype(np.float64)
 
-    def row(self, k: int, out: np.ndarray | None = None) -> np.ndarray:
-        """(V,) shape k's support (into ``out``)."""
-        out = np.empty(self.shape[0]) if out is None else out
-        np.divide(self._DT[k], self._scales[k], out=out)
+    @staticmethod
+    def _into(displacement: np.ndarray, scales, out: np.ndarray) -> np.ndarray:
+        """``out = min(displacement / scales, 1)``: the support's one formula, for a row or a block of rows."""
+        np.divide(displacement, scales, out=out)
         np.minimum(out, 1.0, out=out)
         return out
+
+    def row(self, k: int, out: np.ndarray | None = None) -> np.ndarray:
+        """(V,) shape k's support (into ``out``)."""
+        return self._into(self._DT[k], self._scales[k], np.empty(self.shape[0]) if out is None else out)
 
     def gram(self, block: int = 1 << 14) -> np.ndarray:
         """(K, K) ``SᵀS``, summed over blocks of ``block`` vertices (one (K, block) scratch, no (V, K) array)."""
@@ -306,9 +310,7 @@ class ShapeSupport:
         G = np.zeros((K, K))
         scratch = np.empty((K, min(block, V)))
         for a in range(0, V, block):
-            S = scratch[:, :min(block, V - a)]
-            np.divide(self._DT[:, a:a + block], self._scales[:, None], out=S)
-            np.minimum(S, 1.0, out=S)
+            S = self._into(self._DT[:, a:a + block], self._scales[:, None], scratch[:, :min(block, V - a)])
             G += S @ S.T
         return G
 
@@ -317,11 +319,6 @@ class ShapeSupport:
         for k in range(self.shape[1]):
             self.row(k, o[k])
         return o.T if dtype is None else o.T.astype(dtype)
-
-
-def shape_support(per_shape_displacement: np.ndarray, scales: np.ndarray) -> ShapeSupport:
-    """Where each shape acts (``ShapeSupport``), from its (V, K) displacement maps and (K,) scales."""
-    return ShapeSupport(per_shape_displacement, scales)
 
 
 def shape_groups(support: np.ndarray, cut: float = 0.6) -> np.ndarray:
@@ -389,17 +386,16 @@ def attach_separate_meshes(labels: np.ndarray, piece: np.ndarray, main: np.ndarr
     its own (cosine ≥ ``min_similarity``): the lower teeth follow the jaw, an eyeball its eye. A piece no
     shape moves, or none like any region, stays in the background. Nothing is joined by proximity."""
     lab = np.asarray(labels, dtype=np.int64).copy()
-    S = support if isinstance(support, ShapeSupport) else np.asarray(support)
     off = np.flatnonzero(~main)
     lab[off] = BACKGROUND
     R = int(lab.max()) + 1 if (lab >= 0).any() else 0
     if R == 0 or off.size == 0:
         return lab
     fg = np.flatnonzero(lab >= 0)
-    act = group_sums(S, fg, lab[fg], R)  # (R, K) per region
+    act = group_sums(support, fg, lab[fg], R)  # (R, K) per region
     act /= np.maximum(np.linalg.norm(act, axis=1, keepdims=True), 1e-300)
     ids, pid = np.unique(piece[off], return_inverse=True)
-    pact = group_sums(S, off, pid, ids.size)  # (P, K) per piece
+    pact = group_sums(support, off, pid, ids.size)  # (P, K) per piece
     norm = np.linalg.norm(pact, axis=1)
     sim = (pact / np.maximum(norm, 1e-300)[:, None]) @ act.T
     best = sim.argmax(axis=1)
