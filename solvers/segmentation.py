@@ -491,12 +491,10 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int,
     M = R + 1  # a (vertex, column) pair as one key v·M + c, so that sorted keys are CSR order; column R = background
     C = rings + 1  # a ring pair's key with its ring distance d in the low digit
     in_core = labels >= 0
-    fg = np.flatnonzero(in_core)
-    reach = fg * M + labels[fg]          # sorted: one core pair per foreground vertex
-    ring_keys = []                       # each ring's pairs, sorted
+    ring_keys, ring_pairs = [], []       # each ring's pairs (sorted), with and without d
     weight = np.ones(C)
     # ring 1 of every region at once: the far ends of the mesh edges that leave its core; ring d: the neighbours
-    # of ring d-1 not reached before
+    # of ring d-1 in neither the region's core (a vertex's label) nor a ring before (a few pairs: a search)
     rows, cols = leaving_edges(labels, A, edges)
     new = sorted_unique(cols * M + labels[rows])
     deg = np.diff(A.indptr)
@@ -506,18 +504,22 @@ def overlap_and_blend(labels: np.ndarray, adjacency: sp.spmatrix, rings: int,
             n = deg[v]
             first = np.repeat(A.indptr[v] - (np.cumsum(n) - n), n) + np.arange(int(n.sum()))
             cand = sorted_unique(A.indices[first] * M + np.repeat(r, n))
-            pos = np.minimum(np.searchsorted(reach, cand), reach.size - 1)
-            new = cand[reach[pos] != cand] if reach.size else cand
+            cand = cand[labels[cand // M] != cand % M]
+            before = np.sort(np.concatenate(ring_pairs))
+            pos = np.minimum(np.searchsorted(before, cand), before.size - 1)
+            new = cand[before[pos] != cand]
         if new.size == 0:
             break
         ring_keys.append(new * C + d)
+        ring_pairs.append(new)
         weight[d] = (rings + 1.0 - d) / (rings + 1.0)
-        reach = np.sort(np.concatenate((reach, new)), kind="stable")  # two sorted runs: a merge
     W = _blend_matrix(np.where(in_core, labels, R), ring_keys, weight, M)
-    # each region's core and overlap vertices, sorted: the reached pairs (in vertex order) by region
-    v, r = np.divmod(reach, M)
-    v = v[np.argsort(r.astype(np.uint16) if R < 1 << 16 else r, kind="stable")]  # 16 bits: a radix sort
-    verts = np.split(v, np.cumsum(np.bincount(r, minlength=R))[:-1]) if R else []
+    # each region's core and overlap vertices, sorted: its core merged with its ring vertices (few)
+    pairs = np.concatenate(ring_pairs) if ring_pairs else np.zeros(0, np.int64)
+    v, r = np.divmod(pairs, M)
+    order = np.lexsort((v, r))
+    ring_of = np.split(v[order], np.cumsum(np.bincount(r, minlength=R))[:-1]) if R else []
+    verts = [np.sort(np.concatenate((c, g)), kind="stable") if g.size else c.copy() for c, g in zip(cores, ring_of)]
     return cores, verts, W
 
 
