@@ -21,6 +21,7 @@ import numpy as np
 from solvers.damping import point_mobility
 from solvers.mesh import hidden_back_faces
 from solvers.normals import VertexNormals
+from solvers.parallel import Background
 
 from .pages import small_pages_for
 from .parts import drawn_faces
@@ -72,6 +73,7 @@ def prepare_rig(rig: Rig) -> RigPrep:
     """The display evaluator, the shapes' reach and the default view (``DefaultView``) of ``rig`` (seconds on a
     studio rig: call it off the GUI thread). The evaluator's float32 copy of a studio rig's deltas is written once
     here: ordinary pages for it (``model.pages``)."""
+    view = Background(lambda: default_view(rig))   # the neutral's faces only: on another core meanwhile
     with small_pages_for(rig.deltas.nbytes):
         evaluator, reach = PoseEvaluator(rig), shape_reach(rig)
-    return RigPrep(rig=rig, evaluator=evaluator, reach=reach, view=default_view(rig))
+    return RigPrep(rig=rig, evaluator=evaluator, reach=reach, view=view.result())
