@@ -26,7 +26,7 @@ from .errors import RigInputError, shown
 from .input_files import regular_file
 from .json_file import MAX_JSON_BYTES, parse_json_text
 from .pages import small_pages_for
-from .rig import MAX_WEIGHT, Rig
+from .rig import MAX_WEIGHT, Rig, finite_range
 
 FORMAT = "blendshape-studio-project"
 VERSION = 1
@@ -210,7 +210,7 @@ def read_npy_member(z: zipfile.ZipFile, name: str, path: Path, key: str) -> np.n
         raise RigInputError(f"{path}: the array '{key}' is damaged ({shown(exc, 80)}).") from None
     if got != nbytes or extra:
         raise RigInputError(f"{path}: the array '{key}' is truncated.")
-    if a.dtype.kind == "f" and not np.isfinite(a).all():
+    if a.dtype.kind == "f" and finite_range(a) is None:
         raise RigInputError(f"{path}: the array '{key}' holds NaN or infinite values.")
     return a
 

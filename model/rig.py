@@ -19,6 +19,17 @@ MAX_WEIGHT = 1e3       # presets and poses: overdrive and negative weights exist
 INBETWEEN_MAX_WEIGHT = 10.0   # Maya keeps in-between weights within ±10
 
 
+def finite_range(a: np.ndarray) -> tuple[float, float] | None:
+    """(min, max) of a float array when every value is finite, else None; (0, 0) when it is empty. Both reductions
+    carry a NaN through and an infinity is one of the extremes, so two passes tell what ``np.isfinite(a).all()``
+    does without its (n,) bool array: 270 MB of new memory for a 422k-vertex, 228-shape rig's deltas, 0.5 s of its
+    first touch against 0.17 s for the two passes."""
+    if a.size == 0:
+        return 0.0, 0.0
+    lo, hi = float(a.min()), float(a.max())
+    return (lo, hi) if np.isfinite(lo) and np.isfinite(hi) else None
+
+
 def _float_array(a, where: str, what: str) -> np.ndarray:
     a = np.asarray(a)
     if a.dtype.kind not in "fiub":
@@ -167,17 +178,19 @@ class Rig:
         where = self.source or self.name
         if self.neutral.ndim != 2 or self.neutral.shape[1] != 3:
             raise RigInputError(f"{where}: the neutral must be an array of 3D points.")
-        if not np.isfinite(self.neutral).all():
+        extent = finite_range(self.neutral)
+        if extent is None:
             raise RigInputError(f"{where}: the neutral has NaN or infinite coordinates.")
-        if self.neutral.size and np.abs(self.neutral).max() > MAX_COORDINATE:
+        if max(extent[1], -extent[0]) > MAX_COORDINATE:
             raise RigInputError(f"{where}: the neutral has coordinates beyond ±{MAX_COORDINATE:g}; "
                                 "the file is damaged or not in any length unit.")
         if self.deltas.shape != (len(self.shape_names), self.n_vertices, 3):
             raise RigInputError(
                 f"{where}: {len(self.shape_names)} shape names but deltas of shape {self.deltas.shape}.")
-        if not np.isfinite(self.deltas).all():
+        extent = finite_range(self.deltas)
+        if extent is None:
             raise RigInputError(f"{where}: a shape has NaN or infinite coordinates.")
-        if self.deltas.size and max(float(self.deltas.max()), -float(self.deltas.min())) > MAX_COORDINATE:  # no |d| copy
+        if max(extent[1], -extent[0]) > MAX_COORDINATE:  # no |d| copy
             raise RigInputError(f"{where}: a shape moves a vertex by more than {MAX_COORDINATE:g}; the file is damaged.")
         if self.face_counts.size == 0:
             raise RigInputError(f"{where}: the rig has no faces.")

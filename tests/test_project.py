@@ -148,6 +148,40 @@ def test_damaged_projects(small_project, tmp_path):
     assert str(info.value).startswith(str(path))
 
 
+@pytest.mark.parametrize("array", ["rig/deltas", "rig/neutral"])
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_a_project_with_a_non_finite_value_is_refused(small_project, tmp_path, array, bad):
+    """One NaN or infinity anywhere in a saved array (first, middle or last value) is named, never loaded."""
+    import io
+    path = tmp_path / "p.bsproj"
+    save_project(small_project, path)
+    good = path.read_bytes()
+    with zipfile.ZipFile(path) as z:
+        a = np.load(io.BytesIO(z.read(f"{array}.npy")))
+    for at in (0, a.size // 2, a.size - 1):
+        b = a.copy()
+        b.reshape(-1)[at] = bad
+        buf = io.BytesIO()
+        np.save(buf, b)
+        path.write_bytes(good)
+        _rewrite(path, replace={f"{array}.npy": buf.getvalue()})
+        with pytest.raises(RigInputError, match=f"{array}' holds NaN or infinite values") as info:
+            load_project(path)
+        assert str(info.value).startswith(str(path))
+
+
+def test_finite_range_tells_every_non_finite_value():
+    from model.rig import finite_range
+    a = np.linspace(-2.0, 3.0, 30).reshape(5, 2, 3)
+    assert finite_range(a) == (-2.0, 3.0)
+    assert finite_range(np.zeros((0, 3))) == (0.0, 0.0)
+    for bad in (np.nan, np.inf, -np.inf):
+        for at in range(a.size):
+            b = a.copy()
+            b.reshape(-1)[at] = bad
+            assert finite_range(b) is None, (bad, at)
+
+
 def test_arrays_are_deflated_and_reopen_exactly(ict_rig, tmp_path):
     path = tmp_path / "ict.bsproj"
     save_project(Project(rig=ict_rig), path)
