@@ -28,6 +28,8 @@ from collections.abc import Iterable
 import numpy as np
 import scipy.sparse as sp
 
+from solvers.parallel import cores, ordered_map
+
 from .correctives import corrective_activations, corrective_activations_per_vertex
 from .rig import Rig
 from .shape_weights import ShapeWeights
@@ -61,17 +63,26 @@ def _moving_vertices(full: np.ndarray, V: int) -> np.ndarray:
     return np.flatnonzero(moves.reshape(V, 3).any(axis=1))
 
 
-def _gathered_columns(full: np.ndarray, cols: np.ndarray, dtype) -> np.ndarray:
+def _gathered_columns(full: np.ndarray, cols: np.ndarray, dtype, threads: int | None = None) -> np.ndarray:
     """(rows, cols.size) ``full[:, cols]`` as ``dtype``, one row at a time: the display evaluator's float32 matrix
     without a float64 copy of every row first (a 422k-vertex, 228-shape rig: 2 GB of new memory less, which on a VM
-    whose host backs new memory lazily cost seconds). A float64 evaluator gets the one gathered copy it keeps."""
+    whose host backs new memory lazily cost seconds). A float64 evaluator gets the one gathered copy it keeps.
+    ``threads``: how many share the rows (default: the machine's cores from 64 MB of output on, else one)."""
     out = np.empty((full.shape[0], cols.size), dtype=dtype)
     same = full.dtype == out.dtype
-    for row, into in zip(full, out):
-        if same:
-            np.take(row, cols, out=into)
-        else:
-            np.copyto(into, row[cols])      # one row's float64 gather at a time, cast into its float32 row
+
+    def rows(span: tuple[int, int]) -> None:
+        for row, into in zip(full[span[0]:span[1]], out[span[0]:span[1]]):
+            if same:
+                np.take(row, cols, out=into)
+            else:
+                np.copyto(into, row[cols])      # one row's float64 gather at a time, cast into its float32 row
+    # a studio rig's rows on the machine's cores (numpy's gather and cast run outside the GIL): the output's first
+    # touch, most of the time on 1 GB of new memory, is shared by them too
+    n = threads or (cores() if out.nbytes >= 1 << 26 else 1)
+    cuts = np.linspace(0, full.shape[0], n + 1).astype(int)
+    for _ in ordered_map(rows, zip(cuts[:-1], cuts[1:]), threads=n):
+        pass
     return out
 
 

@@ -205,3 +205,17 @@ def test_a_float64_evaluator_reads_the_rigs_own_deltas_in_place_and_poses_as_the
                                                  delta=np.full((rig.n_vertices, 3), 0.1))])
     own = PoseEvaluator(with_corrective, dtype=np.float64)
     assert not np.shares_memory(own._D, with_corrective.deltas) and own._D.shape[0] == rig.n_shapes + 1
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_the_gathered_matrix_is_the_same_on_any_number_of_threads(ict_rig, threads):
+    """The display evaluator's float32 matrix of the moving vertices' columns (a studio rig's rows are gathered on
+    the machine's cores): ``full[:, cols]`` cast, row for row, however the rows are shared out."""
+    from model.pose import _gathered_columns, _moving_vertices
+    full = ict_rig.deltas.reshape(ict_rig.n_shapes, -1)
+    moving = _moving_vertices(full, ict_rig.n_vertices)
+    cols = (moving[:, None] * 3 + np.arange(3)).reshape(-1)
+    for dtype in (np.float32, np.float64):
+        got = _gathered_columns(full, cols, dtype, threads=threads)
+        assert got.dtype == dtype and np.array_equal(got, full[:, cols].astype(dtype))
+    assert np.array_equal(PoseEvaluator(ict_rig)._D, _gathered_columns(full, cols, np.float32, threads=threads))
