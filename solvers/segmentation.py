@@ -6,6 +6,7 @@ Functions take the (V, V) CSR vertex adjacency from ``solvers.laplacian``.
 from __future__ import annotations
 
 import math
+import threading
 import weakref
 
 import numpy as np
@@ -13,6 +14,7 @@ import scipy.sparse as sp
 
 from .errors import RigInputError
 from .laplacian import sorted_unique
+from .parallel import cores, ordered_map
 
 BACKGROUND = -1
 
@@ -304,14 +306,23 @@ class ShapeSupport:
         """(V,) shape k's support (into ``out``)."""
         return self._into(self._DT[k], self._scales[k], np.empty(self.shape[0]) if out is None else out)
 
-    def gram(self, block: int = 1 << 14) -> np.ndarray:
-        """(K, K) ``SᵀS``, summed over blocks of ``block`` vertices (one (K, block) scratch, no (V, K) array)."""
+    def gram(self, block: int = 1 << 14, threads: int | None = None) -> np.ndarray:
+        """(K, K) ``SᵀS``, summed over blocks of ``block`` vertices in their order (one (K, block) scratch a
+        thread, no (V, K) array). From 2³⁰ multiply-adds on (a 106k-vertex rig of 228 shapes has 5·10⁹; 0.9 s
+        at 422k on one core) the blocks' products are made on the machine's cores (``threads``) and added here in
+        the same order: the same sums to the bit on any number of threads."""
         K, V = self._DT.shape
         G = np.zeros((K, K))
-        scratch = np.empty((K, min(block, V)))
-        for a in range(0, V, block):
-            S = self._into(self._DT[:, a:a + block], self._scales[:, None], scratch[:, :min(block, V - a)])
-            G += S @ S.T
+        local = threading.local()
+
+        def product(a: int) -> np.ndarray:
+            if not hasattr(local, "scratch"):
+                local.scratch = np.empty((K, min(block, V)))
+            S = self._into(self._DT[:, a:a + block], self._scales[:, None], local.scratch[:, :min(block, V - a)])
+            return S @ S.T
+        n = threads or (cores() if K * K * V >= 1 << 30 else 1)
+        for P in ordered_map(product, range(0, V, block), threads=n):
+            G += P
         return G
 
     def __array__(self, dtype=None, copy=None) -> np.ndarray:

@@ -28,7 +28,9 @@ def run(rig, cache=None, **kw) -> Segmentation:
 
 @pytest.fixture(scope="module")
 def ict_cache(ict_rig):
-    return SegmentationCache()
+    cache = SegmentationCache()    # bound to ICT here, so that a test that asks for the cache alone can run alone
+    cache.bind(ict_rig.neutral, ict_rig.face_counts, ict_rig.face_indices, ict_rig.deltas)
+    return cache
 
 
 @pytest.fixture(scope="module")
@@ -140,6 +142,8 @@ def test_shape_support_read_shape_by_shape_is_the_whole_array(ict_cache):
     G = support.gram(block=1000)            # blocks that do not divide V: the last one is partial
     assert np.allclose(G, whole.T @ whole, rtol=1e-12, atol=0)
     assert not np.allclose(G, whole.T @ np.minimum(D, 1.0), rtol=1e-3)   # the scales matter
+    for threads in (2, 3):                  # a studio rig's blocks are multiplied on the cores: the same bits
+        assert np.array_equal(support.gram(block=1000, threads=threads), G)
     labels = np.arange(whole.shape[0]) % 5
     verts = np.flatnonzero(labels != 3)
     assert np.array_equal(S.group_sums(support, verts, labels[verts], 5), S.group_sums(whole, verts, labels[verts], 5))
