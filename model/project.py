@@ -25,7 +25,7 @@ from .atomic import atomic_write_with
 from .errors import RigInputError, shown
 from .input_files import regular_file
 from .json_file import MAX_JSON_BYTES, parse_json_text
-from .pages import LARGE, Prefault, small_pages_for
+from .pages import small_pages_for
 from .rig import MAX_WEIGHT, Rig, finite_range
 
 FORMAT = "blendshape-studio-project"
@@ -201,12 +201,7 @@ def read_npy_member(z: zipfile.ZipFile, name: str, path: Path, key: str) -> np.n
                 raise RigInputError(f"{path}: the array '{key}' declares {count} values but holds "
                                     f"{max(info.file_size - header, 0) // max(dtype.itemsize, 1)}; it is damaged.")
             a = np.empty(shape, dtype=dtype, order="F" if fortran else "C")   # read straight into it: one copy
-            prefault = Prefault(a) if nbytes >= LARGE else None   # its first touch on another core meanwhile
-            try:
-                got = _read_into(f, memoryview(a.reshape(-1, order="A")).cast("B")) if nbytes else 0
-            finally:
-                if prefault is not None:
-                    prefault.stop()
+            got = _read_into(f, memoryview(a.reshape(-1, order="A")).cast("B")) if nbytes else 0
             extra = f.read(1)
     except RigInputError:
         raise

@@ -15,8 +15,9 @@ pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="Li
 toggle = np._core.multiarray._set_madvise_hugepage
 
 
-def mapping_field(a: np.ndarray, field: str) -> list[str]:
-    """The words after ``field:`` in /proc/self/smaps for the mapping holding the middle of ``a``."""
+def huge_pages_asked(a: np.ndarray) -> bool:
+    """Whether the mapping holding the middle of ``a`` was madvised for transparent huge pages (numpy advises from
+    the first page boundary inside the array on, so the page of its first byte is a mapping of its own)."""
     address = a.__array_interface__["data"][0] + a.nbytes // 2
     inside = False
     for line in Path("/proc/self/smaps").read_text().splitlines():
@@ -24,15 +25,9 @@ def mapping_field(a: np.ndarray, field: str) -> list[str]:
         if "-" in head and ":" not in head:
             start, end = (int(x, 16) for x in head.split("-"))
             inside = start <= address < end
-        elif inside and line.startswith(field + ":"):
-            return line.split()[1:]
+        elif inside and line.startswith("VmFlags:"):
+            return "hg" in line.split()[1:]
     raise AssertionError("the array's mapping is not in /proc/self/smaps")
-
-
-def huge_pages_asked(a: np.ndarray) -> bool:
-    """Whether the mapping holding the middle of ``a`` was madvised for transparent huge pages (numpy advises from
-    the first page boundary inside the array on, so the page of its first byte is a mapping of its own)."""
-    return "hg" in mapping_field(a, "VmFlags")
 
 
 def numpy_asks_for_huge_pages_now() -> bool:
@@ -152,31 +147,3 @@ def test_the_windows_preparation_of_a_large_rig_asks_for_ordinary_pages(
     assert toggle(True) is True
     np.testing.assert_array_equal(prep.evaluator.evaluate(np.full(ict_rig.n_shapes, 0.3)),
                                   evaluator(ict_rig).evaluate(np.full(ict_rig.n_shapes, 0.3)))
-
-
-def _resident_kb(a: np.ndarray) -> int:
-    """Resident KiB of the mapping holding the middle of ``a``."""
-    return int(mapping_field(a, "Rss")[0])
-
-
-def test_prefault_brings_a_new_arrays_pages_in_without_changing_what_is_written(monkeypatch):
-    """A studio rig's arrays are faulted in on another core while the reader fills them (``Prefault``): what the
-    reader has written before or meanwhile is left as it is, and the pages end up resident."""
-    from model import pages
-    monkeypatch.setattr("solvers.parallel.cores", lambda: 2)
-    n = 96 << 20
-    with pages.small_pages():
-        a = np.empty(n // 8)
-    half = a.size // 2
-    a[:half] = np.arange(half, dtype=np.float64) + 0.5     # written before: must survive
-    before = _resident_kb(a)
-    p = pages.Prefault(a)
-    a[half:half + 1000] = -7.0                             # written meanwhile
-    p.wait()
-    assert np.array_equal(a[:half], np.arange(half, dtype=np.float64) + 0.5)
-    assert (a[half:half + 1000] == -7.0).all()
-    if pages._libc_madvise() is not None:                  # this kernel knows the advice (Linux 5.14+)
-        assert _resident_kb(a) - before > 0.9 * (n - half * 8) / 1024, "the rest of the array was faulted in"
-    stopped = pages.Prefault(np.empty(n // 8))
-    stopped.stop()
-    stopped.wait()                                         # a failed read stops it: it ends

@@ -216,23 +216,3 @@ def test_the_source_uvs_and_groups_survive_a_project(ict_rig, tmp_path):
     write_posed_obj(rig, tmp_path / "out.obj")
     back = read_obj(tmp_path / "out.obj")
     assert len(back.vertices) == 26719 and np.array_equal(back.corners.corner_uv, ict_rig.corners.corner_uv)
-
-
-def test_a_studio_sized_array_reads_back_exactly_while_its_pages_are_faulted_in_beside_it(small_project, tmp_path):
-    """An array of ``LARGE`` bytes or more is read while ``Prefault`` brings its pages in on another core: the
-    values read are the values saved, to the last one; and a truncated copy is still named, the prefault stopped."""
-    from model.pages import LARGE
-    big = np.arange(LARGE // 8 + 4096, dtype=np.float64) * 0.25
-    small_project.arrays["big"] = big
-    path = tmp_path / "p.bsproj"
-    save_project(small_project, path)
-    back = load_project(path).arrays["big"]
-    assert back.dtype == big.dtype and np.array_equal(back, big)
-    with zipfile.ZipFile(path) as z:
-        items = {n: z.read(n) for n in z.namelist()}
-    items["extra/big.npy"] = items["extra/big.npy"][:-4096]
-    with zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=1) as z:
-        for n, b in items.items():
-            z.writestr(n, b)
-    with pytest.raises(RigInputError, match="'extra/big'"):
-        load_project(path)
