@@ -28,7 +28,7 @@ from collections.abc import Iterable
 import numpy as np
 import scipy.sparse as sp
 
-from solvers.parallel import cores, ordered_map
+from solvers.parallel import cores, for_spans
 
 from .correctives import corrective_activations, corrective_activations_per_vertex
 from .rig import Rig
@@ -71,18 +71,15 @@ def _gathered_columns(full: np.ndarray, cols: np.ndarray, dtype, threads: int | 
     out = np.empty((full.shape[0], cols.size), dtype=dtype)
     same = full.dtype == out.dtype
 
-    def rows(span: tuple[int, int]) -> None:
-        for row, into in zip(full[span[0]:span[1]], out[span[0]:span[1]]):
+    def rows(a: int, b: int) -> None:
+        for row, into in zip(full[a:b], out[a:b]):
             if same:
                 np.take(row, cols, out=into)
             else:
                 np.copyto(into, row[cols])      # one row's float64 gather at a time, cast into its float32 row
     # a studio rig's rows on the machine's cores (numpy's gather and cast run outside the GIL): the output's first
     # touch, most of the time on 1 GB of new memory, is shared by them too
-    n = threads or (cores() if out.nbytes >= 1 << 26 else 1)
-    cuts = np.linspace(0, full.shape[0], n + 1).astype(int)
-    for _ in ordered_map(rows, zip(cuts[:-1], cuts[1:]), threads=n):
-        pass
+    for_spans(rows, full.shape[0], threads or (cores() if out.nbytes >= 1 << 26 else 1))
     return out
 
 

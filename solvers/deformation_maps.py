@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import RigInputError
-from .parallel import cores, ordered_map
+from .parallel import for_spans, ordered_map
 
 MAP_KINDS = ("laplacian", "displacement", "laplacian+displacement")
 NORMALISE_QUANTILE = 0.99   # each shape's map is divided by this quantile of itself over the vertices it moves
@@ -208,15 +208,12 @@ def deformation_maps(laplacian: sp.spmatrix, deltas: np.ndarray) -> DeformationM
     # is computed when the vector view asks for it (``argmax_vectors``)
     combined, arg, displacement = np.empty(V), np.zeros(V, dtype=np.int64), np.empty(V)
 
-    def columns(span: tuple[int, int]) -> None:     # the vertices a..b, on the machine's cores
-        a, b = span
+    def columns(a: int, b: int) -> None:     # the vertices a..b, on the machine's cores
         np.max(per_shape[:, a:b], axis=0, out=combined[a:b])
         for k in range(K - 1, -1, -1):  # the last write is the smallest k at the maximum
             np.copyto(arg[a:b], k, where=per_shape[k, a:b] == combined[a:b])
         np.max(disp[:, a:b], axis=0, out=displacement[a:b])
-    cuts = np.linspace(0, V, cores() + 1).astype(int)
-    for _ in ordered_map(columns, zip(cuts[:-1], cuts[1:])):
-        pass
+    for_spans(columns, V)
     nan = np.isnan(combined)
     if nan.any():  # np.argmax's answer there: the first NaN
         arg[nan] = np.argmax(per_shape[:, nan], axis=0)

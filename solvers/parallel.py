@@ -57,6 +57,16 @@ def ordered_map(fn: Callable[[T], R], items: Iterable[T], threads: int | None = 
         pool.shutdown(wait=True)
 
 
+def for_spans(fn: Callable[[int, int], object], n: int, threads: int | None = None) -> None:
+    """``fn(a, b)`` for ``threads`` (default ``cores()``) equal spans ``a..b`` of ``range(n)``, one a thread, for
+    work each span writes into its own part of shared arrays; returns when every span is done (the first
+    exception raised here, as ``ordered_map`` raises it)."""
+    parts = max(1, threads or cores())
+    cuts = [n * i // parts for i in range(parts + 1)]
+    for _ in ordered_map(lambda span: fn(*span), zip(cuts[:-1], cuts[1:]), threads=parts):
+        pass
+
+
 class Background:
     """``fn()`` started now on a thread of its own, for work that mostly runs outside the GIL (a k-d tree's build,
     a compiled kernel) to overlap work on this thread; ``result()`` waits for it and returns its value or raises

@@ -6,7 +6,7 @@ import time
 
 import pytest
 
-from solvers.parallel import cores, ordered_map
+from solvers.parallel import cores, for_spans, ordered_map
 
 
 def test_results_come_in_the_items_order_whatever_order_they_finish_in():
@@ -85,3 +85,24 @@ def test_background_work_runs_beside_this_thread_and_hands_back_its_value_or_its
     n = len(ran_on)
     assert job.result() == 42 and ran_on[-1] == here
     assert job.result() == 42 and len(ran_on) == n + 1   # asked again: the value, not a second run
+
+
+@pytest.mark.parametrize("n,threads", [(10, 3), (2, 3), (0, 2), (7, 1)])
+def test_spans_cover_every_index_once_in_order_and_an_error_comes_back(n, threads):
+    seen: list[tuple[int, int]] = []
+    lock = threading.Lock()
+
+    def work(a: int, b: int) -> None:
+        with lock:
+            seen.append((a, b))
+    for_spans(work, n, threads)
+    seen.sort()
+    assert len(seen) == threads and seen[0][0] == 0 and seen[-1][1] == n
+    assert all(b0 == a1 for (_, b0), (a1, _) in zip(seen, seen[1:]))            # no gap, no overlap
+    assert max(b - a for a, b in seen) - min(b - a for a, b in seen) <= 1       # equal shares
+
+    def fail(a: int, b: int) -> None:
+        if a <= n // 2 < b or (n == 0):
+            raise ValueError("span")
+    with pytest.raises(ValueError, match="span"):
+        for_spans(fail, n, threads)
