@@ -403,10 +403,11 @@ def attach_separate_meshes(labels: np.ndarray, piece: np.ndarray, main: np.ndarr
     if R == 0 or off.size == 0:
         return lab
     fg = np.flatnonzero(lab >= 0)
-    act = group_sums(support, fg, lab[fg], R)  # (R, K) per region
-    act /= np.maximum(np.linalg.norm(act, axis=1, keepdims=True), 1e-300)
     ids, pid = np.unique(piece[off], return_inverse=True)
-    pact = group_sums(support, off, pid, ids.size)  # (P, K) per piece
+    # (R, K) per region and (P, K) per piece in one pass over the shapes (each sum in its own vertices' order)
+    both = group_sums(support, np.concatenate((fg, off)), np.concatenate((lab[fg], R + pid)), R + ids.size)
+    act, pact = both[:R], both[R:]
+    act /= np.maximum(np.linalg.norm(act, axis=1, keepdims=True), 1e-300)
     norm = np.linalg.norm(pact, axis=1)
     sim = (pact / np.maximum(norm, 1e-300)[:, None]) @ act.T
     best = sim.argmax(axis=1)
