@@ -23,6 +23,10 @@ def after_modal(deliver: Callable[[], None]) -> None:
         deliver()
 
 
+class _Finished(QtCore.QObject):
+    done = QtCore.Signal()
+
+
 class _Signals(QtCore.QObject):
     done = QtCore.Signal(object)
     failed = QtCore.Signal(str)
@@ -171,12 +175,17 @@ def run_modal(parent: QtWidgets.QWidget, title: str, label: str, fn: Callable[[]
     can change what ``fn`` reads or writes."""
     global _modal_depth
     out: dict[str, Any] = {}
+    loop = QtCore.QEventLoop()
+    finished = _Finished()
+    finished.done.connect(loop.quit)   # emitted on the worker thread: queued to this one, where the loop runs
 
     def work() -> None:
         try:
             out["value"] = fn()
         except BaseException as exc:  # handed to the caller on the GUI thread
             out["error"] = exc
+        finally:
+            finished.done.emit()
 
     thread = threading.Thread(target=work, name=title, daemon=True)
     focus = QtWidgets.QApplication.focusWidget()
@@ -185,17 +194,11 @@ def run_modal(parent: QtWidgets.QWidget, title: str, label: str, fn: Callable[[]
     dialog.setWindowModality(QtCore.Qt.WindowModal)
     dialog.setMinimumDuration(show_after_ms)
     dialog.setValue(0)    # starts its show-after timer: a bar never set shows only after Qt's default 4 s
-    loop = QtCore.QEventLoop()
-    timer = QtCore.QTimer()
-    timer.setInterval(15)
-    timer.timeout.connect(lambda: thread.is_alive() or loop.quit())
     _modal_depth += 1
     try:
         thread.start()
-        timer.start()
-        if thread.is_alive():
+        if thread.is_alive():   # a quit posted before exec() starts is delivered by it: the loop ends at once
             loop.exec(QtCore.QEventLoop.ExcludeUserInputEvents)
-        timer.stop()
         thread.join()
     finally:
         _modal_depth -= 1
