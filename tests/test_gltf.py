@@ -403,3 +403,35 @@ def test_offsets_strides_and_counts_are_checked_against_the_buffers(tmp_path, cu
     fails(lambda d: d["buffers"][0].update(byteLength=len(blob) + 1), "truncated")
     fails(lambda d: d["accessors"][pos].update(sparse={"count": 99, "indices": {"bufferView": 0, "componentType": 5123},
                                                        "values": {"bufferView": 0}}), "sparse count 99 outside 0..8")
+
+
+def _float_span(doc, accessor: int) -> tuple[int, int]:
+    """(byte offset, float count) in the buffer of an accessor's float32 values (its sparse values if sparse)."""
+    acc = doc["accessors"][accessor]
+    if "sparse" in acc:
+        view = doc["bufferViews"][acc["sparse"]["values"]["bufferView"]]
+        start = view.get("byteOffset", 0) + acc["sparse"]["values"].get("byteOffset", 0)
+        return start, 3 * acc["sparse"]["count"]
+    view = doc["bufferViews"][acc["bufferView"]]
+    return view.get("byteOffset", 0) + acc.get("byteOffset", 0), 3 * acc["count"]
+
+
+@pytest.mark.parametrize("where", ["neutral", "target 0", "target 1"])
+def test_nan_or_infinite_coordinates_are_refused_naming_the_file(tmp_path, cube, where):
+    """A NaN or an infinity anywhere in the positions or a morph target (first, middle or last value) is refused
+    in one sentence naming the file; the same file without it loads."""
+    doc, blob = _doc(tmp_path, cube)
+    prim = doc["meshes"][0]["primitives"][0]
+    accessor = prim["attributes"]["POSITION"] if where == "neutral" else prim["targets"][int(where[-1])]["POSITION"]
+    start, n = _float_span(doc, accessor)
+    for i in (0, n // 2, n - 1):
+        for bad in (np.nan, np.inf, -np.inf):
+            b = bytearray(blob)
+            b[start + 4 * i:start + 4 * i + 4] = struct.pack("<f", bad)
+            d = json.loads(json.dumps(doc))
+            d["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(bytes(b)).decode()
+            path = _write(tmp_path, d, f"bad_{i}.gltf")
+            with pytest.raises(RigInputError, match="has NaN or infinite coordinates") as e:
+                load_gltf(path)
+            assert str(path) in str(e.value)
+    assert_same(load_gltf(_write(tmp_path, doc, "good.gltf")), cube)
