@@ -11,16 +11,23 @@ from model.errors import RigInputError
 
 
 _modal_depth = 0   # ``run_modal`` calls under way
+_held: list[Callable[[], None]] = []   # deliveries waiting for the last ``run_modal`` to end, in arrival order
 
 
 def after_modal(deliver: Callable[[], None]) -> None:
     """Run ``deliver`` now, or once no ``run_modal`` is under way. A background job's result reaches the GUI thread
     as a queued signal, which ``run_modal``'s event loop delivers like any other: its callback (a shape added,
-    a segmentation shown) would then change the document in the middle of an undo command's edit or a save."""
+    a segmentation shown) would then change the document in the middle of an undo command's edit or a save.
+    Held deliveries run in the order they came, on the event loop's first turn after the last modal ends."""
     if _modal_depth:
-        QtCore.QTimer.singleShot(20, lambda: after_modal(deliver))
+        _held.append(deliver)
     else:
         deliver()
+
+
+def _release_held() -> None:
+    while _held and not _modal_depth:   # a delivery may start a modal: the rest wait for that one too
+        _held.pop(0)()
 
 
 class _Finished(QtCore.QObject):
@@ -202,6 +209,8 @@ def run_modal(parent: QtWidgets.QWidget, title: str, label: str, fn: Callable[[]
         thread.join()
     finally:
         _modal_depth -= 1
+        if not _modal_depth and _held:
+            QtCore.QTimer.singleShot(0, _release_held)   # after this call's caller has finished its edit
     shown = dialog.isVisible()
     dialog.reset()      # stops its show-after timer too
     dialog.close()
