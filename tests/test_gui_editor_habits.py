@@ -65,6 +65,64 @@ def test_many_rows_shown_at_once_keep_the_keyboard_focus_where_it_was(qtbot, tmp
     assert all(r.isVisibleTo(panel) for r in panel.rows)
 
 
+def _row_state(r) -> tuple:
+    """What a row shows: name label, weight on the slider and in the box, mute, solo, range, bold, selected."""
+    return (r.label.text(), r.label.toolTip(), r.slider.value(), r.box.value(), r.box.minimum(), r.box.maximum(),
+            r.box.toolTip(), r.mute.isChecked(), r.solo.isChecked(), r.label.isEnabled(), r.label.styleSheet(),
+            r.label.foregroundRole(), r.slider.objectName(), r.mute.toolTip())
+
+
+def _fill(panel, names):
+    """A studio rig's list as opening it fills the panel: names, then weights, mute/solo/ranges, a selection."""
+    panel.set_shapes(names)
+    w = np.zeros(len(names))
+    w[[3, 150, 290]] = [0.5, 0.25, 1.5]
+    panel.set_weights(w)
+    panel.set_shape_info(muted=[names[150]], solo=[names[40]], ranges={names[290]: (-1.0, 2.0)},
+                         inbetweens={names[200]: [0.5]})
+    panel.select(names[250])
+
+
+def test_a_studio_rigs_rows_are_made_a_few_dozen_a_turn_those_in_view_first(qtbot, tmp_path, monkeypatch):
+    """300 shapes: the first rows are made at once, the rest on the next turns of the event loop (those scrolled
+    into view first), each empty row as tall as a made one so the list never jumps; every row ends showing its
+    shape's weight, mute, solo, range, in-betweens and selection as a list made in one go does, and a row asked for
+    (a test, a rename) is made on the spot."""
+    from tests.gui_helpers import shapes_panel_alone
+    from widgets import shapes_panel as sp
+    names = [f"shape{i:03d}" for i in range(300)]
+    panel = shapes_panel_alone(qtbot, tmp_path)
+    _fill(panel, names)
+    built = [r.built for r in panel.rows]
+    assert built[:sp.ROWS_AT_ONCE] == [True] * sp.ROWS_AT_ONCE and not any(built[sp.ROWS_AT_ONCE:])
+    QtWidgets.QApplication.sendPostedEvents()
+    bottom = panel.rows[-1].geometry().bottom()
+    bar = panel.scroll.verticalScrollBar()
+    bar.setValue(bar.maximum())                     # scrolled to the end before the middle rows are made
+    qtbot.waitUntil(lambda: panel.rows[-1].built, timeout=5000)
+    assert not all(r.built for r in panel.rows), "the rows in view come before the rest"
+    qtbot.waitUntil(lambda: all(r.built for r in panel.rows), timeout=10000)
+    QtWidgets.QApplication.processEvents()
+    assert panel.rows[-1].geometry().bottom() == bottom
+    assert panel.row(names[290]).slider.value() == panel.row(names[290])._to_steps(1.5)
+
+    monkeypatch.setattr(sp, "ALL_AT_ONCE", 1000)   # the same list made in one go
+    whole = shapes_panel_alone(qtbot, tmp_path)
+    _fill(whole, names)
+    assert all(r.built for r in whole.rows)
+    assert [_row_state(r) for r in panel.rows] == [_row_state(r) for r in whole.rows]
+    assert _row_state(panel.rows[150]) != _row_state(panel.rows[151])     # muted and weighted: not a blank row
+    assert "◆" in panel.row(names[200]).label.text() and panel.row(names[40]).solo.isChecked()
+
+    monkeypatch.setattr(sp, "ALL_AT_ONCE", 64)
+    late = shapes_panel_alone(qtbot, tmp_path)
+    _fill(late, names)
+    row = late.row(names[299])
+    assert not row.built
+    assert row.slider.maximum() == sp.SLIDER_STEPS and row.built   # made when asked for, with its state
+    assert _row_state(row) == _row_state(whole.rows[299])
+
+
 def _wheel(widget, notches=-3) -> bool:
     """A wheel event over ``widget``; returns whether the widget kept it (accepted) or left it to its parents."""
     pos = QtCore.QPointF(widget.width() / 2, widget.height() / 2)
