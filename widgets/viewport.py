@@ -151,10 +151,11 @@ class Viewport(QtWidgets.QWidget):
     def set_surface(self, points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
                     focus: np.ndarray | None = None, *, reset_camera: bool = True,
                     shown_faces: np.ndarray | None = None, base_colors: np.ndarray | None = None,
-                    prepared=None) -> None:
+                    prepared=None, render: bool = True) -> None:
         """Show a new surface (a new rig): topology is uploaded once here. ``shown_faces`` and ``base_colors``:
         see ``set_parts``. ``prepared``: ``model.rig_prep.DefaultView``, made off the GUI thread: its hidden back
-        faces and normals are used whenever the faces drawn are its faces."""
+        faces and normals are used whenever the faces drawn are its faces. ``render`` False: drawn by the caller's
+        next render (the window's, on the event loop's next turn)."""
         self._focus = focus if focus is not None else points
         self._prepared = prepared
         if self._colormap is not None and len(self._colormap.scalars) != len(points):
@@ -165,7 +166,8 @@ class Viewport(QtWidgets.QWidget):
         self._build_mesh(points, shown_faces, base_colors)
         if reset_camera:
             self.set_camera(self._camera, render=False)   # one render for the new surface, not two
-        self.render()
+        if render:
+            self.render()
 
     def set_parts(self, shown_faces: np.ndarray | None, base_colors: np.ndarray | None) -> None:
         """Draw only the polygons ``shown_faces`` (indices into the surface's faces, in order; None: all of them)
