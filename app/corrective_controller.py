@@ -26,6 +26,7 @@ from model.errors import RigInputError
 from model.sides import mirror_drivers
 from model.wording import count
 from solvers.correctives import corrective_delta
+from solvers.mesh import extent
 from widgets.correctives_panel import CORRECTIVES_TAB, INTERFERENCE_TAB, CorrectivesPanel
 
 
@@ -76,8 +77,7 @@ class CorrectiveController(QtCore.QObject):
         rig = self.document.rig
         self.panel.set_shapes(rig.shape_names)
         self.panel.set_units(rig.units)
-        lo, hi = rig.neutral.min(axis=0), rig.neutral.max(axis=0)
-        self.panel.radius.setValue(float(f"{0.08 * np.linalg.norm(hi - lo):.2g}"))
+        self.panel.radius.setValue(float(f"{0.08 * extent(rig.neutral):.2g}"))
         self._refresh_table()
 
     def _on_shapes_change(self) -> None:

@@ -27,6 +27,7 @@ from app.shape_list_controller import ShapeListController
 from model.errors import RigInputError
 from model.project import Project
 from model.wording import count
+from solvers.mesh import extent
 from widgets.scene import focus_vertices
 from widgets.segmentation_panel import SegmentationPanel
 from widgets.shapes_panel import PoseEdit, ShapesPanel
@@ -492,7 +493,7 @@ class MainWindow(QtWidgets.QMainWindow):
         m = self.markers.selected_marker
         if self.markers.mode and m is not None and self.markers.markers is not None and m < len(self.markers.markers):
             p = self.markers.marker_positions()[m]
-            r = 0.08 * float(np.linalg.norm(np.ptp(self.viewport.focus_points(), axis=0)))
+            r = 0.08 * extent(self.viewport.focus_points())
             return f"marker {self.markers.markers.names[m]}", p + np.array([[-r, -r, -r], [r, r, r]])
         seg, region = self.segmentation.segmentation, self.segmentation_panel.selected_region()
         if seg is not None and region >= 0 and self.segmentation.level < len(seg.levels):

@@ -25,6 +25,7 @@ from model.markers import DRAG_LAM_REG, Marker, MarkerSet
 from model.wording import count
 from solvers.correctives import linearised_correctives
 from solvers.damping import damping_gains
+from solvers.mesh import extent
 from solvers.regional_solve import RegionalSolver, shape_region_max
 from widgets.marker_overlay import MarkerOverlay
 from widgets.markers_panel import MarkersPanel
@@ -207,7 +208,7 @@ class MarkerController(QtCore.QObject):
         self._tri_of_vertex = None    # the shapes, and the triangles around each vertex only a click needs
         self._region_max.clear()
         self._triangles = rig.triangles()
-        self._face_size = float(np.linalg.norm(np.ptp(rig.neutral, axis=0)))
+        self._face_size = extent(rig.neutral)
         self.drag = None
         self._load_markers()
 

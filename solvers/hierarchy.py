@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import RigInputError
+from .mesh import extent
 from .segmentation import _rows_cols, group_sums
 
 
@@ -95,8 +96,7 @@ def mirror_partners(positions: np.ndarray, per_shape_displacement: np.ndarray,
     K = D.shape[1]
     w = D.sum(axis=0)
     c = (D.T @ X) / np.where(w > 0, w, 1.0)[:, None]
-    # per coordinate column (a (V, 3) reduction along axis 0 runs numpy's slow small-inner-axis loop)
-    size = float(np.linalg.norm([X[:, i].max() - X[:, i].min() for i in range(3)])) or 1.0
+    size = extent(X) or 1.0
     refl = c * np.array([-1.0, 1.0, 1.0])
     dist = np.linalg.norm(refl[:, None, :] - c[None, :, :], axis=2)
     dist[w == 0, :] = np.inf

@@ -4,6 +4,22 @@ from __future__ import annotations
 import numpy as np
 
 
+def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi): the (3,) smallest and largest coordinates of (V, 3) points (``points.min(axis=0)``,
+    ``points.max(axis=0)``, the same numbers), column by column: numpy reduces a (V, 3) array along its first axis
+    in a loop over the short inner axis, 12 ms a reduction at 422k vertices against 0.2 ms for a column."""
+    p = np.asarray(points).reshape(-1, 3)
+    if not len(p):
+        raise ValueError("bounds of no points")
+    return (np.array([p[:, i].min() for i in range(3)]), np.array([p[:, i].max() for i in range(3)]))
+
+
+def extent(points: np.ndarray) -> float:
+    """The length of the bounding box's diagonal (``‖ptp(points, axis=0)‖``)."""
+    lo, hi = bounds(points)
+    return float(np.linalg.norm(hi - lo))
+
+
 def fan_triangulate(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
     """(T, 3) triangles of polygons given as counts + flat indices (fan from each first vertex)."""
     counts = np.asarray(face_counts, dtype=np.int64)

@@ -10,6 +10,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from .mesh import extent
+
 REFLECT_X = np.array([-1.0, 1.0, 1.0])  # M = diag(−1, 1, 1), the reflection across x = 0
 
 
@@ -89,7 +91,7 @@ def unmatched_vertices(neutral, mirror, field, tolerance_fraction: float = 0.005
     p = np.asarray(neutral, dtype=np.float64)
     n = np.linalg.norm(np.asarray(field, dtype=np.float64), axis=1)
     moved = n > 1e-3 * n.max() if n.max() > 0 else n > 0
-    tol = tolerance_fraction * float(np.linalg.norm(np.ptp(p, axis=0)))
+    tol = tolerance_fraction * extent(p)
     return int((moved & (mirror_error(p, mirror) > tol)).sum()), int(moved.sum()), tol
 
 

@@ -58,3 +58,20 @@ def test_a_small_opening_is_allowed_a_large_one_is_not():
     # the cube without its top: a box open on 4 of its 12 edges shows its inside
     open_box = CUBE_FACES[:5]
     assert not hidden_back_faces(CUBE, np.full(5, 4), np.ravel(open_box)).any()
+
+
+def test_bounds_and_extent_are_numpys_own_numbers_column_by_column(ict_rig):
+    """``solvers.mesh.bounds`` (the rig-change path's bounding boxes, a column at a time) gives exactly numpy's
+    ``min``/``max`` along the first axis, ``extent`` the norm of ``ptp``; on ICT's neutral and on points whose
+    columns have their extremes in different rows."""
+    import pytest
+    from solvers.mesh import bounds, extent
+    rng = np.random.default_rng(3)
+    for p in (ict_rig.neutral, rng.normal(size=(1001, 3)) * [1.0, -20.0, 3e5], np.float32(ict_rig.neutral[:7])):
+        lo, hi = bounds(p)
+        assert np.array_equal(lo, p.min(axis=0)) and np.array_equal(hi, p.max(axis=0))
+        assert extent(p) == float(np.linalg.norm(np.ptp(p, axis=0)))
+    p = np.array([[0.0, 5.0, -1.0], [2.0, -3.0, 4.0]])
+    assert bounds(p)[0].tolist() == [0.0, -3.0, -1.0] and bounds(p)[1].tolist() == [2.0, 5.0, 4.0]
+    with pytest.raises(ValueError):
+        bounds(np.zeros((0, 3)))

@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solvers.mesh import bounds
 from solvers.normals import VertexNormals, dequantise
 
 SKIN = (0.86, 0.70, 0.60)
@@ -508,7 +509,7 @@ def camera_placement(name: str, focus_points: np.ndarray, size: tuple[int, int],
                      direction: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(focal point, position, view up) of ``set_camera``'s camera for a picture of ``size`` (w, h) pixels."""
     pts = np.asarray(focus_points, dtype=np.float64).reshape(-1, 3)
-    lo, hi = pts.min(axis=0), pts.max(axis=0)
+    lo, hi = bounds(pts)
     center = (lo + hi) / 2
     d, up = camera_direction(name) if direction is None else (np.asarray(direction[0], dtype=np.float64),
                                                               np.asarray(direction[1], dtype=np.float64))
