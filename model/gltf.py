@@ -31,7 +31,7 @@ from .errors import RigInputError, shown
 from .input_files import read_input_bytes, regular_file
 from .json_file import parse_json_text
 from .pages import small_pages_for
-from .rig import CornerAttributes, Rig, finite_range
+from .rig import CornerAttributes, Rig
 
 from .export_gltf import CHUNK_BIN as _CHUNK_BIN, CHUNK_JSON as _CHUNK_JSON, GLB_MAGIC as _GLB_MAGIC
 _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
@@ -477,14 +477,12 @@ def _load_mesh(doc: _Doc, path: Path, units: str, mesh_index: int, mesh: dict) -
         offset += n
     M = _world_matrix(doc, mesh_index)
     A = M[:3, :3]
-    with np.errstate(invalid="ignore", over="ignore"):   # a NaN or infinity in the file is refused just below
+    with np.errstate(invalid="ignore", over="ignore"):   # a NaN or infinity in the file: the Rig refuses it below
         neutral = np.concatenate(positions) @ A.T + M[:3, 3]
         D = np.concatenate(deltas, axis=1) @ A.T
     T = np.concatenate(tris).astype(np.int32)
     if np.linalg.det(A) < 0:  # a mirroring node: keep the faces facing out
         T = T[:, [0, 2, 1]]
-    if finite_range(neutral) is None or finite_range(D) is None:   # the Rig checks again, naming no file
-        raise doc.fail("has NaN or infinite coordinates.")
     names = (mesh.get("extras") or {}).get("targetNames") or (prims[0].get("extras") or {}).get("targetNames")
     if names is None:
         names = [f"target_{k}" for k in range(K)]
