@@ -2,7 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from tests.gui_helpers import make_window, mouse, open_and_wait
 from tests.rig_files import write_rig_folder
@@ -461,6 +461,56 @@ def test_a_pose_change_draws_one_frame(qtbot, tmp_path):
     fresh.set_surface(w.document.surface(), rig.face_counts, rig.face_indices)
     assert drawn[0] == 1
     fresh.close()
+
+
+def test_an_expose_shows_the_last_render_again_unless_something_changed(qtbot, tmp_path):
+    """A window closing over the viewport (a menu, a tooltip, a dialog; no compositor) exposes it: the picture VTK
+    keeps is shown again without a render when nothing changed since the last one (a render is 0.1-0.16 s at 422k
+    vertices), and rendered when anything did (here the camera, turned without a render)."""
+    import vtk
+    w = make_window(qtbot, tmp_path)
+    plotter = w.viewport.plotter
+    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=5000)
+    qtbot.wait(100)
+    renders = [0]
+    plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: renders.__setitem__(0, renders[0] + 1))
+    corner = plotter.mapToGlobal(QtCore.QPoint(0, 0))
+    box = (corner.x(), corner.y(), plotter.width(), plotter.height())
+
+    def on_screen() -> np.ndarray:
+        image = QtWidgets.QApplication.primaryScreen().grabWindow(0, *box).toImage()
+        image = image.convertToFormat(QtGui.QImage.Format_RGB888)
+        return np.array(image.constBits(), np.uint8).reshape(image.height(), image.bytesPerLine())[:, :box[2] * 3]
+
+    def cover_and_expose() -> None:
+        cover = QtWidgets.QWidget(None, QtCore.Qt.FramelessWindowHint | QtCore.Qt.Tool)
+        cover.setStyleSheet("background: rgb(255, 0, 0)")
+        cover.setGeometry(corner.x() + 20, corner.y() + 20, box[2] // 2, box[3] // 2)
+        cover.show()
+        qtbot.waitExposed(cover)
+        qtbot.wait(50)
+        assert (on_screen() != shown).any(axis=1).sum() > box[3] // 3      # the viewport's pixels were covered
+        cover.close()
+        plotter.repaint()               # the expose (done at once here; the X server's own may come later)
+        qtbot.wait(50)
+
+    shown = on_screen()
+    cover_and_expose()
+    assert renders[0] == 0
+    np.testing.assert_array_equal(on_screen(), shown)
+    cover_and_expose()                  # again: still the same picture, still no render
+    assert renders[0] == 0
+    np.testing.assert_array_equal(on_screen(), shown)
+    # something changed without a render (the camera turned): the expose renders it
+    plotter.camera.Azimuth(40.0)
+    plotter.repaint()
+    assert renders[0] == 1
+    turned = on_screen()
+    assert (turned != shown).any(axis=1).sum() > box[3] // 4
+    shown = turned
+    cover_and_expose()
+    assert renders[0] == 1
+    np.testing.assert_array_equal(on_screen(), shown)
 
 
 def _dock_tab_bars(w) -> list[list[str]]:

@@ -22,7 +22,19 @@ vtkmodules.qt.QVTKRWIBase = "QWidget"  # read when the module below is first imp
 from vtkmodules.qt.QVTKRenderWindowInteractor import QVTKRenderWindowInteractor  # noqa: E402
 
 from pyvista.plotting import BasePlotter  # noqa: E402
+from vtkmodules.vtkCommonCore import vtkTimeStamp  # noqa: E402
 from pyvista.plotting.render_window_interactor import RenderWindowInteractor  # noqa: E402
+
+
+_clock = vtkTimeStamp()
+
+
+def vtk_clock() -> int:
+    """VTK's modification clock, advanced by one: every ``Modified()`` of every VTK object in the process (a point,
+    an actor, a camera, a window's size) advances the one counter this reads, so two readings one apart mean that
+    nothing in VTK changed between them but the first reading itself."""
+    _clock.Modified()
+    return _clock.GetMTime()
 
 
 @contextlib.contextmanager
@@ -65,6 +77,12 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
         self.iren.add_observer("KeyPressEvent", self.key_press_event)
         self.reset_key_events()
         self._first_time = False  # lets BasePlotter render without show()
+        # VTK's clock when the window last showed a whole render (None: its picture is not known to be current)
+        self._shown_at: int | None = None
+        self.ren_win.AddObserver("EndEvent", self._rendered_now)
+
+    def _rendered_now(self, *_args) -> None:
+        self._shown_at = vtk_clock()
 
     def render(self) -> None:
         """Render now into the window (no-op once closed or before the widget has a size)."""
@@ -74,7 +92,20 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
         BasePlotter.render(self)
 
     def paintEvent(self, event) -> None:  # Qt override: expose / resize
-        if not self._closed:
+        """Show the last render again when nothing in VTK has changed since (``vtk_clock``): a menu, tooltip or
+        dialog closing over the viewport on an X server without a compositor exposes it, and the picture VTK keeps
+        in its own frame buffer is blitted back (``Frame``: ~4 ms at any rig size) instead of rendered again
+        (13-18 ms on ICT, 0.1-0.16 s at 422k vertices under llvmpipe). Anything changed -- a point, a colour, the
+        camera, the window's size (``resizeEvent``) -- or another window rendered meanwhile: a whole render."""
+        if self._closed:
+            return
+        now = vtk_clock()
+        if self._shown_at is not None and now == self._shown_at + 1:
+            self.ren_win.Frame()
+            after = vtk_clock()
+            # Frame itself touches one object (its frame buffers' state); anything more: render next time
+            self._shown_at = after if after == now + 2 else None
+        else:
             self.ren_win.Render()
 
     def resizeEvent(self, event) -> None:  # Qt override
