@@ -76,6 +76,7 @@ class Document(QtCore.QObject):
         self._shapes_version = 0   # bumped on every new rig and every edit of its shapes' deltas
         self._reach: tuple[int, np.ndarray] | None = None   # (shapes version, the shapes' reach)
         self.default_view: rig_prep.DefaultView | None = None   # prepared with the load (``model.rig_prep``), or None
+        self._triangles: np.ndarray | None = None   # the rig's (``triangles``)
         self._surface: np.ndarray | None = None
         self.edit_offset: np.ndarray | None = None  # pending sculpt/nudge (V, 3), shown on top of the pose
         # Regional pose (Joshi §4): per-region weights of one segmentation level, or None for a global pose.
@@ -104,6 +105,7 @@ class Document(QtCore.QObject):
         # the default view's hidden back faces and normals, prepared with the load (the faces and parts of a rig
         # never change while it is open)
         self.default_view = prep.view if prep is not None else None
+        self._triangles = prep.triangles if prep is not None else None
         self._surface = None
         self._mirror = None
         self.edit_offset = None
@@ -232,6 +234,13 @@ class Document(QtCore.QObject):
         if self._evaluator64 is None or self._evaluator64[0] != self.rig_version:
             self._evaluator64 = (self.rig_version, PoseEvaluator(self.project.rig, dtype=np.float64))
         return self._evaluator64[1]
+
+    def triangles(self) -> np.ndarray:
+        """(T, 3) the rig's triangles (``Rig.triangles``), prepared with the load or made on first use: a rig's
+        faces never change while it is open."""
+        if self._triangles is None:
+            self._triangles = self.project.rig.triangles()
+        return self._triangles
 
     def shape_reach(self) -> np.ndarray:
         """(V,) each vertex's largest displacement over the rig's shapes (``model.rig_prep.shape_reach``): where the

@@ -207,7 +207,7 @@ class MarkerController(QtCore.QObject):
         self._gains = None            # made on a drag's first use (``gains``): on a studio rig they cost a pass over
         self._tri_of_vertex = None    # the shapes, and the triangles around each vertex only a click needs
         self._region_max.clear()
-        self._triangles = rig.triangles()
+        self._triangles = self.document.triangles()
         self._face_size = extent(rig.neutral)
         self.drag = None
         self._load_markers()

@@ -37,7 +37,7 @@ class SculptTool(ViewportTool):
         """Take the viewport's left-button drags that start on the face (elsewhere the camera turns)."""
         rig = self.document.rig
         if self.mesh is None:
-            self.mesh = sculpt.SculptMesh.build(rig.neutral, rig.triangles(), symmetric=True)
+            self.mesh = sculpt.SculptMesh.build(rig.neutral, self.document.triangles(), symmetric=True)
         self.viewport.push_tool(self)
         self.set_brush_actions(True)
 

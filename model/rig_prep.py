@@ -10,7 +10,8 @@ dialog had closed.
 - the default view's faces (``model.parts.drawn_faces``: the helper shells left out): which of them have a back side
   no one can see (``solvers.mesh.hidden_back_faces`` on the neutral), which the viewport culls, a graph search over
   the faces, 0.17 s at 106k vertices and ~0.7 s at 422k; and their triangulation for the display's vertex normals
-  (``solvers.normals.VertexNormals``), 0.25 s at 422k.
+  (``solvers.normals.VertexNormals``), 0.25 s at 422k;
+- the rig's triangles (``Rig.triangles``: the polygons' fans, which markers sit on), 0.04 s at 422k.
 """
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solvers.damping import point_mobility
-from solvers.mesh import hidden_back_faces
+from solvers.mesh import cell_layout, hidden_back_faces, reversed_faces
 from solvers.normals import VertexNormals
 from solvers.parallel import Background
 
@@ -35,6 +36,9 @@ class DefaultView:
     faces: np.ndarray | None      # indices into the rig's faces, in order; None: all of them
     hidden_backs: np.ndarray      # (n,) bool over them: ``hidden_back_faces`` on the neutral
     normals: VertexNormals        # the display normals of a surface of just those faces
+    layout: tuple[np.ndarray, np.ndarray] | None = None    # their ``cell_layout`` (the viewport's cells)
+    # the faces among them whose back can show, and those faces reversed (``reversed_faces``): the backs' cells
+    backs: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def is_for(self, faces: np.ndarray | None, n_faces: int) -> bool:
         """Whether this is of the faces ``faces`` (None: all), ``n_faces`` polygons."""
@@ -51,6 +55,7 @@ class RigPrep:
     evaluator: PoseEvaluator
     reach: np.ndarray          # (V,) max_k ‖d_k(v)‖, zeros for a rig without shapes
     view: DefaultView | None = None
+    triangles: np.ndarray | None = None   # (T, 3) ``rig.triangles()``
 
     def is_for(self, rig: Rig) -> bool:
         return self.rig is rig
@@ -63,17 +68,22 @@ def shape_reach(rig: Rig) -> np.ndarray:
 
 
 def default_view(rig: Rig) -> DefaultView:
-    """The default view's faces, their hidden back sides and their display normals' triangulation."""
+    """The default view's faces, their hidden back sides, their display normals' triangulation and their cells."""
     faces, counts, indices = drawn_faces(rig)
-    return DefaultView(faces, hidden_back_faces(rig.neutral, counts, indices),
-                       VertexNormals(counts, indices, rig.n_vertices))
+    hidden = hidden_back_faces(rig.neutral, counts, indices)
+    shown_backs = np.flatnonzero(~hidden)
+    return DefaultView(faces, hidden, VertexNormals(counts, indices, rig.n_vertices),
+                       layout=cell_layout(counts, indices),
+                       backs=(shown_backs, *reversed_faces(counts, indices, shown_backs)))
 
 
 def prepare_rig(rig: Rig) -> RigPrep:
-    """The display evaluator, the shapes' reach and the default view (``DefaultView``) of ``rig`` (seconds on a
-    studio rig: call it off the GUI thread). The evaluator's float32 copy of a studio rig's deltas is written once
-    here: ordinary pages for it (``model.pages``)."""
-    view = Background(lambda: default_view(rig))   # the neutral's faces only: on another core meanwhile
+    """The display evaluator, the shapes' reach, the default view (``DefaultView``) and the triangles of ``rig``
+    (seconds on a studio rig: call it off the GUI thread). The evaluator's float32 copy of a studio rig's deltas is
+    written once here: ordinary pages for it (``model.pages``)."""
+    # the neutral's faces only: on another core meanwhile
+    view = Background(lambda: (default_view(rig), rig.triangles()))
     with small_pages_for(rig.deltas.nbytes):
         evaluator, reach = PoseEvaluator(rig), shape_reach(rig)
-    return RigPrep(rig=rig, evaluator=evaluator, reach=reach, view=view.result())
+    view, triangles = view.result()
+    return RigPrep(rig=rig, evaluator=evaluator, reach=reach, view=view, triangles=triangles)

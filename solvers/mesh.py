@@ -32,6 +32,28 @@ def fan_triangulate(face_counts: np.ndarray, face_indices: np.ndarray) -> np.nda
     return np.stack([idx[s], idx[s + k + 1], idx[s + k + 2]], axis=1).astype(np.int32)
 
 
+def cell_layout(face_counts: np.ndarray, face_indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(offsets, connectivity), int64: the polygons in VTK's cell array layout (``vtkCellArray.SetData``), polygon
+    ``f``'s corners being ``connectivity[offsets[f]:offsets[f + 1]]``."""
+    counts = np.asarray(face_counts, dtype=np.int64)
+    offsets = np.zeros(counts.size + 1, dtype=np.int64)
+    np.cumsum(counts, out=offsets[1:])
+    return offsets, np.ascontiguousarray(face_indices, dtype=np.int64)
+
+
+def reversed_faces(face_counts: np.ndarray, face_indices: np.ndarray,
+                   faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``cell_layout`` of the polygons ``faces`` (indices, in order), each reversed with its first corner kept:
+    (i0, ik, ..., i1), so that a fan splits it into the same triangles, facing the other way."""
+    counts = np.asarray(face_counts, dtype=np.int64)
+    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    n = counts[faces]
+    offsets = np.concatenate(([0], np.cumsum(n)))
+    k = np.arange(offsets[-1]) - np.repeat(offsets[:-1], n)            # corner number in its face
+    corner = np.where(k == 0, 0, np.repeat(n, n) - k)
+    return offsets, np.asarray(face_indices, dtype=np.int64)[np.repeat(starts[faces], n) + corner]
+
+
 HIDDEN_BACK_OPENING = 0.01   # a part counts as closed when at most this share of its edges lie on openings
 
 

@@ -75,3 +75,39 @@ def test_bounds_and_extent_are_numpys_own_numbers_column_by_column(ict_rig):
     assert bounds(p)[0].tolist() == [0.0, -3.0, -1.0] and bounds(p)[1].tolist() == [2.0, 5.0, 4.0]
     with pytest.raises(ValueError):
         bounds(np.zeros((0, 3)))
+
+
+def test_the_viewports_cells_are_the_rigs_polygons_and_their_reversed_backs(ict_rig):
+    """The viewport's mesh holds exactly the rig's polygons as cells, in order, and nothing else (a pyvista mesh
+    made from points alone would also hold a vertex cell for each point, which picking would count); the backs'
+    cells are the chosen polygons reversed with their first corner kept (``solvers.mesh.reversed_faces``), whose
+    fans are the originals' triangles facing the other way. Checked against the polygons as ``Rig.polygons``
+    lists them, on ICT (quads and triangles) and on a mesh of 3- to 6-gons."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+
+    from solvers.mesh import cell_layout, fan_triangulate, reversed_faces
+    from widgets.scene import polygon_cells, rig_mesh
+    polys = [np.array([0, 1, 2]), np.array([2, 3, 4, 5]), np.array([5, 6, 7, 8, 9]), np.array([9, 0, 4, 7, 1, 3])]
+    meshes = [(ict_rig.face_counts, ict_rig.face_indices, ict_rig.polygons()),
+              (np.array([len(p) for p in polys]), np.concatenate(polys), polys)]
+    for counts, indices, listed in meshes:
+        offsets, connectivity = cell_layout(counts, indices)
+        assert [connectivity[a:b].tolist() for a, b in zip(offsets[:-1], offsets[1:])] == [p.tolist() for p in listed]
+        n_points = int(indices.max()) + 1
+        mesh = rig_mesh(np.zeros((n_points, 3)), counts, indices)
+        assert mesh.n_cells == len(counts) and mesh.GetNumberOfVerts() == 0 and mesh.n_points == n_points
+        cells = mesh.GetPolys()
+        assert np.array_equal(vtk_to_numpy(cells.GetOffsetsArray()), offsets)
+        assert np.array_equal(vtk_to_numpy(cells.GetConnectivityArray()), connectivity)
+        assert polygon_cells(counts, indices, (offsets, connectivity)).GetNumberOfCells() == len(counts)
+        chosen = np.arange(len(counts))[::3]
+        r_offsets, r_ids = reversed_faces(counts, indices, chosen)
+        for j, f in enumerate(chosen):
+            p = listed[f]
+            assert r_ids[r_offsets[j]:r_offsets[j + 1]].tolist() == [p[0], *p[1:][::-1]]
+        tri = fan_triangulate(counts[chosen], np.concatenate([listed[f] for f in chosen]))
+        tri_back = fan_triangulate(np.diff(r_offsets), r_ids)
+
+        def wound(t):   # each triangle turned to start at its smallest corner, its winding kept
+            return {tuple(np.roll(x, -int(np.argmin(x)))) for x in t.tolist()}
+        assert wound(tri_back[:, ::-1]) == wound(tri) and wound(tri_back).isdisjoint(wound(tri))

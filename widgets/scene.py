@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solvers.mesh import bounds
+from solvers.mesh import bounds, cell_layout, reversed_faces
 from solvers.normals import VertexNormals, dequantise
 
 SKIN = (0.86, 0.70, 0.60)
@@ -31,20 +31,22 @@ def use_offscreen_backend_if_headless() -> None:
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
 
 
-def vtk_faces(face_counts: np.ndarray, face_indices: np.ndarray) -> np.ndarray:
-    """Polygons in VTK's padded cell format [n, i0, ..., n, ...], polygons kept as in the file."""
-    counts = np.asarray(face_counts, dtype=np.int64)
-    out = np.empty(counts.size + counts.sum(), dtype=np.int64)
-    starts = np.concatenate(([0], np.cumsum(counts + 1)[:-1]))
-    out[starts] = counts
-    mask = np.ones(out.size, dtype=bool)
-    mask[starts] = False
-    out[mask] = face_indices
-    return out
+def polygon_cells(face_counts: np.ndarray, face_indices: np.ndarray, layout=None):
+    """The polygons, in order, as a ``vtkCellArray`` of their offsets and flat indices (VTK's own layout,
+    ``solvers.mesh.cell_layout``; ``layout``: made beforehand, off the GUI thread, ``model.rig_prep``), copied
+    into VTK's arrays (a few ms at 422k vertices). Through VTK's legacy padded format [n, i0, ..., n, ...],
+    which a pyvista ``PolyData(points, faces)`` is given, it took 0.05 s at 422k vertices: building the padded
+    array, then VTK parsing it."""
+    from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray
+    from vtkmodules.vtkCommonDataModel import vtkCellArray
+    offsets, connectivity = layout if layout is not None else cell_layout(face_counts, face_indices)
+    cells = vtkCellArray()
+    cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True), numpy_to_vtkIdTypeArray(connectivity, deep=True))
+    return cells
 
 
 def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
-             normals: VertexNormals | None = None):
+             normals: VertexNormals | None = None, layout=None):
     """A pyvista PolyData of the surface (float32 points for display) with smooth-shading normals.
 
     ``mesh.field_data`` is left alone; the normals function (``normals``, to share one built for these
@@ -53,7 +55,9 @@ def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarr
     """
     import pyvista as pv
     # A copy: SurfaceArrays writes into the mesh's own arrays, never into the caller's.
-    mesh = pv.PolyData(np.array(points, dtype=np.float32), vtk_faces(face_counts, face_indices))
+    mesh = pv.PolyData()            # given points, pyvista would add a vertex cell for each
+    mesh.points = np.array(points, dtype=np.float32)
+    mesh.SetPolys(polygon_cells(face_counts, face_indices, layout))
     if normals is None:
         normals = VertexNormals(face_counts, face_indices, mesh.n_points)
     object.__setattr__(mesh, "_display_normals", normals)
@@ -230,8 +234,10 @@ def shade_surface_actor(renderer, mesh, actor, cull_hidden: bool):
 
 
 def _back_sides(mesh):
-    """(vtkCellArray of the mesh's faces whose back can show, each reversed; their face indices), cached on
-    the mesh; (None, None) when every face's back is hidden."""
+    """(vtkCellArray of the mesh's faces whose back can show, each reversed (``solvers.mesh.reversed_faces``);
+    their face indices), cached on the mesh; (None, None) when every face's back is hidden. Those faces and their
+    reversed cells may be found beforehand, off the GUI thread (``model.rig_prep.DefaultView``: the mesh's
+    ``_hidden_faces`` and ``_back_layout``)."""
     cached = getattr(mesh, "_back_cells", None)
     if cached is None:
         from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray, vtk_to_numpy
@@ -239,24 +245,17 @@ def _back_sides(mesh):
 
         from solvers.mesh import hidden_back_faces
         counts, indices = mesh._faces
-        hidden = getattr(mesh, "_hidden_faces", None)   # found beforehand, off the GUI thread (``model.rig_prep``)
+        hidden = getattr(mesh, "_hidden_faces", None)
+        layout = getattr(mesh, "_back_layout", None)    # (faces, offsets, ids) of those hidden faces
         if hidden is None or len(hidden) != len(counts):
             points = vtk_to_numpy(mesh.GetPoints().GetData())   # a pyvista mesh's ``points``, or a plain vtkPolyData's
-            hidden = hidden_back_faces(points, counts, indices)
-        faces = np.flatnonzero(~hidden)
+            hidden, layout = hidden_back_faces(points, counts, indices), None
+        faces = np.flatnonzero(~hidden) if layout is None else layout[0]
         cached = (None, None)
         if faces.size:
-            counts = np.asarray(counts, dtype=np.int64)
-            starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
-            n = counts[faces]
-            offsets = np.concatenate(([0], np.cumsum(n)))
-            k = np.arange(offsets[-1]) - np.repeat(offsets[:-1], n)            # corner number in its face
-            # reversed with the first corner kept: (i0, ik, ..., i1), so a fan splits it as the original
-            corner = np.where(k == 0, 0, np.repeat(n, n) - k)
-            reversed_ids = np.asarray(indices, dtype=np.int64)[np.repeat(starts[faces], n) + corner]
+            offsets, ids = reversed_faces(counts, indices, faces) if layout is None else layout[1:]
             cells = vtkCellArray()
-            cells.SetData(numpy_to_vtkIdTypeArray(offsets.astype(np.int64), deep=True),
-                          numpy_to_vtkIdTypeArray(reversed_ids, deep=True))
+            cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True), numpy_to_vtkIdTypeArray(ids, deep=True))
             cached = (cells, faces)
         object.__setattr__(mesh, "_back_cells", cached)
     return cached

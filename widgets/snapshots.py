@@ -19,8 +19,8 @@ from solvers.normals import VertexNormals
 
 from .scene import (AMBIENT, BACKGROUND_BOTTOM, BACKGROUND_TOP, DIFFUSE, EDGE_COLOR, EDGE_WIDTH,
                     FILL_LIGHT_INTENSITY, KEY_LIGHT_INTENSITY, KEY_LIGHT_POSITION, SKIN, SPECULAR_POWER, SurfaceArrays,
-                    blend_only_when_needed, camera_placement, shade_surface_actor, use_offscreen_backend_if_headless,
-                    vtk_faces)
+                    blend_only_when_needed, camera_placement, polygon_cells, shade_surface_actor,
+                    use_offscreen_backend_if_headless)
 
 MULTI_SAMPLES = 8      # pyvista's default anti-aliasing for an off-screen plotter (its theme's ``multi_samples``)
 
@@ -89,17 +89,15 @@ class SurfaceSnapshots:
 
     def _add_surface(self, points: np.ndarray) -> None:
         """The surface as ``add_surface`` adds it without a colour map (material, per-vertex lighting, backs)."""
-        from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray
+        from vtkmodules.util.numpy_support import numpy_to_vtk
         from vtkmodules.vtkCommonCore import vtkPoints
-        from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+        from vtkmodules.vtkCommonDataModel import vtkPolyData
         from vtkmodules.vtkRenderingCore import vtkActor, vtkPolyDataMapper
         mesh = vtkPolyData()
         pts = vtkPoints()
         pts.SetData(numpy_to_vtk(np.array(points, dtype=np.float32), deep=True))
         mesh.SetPoints(pts)
-        cells = vtkCellArray()
-        cells.ImportLegacyFormat(numpy_to_vtkIdTypeArray(vtk_faces(self.face_counts, self.face_indices), deep=True))
-        mesh.SetPolys(cells)
+        mesh.SetPolys(polygon_cells(self.face_counts, self.face_indices))
         normals = VertexNormals(self.face_counts, self.face_indices, len(points))
         mesh._display_normals = normals
         mesh._faces = (self.face_counts, self.face_indices)

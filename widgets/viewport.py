@@ -191,9 +191,11 @@ class Viewport(QtWidgets.QWidget):
         known = self._prepared
         if known is not None and not known.is_for(self._shown_faces, len(counts)):
             known = None   # prepared for other faces
-        self.mesh = rig_mesh(points, counts, indices, normals=known.normals if known is not None else None)
-        if known is not None:
-            object.__setattr__(self.mesh, "_hidden_faces", known.hidden_backs)   # ``scene._back_sides`` takes them
+        self.mesh = rig_mesh(points, counts, indices, normals=known.normals if known is not None else None,
+                             layout=known.layout if known is not None else None)
+        if known is not None:     # ``scene._back_sides`` takes them
+            object.__setattr__(self.mesh, "_hidden_faces", known.hidden_backs)
+            object.__setattr__(self.mesh, "_back_layout", known.backs)
         self._face_counts = np.asarray(counts)
         self._arrays = SurfaceArrays(self.mesh)
         if self._texture_split is not None and self._textured is not None:
