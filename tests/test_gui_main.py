@@ -200,6 +200,7 @@ def test_opening_a_rig_leaves_its_passes_over_the_shapes_to_the_loader_thread(qt
     import app.segmentation_controller as seg_ctl
     import solvers.normals
     w = make_window(qtbot, tmp_path)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=60000)    # the sample face's
     calls = []
     for module, name, label in ((model.pose.PoseEvaluator, "__init__", "__init__"),
                                 (model.rig_prep, "shape_reach", "shape_reach"), (seg_ctl, "segment_rig", "segment_rig"),
@@ -435,10 +436,12 @@ def test_a_pose_change_draws_one_frame(qtbot, tmp_path):
     renders[0] = 0
     w.document.set_project(project, None)
     # not in the turn that takes the rig in (a studio rig's first render is 0.16 s more of a frozen window) ...
+    started = []        # ... but on a later one, once, and before its segmentation starts (whose thread would slow it)
+    segment = w.segmentation.recompute
+    w.segmentation.recompute = lambda settings: (started.append(renders[0]), segment(settings))
     assert renders[0] == 0 and w.redraw_pending
-    QtWidgets.QApplication.processEvents()    # ... but on the event loop's next turn
-    QtWidgets.QApplication.processEvents()
-    assert renders[0] == 1 and not w.redraw_pending
+    qtbot.waitUntil(lambda: bool(started), timeout=2000)
+    assert started == [1] and not w.redraw_pending
     np.testing.assert_allclose(w.viewport.points(), w.document.surface(), atol=1e-5)
     # the next pose change is drawn as before (once the new rig's segmentation, which recolours the view, is in)
     qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=60000)
@@ -511,6 +514,17 @@ def test_an_expose_shows_the_last_render_again_unless_something_changed(qtbot, t
     cover_and_expose()
     assert renders[0] == 1
     np.testing.assert_array_equal(on_screen(), shown)
+    # a change whose redraw is pending (the window renders on the event loop's next turn): an expose before it shows
+    # the last picture, and the redraw renders the change once
+    plotter.camera.Azimuth(-40.0)
+    w.request_render()
+    plotter.repaint()
+    assert renders[0] == 1 and w.redraw_pending
+    np.testing.assert_array_equal(on_screen(), shown)
+    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=2000)
+    qtbot.wait(50)
+    assert renders[0] == 2
+    assert (on_screen() != shown).any(axis=1).sum() > box[3] // 4
 
 
 def _dock_tab_bars(w) -> list[list[str]]:

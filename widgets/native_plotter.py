@@ -15,6 +15,7 @@ Qt widget, ``render()``, ``close()``, ``screenshot()``, subplots and linked view
 from __future__ import annotations
 
 import contextlib
+from typing import Callable
 
 import vtkmodules.qt
 
@@ -58,6 +59,9 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
         self._closed = True   # until BasePlotter is initialised (it sets False); close() sets it again
         # VTK's clock when the window last showed a whole render (None: its picture is not known to be current)
         self._shown_at: int | None = None
+        self._shown_size: tuple | None = None    # the window's size at its last whole render
+        # whether its owner will render it on the event loop's next turn (a coalesced redraw): set by the owner
+        self.render_pending: Callable[[], bool] = lambda: False
         BasePlotter.__init__(self, **kwargs)
         self.interactor = self
         self.ren_win = self.GetRenderWindow()
@@ -83,6 +87,7 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
 
     def _rendered_now(self, *_args) -> None:
         self._shown_at = vtk_clock()
+        self._shown_size = tuple(self.ren_win.GetSize())
 
     def _unchanged(self) -> bool:
         """Whether nothing in VTK has changed since this window last showed a whole render (``vtk_clock``): no
@@ -93,6 +98,14 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
             return False
         self._shown_at = now
         return True
+
+    def _setEventInformation(self, *args, **kwargs) -> None:  # QVTKRenderWindowInteractor's, for every Qt event
+        """Hand the pointer's position and keys to VTK's interactor, which that modifies: not a change of the
+        picture (the pointer entering the viewport as a dialog closes over it, then the expose)."""
+        current = self._unchanged()
+        super()._setEventInformation(*args, **kwargs)
+        if current:
+            self._shown_at = vtk_clock()
 
     def render(self) -> None:
         """Render now into the window (no-op once closed or before the widget has a size), unless nothing has
@@ -110,7 +123,10 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
         closing over the viewport on an X server without a compositor exposes it, and the picture VTK keeps in its
         own frame buffer is blitted back (``Frame``: ~2 ms at any rig size) instead of rendered again (13-18 ms on
         ICT, 0.07-0.16 s at 422k vertices under llvmpipe). Anything changed -- a point, a colour, the camera, the
-        window's size (``resizeEvent``) -- or another window rendered meanwhile: a whole render."""
+        window's size (``resizeEvent``) -- or another window rendered meanwhile: a whole render, unless the owner
+        renders on the event loop's next turn anyway (``render_pending``) and the window's size is the same: the last
+        picture is shown until then. A new rig is taken in by one turn and rendered by the next (0.1 s each at 422k
+        vertices); the progress dialog closing over the viewport between them made both one freeze of the window."""
         if self._closed:
             return
         if self._unchanged():
@@ -118,6 +134,8 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
             # Frame itself touches one object (its frame buffers' state); anything more: render next time
             marked, now = self._shown_at, vtk_clock()
             self._shown_at = now if now == marked + 2 else None
+        elif self._shown_size == tuple(self.ren_win.GetSize()) and self.render_pending():
+            self.ren_win.Frame()
         else:
             self.ren_win.Render()
 

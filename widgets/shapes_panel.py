@@ -3,6 +3,7 @@ reset, and presets. It shows weights and emits the user's gestures; the app turn
 """
 from __future__ import annotations
 
+import time
 from contextlib import contextmanager
 from dataclasses import dataclass
 
@@ -10,8 +11,11 @@ import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
 SLIDER_STEPS = 1000
-ROWS_AT_ONCE = 32   # Shapes panel rows made in one turn of the event loop (~1 ms each) for a studio rig's list,
+ROWS_AT_ONCE = 32   # Shapes panel rows made in one turn of the event loop (~1-2 ms each) for a studio rig's list,
 ALL_AT_ONCE = 64    # but every row at once up to this many (ICT FaceKit's 57)
+# and no more rows in a later turn than fit in this many seconds: a turn of 32 rows took 55 ms beside a 422k-vertex
+# rig's first render, which the same turn of the event loop may run (the window answers neither meanwhile)
+ROWS_BUDGET = 0.012
 
 
 @dataclass(frozen=True)
@@ -585,7 +589,8 @@ class ShapesPanel(QtWidgets.QWidget):
             self._build_timer.start()
 
     def _build_some(self) -> None:
-        """Build the next rows still empty: those in view first, then in list order, ``ROWS_AT_ONCE`` a turn."""
+        """Build the next rows still empty: those in view first, then in list order, ``ROWS_AT_ONCE`` a turn at
+        most, and no more once ``ROWS_BUDGET`` has passed (one at least)."""
         empty = [r for r in self.rows if not r.built]
         if not empty:
             return
@@ -597,13 +602,18 @@ class ShapesPanel(QtWidgets.QWidget):
         # the list's layout off meanwhile: a row whose widgets are shown would lay out the whole list again each
         # time (the rows keep their places: an empty row is as tall as a built one)
         self._rows_layout.setEnabled(False)
+        end = time.perf_counter() + ROWS_BUDGET
+        built = 0
         try:
             for r in chosen:
                 r.build()
+                built += 1
+                if time.perf_counter() > end:
+                    break
         finally:
             self._rows_layout.setEnabled(True)
             self._rows_layout.update()
-        if len(chosen) < len(empty):
+        if built < len(empty):
             self._build_timer.start()
 
     def finish_rows(self) -> None:
