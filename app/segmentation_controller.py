@@ -50,6 +50,7 @@ class SegmentationController(QtCore.QObject):
         self._last_nudge: tuple[int, str] | None = None   # (region, direction): names a saved nudge
         self.last_seconds = 0.0
         self._segmented: tuple | None = None  # (neutral, deltas, shape names) the segmentation is of
+        self._start_pending = False   # a new rig's segmentation waits for its first render (``_on_rig_change``)
         d = self.document
         d.rig_changed.connect(self._on_rig_change)
         d.shapes_changed.connect(self._on_shapes_change)
@@ -128,9 +129,11 @@ class SegmentationController(QtCore.QObject):
         # each of the hundreds of Python calls those events make wait for the interpreter, ~3 s more of a frozen
         # window on a 422k-vertex rig, and the rig's first render 0.04-0.15 s more
         arrays = self._segmented
+        self._start_pending = True
 
         def start() -> None:
             if self._segmented is arrays:
+                self._start_pending = False
                 self.recompute(self.settings())
         QtCore.QTimer.singleShot(0, self, lambda: self.window.when_drawn(start))
 
@@ -233,8 +236,14 @@ class SegmentationController(QtCore.QObject):
         override = self.view_override
         self.viewport.set_colormap(override() if override is not None else self.colormap())
 
-    def wait(self) -> None:
-        self.runner.wait()
+    def wait(self, msecs: int = 60000) -> None:
+        """Wait for the segmentation of the current rig (started, or still to start once the window has drawn the
+        rig) and deliver it (tests, benchmarks)."""
+        deadline = QtCore.QDeadlineTimer(msecs)
+        while self._start_pending and not deadline.hasExpired():
+            QtCore.QCoreApplication.processEvents(QtCore.QEventLoop.AllEvents, 5)
+            QtCore.QThread.msleep(1)
+        self.runner.wait(max(0, deadline.remainingTime()))
 
     # --- nudge (Acosta) ----------------------------------------------------------------------------
     def nudge(self, direction: str, amount: float) -> None:
