@@ -67,7 +67,7 @@ def test_bench_drag_to_redraw_step(benchmark, qtbot, tmp_path, ict_rig, ict_drag
     qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
     w.document.set_project(Project(rig=ict_rig.copy()), None)
     qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=120000)
-    w.segmentation.runner.wait() if hasattr(w.segmentation.runner, "wait") else None
+    w.segmentation.wait()
     qtbot.waitUntil(lambda: c.panel.level.count() > 1, timeout=120000)
     for m in ms.markers:
         assert c.add_marker_at(m.vertex, name=m.name)
