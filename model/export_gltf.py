@@ -107,7 +107,7 @@ def _min_max(a: np.ndarray) -> tuple[list, list]:
     reduction of a (V, 3) array along its first axis is ~20x slower; two per morph target of a studio rig)."""
     if not a.size:
         return [0.0] * a.shape[1], [0.0] * a.shape[1]
-    lo, hi = bounds(a) if a.shape[1] == 3 else (a.min(axis=0), a.max(axis=0))
+    lo, hi = bounds(a)
     return lo.astype(float).tolist(), hi.astype(float).tolist()
 
 

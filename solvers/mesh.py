@@ -5,13 +5,17 @@ import numpy as np
 
 
 def bounds(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi): the (3,) smallest and largest coordinates of (V, 3) points (``points.min(axis=0)``,
-    ``points.max(axis=0)``, the same numbers), column by column: numpy reduces a (V, 3) array along its first axis
-    in a loop over the short inner axis, 12 ms a reduction at 422k vertices against 0.2 ms for a column."""
-    p = np.asarray(points).reshape(-1, 3)
+    """(lo, hi): the smallest and largest value of each column of (n, k) values, (V, 3) points or any other
+    (``points.min(axis=0)``, ``points.max(axis=0)``, the same numbers; points given flat are read as (V, 3)), column
+    by column: numpy reduces a (V, 3) array along its first axis in a loop over the short inner axis, 12 ms a
+    reduction at 422k vertices against 0.2 ms for a column."""
+    p = np.asarray(points)
+    if p.ndim != 2:
+        p = p.reshape(-1, 3)
     if not len(p):
         raise ValueError("bounds of no points")
-    return (np.array([p[:, i].min() for i in range(3)]), np.array([p[:, i].max() for i in range(3)]))
+    columns = range(p.shape[1])
+    return np.array([p[:, i].min() for i in columns]), np.array([p[:, i].max() for i in columns])
 
 
 def extent(points: np.ndarray) -> float:

@@ -71,6 +71,9 @@ def test_bounds_and_extent_are_numpys_own_numbers_column_by_column(ict_rig):
         lo, hi = bounds(p)
         assert np.array_equal(lo, p.min(axis=0)) and np.array_equal(hi, p.max(axis=0))
         assert extent(p) == float(np.linalg.norm(np.ptp(p, axis=0)))
+    for p in (rng.normal(size=(50, 2)), rng.normal(size=(50, 1)), rng.normal(size=(50, 4)).astype(np.float32)):
+        lo, hi = bounds(p)          # any number of columns (the glTF writer's UVs, times, colours)
+        assert np.array_equal(lo, p.min(axis=0)) and np.array_equal(hi, p.max(axis=0)) and lo.dtype == p.dtype
     p = np.array([[0.0, 5.0, -1.0], [2.0, -3.0, 4.0]])
     assert bounds(p)[0].tolist() == [0.0, -3.0, -1.0] and bounds(p)[1].tolist() == [2.0, 5.0, 4.0]
     with pytest.raises(ValueError):

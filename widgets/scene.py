@@ -37,9 +37,14 @@ def polygon_cells(face_counts: np.ndarray, face_indices: np.ndarray, layout=None
     into VTK's arrays (a few ms at 422k vertices). Through VTK's legacy padded format [n, i0, ..., n, ...],
     which a pyvista ``PolyData(points, faces)`` is given, it took 0.05 s at 422k vertices: building the padded
     array, then VTK parsing it."""
+    return cell_array(*(layout if layout is not None else cell_layout(face_counts, face_indices)))
+
+
+def cell_array(offsets: np.ndarray, connectivity: np.ndarray):
+    """A ``vtkCellArray`` of cells in VTK's layout (int64 ``offsets`` and ``connectivity``, ``solvers.mesh``),
+    both copied into VTK's own arrays."""
     from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray
     from vtkmodules.vtkCommonDataModel import vtkCellArray
-    offsets, connectivity = layout if layout is not None else cell_layout(face_counts, face_indices)
     cells = vtkCellArray()
     cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True), numpy_to_vtkIdTypeArray(connectivity, deep=True))
     return cells
@@ -240,22 +245,19 @@ def _back_sides(mesh):
     ``_hidden_faces`` and ``_back_layout``)."""
     cached = getattr(mesh, "_back_cells", None)
     if cached is None:
-        from vtkmodules.util.numpy_support import numpy_to_vtkIdTypeArray, vtk_to_numpy
-        from vtkmodules.vtkCommonDataModel import vtkCellArray
+        from vtkmodules.util.numpy_support import vtk_to_numpy
 
         from solvers.mesh import hidden_back_faces
         counts, indices = mesh._faces
         hidden = getattr(mesh, "_hidden_faces", None)
-        layout = getattr(mesh, "_back_layout", None)    # (faces, offsets, ids) of those hidden faces
+        layout = getattr(mesh, "_back_layout", None)    # (faces, offsets, ids) of the faces whose back can show
         if hidden is None or len(hidden) != len(counts):
             points = vtk_to_numpy(mesh.GetPoints().GetData())   # a pyvista mesh's ``points``, or a plain vtkPolyData's
             hidden, layout = hidden_back_faces(points, counts, indices), None
         faces = np.flatnonzero(~hidden) if layout is None else layout[0]
         cached = (None, None)
         if faces.size:
-            offsets, ids = reversed_faces(counts, indices, faces) if layout is None else layout[1:]
-            cells = vtkCellArray()
-            cells.SetData(numpy_to_vtkIdTypeArray(offsets, deep=True), numpy_to_vtkIdTypeArray(ids, deep=True))
+            cells = cell_array(*(reversed_faces(counts, indices, faces) if layout is None else layout[1:]))
             cached = (cells, faces)
         object.__setattr__(mesh, "_back_cells", cached)
     return cached
