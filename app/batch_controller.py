@@ -10,6 +10,7 @@ from pathlib import Path
 
 from PySide6 import QtCore
 
+from app import settings as app_settings
 from app.background import BackgroundRunner
 from model.errors import RigInputError
 from widgets.batch_dialog import BatchDialog
@@ -54,6 +55,13 @@ class BatchController(QtCore.QObject):
             d.run_requested.connect(self.run)
             d.cancel_requested.connect(self.cancel)
             d.open_requested.connect(self.open_take)
+            d.results_requested.connect(self.open_results)
+            for widget, key in ((d.output_edit, "output"), (d.map_edit, "markerMap"), (d.mode_combo, "mode"),
+                                (d.residual_combo, "residual"), (d.calibration_spin, "calibrationFrames"),
+                                (d.fixed_head_check, "fixedHead"), (d.extra_edit, "moreOptions"),
+                                (d.cache_check, "cache"), (d.workers_spin, "workers"),
+                                (d.scheduler_edit, "scheduler")):
+                app_settings.remember(widget, f"batch/{key}")     # the last batch's form, in the next session
         self.dialog.show()
         self.dialog.raise_()
         self.dialog.activateWindow()
@@ -121,13 +129,11 @@ class BatchController(QtCore.QObject):
         self.dialog.set_progress(p.done, p.total, text)
 
     def _on_done(self, rows: list) -> None:
+        from model.batch import counts_text
         self.running = False
-        self.rows = rows
-        count = {s: sum(r["status"] == s for r in rows) for s in ("solved", "skipped", "failed")}
-        text = (f"Batch: solved {count['solved']}, skipped {count['skipped']} (complete), failed {count['failed']}; "
-                f"summary in {Path(self.dialog.output()) / 'batch.json'}.")
+        text = f"Batch: {counts_text(rows)}; summary in {Path(self.dialog.output()) / 'batch.json'}."
         self.dialog.set_running(False)
-        self.dialog.set_rows(rows, units=self._units)   # the marker RMSE is in the solved rig's units
+        self._show_rows(Path(self.dialog.output()), rows, self._units)   # the RMSE is in the solved rig's units
         self.dialog.set_progress(len(rows), len(rows), text)
         self.window.show_status(text, 0)
         self.finished.emit(rows)
@@ -140,9 +146,45 @@ class BatchController(QtCore.QObject):
         self.window.show_error("Batch Solve", message)
         self.failed.emit(message)
 
+    def _show_rows(self, batch_dir: Path, rows: list[dict], units: str) -> None:
+        from model.batch import preview_path
+        self.rows = rows
+        self.dialog.set_rows(rows, units=units, previews=[preview_path(batch_dir, r["take"]) for r in rows])
+
+    def open_results(self, path: str) -> bool:
+        """Show the results of an earlier batch (its ``batch.json``, or the folder holding it: a run of this
+        dialog or of the ``batch`` command, here or on a cluster) in the dialog's table, with the previews in its
+        folder; a take then opens from it with the marker map that batch used. False (the reason in the dialog)
+        for a file that is not a batch summary, or while a batch runs."""
+        from model.batch import counts_text, read_summary
+        d = self.dialog
+        if d is None:
+            return False
+        if self.running:
+            d.set_status("A batch is running: open earlier results when it has finished.")
+            return False
+        try:
+            folder, summary = read_summary(path)
+        except RigInputError as exc:
+            d.set_status(str(exc))
+            self.window.show_status(str(exc))
+            return False
+        rows = summary["takes"]
+        marker_map = summary.get("marker_map")
+        self.map_path = marker_map if isinstance(marker_map, str) and Path(marker_map).is_file() else None
+        units = summary.get("rig_units") if isinstance(summary.get("rig_units"), str) else ""
+        self._show_rows(folder, rows, units)
+        rig = summary.get("rig")
+        d.set_progress(len(rows), len(rows), f"Results of {folder}" + (f" (rig {rig})" if isinstance(rig, str) else "")
+                       + f": {counts_text(rows)}.")
+        return True
+
     def open_take(self, row: int) -> bool:
-        """Open row ``row``'s take (and the batch's marker map) in the Mocap panel."""
+        """Open take ``row`` of the results (and the batch's marker map) in the Mocap panel."""
         if not 0 <= row < len(self.rows):
+            return False
+        if not self.rows[row]["path"]:
+            self.window.show_status(f"The batch's summary names no take file for {self.rows[row]['take']}.")
             return False
         mocap = self.window.mocap
         if not mocap.load_take(self.rows[row]["path"]):

@@ -145,7 +145,8 @@ class ProgressPrinter:
 
 
 def cmd_batch(args) -> int:
-    from model.batch import find_takes, run_batch, share_job, start_fork_server, take_names
+    from model.batch import (counts_text, find_takes, run_batch, share_job, start_fork_server, status_counts,
+                             take_names)
 
     if args.workers is not None and args.workers < 1:
         raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
@@ -163,10 +164,8 @@ def cmd_batch(args) -> int:
         announce_solver_build()      # the local workers' fork server compiles it before the first take
     rows = run_batch(job, takes, args.output, names=names, force=args.force, workers=args.workers,
                      scheduler=args.scheduler, progress=ProgressPrinter())
-    count = {s: sum(r["status"] == s for r in rows) for s in ("solved", "skipped", "failed")}
-    print(f"solved {count['solved']}, skipped {count['skipped']} (complete), failed {count['failed']}; "
-          f"wrote {args.output}/batch.json and batch.csv")
-    if count["failed"]:
+    print(f"{counts_text(rows)}; wrote {args.output}/batch.json and batch.csv")
+    if status_counts(rows)["failed"]:
         for r in rows:
             if r["status"] == "failed":
                 print(f"error: {r['error']}", file=sys.stderr)

@@ -38,8 +38,9 @@ def remember(widget: QtWidgets.QWidget, key: str) -> None:
     """Bring back the value ``widget`` had in the last session (saved under ``key``) and save every change.
 
     For a QComboBox (its item data, else its text), a QSpinBox or QDoubleSpinBox (its value, clamped to its
-    range) and a QCheckBox. A saved value that no longer fits (an item gone) is ignored. The widget's signals
-    are blocked while it is restored, so start-up triggers no work; a widget that is not one of those raises.
+    range), a QCheckBox and a QLineEdit (its text). A saved value that no longer fits (an item gone) is ignored.
+    The widget's signals are blocked while it is restored, so start-up triggers no work; a widget that is not one
+    of those raises.
     """
     saved = settings().value(key)
     widget.blockSignals(True)
@@ -64,6 +65,10 @@ def remember(widget: QtWidgets.QWidget, key: str) -> None:
             if saved is not None:
                 widget.setChecked(str(saved).lower() in ("true", "1"))
             widget.toggled.connect(lambda on: settings().setValue(key, bool(on)))
+        elif isinstance(widget, QtWidgets.QLineEdit):
+            if isinstance(saved, str):
+                widget.setText(saved)
+            widget.textChanged.connect(lambda text: settings().setValue(key, text))
         else:
             raise TypeError(f"Cannot remember a {type(widget).__name__}.")
     finally:

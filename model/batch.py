@@ -55,6 +55,7 @@ TAKE_SUFFIXES = (".c3d", ".trc", ".csv")
 DONE = "done.json"                      # the done-marker, written last in a take's set
 OUTPUTS = {"weights": "weights.csv", "report": "report.json", "preview": "preview.png", "cache": "cache.pc2"}
 SUMMARY_JSON, SUMMARY_CSV = "batch.json", "batch.csv"
+STATUSES = ("solved", "skipped", "failed")
 ROW_KEYS = ("take", "status", "error", "frames", "rate", "frames_per_second", "marker_rmse", "motion_explained",
             "seconds", "path", "output")
 PREVIEW_SIZE = (480, 360)
@@ -361,12 +362,65 @@ def write_summary(out_dir: str | Path, rows: list[dict], meta: dict | None = Non
                out_dir / SUMMARY_CSV: lambda f: f.write(buf.getvalue().encode())})
 
 
-def read_summary(out_dir: str | Path) -> dict:
-    path = Path(out_dir) / SUMMARY_JSON
+def status_counts(rows: list[dict]) -> dict[str, int]:
+    """How many rows are solved, skipped and failed."""
+    return {s: sum(r["status"] == s for r in rows) for s in STATUSES}
+
+
+def counts_text(rows: list[dict]) -> str:
+    """The rows' counts as the command and the dialog say them: 'solved 11, skipped 0 (complete), failed 1'."""
+    c = status_counts(rows)
+    return f"solved {c['solved']}, skipped {c['skipped']} (complete), failed {c['failed']}"
+
+
+SUMMARY_MAX_BYTES = 256 << 20    # a summary of 10,000 takes is ~5 MB; a larger "batch.json" is not one
+
+
+def read_summary(path: str | Path) -> tuple[Path, dict]:
+    """(the batch's folder, its summary) from a ``batch.json`` or the folder that holds one, as ``write_summary``
+    wrote it (a run of the ``batch`` command, on this machine or a cluster): its settings and counts, and
+    ``takes``, one row a take with every ``ROW_KEYS`` key (None where the file has none). A file that is not
+    such a summary -- not JSON, no list of takes, a row without a name or a status -- is one sentence
+    (RigInputError); nothing the rows name is read here."""
+    from .input_files import regular_file
+    p = Path(path)
+    p = regular_file(p / SUMMARY_JSON if p.is_dir() else p)
     try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise RigInputError(f"{path}: could not be read ({exc}).") from None
+        if p.stat().st_size > SUMMARY_MAX_BYTES:
+            raise RigInputError(f"{p}: is not a batch summary ({p.stat().st_size >> 20} MB).")
+        doc = json.loads(p.read_bytes().decode("utf-8"))
+    except OSError as exc:
+        raise RigInputError(f"{p}: cannot be read ({exc.strerror or exc}).") from None
+    except (UnicodeDecodeError, ValueError, RecursionError):
+        raise RigInputError(f"{p}: is not a batch summary (not JSON text).") from None
+    takes = doc.get("takes") if isinstance(doc, dict) else None
+    if not isinstance(takes, list):
+        raise RigInputError(f"{p}: is not a batch summary (no list of takes).")
+    rows = []
+    for i, r in enumerate(takes):
+        if not (isinstance(r, dict) and isinstance(r.get("take"), str) and r.get("status") in STATUSES):
+            raise RigInputError(f"{p}: is not a batch summary (take {i + 1} has no name or no status).")
+        row = {k: r.get(k) for k in ROW_KEYS}
+        for k in ("frames", "rate", "frames_per_second", "marker_rmse", "motion_explained", "seconds"):
+            v = row[k]
+            if v is not None and (isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v)):
+                row[k] = None                   # a value that is not a number is shown as none
+        for k in ("error", "path", "output"):
+            row[k] = row[k] if isinstance(row[k], str) else None
+        rows.append(row)
+    summary = {k: v for k, v in doc.items() if k != "takes"}
+    summary["takes"] = rows
+    return p.parent, summary
+
+
+def preview_path(batch_dir: str | Path, take: str) -> Path | None:
+    """The preview PNG of the take named ``take`` in the batch folder ``batch_dir`` (``<batch_dir>/<take>/
+    preview.png``), or None if it has none there. Found by the take's name inside the folder the user chose,
+    never by a path a summary holds: a name that is not one plain folder name has none."""
+    if not take or take in (".", "..") or any(c in take for c in ("/", "\\", "\0")):
+        return None
+    p = Path(batch_dir) / take / OUTPUTS["preview"]
+    return p if p.is_file() else None
 
 
 # --- the cluster ------------------------------------------------------------------------------------
@@ -634,8 +688,7 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
     out_dir.mkdir(parents=True, exist_ok=True)
     meta = {"rig": job.rig.name, "rig_units": job.rig.units, "settings": job.signature["settings"],
             "marker_map": job.marker_map.source if job.marker_map is not None else "automatic",
-            "solved": sum(r["status"] == "solved" for r in rows), "skipped": sum(r["status"] == "skipped" for r in rows),
-            "failed": sum(r["status"] == "failed" for r in rows), "seconds": outcome.seconds,
+            **status_counts(rows), "seconds": outcome.seconds,
             "frames_per_second": frames / max(outcome.seconds, 1e-9) if frames else None,
             "dashboard": outcome.dashboard}
     write_summary(out_dir, rows, meta)

@@ -123,6 +123,50 @@ def test_take_names_tell_takes_apart(tmp_path):
         find_takes([str(tmp_path / "*.nothing")])
 
 
+def test_a_batch_summary_reads_back_as_written_and_anything_else_is_one_sentence(tmp_path):
+    """``read_summary`` (the dialog's Open Results…): what ``write_summary`` wrote comes back row for row, from the
+    file or its folder; a file that is not a summary is one sentence naming it; a value that is not a number is
+    shown as none; previews are found by the take's name inside the batch's folder only."""
+    from model.batch import ROW_KEYS, preview_path, read_summary, write_summary
+    from model.errors import RigInputError
+    rows = [dict(dict.fromkeys(ROW_KEYS), take="a", status="solved", frames=358, rate=60.0, marker_rmse=0.0334612,
+                 motion_explained=0.997, path="/takes/a.c3d", output=str(tmp_path / "out" / "a")),
+            dict(dict.fromkeys(ROW_KEYS), take="b", status="failed", error="/takes/b.c3d: the file is truncated.",
+                 path="/takes/b.c3d")]
+    write_summary(tmp_path / "out", rows, {"rig": "ict-facekit", "rig_units": "cm", "marker_map": "/maps/m.json"})
+    for where in (tmp_path / "out", tmp_path / "out" / "batch.json"):
+        folder, summary = read_summary(where)
+        assert folder == tmp_path / "out" and summary["takes"] == rows
+        assert summary["rig"] == "ict-facekit" and summary["rig_units"] == "cm"
+    (tmp_path / "out" / "a").mkdir()
+    (tmp_path / "out" / "a" / "preview.png").write_bytes(b"png")
+    assert preview_path(tmp_path / "out", "a") == tmp_path / "out" / "a" / "preview.png"
+    assert preview_path(tmp_path / "out", "b") is None                    # failed: none written
+    (tmp_path / "out" / "preview.png").write_bytes(b"png")
+    for name in ("..", ".", "", "a/..", "../a"):          # never outside the chosen folder (each names a preview)
+        assert preview_path(tmp_path / "out" / "a", name) is None
+    # a row's number that is not one is shown as none; the rest of the row stays
+    doc = json.loads((tmp_path / "out" / "batch.json").read_text())
+    doc["takes"][0].update(marker_rmse="0.03", frames=True, rate=float("nan"), path=7)
+    (tmp_path / "odd.json").write_text(json.dumps(doc))
+    row = read_summary(tmp_path / "odd.json")[1]["takes"][0]
+    assert (row["marker_rmse"], row["frames"], row["rate"], row["path"]) == (None, None, None, None)
+    assert row["motion_explained"] == 0.997 and row["take"] == "a"
+    bad = {"not JSON": b'{"takes": [1, 2', "not text": b"\xff\xfe\x00", "a list": b"[]",
+           "no takes": b'{"rig": "x"}', "takes not a list": b'{"takes": {"a": 1}}',
+           "a row without a status": b'{"takes": [{"take": "a"}]}',
+           "a status of its own": b'{"takes": [{"take": "a", "status": "done"}]}',
+           "deep": b"[" * 100000 + b"]" * 100000, "empty": b""}
+    for what, data in bad.items():
+        (tmp_path / "bad.json").write_bytes(data)
+        with pytest.raises(RigInputError) as info:
+            read_summary(tmp_path / "bad.json")
+        message = str(info.value)
+        assert message.startswith(f"{tmp_path / 'bad.json'}: ") and "\n" not in message, (what, message)
+    with pytest.raises(RigInputError, match="does not exist"):
+        read_summary(tmp_path / "nowhere")
+
+
 def test_batch_on_a_local_cluster_matches_solve_resumes_and_survives_a_killed_worker(
         tmp_path, ict_dir, take_dir, takes, references):
     out = tmp_path / "out"

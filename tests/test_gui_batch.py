@@ -1,6 +1,8 @@
 """File ▸ Batch Solve… in the window: the open rig, two short takes and a truncated one solved on a local Dask
 cluster in the background (the window keeps handling events), the results table, a take opened from it in the
-Mocap panel; a bad option is said in the dialog, not raised."""
+Mocap panel; a bad option is said in the dialog, not raised. The table sorts by a header click, shows the selected
+take's preview, and shows an earlier batch's results (Open Results…) in a later session, whose form the dialog
+remembers."""
 from __future__ import annotations
 
 import json
@@ -8,7 +10,7 @@ import os
 import time
 
 import pytest
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 from tests.gui_helpers import make_window, open_and_wait
 
@@ -74,7 +76,7 @@ def test_batch_solve_dialog_runs_in_the_background_and_opens_a_take(qtbot, tmp_p
     assert d.table.rowCount() == 3 and d.table.item(1, 1).text() == "solved"
     assert d.table.item(2, 6).text() == rows[2]["error"]
     # the RMSE's unit in its header, the explained motion as a percentage, the error sentence whole on its row
-    assert d.table.horizontalHeaderItem(4).text() == "Marker RMSE (cm)"
+    assert d.table.horizontalHeaderItem(4).text() == "Marker RMSE\n(cm)"
     assert d.table.item(1, 5).text() == f"{100 * rows[1]['motion_explained']:.1f} %"
     error_rect = d.table.visualItemRect(d.table.item(2, 6))
     needed = d.table.fontMetrics().boundingRect(QtCore.QRect(0, 0, error_rect.width() - 8, 10000),
@@ -94,3 +96,96 @@ def test_batch_solve_dialog_runs_in_the_background_and_opens_a_take(qtbot, tmp_p
     assert str(w.mocap.workspace.take_path) == takes[1]
     assert w.mocap.marker_map is not None and len(w.mocap.marker_map.labels) == 60
     assert "second" in w.mocap.panel.take_label.text()
+
+
+def _click_row(qtbot, table, row: int) -> None:
+    rect = table.visualItemRect(table.item(row, 1))
+    qtbot.mouseClick(table.viewport(), QtCore.Qt.LeftButton, pos=rect.center())
+
+
+def _click_header(qtbot, table, column: int) -> None:
+    header = table.horizontalHeader()
+    x = header.sectionViewportPosition(column) + header.sectionSize(column) // 2
+    qtbot.mouseClick(header.viewport(), QtCore.Qt.LeftButton, pos=QtCore.QPoint(x, header.height() // 2))
+
+
+def _names(table) -> list[str]:
+    return [table.item(r, 0).text() for r in range(table.rowCount())]
+
+
+def test_batch_results_sort_show_previews_and_open_again_in_a_later_session(qtbot, tmp_path, ict_dir, take_dir):
+    from model.take_c3d import write_c3d
+    from model.takes import MarkerTake, load_take
+    t = load_take(take_dir / "take.c3d")
+    takes = []
+    for name, pos in (("first", t.positions[:40]), ("second", t.positions[40:80] + [10.0, 0.0, 0.0])):
+        write_c3d(tmp_path / f"{name}.c3d", MarkerTake(pos, t.labels, t.rate, t.units))
+        takes.append(str(tmp_path / f"{name}.c3d"))
+    (tmp_path / "cut.c3d").write_bytes((tmp_path / "first.c3d").read_bytes()[:5000])
+    takes.append(str(tmp_path / "cut.c3d"))
+    map_path = str(take_dir / "marker_map.json")
+
+    w = make_window(qtbot, tmp_path, size=(1400, 1000))
+    open_and_wait(qtbot, w, ict_dir)
+    _menu_action(w, "Batch Solve…").trigger()
+    d = w.batch.dialog
+    d.add_takes(takes)
+    qtbot.keyClicks(d.output_edit, str(tmp_path / "out"))
+    qtbot.keyClicks(d.map_edit, map_path)
+    d.workers_spin.setValue(1)
+    d.residual_combo.setCurrentText("joshi")
+    with qtbot.waitSignal(w.batch.finished, timeout=240000) as blocker:
+        qtbot.mouseClick(d.run_button, QtCore.Qt.LeftButton)
+    rows = blocker.args[0]
+    assert [r["status"] for r in rows] == ["solved", "solved", "failed"]
+    assert _names(d.table) == ["first", "second", "cut"]            # the batch's order until a header is clicked
+    assert d.preview_label.pixmap().isNull() and not d.open_button.isEnabled()
+
+    # the selected take's preview: the picture the batch drew for it, scaled into the pane
+    _click_row(qtbot, d.table, 1)
+    drawn = QtGui.QImage(str(tmp_path / "out" / "second" / "preview.png"))
+    assert drawn.size() == QtCore.QSize(480, 360)
+    expected = QtGui.QPixmap.fromImage(drawn).scaled(d.preview_label.size(), QtCore.Qt.KeepAspectRatio,
+                                                     QtCore.Qt.SmoothTransformation)
+    assert d.preview_label.pixmap().toImage() == expected.toImage()
+    assert d.preview_caption.text() == f"second: solved, frame {rows[1]['preview_frame']}"
+    _click_row(qtbot, d.table, 2)
+    assert d.preview_label.pixmap().isNull() and "failed" in d.preview_label.text()
+
+    # a header click sorts; the row clicked is the take opened, however the table is sorted
+    _click_header(qtbot, d.table, 0)
+    assert _names(d.table) == ["cut", "first", "second"]
+    _click_row(qtbot, d.table, 1)
+    assert d.preview_caption.text().startswith("first: solved")
+    qtbot.mouseClick(d.open_button, QtCore.Qt.LeftButton)
+    assert str(w.mocap.workspace.take_path) == takes[0] and w.mocap.take.n_frames == 40
+    # the marker RMSE, the worst first; a take without one (failed) last whichever way
+    rmse = {r["take"]: r["marker_rmse"] for r in rows}
+    _click_header(qtbot, d.table, 4)
+    assert _names(d.table) == sorted(["first", "second"], key=lambda n: -rmse[n]) + ["cut"]
+    _click_header(qtbot, d.table, 4)
+    assert _names(d.table) == sorted(["first", "second"], key=lambda n: rmse[n]) + ["cut"]
+
+    # a later session: the form as it was left; an earlier batch's results opened from its folder
+    w2 = make_window(qtbot, tmp_path, size=(1400, 1000))
+    open_and_wait(qtbot, w2, ict_dir)
+    _menu_action(w2, "Batch Solve…").trigger()
+    d2 = w2.batch.dialog
+    assert (d2.output(), d2.map_edit.text(), d2.workers_spin.value(), d2.residual_combo.currentText()) == (
+        str(tmp_path / "out"), map_path, 1, "joshi")
+    assert d2.take_list.count() == 0 and d2.table.rowCount() == 0
+    (tmp_path / "bad.json").write_text('{"takes": [1, 2')
+    d2.results_requested.emit(str(tmp_path / "bad.json"))       # what Open Results… emits for the file chosen
+    assert d2.status_label.text() == f"{tmp_path / 'bad.json'}: is not a batch summary (not JSON text)."
+    assert d2.table.rowCount() == 0
+    d2.results_requested.emit(str(tmp_path / "out" / "batch.json"))
+    assert _names(d2.table) == ["first", "second", "cut"]
+    assert d2.table.item(2, 6).text() == rows[2]["error"]
+    assert d2.table.horizontalHeaderItem(4).text() == "Marker RMSE\n(cm)"
+    assert "solved 2, skipped 0 (complete), failed 1" in d2.status_label.text()
+    _click_row(qtbot, d2.table, 1)
+    assert d2.preview_label.pixmap().toImage() == expected.toImage()
+    second = d2.table.visualItemRect(d2.table.item(1, 1)).center()
+    qtbot.mouseDClick(d2.table.viewport(), QtCore.Qt.LeftButton, pos=second)
+    assert str(w2.mocap.workspace.take_path) == takes[1] and w2.mocap.take.n_frames == 40
+    assert w2.mocap.marker_map is not None and w2.mocap.marker_map.source == map_path

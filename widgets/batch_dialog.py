@@ -7,12 +7,15 @@ from __future__ import annotations
 import os
 import shlex
 
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore, QtGui, QtWidgets
 
 TAKE_FILTER = "Marker takes (*.c3d *.trc *.csv);;All files (*)"
-COLUMNS = (("take", "Take"), ("status", "Status"), ("frames", "Frames"), ("rate", "Rate (fps)"),
-           ("marker_rmse", "Marker RMSE"), ("motion_explained", "Motion explained"), ("error", "Error"))
-TAKE_COLUMN_MAX = 200     # pixels: the take names' column at most (set_rows)
+# titles over two lines where a long one would widen its column of short numbers (room for the error sentences)
+COLUMNS = (("take", "Take"), ("status", "Status"), ("frames", "Frames"), ("rate", "Rate\n(fps)"),
+           ("marker_rmse", "Marker RMSE"), ("motion_explained", "Motion\nexplained"), ("error", "Error"))
+TAKE_COLUMN_MAX = 180     # pixels: the take names' column at most (set_rows)
+PREVIEW_WIDTH = 288       # pixels: the preview pane's picture at least (the batch draws 480x360)
+SORT_ARROW = 16           # pixels a column needs beside its title for the header's sort arrow
 RESIDUALS = ("default", "none", "joshi", "gaussian", "multiquadric")
 
 
@@ -27,18 +30,47 @@ def _cell_text(key: str, value) -> str:
     return f"{value:.4g}" if isinstance(value, float) else str(value)
 
 
+class _Item(QtWidgets.QTableWidgetItem):
+    """A results cell that sorts by its value (numbers as numbers, empty cells last), not by its text."""
+
+    def __init__(self, text: str, key) -> None:
+        super().__init__(text)
+        self.key = key
+
+    def __lt__(self, other) -> bool:
+        a, b = self.key, getattr(other, "key", None)
+        if a is None or b is None:
+            # an empty cell sorts after every value whichever way the column is sorted
+            ascending = (self.tableWidget() is None or
+                         self.tableWidget().horizontalHeader().sortIndicatorOrder() == QtCore.Qt.AscendingOrder)
+            return (a is not None) == ascending if (a is None) != (b is None) else False
+        return a < b
+
+
+def _sort_key(key: str, value):
+    if value is None or value == "":
+        return None
+    if key in ("frames", "rate", "marker_rmse", "motion_explained"):
+        try:
+            return float(value)
+        except (TypeError, ValueError):
+            return None
+    return str(value).lower()
+
+
 class BatchDialog(QtWidgets.QDialog):
     """Non-modal: the window stays usable while a batch runs."""
 
     run_requested = QtCore.Signal()
     cancel_requested = QtCore.Signal()
-    open_requested = QtCore.Signal(int)     # a row of the results table
+    open_requested = QtCore.Signal(int)     # a take of the results: its index in the rows given to set_rows
+    results_requested = QtCore.Signal(str)  # Open Results…: a batch.json (or the folder holding one) chosen
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
         self.setWindowTitle("Batch Solve")
         self.setObjectName("batch_dialog")
-        self.resize(960, 680)
+        self.resize(1180, 720)
         lay = QtWidgets.QVBoxLayout(self)
 
         takes_box = QtWidgets.QGroupBox("Takes")
@@ -98,12 +130,16 @@ class BatchDialog(QtWidgets.QDialog):
         self.run_button.setDefault(True)
         self.cancel_button = QtWidgets.QPushButton("Cancel")
         self.cancel_button.setEnabled(False)
+        self.results_button = QtWidgets.QPushButton("Open Results…")
+        self.results_button.setToolTip("Show an earlier batch's results (its batch.json, from this window or the "
+                                       "batch command): sort them, see each take's preview, open a take")
         self.progress_bar = QtWidgets.QProgressBar()
         self.progress_bar.setRange(0, 1)
         self.progress_bar.setValue(0)
         run_row.addWidget(self.run_button)
         run_row.addWidget(self.cancel_button)
         run_row.addWidget(self.progress_bar, 1)
+        run_row.addWidget(self.results_button)
         lay.addLayout(run_row)
         self.status_label = QtWidgets.QLabel("")
         self.status_label.setTextInteractionFlags(QtCore.Qt.TextBrowserInteraction)
@@ -120,22 +156,48 @@ class BatchDialog(QtWidgets.QDialog):
         self.table.verticalHeader().setVisible(False)
         self.table.setWordWrap(True)
         self.table.setTextElideMode(QtCore.Qt.ElideNone)   # an error sentence wraps whole (set_rows)
+        # a header click sorts (the worst first: the largest marker RMSE, the least motion explained, failed); the
+        # rows stay in the batch's order until then
+        self.table.horizontalHeader().setSortIndicator(-1, QtCore.Qt.AscendingOrder)
+        self.table.setSortingEnabled(True)
+        self.table.horizontalHeader().setToolTip("Click to sort by this column")
         # the rows' heights follow the error column's width as the dialog is resized
         self.table.horizontalHeader().sectionResized.connect(
             lambda column, _old, _new: self._fit_rows() if column == len(COLUMNS) - 1 else None)
-        lay.addWidget(self.table, 2)
+        # the selected take's preview (its most expressive frame, as the batch drew it) beside the table
+        preview_box = QtWidgets.QGroupBox("Preview")
+        pl = QtWidgets.QVBoxLayout(preview_box)
+        self.preview_label = QtWidgets.QLabel("Select a take to see its preview.")
+        self.preview_label.setAlignment(QtCore.Qt.AlignCenter)
+        self.preview_label.setMinimumSize(PREVIEW_WIDTH, PREVIEW_WIDTH * 3 // 4)
+        self.preview_label.setWordWrap(True)
+        self.preview_caption = QtWidgets.QLabel("")
+        self.preview_caption.setWordWrap(True)
+        pl.addWidget(self.preview_label, 1)
+        pl.addWidget(self.preview_caption)
         self.open_button = QtWidgets.QPushButton("Open in Mocap Panel")
         self.open_button.setEnabled(False)
-        lay.addWidget(self.open_button, 0, QtCore.Qt.AlignRight)
+        self.open_button.setToolTip("Open the selected take, with the batch's marker map, in the Mocap panel "
+                                    "(or double-click its row)")
+        pl.addWidget(self.open_button, 0, QtCore.Qt.AlignRight)
+        results = QtWidgets.QSplitter(QtCore.Qt.Horizontal)
+        results.addWidget(self.table)
+        results.addWidget(preview_box)
+        results.setStretchFactor(0, 1)
+        results.setChildrenCollapsible(False)
+        lay.addWidget(results, 2)
+        self._previews: list = []       # per row given to set_rows: its preview PNG's path or None
+        self._rows: list[dict] = []
+        self._picture = (None, QtGui.QPixmap())    # the preview shown: (its path, the picture read from it)
 
         self.add_files_button.clicked.connect(self._choose_takes)
         self.add_folder_button.clicked.connect(self._choose_folder)
         self.remove_button.clicked.connect(self._remove_selected)
         self.run_button.clicked.connect(self.run_requested)
         self.cancel_button.clicked.connect(self.cancel_requested)
-        self.table.itemSelectionChanged.connect(
-            lambda: self.open_button.setEnabled(bool(self.table.selectionModel().selectedRows())))
-        self.table.cellDoubleClicked.connect(lambda row, _col: self.open_requested.emit(row))
+        self.results_button.clicked.connect(self._choose_results)
+        self.table.itemSelectionChanged.connect(self._show_selected)
+        self.table.cellDoubleClicked.connect(lambda row, _col: self.open_requested.emit(self._take_at(row)))
         self.open_button.clicked.connect(self._open_selected)
 
     def _path_row(self, label: str, slot) -> tuple[QtWidgets.QLineEdit, QtWidgets.QWidget]:
@@ -169,6 +231,12 @@ class BatchDialog(QtWidgets.QDialog):
         if path:
             self.map_edit.setText(path)
 
+    def _choose_results(self) -> None:
+        path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open Batch Results", self.output(),
+                                                        "Batch summaries (batch.json);;JSON files (*.json)")
+        if path:
+            self.results_requested.emit(path)
+
     def add_takes(self, paths) -> None:
         have = set(self.takes())
         for p in paths:
@@ -180,10 +248,49 @@ class BatchDialog(QtWidgets.QDialog):
         for item in self.take_list.selectedItems():
             self.take_list.takeItem(self.take_list.row(item))
 
-    def _open_selected(self) -> None:
+    def _take_at(self, row: int) -> int:
+        """The index (in the rows given to ``set_rows``) of the take shown on table row ``row``, however sorted."""
+        item = self.table.item(row, 0)
+        return -1 if item is None else int(item.data(QtCore.Qt.UserRole))
+
+    def selected_take(self) -> int:
+        """The selected take's index in the rows given to ``set_rows``; -1 if none is selected."""
         rows = self.table.selectionModel().selectedRows()
-        if rows:
-            self.open_requested.emit(rows[0].row())
+        return self._take_at(rows[0].row()) if rows else -1
+
+    def _open_selected(self) -> None:
+        i = self.selected_take()
+        if i >= 0:
+            self.open_requested.emit(i)
+
+    def _show_selected(self) -> None:
+        """The selected take's preview, scaled to the pane, and what its row says under it."""
+        i = self.selected_take()
+        self.open_button.setEnabled(i >= 0)
+        if i < 0:
+            self.preview_label.setPixmap(QtGui.QPixmap())
+            self.preview_label.setText("Select a take to see its preview.")
+            self.preview_caption.setText("")
+            return
+        row, path = self._rows[i], self._previews[i]
+        if self._picture[0] != path:           # read once a selection: a resize only scales it again
+            self._picture = (path, QtGui.QPixmap(str(path)) if path is not None else QtGui.QPixmap())
+        pixmap = self._picture[1]
+        if pixmap.isNull():
+            self.preview_label.setPixmap(QtGui.QPixmap())
+            self.preview_label.setText(row.get("preview_error") or "This take has no preview"
+                                       + (" (it failed)." if row.get("status") == "failed" else "."))
+        else:
+            self.preview_label.setPixmap(pixmap.scaled(self.preview_label.size(), QtCore.Qt.KeepAspectRatio,
+                                                       QtCore.Qt.SmoothTransformation))
+        frame = row.get("preview_frame")
+        self.preview_caption.setText(f"{row.get('take')}: {row.get('status')}"
+                                     + (f", frame {frame}" if frame is not None and not pixmap.isNull() else ""))
+
+    def resizeEvent(self, event) -> None:
+        super().resizeEvent(event)
+        if self._rows:
+            self._show_selected()          # the preview scaled to its pane's new size
 
     # --- what the form says -----------------------------------------------------------------------
     def takes(self) -> list[str]:
@@ -225,17 +332,28 @@ class BatchDialog(QtWidgets.QDialog):
     def set_status(self, text: str) -> None:
         self.status_label.setText(text)
 
-    def set_rows(self, rows: list[dict], units: str = "") -> None:
-        """The results table: one row a take. ``units``: the rig's length unit, which the marker RMSE is in.
-        The error column takes the room left and wraps its sentence over as many lines as it needs."""
+    def set_rows(self, rows: list[dict], units: str = "", previews: list | None = None) -> None:
+        """The results table: one row a take, in the given order until a header click sorts it. ``units``: the
+        rig's length unit, which the marker RMSE is in. ``previews``: per row, the path of its preview PNG or
+        None. The error column takes the room left and wraps its sentence over as many lines as it needs."""
         labels = dict(COLUMNS)
         if units:
-            labels["marker_rmse"] = f"Marker RMSE ({units})"
+            labels["marker_rmse"] = f"Marker RMSE\n({units})"
+        self._rows = list(rows)
+        self._previews = list(previews) if previews is not None else [None] * len(rows)
+        self._picture = (None, QtGui.QPixmap())       # a batch run again writes its previews anew
+        self.table.setSortingEnabled(False)          # rows filled in the given order, then sorted as the header says
+        self.table.clearContents()
         self.table.setHorizontalHeaderLabels([labels[key] for key, _ in COLUMNS])
+        for j, (key, _) in enumerate(COLUMNS):
+            order = QtCore.Qt.DescendingOrder if key == "marker_rmse" else QtCore.Qt.AscendingOrder
+            self.table.horizontalHeaderItem(j).setData(QtCore.Qt.InitialSortOrderRole, order)
         self.table.setRowCount(len(rows))
         for i, r in enumerate(rows):
             for j, (key, _) in enumerate(COLUMNS):
-                item = QtWidgets.QTableWidgetItem(_cell_text(key, r.get(key)))
+                item = _Item(_cell_text(key, r.get(key)), _sort_key(key, r.get(key)))
+                if j == 0:
+                    item.setData(QtCore.Qt.UserRole, i)
                 if key in ("frames", "rate", "marker_rmse", "motion_explained"):
                     item.setTextAlignment(QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)
                 if key == "error" and r.get(key):
@@ -246,9 +364,12 @@ class BatchDialog(QtWidgets.QDialog):
         error_column = len(COLUMNS) - 1
         for j in range(error_column):
             self.table.resizeColumnToContents(j)
+            self.table.setColumnWidth(j, self.table.columnWidth(j) + SORT_ARROW)
         # a long take name is cut (its tooltip has it whole), so that the error sentences keep room to be read
         self.table.setColumnWidth(0, min(self.table.columnWidth(0), TAKE_COLUMN_MAX))
+        self.table.setSortingEnabled(True)
         self._fit_rows()
+        self._show_selected()
 
     def _fit_rows(self) -> None:
         """Each row as tall as its wrapped error sentence. Qt's item delegate measures wrapped text a few pixels
