@@ -56,6 +56,7 @@ class BatchController(QtCore.QObject):
             d.cancel_requested.connect(self.cancel)
             d.open_requested.connect(self.open_take)
             d.results_requested.connect(self.open_results)
+            d.dropped.connect(self.drop)
             for widget, key in ((d.output_edit, "output"), (d.map_edit, "markerMap"), (d.mode_combo, "mode"),
                                 (d.residual_combo, "residual"), (d.calibration_spin, "calibrationFrames"),
                                 (d.fixed_head_check, "fixedHead"), (d.extra_edit, "moreOptions"),
@@ -177,6 +178,24 @@ class BatchController(QtCore.QObject):
         rig = summary.get("rig")
         d.set_progress(len(rows), len(rows), f"Results of {folder}" + (f" (rig {rig})" if isinstance(rig, str) else "")
                        + f": {counts_text(rows)}.")
+        return True
+
+    def drop(self, paths: list[str]) -> bool:
+        """Files dropped on the dialog: takes and folders of takes join the list, a marker map fills its field, a
+        batch's results show (``model.batch.sort_dropped``). Anything else is one sentence, and nothing changes."""
+        from model.batch import sort_dropped
+        d = self.dialog
+        try:
+            items = sort_dropped(paths)
+        except RigInputError as exc:
+            d.set_status(str(exc))
+            self.window.show_status(str(exc))
+            return False
+        d.add_takes([str(p) for p in items.takes])
+        if items.marker_map is not None:
+            d.map_edit.setText(str(items.marker_map))
+        if items.results is not None:
+            return self.open_results(str(items.results))
         return True
 
     def open_take(self, row: int) -> bool:

@@ -28,6 +28,7 @@ from model.errors import RigInputError
 from model.project import Project
 from model.wording import count
 from solvers.mesh import extent
+from widgets.file_drops import FileDropTarget
 from widgets.scene import focus_vertices
 from widgets.segmentation_panel import SegmentationPanel
 from widgets.shapes_panel import PoseEdit, ShapesPanel
@@ -52,7 +53,7 @@ def _let_choices_shrink(panel: QtWidgets.QWidget) -> None:
                 combo.setMinimumContentsLength(12)   # characters
 
 
-class MainWindow(QtWidgets.QMainWindow):
+class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
     """The viewport, the panels in docks, the menus, undo and the status bar; it owns the controllers.
 
     Controllers plug in through a small public interface: ``add_dock``, ``add_menu``, ``add_action``,
@@ -593,19 +594,8 @@ class MainWindow(QtWidgets.QMainWindow):
         self.load_failed.emit(message)
 
     # --- files dropped on the window ---------------------------------------------------------------
-    def dragEnterEvent(self, event: QtGui.QDragEnterEvent) -> None:  # Qt override
-        urls = event.mimeData().urls() if event.mimeData().hasUrls() else []
-        if urls and all(u.isLocalFile() for u in urls):
-            event.acceptProposedAction()
-
-    def dragMoveEvent(self, event) -> None:  # Qt override
-        self.dragEnterEvent(event)
-
-    def dropEvent(self, event: QtGui.QDropEvent) -> None:  # Qt override
-        paths = [u.toLocalFile() for u in event.mimeData().urls() if u.isLocalFile()]
-        if paths:
-            event.acceptProposedAction()
-            self.open_dropped(paths)
+    def files_dropped(self, paths: list[str]) -> None:   # FileDropTarget
+        self.open_dropped(paths)
 
     def open_dropped(self, paths) -> bool:
         """Open dropped files through the menus' paths: a rig folder, project, glTF or OBJ as File ▸ Open, a take

@@ -96,6 +96,48 @@ def find_takes(items: list[str], exclude: str | Path | None = None) -> list[Path
     return out
 
 
+@dataclass
+class DroppedItems:
+    """What files dropped on the Batch Solve dialog are (``sort_dropped``)."""
+
+    takes: list[Path] = field(default_factory=list)   # take files and folders of takes, in the order dropped
+    marker_map: Path | None = None
+    results: Path | None = None                       # a batch's summary (batch.json) or the folder holding one
+
+
+def sort_dropped(paths: list[str | Path]) -> DroppedItems:
+    """Sort dropped paths by what the batch does with them: a ``batch.json`` (or a folder holding one) is an
+    earlier batch's results, another ``.json`` file the marker map, a take file (.c3d, .trc, .csv) or another
+    folder takes to solve. Anything else, or two maps or two results at once, is one sentence (RigInputError)
+    naming the path; nothing is read but the folders' listings."""
+    items = DroppedItems()
+    for raw in paths:
+        p = Path(raw)
+        if p.is_dir():
+            if (p / SUMMARY_JSON).is_file():
+                kind = "results"
+            else:
+                items.takes.append(p)
+                continue
+        elif not p.is_file():
+            raise RigInputError(f"{p}: does not exist.")
+        elif p.name.lower() == SUMMARY_JSON:
+            kind = "results"
+        elif p.suffix.lower() == ".json":
+            kind = "marker_map"
+        elif p.suffix.lower() in TAKE_SUFFIXES:
+            items.takes.append(p)
+            continue
+        else:
+            raise RigInputError(f"{p}: is not a take (.c3d, .trc or .csv), a marker map (.json) or a batch's "
+                                f"results (batch.json).")
+        if getattr(items, kind) is not None:
+            what = "marker maps" if kind == "marker_map" else "batch results"
+            raise RigInputError(f"{getattr(items, kind)}, {p}: two {what} were dropped; drop one.")
+        setattr(items, kind, p)
+    return items
+
+
 def take_names(paths: list[Path]) -> list[str]:
     """One output folder name per take: the file's stem; takes sharing a stem get as many parent folder names
     as tell them apart (``actor_take_take``), then their extension (``take_trc``)."""

@@ -52,3 +52,20 @@ def mouse(widget, kind, pos, buttons=QtCore.Qt.LeftButton, button=QtCore.Qt.Left
                            held, QtCore.Qt.NoModifier)
     QtWidgets.QApplication.sendEvent(widget, ev)
     QtWidgets.QApplication.processEvents()
+
+
+def drop_files(widget, paths) -> bool:
+    """Drag ``paths`` over ``widget`` and drop them (real mime data with file URLs); returns whether the widget
+    took the drop."""
+    mime = QtCore.QMimeData()
+    mime.setUrls([QtCore.QUrl.fromLocalFile(str(p)) for p in paths])
+    pos = QtCore.QPoint(widget.width() // 2, widget.height() // 2)
+    enter = QtGui.QDragEnterEvent(pos, QtCore.Qt.CopyAction, mime, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier)
+    QtWidgets.QApplication.sendEvent(widget, enter)
+    if not enter.isAccepted():
+        return False
+    drop = QtGui.QDropEvent(QtCore.QPointF(pos), QtCore.Qt.CopyAction, mime, QtCore.Qt.LeftButton,
+                            QtCore.Qt.NoModifier)
+    QtWidgets.QApplication.sendEvent(widget, drop)
+    QtWidgets.QApplication.processEvents()
+    return drop.isAccepted()

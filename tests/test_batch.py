@@ -167,6 +167,30 @@ def test_a_batch_summary_reads_back_as_written_and_anything_else_is_one_sentence
         read_summary(tmp_path / "nowhere")
 
 
+def test_files_dropped_on_the_batch_dialog_are_sorted_by_what_they_are(tmp_path):
+    """``sort_dropped``: takes and folders of takes in the order dropped, a .json the marker map, a batch.json or
+    a folder holding one the results; anything else, or two maps, one sentence naming the paths."""
+    from model.batch import sort_dropped
+    from model.errors import RigInputError
+    for name in ("a.c3d", "b.TRC", "c.csv", "map.json", "face.obj", "other.json"):
+        (tmp_path / name).write_text("x")
+    (tmp_path / "takes").mkdir()
+    (tmp_path / "out").mkdir()
+    (tmp_path / "out" / "batch.json").write_text("{}")
+    items = sort_dropped([tmp_path / "b.TRC", tmp_path / "takes", tmp_path / "map.json", tmp_path / "a.c3d"])
+    assert items.takes == [tmp_path / "b.TRC", tmp_path / "takes", tmp_path / "a.c3d"]
+    assert items.marker_map == tmp_path / "map.json" and items.results is None
+    assert sort_dropped([tmp_path / "out"]).results == tmp_path / "out"
+    summary = tmp_path / "out" / "batch.json"
+    assert sort_dropped([summary, tmp_path / "c.csv"]).results == summary
+    for paths, says in (([tmp_path / "face.obj"], "is not a take"), ([tmp_path / "nowhere.c3d"], "does not exist"),
+                        ([tmp_path / "map.json", tmp_path / "other.json"], "two marker maps"),
+                        ([tmp_path / "out", tmp_path / "out" / "batch.json"], "two batch results")):
+        with pytest.raises(RigInputError, match=says) as info:
+            sort_dropped(paths)
+        assert str(info.value).startswith(str(paths[0])), info.value
+
+
 def test_batch_on_a_local_cluster_matches_solve_resumes_and_survives_a_killed_worker(
         tmp_path, ict_dir, take_dir, takes, references):
     out = tmp_path / "out"

@@ -1,8 +1,8 @@
 """File ▸ Batch Solve… in the window: the open rig, two short takes and a truncated one solved on a local Dask
 cluster in the background (the window keeps handling events), the results table, a take opened from it in the
 Mocap panel; a bad option is said in the dialog, not raised. The table sorts by a header click, shows the selected
-take's preview, and shows an earlier batch's results (Open Results…) in a later session, whose form the dialog
-remembers."""
+take's preview, and shows an earlier batch's results (Open Results…, or its folder dropped on the dialog) in a later
+session, whose form the dialog remembers."""
 from __future__ import annotations
 
 import json
@@ -12,7 +12,7 @@ import time
 import pytest
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from tests.gui_helpers import make_window, open_and_wait
+from tests.gui_helpers import drop_files, make_window, open_and_wait
 
 pytestmark = [pytest.mark.gui, pytest.mark.data]
 if not os.environ.get("CI"):
@@ -178,7 +178,17 @@ def test_batch_results_sort_show_previews_and_open_again_in_a_later_session(qtbo
     d2.results_requested.emit(str(tmp_path / "bad.json"))       # what Open Results… emits for the file chosen
     assert d2.status_label.text() == f"{tmp_path / 'bad.json'}: is not a batch summary (not JSON text)."
     assert d2.table.rowCount() == 0
-    d2.results_requested.emit(str(tmp_path / "out" / "batch.json"))
+    # files dropped on the dialog: takes and a folder of them join the list, a .json is the marker map, a file
+    # that is none of these is one sentence; a batch's folder shows its results
+    (tmp_path / "more").mkdir()
+    (tmp_path / "more" / "third.c3d").write_bytes((tmp_path / "first.c3d").read_bytes())
+    d2.map_edit.clear()
+    assert drop_files(d2, [tmp_path / "first.c3d", tmp_path / "more", take_dir / "marker_map.json"])
+    assert d2.takes() == [takes[0], str(tmp_path / "more")] and d2.map_edit.text() == map_path
+    (tmp_path / "face.obj").write_text("v 0 0 0\n")
+    assert drop_files(d2, [tmp_path / "face.obj"])
+    assert d2.status_label.text().startswith(f"{tmp_path / 'face.obj'}: is not a take") and d2.take_list.count() == 2
+    assert drop_files(d2, [tmp_path / "out"])
     assert _names(d2.table) == ["first", "second", "cut"]
     assert d2.table.item(2, 6).text() == rows[2]["error"]
     assert d2.table.horizontalHeaderItem(4).text() == "Marker RMSE\n(cm)"

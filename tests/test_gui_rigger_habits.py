@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from tests.gui_helpers import make_window, open_and_wait
+from tests.gui_helpers import drop_files, make_window, open_and_wait
 from tests.test_gui_editor_habits import _focus
 
 pytestmark = pytest.mark.gui
@@ -255,26 +255,9 @@ def test_f_frames_the_selected_marker_in_marker_mode(qtbot, tmp_path):
 
 
 # --- files dropped on the window ------------------------------------------------------------------------------------
-def _drop(w, paths) -> bool:
-    """Drag ``paths`` over the window and drop them (real mime data with file URLs); returns whether the
-    window took the drag."""
-    mime = QtCore.QMimeData()
-    mime.setUrls([QtCore.QUrl.fromLocalFile(str(p)) for p in paths])
-    pos = QtCore.QPoint(w.width() // 2, w.height() // 2)
-    enter = QtGui.QDragEnterEvent(pos, QtCore.Qt.CopyAction, mime, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier)
-    QtWidgets.QApplication.sendEvent(w, enter)
-    if not enter.isAccepted():
-        return False
-    drop = QtGui.QDropEvent(QtCore.QPointF(pos), QtCore.Qt.CopyAction, mime, QtCore.Qt.LeftButton,
-                            QtCore.Qt.NoModifier)
-    QtWidgets.QApplication.sendEvent(w, drop)
-    QtWidgets.QApplication.processEvents()
-    return drop.isAccepted()
-
-
 def test_a_rig_folder_take_and_marker_map_dropped_together_open(qtbot, tmp_path, ict_dir, take_dir):
     w = make_window(qtbot, tmp_path)
-    assert _drop(w, [take_dir / "marker_map.json", take_dir / "take.c3d", ict_dir])
+    assert drop_files(w, [take_dir / "marker_map.json", take_dir / "take.c3d", ict_dir])
     qtbot.waitUntil(lambda: not w.is_loading, timeout=60000)
     QtWidgets.QApplication.processEvents()
     assert w.document.rig.n_vertices == 26719
@@ -290,21 +273,21 @@ def test_a_dropped_project_gltf_or_take_opens_and_anything_else_is_one_sentence(
     rig = build_sample_rig()
     project = tmp_path / "face.bsproj"
     save_project(Project(rig=rig), project)
-    assert _drop(w, [project])
+    assert drop_files(w, [project])
     qtbot.waitUntil(lambda: not w.is_loading, timeout=60000)
     assert w.document.path == project
     note = tmp_path / "notes.txt"
     note.write_text("not a rig")
-    assert _drop(w, [note])
+    assert drop_files(w, [note])
     assert w.last_error.startswith(f"{note}: is not something Blendshape Studio opens")
     assert w.last_error.endswith(".") and ". " not in w.last_error and w.document.path == project   # one sentence
     w.last_error = None
-    assert _drop(w, [llf_csv])                 # a Live Link Face take on the open rig
+    assert drop_files(w, [llf_csv])                 # a Live Link Face take on the open rig
     assert w.mocap.workspace.take_path == llf_csv
     from model.export import export_rig
     gltf = tmp_path / "face.glb"
     export_rig(rig, gltf)
-    assert _drop(w, [gltf])
+    assert drop_files(w, [gltf])
     qtbot.waitUntil(lambda: not w.is_loading, timeout=60000)
     QtWidgets.QApplication.processEvents()
     assert w.document.path is None and w.document.rig.n_vertices == rig.n_vertices and w.last_error is None

@@ -9,6 +9,8 @@ import shlex
 
 from PySide6 import QtCore, QtGui, QtWidgets
 
+from .file_drops import FileDropTarget
+
 TAKE_FILTER = "Marker takes (*.c3d *.trc *.csv);;All files (*)"
 # titles over two lines where a long one would widen its column of short numbers (room for the error sentences)
 COLUMNS = (("take", "Take"), ("status", "Status"), ("frames", "Frames"), ("rate", "Rate\n(fps)"),
@@ -58,19 +60,21 @@ def _sort_key(key: str, value):
     return str(value).lower()
 
 
-class BatchDialog(QtWidgets.QDialog):
+class BatchDialog(FileDropTarget, QtWidgets.QDialog):
     """Non-modal: the window stays usable while a batch runs."""
 
     run_requested = QtCore.Signal()
     cancel_requested = QtCore.Signal()
     open_requested = QtCore.Signal(int)     # a take of the results: its index in the rows given to set_rows
     results_requested = QtCore.Signal(str)  # Open Results…: a batch.json (or the folder holding one) chosen
+    dropped = QtCore.Signal(list)           # local files and folders dropped on the dialog (their paths)
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
         self.setWindowTitle("Batch Solve")
         self.setObjectName("batch_dialog")
         self.resize(1180, 720)
+        self.setAcceptDrops(True)     # takes, folders of takes, a marker map or a batch.json dropped anywhere on it
         lay = QtWidgets.QVBoxLayout(self)
 
         takes_box = QtWidgets.QGroupBox("Takes")
@@ -230,6 +234,9 @@ class BatchDialog(QtWidgets.QDialog):
         path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Marker Map", "", "Marker maps (*.json)")
         if path:
             self.map_edit.setText(path)
+
+    def files_dropped(self, paths: list[str]) -> None:   # FileDropTarget
+        self.dropped.emit(paths)
 
     def _choose_results(self) -> None:
         path, _ = QtWidgets.QFileDialog.getOpenFileName(self, "Open Batch Results", self.output(),
