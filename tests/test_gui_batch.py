@@ -199,3 +199,6 @@ def test_batch_results_sort_show_previews_and_open_again_in_a_later_session(qtbo
     qtbot.mouseDClick(d2.table.viewport(), QtCore.Qt.LeftButton, pos=second)
     assert str(w2.mocap.workspace.take_path) == takes[1] and w2.mocap.take.n_frames == 40
     assert w2.mocap.marker_map is not None and w2.mocap.marker_map.source == map_path
+    _click_row(qtbot, d2.table, 0)                                   # Enter on a row opens it too
+    qtbot.keyClick(d2.table, QtCore.Qt.Key_Return)
+    assert str(w2.mocap.workspace.take_path) == takes[0]

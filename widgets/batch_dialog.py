@@ -182,7 +182,7 @@ class BatchDialog(FileDropTarget, QtWidgets.QDialog):
         self.open_button = QtWidgets.QPushButton("Open in Mocap Panel")
         self.open_button.setEnabled(False)
         self.open_button.setToolTip("Open the selected take, with the batch's marker map, in the Mocap panel "
-                                    "(or double-click its row)")
+                                    "(or double-click its row, or press Enter)")
         pl.addWidget(self.open_button, 0, QtCore.Qt.AlignRight)
         results = QtWidgets.QSplitter(QtCore.Qt.Horizontal)
         results.addWidget(self.table)
@@ -201,7 +201,8 @@ class BatchDialog(FileDropTarget, QtWidgets.QDialog):
         self.cancel_button.clicked.connect(self.cancel_requested)
         self.results_button.clicked.connect(self._choose_results)
         self.table.itemSelectionChanged.connect(self._show_selected)
-        self.table.cellDoubleClicked.connect(lambda row, _col: self.open_requested.emit(self._take_at(row)))
+        # a double-click or Enter on a row opens its take
+        self.table.activated.connect(lambda index: self.open_requested.emit(self._take_at(index.row())))
         self.open_button.clicked.connect(self._open_selected)
 
     def _path_row(self, label: str, slot) -> tuple[QtWidgets.QLineEdit, QtWidgets.QWidget]:
