@@ -428,11 +428,14 @@ def read_summary(path: str | Path) -> tuple[Path, dict]:
     p = Path(path)
     p = regular_file(p / SUMMARY_JSON if p.is_dir() else p)
     try:
-        if p.stat().st_size > SUMMARY_MAX_BYTES:
-            raise RigInputError(f"{p}: is not a batch summary ({p.stat().st_size >> 20} MB).")
-        doc = json.loads(p.read_bytes().decode("utf-8"))
+        size = p.stat().st_size
+        if size > SUMMARY_MAX_BYTES:
+            raise RigInputError(f"{p}: is not a batch summary ({size / 2 ** 20:.0f} MB).")
+        data = p.read_bytes()
     except OSError as exc:
         raise RigInputError(f"{p}: cannot be read ({exc.strerror or exc}).") from None
+    try:
+        doc = json.loads(data.decode("utf-8"))
     except (UnicodeDecodeError, ValueError, RecursionError):
         raise RigInputError(f"{p}: is not a batch summary (not JSON text).") from None
     takes = doc.get("takes") if isinstance(doc, dict) else None

@@ -123,7 +123,7 @@ def test_take_names_tell_takes_apart(tmp_path):
         find_takes([str(tmp_path / "*.nothing")])
 
 
-def test_a_batch_summary_reads_back_as_written_and_anything_else_is_one_sentence(tmp_path):
+def test_a_batch_summary_reads_back_as_written_and_anything_else_is_one_sentence(tmp_path, monkeypatch):
     """``read_summary`` (the dialog's Open Results…): what ``write_summary`` wrote comes back row for row, from the
     file or its folder; a file that is not a summary is one sentence naming it; a value that is not a number is
     shown as none; previews are found by the take's name inside the batch's folder only."""
@@ -165,6 +165,11 @@ def test_a_batch_summary_reads_back_as_written_and_anything_else_is_one_sentence
         assert message.startswith(f"{tmp_path / 'bad.json'}: ") and "\n" not in message, (what, message)
     with pytest.raises(RigInputError, match="does not exist"):
         read_summary(tmp_path / "nowhere")
+    import model.batch
+    (tmp_path / "big.json").write_bytes(b" " * 3_000_000 + b"{}")          # larger than any summary may be
+    monkeypatch.setattr(model.batch, "SUMMARY_MAX_BYTES", 2 << 20)
+    with pytest.raises(RigInputError, match=r"big.json: is not a batch summary \(3 MB\)"):
+        read_summary(tmp_path / "big.json")
 
 
 def test_files_dropped_on_the_batch_dialog_are_sorted_by_what_they_are(tmp_path):
