@@ -89,9 +89,7 @@ class BatchController(QtCore.QObject):
                 raise RigInputError("Choose the output folder first.")
             takes = find_takes(d.takes(), exclude=d.output())
         except RigInputError as exc:
-            d.set_status(str(exc))
-            self.window.show_status(str(exc))
-            return False
+            return self._refuse(str(exc))
         args.cache = d.cache_check.isChecked()
         rig = self.window.document.rig.copy()      # a snapshot: the user may go on editing the open rig
         if args.rig_units:
@@ -114,6 +112,12 @@ class BatchController(QtCore.QObject):
         self.window.show_status(f"Batch solve of {len(takes)} take(s) started.")
         self.runner.submit(job, self._on_done, self._on_failed)
         return True
+
+    def _refuse(self, sentence: str) -> bool:
+        """Say why the dialog's request cannot be done, in the dialog and the status bar; False."""
+        self.dialog.set_status(sentence)
+        self.window.show_status(sentence)
+        return False
 
     def cancel(self) -> None:
         if self.running:
@@ -167,9 +171,7 @@ class BatchController(QtCore.QObject):
         try:
             folder, summary = read_summary(path)
         except RigInputError as exc:
-            d.set_status(str(exc))
-            self.window.show_status(str(exc))
-            return False
+            return self._refuse(str(exc))
         rows = summary["takes"]
         marker_map = summary.get("marker_map")
         self.map_path = marker_map if isinstance(marker_map, str) and Path(marker_map).is_file() else None
@@ -188,9 +190,7 @@ class BatchController(QtCore.QObject):
         try:
             items = sort_dropped(paths)
         except RigInputError as exc:
-            d.set_status(str(exc))
-            self.window.show_status(str(exc))
-            return False
+            return self._refuse(str(exc))
         d.add_takes([str(p) for p in items.takes])
         if items.marker_map is not None:
             d.map_edit.setText(str(items.marker_map))

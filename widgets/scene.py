@@ -50,6 +50,16 @@ def cell_array(offsets: np.ndarray, connectivity: np.ndarray):
     return cells
 
 
+def polygon_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray, layout=None):
+    """A pyvista PolyData of float32 ``points`` (a copy) and these polygons only (``polygon_cells``): given its
+    points at construction, pyvista would add a vertex cell for each point."""
+    import pyvista as pv
+    mesh = pv.PolyData()
+    mesh.points = np.array(points, dtype=np.float32)
+    mesh.SetPolys(polygon_cells(face_counts, face_indices, layout))
+    return mesh
+
+
 def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
              normals: VertexNormals | None = None, layout=None):
     """A pyvista PolyData of the surface (float32 points for display) with smooth-shading normals.
@@ -58,11 +68,8 @@ def rig_mesh(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarr
     faces, else a new one) is kept on the mesh object as ``mesh._display_normals`` so SurfaceArrays can
     refresh them, and the polygons as ``mesh._faces`` (counts, indices) for ``add_surface(cull_hidden=True)``.
     """
-    import pyvista as pv
     # A copy: SurfaceArrays writes into the mesh's own arrays, never into the caller's.
-    mesh = pv.PolyData()            # given points, pyvista would add a vertex cell for each
-    mesh.points = np.array(points, dtype=np.float32)
-    mesh.SetPolys(polygon_cells(face_counts, face_indices, layout))
+    mesh = polygon_mesh(points, face_counts, face_indices, layout)
     if normals is None:
         normals = VertexNormals(face_counts, face_indices, mesh.n_points)
     object.__setattr__(mesh, "_display_normals", normals)

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scene import polygon_cells
+from .scene import polygon_mesh
 
 
 class TexturedSurface:
@@ -19,9 +19,7 @@ class TexturedSurface:
         import pyvista as pv
         from vtkmodules.util.numpy_support import vtk_to_numpy
         self.vertex = np.asarray(split.vertex, dtype=np.int64)
-        self.mesh = pv.PolyData()   # given points, pyvista would add a vertex cell for each
-        self.mesh.points = np.asarray(points, np.float32)[self.vertex]
-        self.mesh.SetPolys(polygon_cells(face_counts, split.face_indices))
+        self.mesh = polygon_mesh(np.asarray(points, np.float32)[self.vertex], face_counts, split.face_indices)
         self.mesh.point_data["Normals"] = np.asarray(normals, np.float32)[self.vertex]
         self.mesh.point_data.active_normals_name = "Normals"
         self.mesh.active_texture_coordinates = np.asarray(split.uv, np.float32)
