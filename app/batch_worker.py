@@ -3,8 +3,10 @@
 a take's preview needs, loaded once for every worker instead of in each worker's first take. The VTK modules of
 ``widgets.snapshots.SurfaceSnapshots`` (VTK alone: not pyvista, whose import with the matplotlib it loads cost the
 fork server ~0.7 s of CPU), with the render window backend the preview uses (EGL: ``prefer_egl``), Pillow's PNG
-writer and the plugins it loads on its first save, the graph search of the preview's hidden faces (``solvers.mesh.hidden_back_faces``), and the compiled solve
-kernel. Nothing is rendered here: an OpenGL context must not be shared across a fork.
+writer and the plugins it loads on its first save, the graph search of the preview's hidden faces
+(``solvers.mesh.hidden_back_faces``), the compiled solve kernel, and the libraries of the OpenGL driver that will draw
+the previews (``load_gl_driver``); BLAS is limited to one thread here, for every worker. Nothing is rendered here: an
+OpenGL context must not be shared across a fork.
 """
 from __future__ import annotations
 
@@ -48,8 +50,42 @@ def leave_egl() -> bool:
     return True
 
 
+def load_gl_driver() -> list[str]:
+    """Load (``dlopen``) the libraries of the OpenGL driver a worker's preview window will use, without making a
+    display or a context: EGL (glvnd's libEGL), Mesa's EGL and its software rasteriser (``swrast_dri.so``, which
+    brings LLVM, ~110 MB). A worker forked from here then finds them loaded and relocated when it makes its window
+    (~15 ms of its start on the 2-core development machine, before its first take). Where a library is not found
+    nothing is loaded for it (another driver, or no EGL: the worker loads what it uses itself). Returns the paths
+    loaded."""
+    import ctypes
+    loaded = []
+
+    def load(path: str) -> bool:
+        try:
+            ctypes.CDLL(path, mode=ctypes.RTLD_GLOBAL)
+        except OSError:
+            return False
+        loaded.append(path)
+        return True
+
+    if not load("libEGL.so.1") or not load("libEGL_mesa.so.0"):     # glvnd's and Mesa's sonames
+        return loaded
+    with open("/proc/self/maps") as maps:       # where Mesa is: its drivers are in dri/ beside it
+        mesa = next((line.split()[-1] for line in maps if "libEGL_mesa" in line), None)
+    dirs = [d for d in os.environ.get("LIBGL_DRIVERS_PATH", "").split(os.pathsep) if d]
+    if mesa is not None:
+        dirs.append(os.path.join(os.path.dirname(mesa), "dri"))
+    for d in dirs:
+        driver = os.path.join(d, "swrast_dri.so")
+        if os.path.isfile(driver) and load(driver):
+            break
+    return loaded
+
+
 prefer_egl()
 use_offscreen_backend_if_headless()
+if egl_over_display or not os.environ.get("DISPLAY"):
+    load_gl_driver()
 
 import PIL.Image  # noqa: E402
 import PIL.PngImagePlugin  # noqa: E402,F401
@@ -63,14 +99,16 @@ take_kernel.kernel()
 
 PIL.Image.preinit()    # the plugins Pillow loads on its first save (BMP, GIF, JPEG, PPM): ~10 ms of a first take
 
+from model.batch import _limit_blas_once  # noqa: E402
+
+_limit_blas_once()     # inherited by every worker (~15 ms of each one's start: threadpoolctl reads the libraries)
+
 
 def warm_up() -> None:
-    """What a worker's first take would otherwise do first, done while the worker waits for it: one BLAS thread
-    (``model.batch._limit_blas_once``, ~13 ms: threadpoolctl looks through the loaded libraries) and the preview's
+    """What a worker's first take would otherwise do first, done while the worker waits for it: the preview's
     window with its shaders compiled (``app.cli_batch.warm_up_preview``, ~0.1 s). Never fails: a worker that cannot
     draw finds out in its first preview, as before."""
-    from model.batch import _limit_blas_once
-    _limit_blas_once()
+    _limit_blas_once()     # done in the fork server already, unless this module was imported elsewhere since
     try:
         from app.cli_batch import warm_up_preview
         warm_up_preview()

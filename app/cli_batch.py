@@ -35,13 +35,14 @@ def add_parser(sub, rig_arg) -> None:
 _snapshots = None      # this process's widgets.snapshots.SurfaceSnapshots: a worker draws every take's preview with it
 
 
-def render_preview(points, face_counts, face_indices, path, *, focus=None) -> None:
+def render_preview(points, face_counts, face_indices, path, *, focus=None, view=None) -> None:
     """A take's preview PNG: ``widgets.scene.render_png``'s picture from the front, drawn by one off-screen plotter
     kept in this process for every preview of the same surface (``SurfaceSnapshots``: ~0.06 s a preview on ICT
     instead of ~0.18 with a new plotter each time), PNG compression level 1 (a 480x360 preview encodes in 10 ms
     instead of 41 and weighs ~150 KB instead of ~125). On a local cluster's worker that chose EGL over an X display
     (``app.batch_worker.prefer_egl``), a preview that fails through EGL is drawn again through the display's window,
-    which that worker keeps using."""
+    which that worker keeps using. ``view``: the faces' hidden back sides and display normals found beforehand
+    (``model.rig_prep.DefaultView``: a batch's job carries them), instead of on the first preview (~0.03 s on ICT)."""
     from model.batch import PREVIEW_SIZE
     from widgets.snapshots import SurfaceSnapshots
 
@@ -51,9 +52,9 @@ def render_preview(points, face_counts, face_indices, path, *, focus=None) -> No
             _snapshots.close()
             _snapshots = None
         if _snapshots is not None and not _snapshots.matches(face_counts, face_indices, PREVIEW_SIZE, "front"):
-            _snapshots.set_faces(face_counts, face_indices)    # another rig, or the stand-in of ``warm_up_preview``
+            _snapshots.set_faces(face_counts, face_indices, view)   # another rig, or ``warm_up_preview``'s stand-in
         if _snapshots is None:
-            _snapshots = SurfaceSnapshots(face_counts, face_indices, size=PREVIEW_SIZE, camera="front")
+            _snapshots = SurfaceSnapshots(face_counts, face_indices, size=PREVIEW_SIZE, camera="front", view=view)
         _snapshots.write(points, path, focus=focus, compress_level=1)
 
     try:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from solvers.take_solve import DEFAULTS, Progress, TakeSolution, TakeSolver
+from solvers.take_solve import DEFAULTS, Progress, TakeSolution, TakeSolver, marker_rest, residual_preparation
 
 from .correctives import solver_correctives
 from .errors import RigInputError
@@ -187,11 +187,31 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
     return sol
 
 
+def _settings_options(settings: dict) -> dict:
+    """The solver options ``settings`` give (``SOLVER_OPTIONS``), the defaults for those they leave out."""
+    return {k: settings[k] if settings.get(k) is not None else DEFAULTS[k] for k in SOLVER_OPTIONS}
+
+
+def prepare_solver(rig: Rig, marker_map: MarkerMap, settings: dict) -> dict:
+    """``solve_take``'s ``prepared`` made before any take, for takes that carry every marker of ``marker_map``
+    solved with ``settings``: the residual's preparation (``solvers.take_solve.residual_preparation``: the
+    vertices it moves, the phantom ring and the kernel matrix; ~10 ms on ICT; not its evaluation matrix, which is
+    made where it is used: on ICT it is 12 MB, a third of the rig's deltas, made in ~5 ms). A batch makes it once,
+    with its job, and sends it to every worker with the job, instead of each worker's first take making it again;
+    a take without some of the map's markers makes its own."""
+    options = take_solver_options(_settings_options(settings), rig.units)
+    rest = marker_rest(rig.neutral, marker_map.binding(rig, marker_map.labels))
+    prepared: dict = {}
+    residual = {k: options[k] for k in ("residual", "rbf_scale", "rbf_lambda", "phantom_distance")}
+    residual_preparation(np.asarray(rig.neutral, dtype=np.float64), rest, prepared=prepared, **residual)
+    return prepared
+
+
 def _head_and_options(settings: dict, take: MarkerTake) -> tuple[bool, int, dict]:
     """(fixed head, calibration frames, solver options without the regions) of ``settings`` on ``take``.
     A one-frame take (a keyframe) has no neutral frames to calibrate on and no motion to follow: its markers
     are taken as already in rig space, and temporal smoothness has no neighbour to act on."""
-    options = {k: settings[k] if settings.get(k) is not None else DEFAULTS[k] for k in SOLVER_OPTIONS}
+    options = _settings_options(settings)
     fixed_head = bool(settings.get("fixed_head")) or take.n_frames == 1
     if fixed_head:
         options["head_motion"] = False

@@ -358,6 +358,52 @@ class TakeSolution:
         return x
 
 
+def marker_rest(neutral: np.ndarray, binding) -> np.ndarray:
+    """(M, 3) float64 the markers at rest: ``binding`` ((M, V) sparse, or M vertex indices) applied to the
+    rig's ``neutral``, as ``TakeSolver`` computes them (and keys its residual's preparation by)."""
+    neutral = np.asarray(neutral, dtype=np.float64)
+    if not sp.issparse(binding):
+        idx = np.asarray(binding, dtype=np.int64)
+        binding = sp.csr_matrix((np.ones(idx.size), (np.arange(idx.size), idx)), shape=(idx.size, neutral.shape[0]))
+    return np.asarray(sp.csr_matrix(binding) @ neutral)
+
+
+def residual_preparation(neutral: np.ndarray, rest: np.ndarray, *, residual: str = DEFAULTS["residual"],
+                         rbf_scale: float = DEFAULTS["rbf_scale"], rbf_lambda: float = DEFAULTS["rbf_lambda"],
+                         n_phantoms: int = DEFAULTS["n_phantoms"],
+                         phantom_distance: float = DEFAULTS["phantom_distance"],
+                         residual_vertices: np.ndarray | None = None,
+                         prepared: dict | None = None) -> tuple[np.ndarray, RBFResidual | None]:
+    """(the vertices the residual moves, the RBF residual) of markers at rest ``rest`` (M, 3) on the rig's
+    ``neutral`` (V, 3) float64 (``TakeSolver``'s, with its options; lengths in the rig's units): Fidaleo's
+    phantom ring (``solvers.rbf.phantom_points``) and the RBF interpolant of Joshi et al. 2003, Eq. 3, over the
+    vertices within ``phantom_distance`` of a marker (its evaluation matrix is built on first use). No residual:
+    (no vertices, None).
+
+    ``prepared``: a dict kept for one rig across takes; the result is taken from it for the same marker points and
+    options, else made and put in it. A batch makes it once for its marker map before any take
+    (``model.take_workspace.prepare_solver``) and sends it with the job."""
+    if residual == "none":
+        return np.zeros(0, dtype=np.int64), None
+    key = ("residual", rest.tobytes(), residual, float(rbf_scale), float(rbf_lambda), int(n_phantoms),
+           float(phantom_distance),
+           None if residual_vertices is None else np.asarray(residual_vertices, dtype=np.int64).tobytes())
+    hit = None if prepared is None else prepared.get(key)
+    if hit is not None:
+        return hit
+    from scipy.spatial import cKDTree
+    if residual_vertices is None:
+        d, _ = cKDTree(rest).query(neutral)
+        residual_vertices = np.flatnonzero(d < phantom_distance)
+    residual_vertices = np.asarray(residual_vertices, dtype=np.int64)
+    ph = phantom_points(neutral, rest, phantom_distance, n_phantoms) if n_phantoms else []
+    rbf = RBFResidual(rest, neutral[ph] if len(ph) else None, neutral[residual_vertices], kernel=residual,
+                      scale=rbf_scale, lam=rbf_lambda)
+    if prepared is not None:
+        prepared[key] = (residual_vertices, rbf)
+    return residual_vertices, rbf
+
+
 class TakeSolver:
     """Everything of a take solve that depends only on the rig and the marker set, built once.
 
@@ -439,7 +485,7 @@ class TakeSolver:
         self.head_motion = bool(head_motion)  # False: markers are already head-stabilised in rig space
         self.rigid_weighting = float(rigid_weighting)
         self.rigid_noise = float(rigid_noise)
-        self.rest = np.asarray(self.binding @ self.neutral)  # (M, 3) markers at rest
+        self.rest = marker_rest(self.neutral, self.binding)  # (M, 3) markers at rest
         self._Dm_rig = np.stack([self.binding @ self.deltas[k] for k in range(K)])  # (K, M, 3)
         self.mode, self.lam_sparsity, self.lam_temporal = mode, float(lam_sparsity), float(lam_temporal)
         self.ridge = float(ridge)   # rig units²: keeps H positive definite where λ_t is 0
@@ -470,27 +516,10 @@ class TakeSolver:
         self._set_actor(self.rest, None)
         # Residual.
         self.residual = residual
-        self.rbf: RBFResidual | None = None
-        self.residual_vertices = np.zeros(0, dtype=np.int64)
-        if residual != "none":
-            key = ("residual", self.rest.tobytes(), residual, float(rbf_scale), float(rbf_lambda), int(n_phantoms),
-                   float(phantom_distance),
-                   None if residual_vertices is None else np.asarray(residual_vertices, dtype=np.int64).tobytes())
-            hit = None if prepared is None else prepared.get(key)
-            if hit is not None:
-                self.residual_vertices, self.rbf = hit
-            else:
-                from scipy.spatial import cKDTree
-                if residual_vertices is None:
-                    d, _ = cKDTree(self.rest).query(self.neutral)
-                    residual_vertices = np.flatnonzero(d < phantom_distance)
-                self.residual_vertices = np.asarray(residual_vertices, dtype=np.int64)
-                ph = phantom_points(self.neutral, self.rest, phantom_distance, n_phantoms) if n_phantoms else []
-                self.rbf = RBFResidual(self.rest, self.neutral[ph] if len(ph) else None,
-                                       self.neutral[self.residual_vertices], kernel=residual, scale=rbf_scale,
-                                       lam=rbf_lambda)
-                if prepared is not None:
-                    prepared[key] = (self.residual_vertices, self.rbf)
+        self.residual_vertices, self.rbf = residual_preparation(
+            self.neutral, self.rest, residual=residual, rbf_scale=rbf_scale, rbf_lambda=rbf_lambda,
+            n_phantoms=n_phantoms, phantom_distance=phantom_distance, residual_vertices=residual_vertices,
+            prepared=prepared)
 
     # --- the actor's model at the markers (ALGORITHMS.md §12) -------------------------------------
     def _set_actor(self, anchor: np.ndarray, jac: np.ndarray | None) -> None:

@@ -338,6 +338,44 @@ def _wait_for(path: Path, proc: subprocess.Popen, seconds: float) -> None:
         time.sleep(0.2)
 
 
+def test_the_job_carries_the_take_solvers_preparation_and_a_workers_first_take_uses_it(tmp_path, ict_rig,
+                                                                                       take_dir, monkeypatch):
+    """The residual's preparation (phantom ring, kernel matrix) is made once with the job and scattered with it: a
+    worker's first take of a take with every marker of the map makes none and writes the same weights, byte for
+    byte, as a take that made its own; a take with a marker missing in most frames (left out) makes its own (other
+    marker points)."""
+    import pickle
+
+    import solvers.take_solve
+    from model.batch import BatchJob, solve_take_file
+    from model.marker_map import load_marker_map
+    from model.take_c3d import write_c3d
+    from model.takes import MarkerTake, load_take
+    settings = {"mode": "global", "residual": None, "calibration_frames": 30, "fixed_head": False}
+    mm = load_marker_map(take_dir / "marker_map.json")
+    job = BatchJob.prepare(ict_rig, settings, marker_map=mm)
+    assert len(job.solver_prep) == 1
+    made = []
+    real = solvers.take_solve.phantom_points
+    monkeypatch.setattr(solvers.take_solve, "phantom_points", lambda *a: made.append(1) or real(*a))
+    received = pickle.loads(pickle.dumps(job, protocol=5))            # as a worker receives it
+    row = solve_take_file(received, str(take_dir / "take.c3d"), str(tmp_path / "with"))
+    assert row["status"] == "solved" and not made and len(received.prepared) == 1
+    own = pickle.loads(pickle.dumps(BatchJob.prepare(ict_rig, settings, marker_map=mm), protocol=5))
+    own.solver_prep = None                                            # as before: the first take makes it
+    made.clear()
+    solve_take_file(own, str(take_dir / "take.c3d"), str(tmp_path / "own"))
+    assert made == [1]
+    assert (tmp_path / "with" / "weights.csv").read_bytes() == (tmp_path / "own" / "weights.csv").read_bytes()
+    t = load_take(take_dir / "take.c3d")
+    positions = t.positions.copy()
+    positions[: 2 * t.n_frames // 3, t.labels.index(mm.labels[0])] = np.nan     # left out: missing in most frames
+    write_c3d(tmp_path / "lacking.c3d", MarkerTake(positions, t.labels, t.rate, t.units))
+    row = solve_take_file(received, str(tmp_path / "lacking.c3d"), str(tmp_path / "lacking"))
+    assert row["status"] == "solved", row["error"]
+    assert made == [1, 1] and len(received.prepared) == 2
+
+
 def test_batch_against_a_separate_scheduler_and_worker(tmp_path, ict_dir, take_dir, takes, references):
     """``dask scheduler`` and ``dask worker`` as their own processes on 127.0.0.1; ``batch --scheduler`` uses them."""
     sched_file = tmp_path / "scheduler.json"
@@ -812,38 +850,48 @@ def test_a_batch_whose_driver_is_killed_still_writes_its_summary_and_leaves_no_p
 _KEPT_AND_FRESH = """
 import sys
 import numpy as np
+import solvers.mesh
 from app.cli_batch import render_preview
 from model.batch import PREVIEW_SIZE, preview_focus
+from model.parts import drawn_faces
 from model.pose import PoseEvaluator
 from model.readers import load_rig
+from model.rig_prep import default_view
 from widgets.scene import render_png
 rig = load_rig(sys.argv[1])
 ev, focus = PoseEvaluator(rig), preview_focus(rig)
+counts, indices = drawn_faces(rig)[1:]          # the faces a batch's preview draws (BatchJob.preview_faces)
+view = default_view(rig)                        # their hidden back sides and normals, as the batch's job carries them
 poses = [ev.pose(np.array([float(n in names) for n in rig.shape_names]))
          for names in (["jawOpen"], ["mouthSmile_L", "mouthSmile_R"], ["jawOpen"])]
 import app.cli_batch
 from widgets.snapshots import SurfaceSnapshots
 app.cli_batch.warm_up_preview()           # as a worker does before its first take (app.batch_worker.dask_setup)
 window = app.cli_batch._snapshots.window
+found, real = [], solvers.mesh.hidden_back_faces
+solvers.mesh.hidden_back_faces = lambda *a: found.append(1) or real(*a)
 for k, pts in enumerate(poses):
-    render_preview(pts, rig.face_counts, rig.face_indices, f"{sys.argv[2]}/kept{k}.png", focus=focus)
+    render_preview(pts, counts, indices, f"{sys.argv[2]}/kept{k}.png", focus=focus, view=view)
+assert not found, "a preview found the hidden back sides again"
+solvers.mesh.hidden_back_faces = real
 assert app.cli_batch._snapshots.window is window, "the previews did not use the window made beforehand"
-fresh = SurfaceSnapshots(rig.face_counts, rig.face_indices, size=PREVIEW_SIZE)
+fresh = SurfaceSnapshots(counts, indices, size=PREVIEW_SIZE)
 fresh.image(poses[0], focus=focus)
 n_actors = lambda s: s.renderer.GetActors().GetNumberOfItems()
 assert n_actors(app.cli_batch._snapshots) == n_actors(fresh), "the stand-in surface is still drawn"
 assert "pyvista" not in sys.modules, "a preview imported pyvista"
 for k, pts in enumerate(poses):
-    render_png(pts, rig.face_counts, rig.face_indices, f"{sys.argv[2]}/fresh{k}.png", focus=focus, size=PREVIEW_SIZE,
-               camera="front")
+    render_png(pts, counts, indices, f"{sys.argv[2]}/fresh{k}.png", focus=focus, size=PREVIEW_SIZE, camera="front")
 """
 
 
 def test_a_worker_draws_each_preview_as_a_fresh_render_would(tmp_path, ict_dir, ict_rig):
     """A worker keeps one off-screen render window for every preview (``render_preview``,
     ``widgets.snapshots.SurfaceSnapshots``, VTK without pyvista), made with a stand-in surface before its first take
-    (``warm_up_preview``): each picture is pixel for pixel what a fresh ``render_png`` (pyvista's plotter) of that
-    pose draws, never the previous take's nor the stand-in. In a process of its own, as a worker's."""
+    (``warm_up_preview``), and takes the faces' hidden back sides and normals from the job (``default_view``)
+    instead of finding them: each picture is pixel for pixel what a fresh ``render_png`` (pyvista's plotter, which
+    finds them on the pose) of that pose draws, never the previous take's nor the stand-in. In a process of its own,
+    as a worker's."""
     from model.batch import PREVIEW_SIZE
     from tests.image_compare import load_png
     assert {"jawOpen", "mouthSmile_L", "mouthSmile_R"} <= set(ict_rig.shape_names)

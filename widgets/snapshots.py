@@ -30,6 +30,11 @@ def _rgb(color) -> tuple[float, float, float]:
     return tuple(round(255 * float(c)) / 255 for c in color)
 
 
+def _view_for(view, face_counts: np.ndarray):
+    """``view`` where it is of as many faces as ``face_counts``, else None."""
+    return view if view is not None and len(view.hidden_backs) == len(face_counts) else None
+
+
 class SurfaceSnapshots:
     """``render_png``'s picture (front camera by default, no colour map, no overlays) of one surface in pose after
     pose, from one off-screen render window kept between pictures: only the points and normals change
@@ -42,11 +47,13 @@ class SurfaceSnapshots:
     sides are found once, on the first pose, as the viewport finds them on the rig it loads. ``matches`` tells
     whether a surface's faces, picture size and camera are this one's."""
 
-    def __init__(self, face_counts: np.ndarray, face_indices: np.ndarray, *, size=(1024, 768), camera: str = "front"):
+    def __init__(self, face_counts: np.ndarray, face_indices: np.ndarray, *, size=(1024, 768), camera: str = "front",
+                 view=None):
         use_offscreen_backend_if_headless()
         import vtkmodules.vtkRenderingOpenGL2  # noqa: F401  (VTK's OpenGL classes behind the render window)
         from vtkmodules.vtkRenderingCore import vtkLight, vtkRenderer, vtkRenderWindow
         self.face_counts, self.face_indices = np.array(face_counts), np.array(face_indices)
+        self.view = _view_for(view, self.face_counts)
         self.size, self.camera = tuple(int(v) for v in size), camera
         self.window = vtkRenderWindow()
         self.window.SetMultiSamples(MULTI_SAMPLES)
@@ -78,13 +85,14 @@ class SurfaceSnapshots:
         return (tuple(int(v) for v in size) == self.size and camera == self.camera
                 and np.array_equal(face_counts, self.face_counts) and np.array_equal(face_indices, self.face_indices))
 
-    def set_faces(self, face_counts: np.ndarray, face_indices: np.ndarray) -> None:
+    def set_faces(self, face_counts: np.ndarray, face_indices: np.ndarray, view=None) -> None:
         """Draw a surface of other faces from the next picture on, in the same window: its OpenGL context and the
         shader programs it compiled stay (VTK keeps a window's programs by their source, which depends on the
         material and lighting, not on the mesh). ``app.cli_batch.warm_up_preview`` draws a stand-in first so that
-        a worker's first take does not wait for them (~0.12 s on ICT)."""
+        a worker's first take does not wait for them (~0.12 s on ICT). ``view``: as for the constructor."""
         self.renderer.RemoveAllViewProps()
         self.face_counts, self.face_indices = np.array(face_counts), np.array(face_indices)
+        self.view = _view_for(view, self.face_counts)
         self._mesh = self._arrays = None
 
     def _add_surface(self, points: np.ndarray) -> None:
@@ -98,9 +106,12 @@ class SurfaceSnapshots:
         pts.SetData(numpy_to_vtk(np.array(points, dtype=np.float32), deep=True))
         mesh.SetPoints(pts)
         mesh.SetPolys(polygon_cells(self.face_counts, self.face_indices))
-        normals = VertexNormals(self.face_counts, self.face_indices, len(points))
+        view = self.view if self.view is not None and self.view.normals.n_points == len(points) else None
+        normals = view.normals if view is not None else VertexNormals(self.face_counts, self.face_indices, len(points))
         mesh._display_normals = normals
         mesh._faces = (self.face_counts, self.face_indices)
+        if view is not None:       # ``scene._back_sides`` takes them instead of finding them
+            mesh._hidden_faces, mesh._back_layout = view.hidden_backs, view.backs
         n = numpy_to_vtk(normals(np.asarray(points, dtype=np.float32)).astype(np.float32), deep=True)
         n.SetName("Normals")
         mesh.GetPointData().SetNormals(n)
