@@ -4,8 +4,9 @@
 the local cluster's fork server, the driver, the scheduler and the workers -- are sampled every 0.1 s while it runs:
 the peak of their summed proportional set size (PSS: a page shared by n processes counts 1/n in each, so the sum
 is the batch's physical memory), with their maps of in-memory files taken out and those files (the job's,
-``model.batch_driver``) counted whole instead, and each process's peak private memory (USS), against the rig's
-delta array.
+``model.batch_driver``) counted whole instead, and each process's peak private memory (USS, without the pages of the
+in-memory files: a page of the job's file that one worker has touched before any other is unique to it for a while,
+not a copy), against the rig's delta array.
 
 The job reaches the driver and the workers through one memory file they all map (``model.shared_pickle``), so the
 rig's arrays are in memory twice (the command's own and the file) whatever the number of workers; before, the
@@ -57,14 +58,17 @@ def _role(p: psutil.Process, root: psutil.Process) -> str:
 
 
 def _sample(procs: list[psutil.Process], root: psutil.Process) -> tuple[dict[int, tuple[str, int, int]], int]:
-    """(pid: (name, PSS without in-memory files, USS) of each process still there; bytes of the in-memory files they
-    hold open)."""
+    """(pid: (name, PSS without in-memory files, USS without in-memory files) of each process still there; bytes of
+    the in-memory files they hold open)."""
     out, files = {}, {}
     for p in procs:
         try:
             m = p.memory_full_info()
-            in_memfd = sum(mp.pss for mp in p.memory_maps() if mp.path.startswith("/memfd:"))  # counted below
-            out[p.pid] = (_role(p, root), m.pss - in_memfd, m.uss)
+            memfd = [mp for mp in p.memory_maps() if mp.path.startswith("/memfd:")]
+            in_memfd = sum(mp.pss for mp in memfd)                                    # counted below
+            # a page of the job's file that only this process has touched yet is "unique" to it too: not its own
+            own = m.uss - sum(mp.private_clean + mp.private_dirty for mp in memfd)
+            out[p.pid] = (_role(p, root), m.pss - in_memfd, own)
             for fd in os.listdir(f"/proc/{p.pid}/fd"):
                 path = f"/proc/{p.pid}/fd/{fd}"
                 if os.readlink(path).startswith("/memfd:"):
@@ -115,7 +119,7 @@ def test_bench_batch_memory_on_the_studio_rig(benchmark, take_dir, tmp_path, lev
                                 peak_uss_gib=[(roles[pid], uss / GiB) for pid, uss in ranked[:6]], at_peak=at_peak)
     print(f"\nbatch of 4 takes on 2 workers, {vertices:,}-vertex 228-shape studio rig (deltas {deltas / GiB:.2f} GiB): "
           f"the batch's processes together peaked at {peak_total / GiB:.2f} GiB ({peak_total / deltas:.2f}x the "
-          f"deltas; GiB at that moment: {at_peak}); private memory (USS) peaks: "
+          f"deltas; GiB at that moment: {at_peak}); private memory (USS without the job's file) peaks: "
           + ", ".join(f"{roles[pid]} {uss / GiB:.2f}" for pid, uss in ranked[:6]) + " GiB")
     # no worker and not the driver holds a copy of the rig: each one's private memory stays under the deltas' size
     # (before the shared job file: 0.73 GiB a worker and 0.69 GiB the driver here, for 0.54 GiB of deltas)
