@@ -3,10 +3,11 @@
 a take's preview needs, loaded once for every worker instead of in each worker's first take. The VTK modules of
 ``widgets.snapshots.SurfaceSnapshots`` (VTK alone: not pyvista, whose import with the matplotlib it loads cost the
 fork server ~0.7 s of CPU), with the render window backend the preview uses (EGL: ``prefer_egl``), Pillow's PNG
-writer and the plugins it loads on its first save, the graph search of the preview's hidden faces
-(``solvers.mesh.hidden_back_faces``), the compiled solve kernel, and the libraries of the OpenGL driver that will draw
-the previews (``load_gl_driver``); BLAS is limited to one thread here, for every worker. Nothing is rendered here: an
-OpenGL context must not be shared across a fork.
+writer and the plugins it loads on its first save, the compiled solve kernel, and the libraries of the OpenGL driver
+that will draw the previews (``load_gl_driver``); BLAS is limited to one thread here, for every worker. Not the graph
+search of the preview's hidden back sides (``scipy.sparse.csgraph``, ~12 ms here): the job brings them found
+(``model.batch.BatchJob.preview_view``). Nothing is rendered here: an OpenGL context must not be shared across a
+fork.
 """
 from __future__ import annotations
 
@@ -89,7 +90,6 @@ if egl_over_display or not os.environ.get("DISPLAY"):
 
 import PIL.Image  # noqa: E402
 import PIL.PngImagePlugin  # noqa: E402,F401
-import scipy.sparse.csgraph  # noqa: E402,F401
 import vtkmodules.vtkRenderingOpenGL2  # noqa: E402,F401
 
 import widgets.snapshots  # noqa: E402,F401
