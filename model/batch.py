@@ -569,11 +569,13 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
     if forked:
         _skip_dask_forkserver_preload()
     # One core a worker: Dask's nanny already sets one BLAS/OpenMP thread; llvmpipe, which draws the previews
-    # off screen, would otherwise rasterise on every core of the machine from each worker at once. The workers
+    # off screen, would otherwise rasterise on every core of the machine from each worker at once, and rasterises in
+    # the worker's own thread (``LP_NUM_THREADS=0``) rather than hand each picture to a raster thread of its own
+    # (which the system may run on the other worker's core). The workers
     # also preload ``preload`` the Dask way: a module's ``dask_setup(worker)`` runs when the worker has started
     # (``app.batch_worker.dask_setup`` readies the previews while the job is on its way).
     options = dict(n_workers=n, threads_per_worker=1, host="127.0.0.1", dashboard_address=dashboard_address,
-                   silence_logs=logging.ERROR, env={"LP_NUM_THREADS": "1"}, preload=list(preload))
+                   silence_logs=logging.ERROR, env={"LP_NUM_THREADS": "0"}, preload=list(preload))
     cluster = _forked_scheduler_cluster(**options) if forked else LocalCluster(processes=True, **options)
     return Client(cluster), cluster
 
