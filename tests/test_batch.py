@@ -422,6 +422,23 @@ def test_batch_says_when_no_scheduler_answers(tmp_path, ict_dir, take_dir, takes
     assert "--scheduler" in proc.stderr and proc.stderr.count("\n") == 1
 
 
+def test_a_map_that_does_not_fit_the_rig_stops_the_batch_before_any_take_in_one_sentence(tmp_path, ict_dir, take_dir,
+                                                                                          takes):
+    """A marker map bound to a vertex the rig does not have fits no take: the command says so in one sentence naming
+    the map before it starts a cluster (the job's solver preparation binds the map), exit 2, and writes nothing."""
+    doc = json.loads((take_dir / "marker_map.json").read_text())
+    label = next(iter(doc["markers"]))
+    doc["markers"][label] = 10 ** 6
+    bad = tmp_path / "map.json"
+    bad.write_text(json.dumps(doc))
+    proc = run_cli("batch", ict_dir, takes[1], "--map", bad, "-o", tmp_path / "out", "--workers", "1", check=False,
+                   timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    assert proc.stderr.count("\n") == 1 and str(bad) in proc.stderr and label in proc.stderr, proc.stderr
+    assert "Traceback" not in proc.stderr and "take(s)" not in proc.stdout
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
 def test_ctrl_c_stops_a_batch_without_tracebacks_and_leaves_no_process(tmp_path, ict_dir, take_dir, takes):
     """Ctrl-C in a terminal sends SIGINT to the command's whole process group: the command closes the cluster, writes
