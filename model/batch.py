@@ -540,6 +540,20 @@ def _skip_dask_forkserver_preload() -> None:
         distributed.utils._forkserver_preload_set = True
 
 
+NANNY_START_POLL = 0.005     # seconds between a local worker's nanny's looks at whether its worker has started
+
+
+def _poll_worker_starts_often() -> None:
+    """A nanny learns that its worker process has started (and registered with the scheduler) by polling a queue,
+    every 50 ms by Dask's default (``distributed.nanny.WorkerProcess._init_msg_interval``): the local cluster was up
+    0-50 ms after its last worker had registered, 12-58 ms in the development machine's timelines (a batch on 2
+    workers takes ~2 s). Every ``NANNY_START_POLL`` s instead: a few dozen more looks at a queue while the cluster
+    starts. Left alone where Dask no longer has that attribute."""
+    from distributed.nanny import WorkerProcess
+    if isinstance(getattr(WorkerProcess, "_init_msg_interval", None), float):
+        WorkerProcess._init_msg_interval = min(WorkerProcess._init_msg_interval, NANNY_START_POLL)
+
+
 def start_client(workers: int | None = None, scheduler: str | None = None, *, timeout: float | None = None,
                  dashboard_address: str = "127.0.0.1:8787", preload: tuple = ()):
     """(Dask client, local cluster or None): a scheduler's address, or a LocalCluster of ``workers`` processes
@@ -568,6 +582,7 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
               and start_fork_server(preload))
     if forked:
         _skip_dask_forkserver_preload()
+    _poll_worker_starts_often()
     # One core a worker: Dask's nanny already sets one BLAS/OpenMP thread; llvmpipe, which draws the previews
     # off screen, would otherwise rasterise on every core of the machine from each worker at once, and rasterises in
     # the worker's own thread (``LP_NUM_THREADS=0``) rather than hand each picture to a raster thread of its own
