@@ -32,7 +32,6 @@ import io
 import json
 import os
 import shutil
-import tempfile
 import time
 import uuid
 from dataclasses import dataclass, field
@@ -42,12 +41,12 @@ from typing import Callable
 import numpy as np
 
 from . import batch_driver, shared_pickle
-from .atomic import process_alive
+from .atomic import process_alive, temp_path, write_temporary
 from .batch_driver import ClusterOutcome
 from .errors import RigInputError
 from .fork_server import start_fork_server
 from .marker_map import MarkerMap
-from .output_set import finish_interrupted_sets, write_set
+from .output_set import commit_set, finish_interrupted_sets, write_set
 from .pose import PoseEvaluator
 from .rig import Rig
 from .rig_prep import shape_reach
@@ -360,44 +359,51 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     except RigInputError as exc:
         return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
     out_dir.mkdir(parents=True, exist_ok=True)
-    _sweep_temporaries(out_dir)
-    tmp = Path(tempfile.mkdtemp(prefix=f"{_TMP_PREFIX}{os.getpid()}-", dir=out_dir))
+    finish_interrupted_sets(out_dir)     # a killed writer's set completed, its temporaries removed
+    _sweep_temporaries(out_dir)          # and the private folders earlier versions wrote a take into first
+    # Each output is written once, completely and fsynced, into a temporary beside its target (named for this
+    # process: ``model.atomic.temp_path``), and the set is moved into place at the end, done.json with it
+    # (``commit_set``): before, the outputs went into a private folder and were copied from there into the set's
+    # own temporaries, each file written and fsynced twice.
+    temps: dict[Path, Path] = {}
+
+    def temporary(fname: str) -> Path:
+        target = out_dir / fname
+        temps[target] = temp_path(target, suffix=target.suffix)
+        return temps[target]
+
     try:
         files = {OUTPUTS["weights"]: lambda p: export_weights_csv(ws, p),
                  OUTPUTS["report"]: lambda p: export_report(ws, p)}
         if job.cache:
             files[OUTPUTS["cache"]] = lambda p: export_pc2(ws, p, evaluator=job.evaluator)
         for fname, write in files.items():
-            write(tmp / fname)
+            write(temporary(fname))
         weights = ws.playing_weights()
         frame, preview_error = preview_frame(weights), None
         if job.preview is not None:
             try:          # a preview that cannot be drawn (no display, no EGL) costs the take its picture only
                 surface = sol.dense(frame) if sol is not None else job.evaluator.pose(weights[frame])
-                job.preview(surface, *job.preview_faces(), tmp / OUTPUTS["preview"], focus=job.focus,
+                job.preview(surface, *job.preview_faces(), temporary(OUTPUTS["preview"]), focus=job.focus,
                             view=job.preview_view)
                 files[OUTPUTS["preview"]] = None
             except Exception as exc:
+                temps.pop(out_dir / OUTPUTS["preview"]).unlink(missing_ok=True)
                 preview_error = f"the preview could not be rendered ({type(exc).__name__}: {exc})"
-        report = json.loads((tmp / OUTPUTS["report"]).read_text())
+        report = json.loads(temps[out_dir / OUTPUTS["report"]].read_text())
         measured = {k: None if report[k] is None else float(report[k]) for k in ("frames_per_second", "marker_rmse")}
         row = _row(name, take_path, out_dir, "solved", frames=int(report["frames"]), rate=float(report["rate"]),
                    **measured,
                    motion_explained=report.get("motion_explained"), preview_frame=frame, preview_error=preview_error)
         row["seconds"] = time.perf_counter() - start
         done = {"take_file": identity, "signature": job.signature, "outputs": list(files), "row": row}
-
-        def copier(src: Path):
-            def write(f) -> None:
-                with open(src, "rb") as s:
-                    shutil.copyfileobj(s, f, 1 << 20)
-            return write
-
-        writers = {out_dir / fname: copier(tmp / fname) for fname in files}
-        writers[out_dir / DONE] = lambda f: f.write((json.dumps(done, indent=1) + "\n").encode())
-        write_set(writers)
-    finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        temps[out_dir / DONE] = write_temporary(out_dir / DONE,
+                                                lambda f: f.write((json.dumps(done, indent=1) + "\n").encode()))
+    except BaseException:
+        for tmp in temps.values():
+            tmp.unlink(missing_ok=True)
+        raise
+    commit_set(temps)
     return row
 
 

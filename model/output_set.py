@@ -41,16 +41,31 @@ def write_set(writers: dict[str | Path, Callable[[IO[bytes]], object]]) -> None:
     for folder in {p.parent for p, _ in items}:
         folder.mkdir(parents=True, exist_ok=True)
         finish_interrupted_sets(folder)
-    temps: list[tuple[Path, Path]] = []
+    temps: dict[Path, Path] = {}
     try:
         for path, writer in items:
-            temps.append((write_temporary(path, writer), path))
-        first = items[0][0]
+            temps[path] = write_temporary(path, writer)
+    except BaseException:
+        for tmp in temps.values():
+            tmp.unlink(missing_ok=True)
+        raise
+    commit_set(temps)
+
+
+def commit_set(temporaries: dict[str | Path, str | Path]) -> None:
+    """Move ``{target: temporary}`` into place as one set: each temporary already written completely and fsynced
+    beside its target (``write_temporary``, or a writer of its own into ``model.atomic.temp_path(target)``); one
+    journal beside the first target. On a failure before the journal is in place, the temporaries are removed."""
+    moves = [(Path(t), Path(p)) for p, t in temporaries.items()]
+    if not moves:
+        return
+    try:
+        first = moves[0][1]
         journal = first.with_name(f".{first.name}{JOURNAL_SUFFIX}")
-        atomic_write(journal, json.dumps({"moves": [[str(t), str(p)] for t, p in temps]}).encode())
+        atomic_write(journal, json.dumps({"moves": [[str(t), str(p)] for t, p in moves]}).encode())
         _fsync_dir(journal.parent)          # the journal in place is the commit point: the new set wins
     except BaseException:
-        for tmp, _ in temps:
+        for tmp, _ in moves:
             tmp.unlink(missing_ok=True)
         raise
     _complete(journal)

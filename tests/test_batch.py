@@ -477,9 +477,11 @@ def test_ctrl_c_stops_a_batch_without_tracebacks_and_leaves_no_process(tmp_path,
     assert len((out / "batch.csv").read_text().splitlines()) == len(takes)
 
 
-def test_a_killed_writers_private_folder_is_removed_by_the_next_write(tmp_path, ict_rig, take_dir):
-    """A worker killed while writing a take leaves its private folder in OUTDIR/<take>/; the next writer of that
-    take removes it (its process is gone) and leaves a live writer's folder alone."""
+def test_a_killed_writers_leftovers_are_removed_by_the_next_write(tmp_path, ict_rig, take_dir):
+    """A worker killed while writing a take leaves its temporaries in OUTDIR/<take>/ (or, from earlier versions, a
+    private folder); the next writer of that take removes them (their process is gone) and leaves a live writer's
+    alone. The take's files are written straight into their temporaries, each once: none is left afterwards."""
+    from model.atomic import TEMP_MARK
     from model.batch import BatchJob, solve_take_file
     from model.marker_map import load_marker_map
     gone = subprocess.Popen([sys.executable, "-c", "pass"])
@@ -490,12 +492,18 @@ def test_a_killed_writers_private_folder_is_removed_by_the_next_write(tmp_path, 
     for d in (stale, live):
         d.mkdir(parents=True)
         (d / "weights.csv").write_text("half a file")
+    stale_file = out / f".weights.csv{TEMP_MARK}{gone.pid}.ab12cd34.csv"
+    live_file = out / f".preview.png{TEMP_MARK}{os.getppid()}.ab12cd34.png"
+    for f in (stale_file, live_file):
+        f.write_text("half a file")
     job = BatchJob.prepare(ict_rig, {"mode": "global", "residual": None, "calibration_frames": 30,
                                      "fixed_head": False}, marker_map=load_marker_map(take_dir / "marker_map.json"))
     row = solve_take_file(job, str(take_dir / "take.c3d"), str(out))
     assert row["status"] == "solved", row
-    assert not stale.exists(), "the dead writer's folder was left behind"
-    assert live.exists(), "a live writer's folder was removed"
+    assert not stale.exists() and not stale_file.exists(), "the dead writer's leftovers were left behind"
+    assert live.exists() and live_file.exists(), "a live writer's files were removed"
+    assert sorted(p.name for p in out.iterdir() if TEMP_MARK in p.name or p.name.startswith(".")) == sorted(
+        [live.name, live_file.name]), list(out.iterdir())
     assert (out / "weights.csv").read_text().startswith("frame,time,")
     # the rig's own pairs, found once for the batch, are reported as solve reports them: not as a project's list
     assert job.antagonists and json.loads((out / "report.json").read_text())["antagonists"] is None
