@@ -85,7 +85,7 @@ def load_gl_driver() -> list[str]:
 
 prefer_egl()
 use_offscreen_backend_if_headless()
-if egl_over_display or not os.environ.get("DISPLAY"):
+if os.environ.get(_WINDOW) == _EGL:      # the previews draw through EGL (chosen over a display, or no display)
     load_gl_driver()
 
 import PIL.Image  # noqa: E402
@@ -106,9 +106,8 @@ _limit_blas_once()     # inherited by every worker (~15 ms of each one's start: 
 
 def warm_up() -> None:
     """What a worker's first take would otherwise do first, done while the worker waits for it: the preview's
-    window with its shaders compiled (``app.cli_batch.warm_up_preview``, ~0.1 s). Never fails: a worker that cannot
-    draw finds out in its first preview, as before."""
-    _limit_blas_once()     # done in the fork server already, unless this module was imported elsewhere since
+    window with its shaders compiled (``app.cli_batch.warm_up_preview``, ~0.1 s; one BLAS thread was set when this
+    module was imported). Never fails: a worker that cannot draw finds out in its first preview, as before."""
     try:
         from app.cli_batch import warm_up_preview
         warm_up_preview()

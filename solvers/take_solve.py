@@ -358,14 +358,10 @@ class TakeSolution:
         return x
 
 
-def marker_rest(neutral: np.ndarray, binding) -> np.ndarray:
-    """(M, 3) float64 the markers at rest: ``binding`` ((M, V) sparse, or M vertex indices) applied to the
-    rig's ``neutral``, as ``TakeSolver`` computes them (and keys its residual's preparation by)."""
-    neutral = np.asarray(neutral, dtype=np.float64)
-    if not sp.issparse(binding):
-        idx = np.asarray(binding, dtype=np.int64)
-        binding = sp.csr_matrix((np.ones(idx.size), (np.arange(idx.size), idx)), shape=(idx.size, neutral.shape[0]))
-    return np.asarray(sp.csr_matrix(binding) @ neutral)
+def marker_rest(neutral: np.ndarray, binding: sp.spmatrix) -> np.ndarray:
+    """(M, 3) float64 the markers at rest: the (M, V) sparse ``binding`` applied to the rig's ``neutral``, as
+    ``TakeSolver`` computes them (and keys its residual's preparation by)."""
+    return np.asarray(sp.csr_matrix(binding) @ np.asarray(neutral, dtype=np.float64))
 
 
 def residual_preparation(neutral: np.ndarray, rest: np.ndarray, *, residual: str = DEFAULTS["residual"],

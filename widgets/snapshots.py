@@ -105,8 +105,8 @@ class SurfaceSnapshots:
         pts = vtkPoints()
         pts.SetData(numpy_to_vtk(np.array(points, dtype=np.float32), deep=True))
         mesh.SetPoints(pts)
-        mesh.SetPolys(polygon_cells(self.face_counts, self.face_indices))
         view = self.view if self.view is not None and self.view.normals.n_points == len(points) else None
+        mesh.SetPolys(polygon_cells(self.face_counts, self.face_indices, view.layout if view is not None else None))
         normals = view.normals if view is not None else VertexNormals(self.face_counts, self.face_indices, len(points))
         mesh._display_normals = normals
         mesh._faces = (self.face_counts, self.face_indices)
