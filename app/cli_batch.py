@@ -36,17 +36,24 @@ _snapshots = None      # this process's widgets.snapshots.SurfaceSnapshots: a wo
 
 
 def render_preview(points, face_counts, face_indices, path, *, focus=None, view=None) -> None:
-    """A take's preview PNG: ``widgets.scene.render_png``'s picture from the front, drawn by one off-screen plotter
-    kept in this process for every preview of the same surface (``SurfaceSnapshots``: ~0.06 s a preview on ICT
-    instead of ~0.18 with a new plotter each time), PNG compression level 1 (a 480x360 preview encodes in 10 ms
-    instead of 41 and weighs ~150 KB instead of ~125). On a local cluster's worker that chose EGL over an X display
-    (``app.batch_worker.prefer_egl``), a preview that fails through EGL is drawn again through the display's window,
-    which that worker keeps using. ``view``: the faces' hidden back sides and display normals found beforehand
-    (``model.rig_prep.DefaultView``: a batch's job carries them), instead of on the first preview (~0.03 s on ICT)."""
+    """A take's preview (``preview_png``) written to the PNG ``path``, atomically."""
+    from model.atomic import atomic_write
+    atomic_write(path, preview_png(points, face_counts, face_indices, focus=focus, view=view))
+
+
+def preview_png(points, face_counts, face_indices, *, focus=None, view=None) -> bytes:
+    """A take's preview as a PNG file's bytes: ``widgets.scene.render_png``'s picture from the front, drawn by one
+    off-screen plotter kept in this process for every preview of the same surface (``SurfaceSnapshots``: ~0.06 s a
+    preview on ICT instead of ~0.18 with a new plotter each time), PNG compression level 1 (a 480x360 preview
+    encodes in 10 ms instead of 41 and weighs ~150 KB instead of ~125). On a local cluster's worker that chose EGL
+    over an X display (``app.batch_worker.prefer_egl``), a preview that fails through EGL is drawn again through the
+    display's window, which that worker keeps using. ``view``: the faces' hidden back sides and display normals
+    found beforehand (``model.rig_prep.DefaultView``: a batch's job carries them), instead of on the first preview
+    (~0.03 s on ICT)."""
     from model.batch import PREVIEW_SIZE
     from widgets.snapshots import SurfaceSnapshots
 
-    def draw(keep: bool) -> None:
+    def draw(keep: bool) -> bytes:
         global _snapshots
         if _snapshots is not None and not (keep and _snapshots.size == PREVIEW_SIZE and _snapshots.camera == "front"):
             _snapshots.close()
@@ -55,15 +62,15 @@ def render_preview(points, face_counts, face_indices, path, *, focus=None, view=
             _snapshots.set_faces(face_counts, face_indices, view)   # another rig, or ``warm_up_preview``'s stand-in
         if _snapshots is None:
             _snapshots = SurfaceSnapshots(face_counts, face_indices, size=PREVIEW_SIZE, camera="front", view=view)
-        _snapshots.write(points, path, focus=focus, compress_level=1)
+        return _snapshots.png(points, focus=focus, compress_level=1)
 
     try:
-        draw(keep=True)
+        return draw(keep=True)
     except Exception:
         worker = sys.modules.get("app.batch_worker")     # loaded by the local cluster's fork server only
         if worker is None or not worker.leave_egl():
             raise
-        draw(keep=False)            # the plotter made through EGL goes; the new one draws through the display
+        return draw(keep=False)     # the plotter made through EGL goes; the new one draws through the display
 
 
 def warm_up_preview() -> None:
@@ -97,7 +104,7 @@ def prepare_job(rig, args):
     settings, segmentation = solve_settings(args, rig)
     marker_map = load_marker_map(args.map) if args.map else None
     return BatchJob.prepare(rig, settings, segmentation=segmentation, marker_map=marker_map,
-                            cache=bool(getattr(args, "cache", False)), preview=render_preview,
+                            cache=bool(getattr(args, "cache", False)), preview=preview_png,
                             focus=preview_focus(rig), preload=BATCH_PRELOAD)
 
 

@@ -41,12 +41,12 @@ from typing import Callable
 import numpy as np
 
 from . import batch_driver, shared_pickle
-from .atomic import process_alive, temp_path, write_temporary
+from .atomic import process_alive
 from .batch_driver import ClusterOutcome
 from .errors import RigInputError
 from .fork_server import start_fork_server
 from .marker_map import MarkerMap
-from .output_set import commit_set, finish_interrupted_sets, write_set
+from .output_set import finish_interrupted_sets, write_set
 from .pose import PoseEvaluator
 from .rig import Rig
 from .rig_prep import shape_reach
@@ -190,7 +190,7 @@ class BatchJob:
     segmentation: object = None
     marker_map: MarkerMap | None = None
     cache: bool = False
-    preview: Callable | None = None       # preview(points, face_counts, face_indices, path, focus=...) or None
+    preview: Callable | None = None       # preview(points, counts, indices, focus=, view=) -> PNG bytes, or None
     focus: np.ndarray | None = None       # the points the preview frames
     signature: dict = field(default_factory=dict)
     antagonists: list | None = None       # the pairs the solves keep apart (``solve_pairs``), found once
@@ -343,7 +343,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     """Solve one take as ``solve`` does and write its outputs into ``out_dir`` as one set, the done-marker last.
     Returns the summary row; a bad take gives a failed row with its one-sentence error (nothing is written).
     Anything unexpected propagates (the cluster retries the take, then reports it)."""
-    from .take_exports import export_pc2, export_report, export_weights_csv
+    from .take_exports import solve_output_writers
     from .take_workspace import TakeWorkspace
 
     _limit_blas_once()
@@ -359,51 +359,30 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     except RigInputError as exc:
         return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
     out_dir.mkdir(parents=True, exist_ok=True)
-    finish_interrupted_sets(out_dir)     # a killed writer's set completed, its temporaries removed
-    _sweep_temporaries(out_dir)          # and the private folders earlier versions wrote a take into first
-    # Each output is written once, completely and fsynced, into a temporary beside its target (named for this
-    # process: ``model.atomic.temp_path``), and the set is moved into place at the end, done.json with it
-    # (``commit_set``): before, the outputs went into a private folder and were copied from there into the set's
-    # own temporaries, each file written and fsynced twice.
-    temps: dict[Path, Path] = {}
-
-    def temporary(fname: str) -> Path:
-        target = out_dir / fname
-        temps[target] = temp_path(target, suffix=target.suffix)
-        return temps[target]
-
-    try:
-        files = {OUTPUTS["weights"]: lambda p: export_weights_csv(ws, p),
-                 OUTPUTS["report"]: lambda p: export_report(ws, p)}
-        if job.cache:
-            files[OUTPUTS["cache"]] = lambda p: export_pc2(ws, p, evaluator=job.evaluator)
-        for fname, write in files.items():
-            write(temporary(fname))
-        weights = ws.playing_weights()
-        frame, preview_error = preview_frame(weights), None
-        if job.preview is not None:
-            try:          # a preview that cannot be drawn (no display, no EGL) costs the take its picture only
-                surface = sol.dense(frame) if sol is not None else job.evaluator.pose(weights[frame])
-                job.preview(surface, *job.preview_faces(), temporary(OUTPUTS["preview"]), focus=job.focus,
-                            view=job.preview_view)
-                files[OUTPUTS["preview"]] = None
-            except Exception as exc:
-                temps.pop(out_dir / OUTPUTS["preview"]).unlink(missing_ok=True)
-                preview_error = f"the preview could not be rendered ({type(exc).__name__}: {exc})"
-        report = json.loads(temps[out_dir / OUTPUTS["report"]].read_text())
-        measured = {k: None if report[k] is None else float(report[k]) for k in ("frames_per_second", "marker_rmse")}
-        row = _row(name, take_path, out_dir, "solved", frames=int(report["frames"]), rate=float(report["rate"]),
-                   **measured,
-                   motion_explained=report.get("motion_explained"), preview_frame=frame, preview_error=preview_error)
-        row["seconds"] = time.perf_counter() - start
-        done = {"take_file": identity, "signature": job.signature, "outputs": list(files), "row": row}
-        temps[out_dir / DONE] = write_temporary(out_dir / DONE,
-                                                lambda f: f.write((json.dumps(done, indent=1) + "\n").encode()))
-    except BaseException:
-        for tmp in temps.values():
-            tmp.unlink(missing_ok=True)
-        raise
-    commit_set(temps)
+    _sweep_temporaries(out_dir)          # the private folders earlier versions wrote a take into first
+    # what ``solve`` writes (``solve_output_writers``), with the preview and done.json, as one set: each file
+    # written once, straight into its temporary beside its target
+    writers, report = solve_output_writers(ws, out_dir / OUTPUTS["weights"],
+                                           cache_path=out_dir / OUTPUTS["cache"] if job.cache else None,
+                                           report_path=out_dir / OUTPUTS["report"], evaluator=job.evaluator)
+    weights = ws.playing_weights()
+    frame, preview_error = preview_frame(weights), None
+    if job.preview is not None:
+        try:          # a preview that cannot be drawn (no display, no EGL) costs the take its picture only
+            surface = sol.dense(frame) if sol is not None else job.evaluator.pose(weights[frame])
+            png = job.preview(surface, *job.preview_faces(), focus=job.focus, view=job.preview_view)
+            writers[out_dir / OUTPUTS["preview"]] = lambda f: f.write(png)
+        except Exception as exc:
+            preview_error = f"the preview could not be rendered ({type(exc).__name__}: {exc})"
+    measured = {k: None if report.get(k) is None else float(report[k])
+                for k in ("frames_per_second", "marker_rmse", "motion_explained")}
+    row = _row(name, take_path, out_dir, "solved", frames=int(report["frames"]), rate=float(report["rate"]),
+               **measured, preview_frame=frame, preview_error=preview_error)
+    row["seconds"] = time.perf_counter() - start
+    done = {"take_file": identity, "signature": job.signature, "outputs": [Path(p).name for p in writers],
+            "row": row}
+    writers[out_dir / DONE] = lambda f: f.write((json.dumps(done, indent=1) + "\n").encode())
+    write_set(writers)
     return row
 
 

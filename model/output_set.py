@@ -41,31 +41,16 @@ def write_set(writers: dict[str | Path, Callable[[IO[bytes]], object]]) -> None:
     for folder in {p.parent for p, _ in items}:
         folder.mkdir(parents=True, exist_ok=True)
         finish_interrupted_sets(folder)
-    temps: dict[Path, Path] = {}
+    temps: list[tuple[Path, Path]] = []
     try:
         for path, writer in items:
-            temps[path] = write_temporary(path, writer)
-    except BaseException:
-        for tmp in temps.values():
-            tmp.unlink(missing_ok=True)
-        raise
-    commit_set(temps)
-
-
-def commit_set(temporaries: dict[str | Path, str | Path]) -> None:
-    """Move ``{target: temporary}`` into place as one set: each temporary already written completely and fsynced
-    beside its target (``write_temporary``, or a writer of its own into ``model.atomic.temp_path(target)``); one
-    journal beside the first target. On a failure before the journal is in place, the temporaries are removed."""
-    moves = [(Path(t), Path(p)) for p, t in temporaries.items()]
-    if not moves:
-        return
-    try:
-        first = moves[0][1]
+            temps.append((write_temporary(path, writer), path))
+        first = items[0][0]
         journal = first.with_name(f".{first.name}{JOURNAL_SUFFIX}")
-        atomic_write(journal, json.dumps({"moves": [[str(t), str(p)] for t, p in moves]}).encode())
+        atomic_write(journal, json.dumps({"moves": [[str(t), str(p)] for t, p in temps]}).encode())
         _fsync_dir(journal.parent)          # the journal in place is the commit point: the new set wins
     except BaseException:
-        for tmp, _ in moves:
+        for tmp, _ in temps:
             tmp.unlink(missing_ok=True)
         raise
     _complete(journal)

@@ -96,6 +96,17 @@ def export_solve_outputs(workspace, weights_path: str | Path, cache_path: str | 
     written as one set (``model.output_set``): a solve killed while writing leaves either all the old files or
     all the new ones. For a solved marker take or a weight take alike. Returns the report."""
     from .output_set import write_set
+    writers, report = solve_output_writers(workspace, weights_path, cache_path, report_path, gltf_path)
+    write_set(writers)
+    return report
+
+
+def solve_output_writers(workspace, weights_path: str | Path, cache_path: str | Path | None = None,
+                         report_path: str | Path | None = None, gltf_path: str | Path | None = None, *,
+                         evaluator: PoseEvaluator | None = None) -> tuple[dict, dict]:
+    """(``{path: writer(file)}`` of ``export_solve_outputs``' files, for ``model.output_set.write_set``; the
+    report): what ``solve`` writes, which a batch's take writes too, with its preview. ``evaluator``: the rig's
+    pose evaluation for a weight take's cache (``take_surfaces``)."""
     from .pc2 import pc2_writer
     from .weights_csv import weights_csv_bytes
     W = workspace.playing_weights()
@@ -110,10 +121,9 @@ def export_solve_outputs(workspace, weights_path: str | Path, cache_path: str | 
         glb = gltf_bytes(export_content(workspace.rig, animation=take_animation(workspace)), gltf_path)
         writers[gltf_path] = lambda f: f.write(glb)
     if cache_path:
-        writers[cache_path] = pc2_writer(cache_path, take_surfaces(workspace), n_points=workspace.rig.n_vertices,
-                                         start_frame=0, sample_rate=1.0)[0]
+        writers[cache_path] = pc2_writer(cache_path, take_surfaces(workspace, evaluator),
+                                         n_points=workspace.rig.n_vertices, start_frame=0, sample_rate=1.0)[0]
     if report_path:
         text = (json.dumps(report, indent=1) + "\n").encode("utf-8")
         writers[report_path] = lambda f: f.write(text)
-    write_set(writers)
-    return report
+    return writers, report

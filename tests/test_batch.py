@@ -543,7 +543,7 @@ s = snapshots.SurfaceSnapshots(np.full(1, 3), np.arange(3), size=(8, 8))
 window = type(s.window).__name__                 # the window class a preview draws through
 s.close()
 from app.cli_batch import render_preview
-real, tried = snapshots.SurfaceSnapshots.write, []
+real, tried = snapshots.SurfaceSnapshots.png, []
 
 def egl_fails_once(self, *args, **kw):      # a machine whose libEGL cannot draw
     tried.append(os.environ.get("VTK_DEFAULT_OPENGL_WINDOW"))
@@ -551,7 +551,7 @@ def egl_fails_once(self, *args, **kw):      # a machine whose libEGL cannot draw
         raise RuntimeError("no EGL device")
     return real(self, *args, **kw)
 
-snapshots.SurfaceSnapshots.write = egl_fails_once
+snapshots.SurfaceSnapshots.png = egl_fails_once      # where a preview is drawn
 pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
 faces = np.array([0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3])
 render_preview(pts, np.full(4, 3), faces, sys.argv[1], focus=pts)

@@ -163,26 +163,23 @@ class SurfaceSnapshots:
         w, h, _ = out.GetDimensions()
         return vtk_to_numpy(out.GetPointData().GetScalars()).reshape(h, w, -1)[::-1]
 
-    def write(self, points: np.ndarray, out_path, *, focus: np.ndarray | None = None,
-              compress_level: int | None = None) -> None:
-        """The surface at ``points`` to the PNG ``out_path``, atomically (a temporary beside it, then moved into
-        place). ``compress_level``: the PNG's zlib level (0-9; Pillow's default 6 if None)."""
-        import os
-        from pathlib import Path
+    def png(self, points: np.ndarray, *, focus: np.ndarray | None = None, compress_level: int | None = None) -> bytes:
+        """The picture of the surface at ``points`` as a PNG file's bytes. ``compress_level``: the PNG's zlib level
+        (0-9; Pillow's default 6 if None)."""
+        import io
 
         from PIL import Image
+        buf = io.BytesIO()
+        Image.fromarray(np.ascontiguousarray(self.image(points, focus=focus))).save(
+            buf, format="PNG", **({} if compress_level is None else {"compress_level": compress_level}))
+        return buf.getvalue()
 
-        from model.atomic import remove_stale_temporaries, temp_path
-        img = Image.fromarray(np.ascontiguousarray(self.image(points, focus=focus)))
-        out = Path(out_path)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        remove_stale_temporaries(out.parent)
-        tmp = temp_path(out, suffix=out.suffix or ".png")
-        try:
-            img.save(tmp, format="PNG", **({} if compress_level is None else {"compress_level": compress_level}))
-            os.replace(tmp, out)
-        finally:
-            tmp.unlink(missing_ok=True)
+    def write(self, points: np.ndarray, out_path, *, focus: np.ndarray | None = None,
+              compress_level: int | None = None) -> None:
+        """The surface at ``points`` to the PNG ``out_path`` (``png``), atomically (a temporary beside it, then
+        moved into place)."""
+        from model.atomic import atomic_write
+        atomic_write(out_path, self.png(points, focus=focus, compress_level=compress_level))
 
     def close(self) -> None:
         self.renderer.RemoveAllViewProps()
