@@ -70,10 +70,15 @@ def shape_reach(rig: Rig) -> np.ndarray:
 def default_view(rig: Rig) -> DefaultView:
     """The default view's faces, their hidden back sides, their display normals' triangulation and their cells."""
     faces, counts, indices = drawn_faces(rig)
-    hidden = hidden_back_faces(rig.neutral, counts, indices)
+    return view_of(counts, indices, rig.n_vertices, hidden_back_faces(rig.neutral, counts, indices), faces)
+
+
+def view_of(counts: np.ndarray, indices: np.ndarray, n_vertices: int, hidden: np.ndarray,
+            faces: np.ndarray | None = None) -> DefaultView:
+    """The ``DefaultView`` of the polygons (``counts``, ``indices``) of a surface of ``n_vertices`` points, whose
+    hidden back sides ``hidden`` are known (``hidden_back_faces``); ``faces``: which of the rig's faces they are."""
     shown_backs = np.flatnonzero(~hidden)
-    return DefaultView(faces, hidden, VertexNormals(counts, indices, rig.n_vertices),
-                       layout=cell_layout(counts, indices),
+    return DefaultView(faces, hidden, VertexNormals(counts, indices, n_vertices), layout=cell_layout(counts, indices),
                        backs=(shown_backs, *reversed_faces(counts, indices, shown_backs)))
 
 

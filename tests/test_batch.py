@@ -891,10 +891,11 @@ poses = [ev.pose(np.array([float(n in names) for n in rig.shape_names]))
          for names in (["jawOpen"], ["mouthSmile_L", "mouthSmile_R"], ["jawOpen"])]
 import app.cli_batch
 from widgets.snapshots import SurfaceSnapshots
-app.cli_batch.warm_up_preview()           # as a worker does before its first take (app.batch_worker.dask_setup)
-window = app.cli_batch._snapshots.window
 found, real = [], solvers.mesh.hidden_back_faces
 solvers.mesh.hidden_back_faces = lambda *a: found.append(1) or real(*a)
+app.cli_batch.warm_up_preview()           # as a worker does before its first take (app.batch_worker.dask_setup)
+assert not found, "the warm-up searched its stand-in's hidden back sides"
+window = app.cli_batch._snapshots.window
 for k, pts in enumerate(poses):
     render_preview(pts, counts, indices, f"{sys.argv[2]}/kept{k}.png", focus=focus, view=view)
 assert not found, "a preview found the hidden back sides again"
