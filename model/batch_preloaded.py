@@ -15,6 +15,15 @@ from __future__ import annotations
 import gc
 import signal
 
+from distributed.versions import get_versions
+
+# Dask's scheduler, each worker and the client describe their installation when they meet (the worker as it
+# registers, the scheduler for each worker and client that registers): the packages' versions, read from their
+# metadata on the disk, and the processor's name, for which Python runs ``uname -p`` in a subprocess (a fork of a
+# process that has VTK and LLVM mapped). Both are cached once read (``functools.cache``, ``cached_property``): read
+# here, once, every process forked from here finds them, ~8 ms each on the way to its first take.
+get_versions()
+
 gc.freeze()
 
 # Ctrl-C in the terminal reaches every process of the command's process group: the workers and the scheduler forked

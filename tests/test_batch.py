@@ -654,6 +654,37 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
     assert workers[0] == 200 and workers[2].count("tcp://127.0.0.1:") >= 2
 
 
+def _installation_described(conn) -> None:
+    """Run in a process forked from the fork server: whether Dask's description of the installation is there."""
+    import platform
+
+    from distributed.versions import _version_cached
+    conn.send(("processor" in vars(platform.uname()), _version_cached.cache_info().currsize))
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
+def test_processes_forked_for_a_batch_find_dasks_description_of_the_installation_read():
+    """The scheduler, each worker and the client describe the installation to each other when they meet (package
+    versions read from the disk, the processor's name from a ``uname -p`` subprocess): the fork server read it once
+    (``model.batch_preloaded``), so a process forked from it has it before Dask asks, and runs no subprocess."""
+    import multiprocessing
+
+    from app.batch_preload import BATCH_PRELOAD
+    from model.fork_server import start_fork_server
+    assert start_fork_server(BATCH_PRELOAD)
+    ctx = multiprocessing.get_context("forkserver")
+    ours, theirs = ctx.Pipe()
+    child = ctx.Process(target=_installation_described, args=(theirs,))
+    child.start()
+    try:
+        assert ours.poll(120)
+        processor, versions = ours.recv()
+    finally:
+        child.join(30)
+    assert processor, "the processor's name is not cached: each process would run uname -p"
+    assert versions >= 6, f"only {versions} package versions cached"     # Dask's required packages at least
+
+
 _NO_DASK_HERE = """
 import json, sys
 from app.launch import main
