@@ -833,6 +833,30 @@ def _job(rig, take_dir):
     return prepare_job(rig, p.parse_args(["--map", str(take_dir / "marker_map.json")]))
 
 
+def test_each_takes_row_reaches_the_client_with_the_news_that_it_is_done(tmp_path, ict_rig, take_dir, monkeypatch):
+    """A take's row travels as a Dask event ahead of its task's completion (``solve_and_report``): the client never
+    asks a worker for a task's result (a round trip through the scheduler per take), and the rows are the ones the
+    takes wrote (done.json), a failed take's included. In this process, where the calls can be counted."""
+    import distributed
+
+    from model import batch_driver
+    from model.batch import run_batch
+    monkeypatch.setattr(batch_driver, "available", lambda preload=(): False)
+    asked = []
+    result = distributed.Future.result
+    monkeypatch.setattr(distributed.Future, "result",
+                        lambda self, *a, **k: asked.append(self.key) or result(self, *a, **k))
+    takes = _short_takes(tmp_path, take_dir, 3)
+    (tmp_path / "cut.c3d").write_bytes(takes[0].read_bytes()[:3000])
+    rows = run_batch(_job(ict_rig, take_dir), [*takes, tmp_path / "cut.c3d"], tmp_path / "out", workers=1,
+                     dashboard_address="127.0.0.1:0")
+    assert asked == [], "the client asked the workers for results"
+    assert [r["status"] for r in rows] == ["solved"] * 3 + ["failed"]
+    assert "cut.c3d" in rows[3]["error"]
+    for take, row in zip(takes, rows):
+        assert row == json.loads((tmp_path / "out" / take.stem / "done.json").read_text())["row"]
+
+
 @pytest.mark.parametrize("where", ["driver", "in-process"])
 def test_a_cancelled_batch_ends_the_takes_in_hand_and_fails_the_rest_as_cancelled(tmp_path, ict_rig, take_dir,
                                                                                  monkeypatch, where):
