@@ -60,6 +60,9 @@ STATUSES = ("solved", "skipped", "failed")
 ROW_KEYS = ("take", "status", "error", "frames", "rate", "frames_per_second", "marker_rmse", "motion_explained",
             "seconds", "path", "output")
 PREVIEW_SIZE = (480, 360)
+# the Dask event topic under which the takes send their rows (``solve_and_report``): one name for every batch, so
+# that a long-lived scheduler keeps one bounded log of them (Dask keeps each topic's last events), not one per batch
+ROW_TOPIC = "blendshape-studio-batch-rows"
 _TMP_PREFIX = ".bs-batch-"
 
 
@@ -663,10 +666,17 @@ def solve_on_cluster(job_source: Callable[[], BatchJob], tasks: list[tuple[int, 
             # scheduler, as for a remote one whose workers this process may not reach, it takes ~2x as long)
             shared = client.scatter(job_source(), broadcast=True, hash=False, direct=cluster is not None)
             run = uuid.uuid4().hex[:8]
-            topic, reported = f"blendshape-studio-batch-{run}", {}     # the rows the takes send (``solve_and_report``)
-            client.subscribe_topic(topic, lambda event: reported.__setitem__(event[1]["key"], event[1]["row"]))
-            futures = {client.submit(solve_and_report, shared, take, out, name, topic, key=f"solve-{name}-{run}",
-                                     pure=False, retries=retries): i
+            keys = {i: f"solve-{name}-{run}" for i, _, _, name in tasks}
+            ours, reported = set(keys.values()), {}       # the rows the takes send (``solve_and_report``)
+
+            def heard(event) -> None:   # on the client's event loop; rows of other batches on the scheduler: not ours
+                message = event[1]
+                if isinstance(message, dict) and message.get("key") in ours:
+                    reported[message["key"]] = message["row"]
+
+            client.subscribe_topic(ROW_TOPIC, heard)
+            futures = {client.submit(solve_and_report, shared, take, out, name, ROW_TOPIC, key=keys[i], pure=False,
+                                     retries=retries): i
                        for i, take, out, name in tasks}
             paths = {i: Path(take) for i, take, _, _ in tasks}
             names = {i: name for i, _, _, name in tasks}
