@@ -91,7 +91,7 @@ def warm_up_preview() -> None:
     square = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]], dtype=np.float32)
     counts, indices = np.array([3, 3]), np.array([0, 1, 2, 0, 2, 3])
     # a flat open square hides neither back side; said here, not searched for: that search's first call imports
-    # scipy.sparse.csgraph (~50 ms, half of a worker's warm-up), which the takes never need (the job's view)
+    # scipy.sparse.csgraph (~45 ms, a third of a worker's warm-up), which the takes never need (the job's view)
     view = view_of(counts, indices, len(square), np.zeros(len(counts), dtype=bool))
     snapshots = SurfaceSnapshots(counts, indices, size=PREVIEW_SIZE, camera="front", view=view)
     try:

@@ -401,9 +401,9 @@ def solve_and_report(job: BatchJob, take_path: str, out_dir: str, name: str, top
     try:
         from distributed import get_worker
         worker = get_worker()
-    except (ImportError, ValueError):       # not on a Dask worker
-        return row
-    worker.log_event(topic, {"key": worker.get_current_task(), "row": row})
+        worker.log_event(topic, {"key": worker.get_current_task(), "row": row})
+    except (ImportError, ValueError, TypeError):    # not on a Dask worker, or a row msgpack cannot carry: the
+        pass                                        # client asks for the result instead; the take stands
     return row
 
 

@@ -857,6 +857,34 @@ def test_each_takes_row_reaches_the_client_with_the_news_that_it_is_done(tmp_pat
         assert row == json.loads((tmp_path / "out" / take.stem / "done.json").read_text())["row"]
 
 
+def test_a_row_that_cannot_travel_as_an_event_is_asked_for(tmp_path, ict_rig, take_dir, monkeypatch):
+    """Where a take's row cannot be sent as an event (here: every event refused, as msgpack refuses a type it does
+    not know), the take still stands: the client asks its worker for the result, as it did before the events. On a
+    cluster of this process's threads, where the workers' ``log_event`` can be replaced."""
+    import dataclasses
+
+    import distributed
+
+    from model.batch import run_batch
+    asked = []
+    result = distributed.Future.result
+    monkeypatch.setattr(distributed.Future, "result",
+                        lambda self, *a, **k: asked.append(self.key) or result(self, *a, **k))
+
+    def refuse(self, topic, msg):
+        raise TypeError("Message must be msgpack serializable.")
+
+    monkeypatch.setattr(distributed.Worker, "log_event", refuse)
+    takes = _short_takes(tmp_path, take_dir, 2)
+    job = dataclasses.replace(_job(ict_rig, take_dir), preview=None)   # no OpenGL window in this process's threads
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None) as c:
+        rows = run_batch(job, takes, tmp_path / "out", scheduler=c.scheduler_address)
+    assert [r["status"] for r in rows] == ["solved", "solved"]
+    assert len(asked) == 2
+    for take, row in zip(takes, rows):
+        assert row == json.loads((tmp_path / "out" / take.stem / "done.json").read_text())["row"]
+
+
 @pytest.mark.parametrize("where", ["driver", "in-process"])
 def test_a_cancelled_batch_ends_the_takes_in_hand_and_fails_the_rest_as_cancelled(tmp_path, ict_rig, take_dir,
                                                                                  monkeypatch, where):
