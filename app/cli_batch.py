@@ -35,12 +35,6 @@ def add_parser(sub, rig_arg) -> None:
 _snapshots = None      # this process's widgets.snapshots.SurfaceSnapshots: a worker draws every take's preview with it
 
 
-def render_preview(points, face_counts, face_indices, path, *, focus=None, view=None) -> None:
-    """A take's preview (``preview_png``) written to the PNG ``path``, atomically."""
-    from model.atomic import atomic_write
-    atomic_write(path, preview_png(points, face_counts, face_indices, focus=focus, view=view))
-
-
 def preview_png(points, face_counts, face_indices, *, focus=None, view=None) -> bytes:
     """A take's preview as a PNG file's bytes: ``widgets.scene.render_png``'s picture from the front, drawn by one
     off-screen plotter kept in this process for every preview of the same surface (``SurfaceSnapshots``: ~0.06 s a

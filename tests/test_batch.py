@@ -542,7 +542,8 @@ import widgets.snapshots as snapshots
 s = snapshots.SurfaceSnapshots(np.full(1, 3), np.arange(3), size=(8, 8))
 window = type(s.window).__name__                 # the window class a preview draws through
 s.close()
-from app.cli_batch import render_preview
+from pathlib import Path
+from app.cli_batch import preview_png
 real, tried = snapshots.SurfaceSnapshots.png, []
 
 def egl_fails_once(self, *args, **kw):      # a machine whose libEGL cannot draw
@@ -554,8 +555,8 @@ def egl_fails_once(self, *args, **kw):      # a machine whose libEGL cannot draw
 snapshots.SurfaceSnapshots.png = egl_fails_once      # where a preview is drawn
 pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
 faces = np.array([0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3])
-render_preview(pts, np.full(4, 3), faces, sys.argv[1], focus=pts)
-render_preview(pts, np.full(4, 3), faces, sys.argv[1] + ".2.png", focus=pts)
+Path(sys.argv[1]).write_bytes(preview_png(pts, np.full(4, 3), faces, focus=pts))
+Path(sys.argv[1] + ".2.png").write_bytes(preview_png(pts, np.full(4, 3), faces, focus=pts))
 print(json.dumps({"chosen": chosen, "window": window, "tried": tried, "after": os.environ.get("VTK_DEFAULT_OPENGL_WINDOW")}))
 """
 
@@ -958,8 +959,9 @@ def test_a_batch_whose_driver_is_killed_still_writes_its_summary_and_leaves_no_p
 _KEPT_AND_FRESH = """
 import sys
 import numpy as np
+from pathlib import Path
 import solvers.mesh
-from app.cli_batch import render_preview
+from app.cli_batch import preview_png
 from model.batch import PREVIEW_SIZE, preview_focus
 from model.parts import drawn_faces
 from model.pose import PoseEvaluator
@@ -980,7 +982,7 @@ app.cli_batch.warm_up_preview()           # as a worker does before its first ta
 assert not found, "the warm-up searched its stand-in's hidden back sides"
 window = app.cli_batch._snapshots.window
 for k, pts in enumerate(poses):
-    render_preview(pts, counts, indices, f"{sys.argv[2]}/kept{k}.png", focus=focus, view=view)
+    Path(f"{sys.argv[2]}/kept{k}.png").write_bytes(preview_png(pts, counts, indices, focus=focus, view=view))
 assert not found, "a preview found the hidden back sides again"
 solvers.mesh.hidden_back_faces = real
 assert app.cli_batch._snapshots.window is window, "the previews did not use the window made beforehand"
@@ -995,7 +997,7 @@ for k, pts in enumerate(poses):
 
 
 def test_a_worker_draws_each_preview_as_a_fresh_render_would(tmp_path, ict_dir, ict_rig):
-    """A worker keeps one off-screen render window for every preview (``render_preview``,
+    """A worker keeps one off-screen render window for every preview (``preview_png``,
     ``widgets.snapshots.SurfaceSnapshots``, VTK without pyvista), made with a stand-in surface before its first take
     (``warm_up_preview``), and takes the faces' hidden back sides and normals from the job (``default_view``)
     instead of finding them: each picture is pixel for pixel what a fresh ``render_png`` (pyvista's plotter, which

@@ -38,13 +38,14 @@ def _view_for(view, face_counts: np.ndarray):
 class SurfaceSnapshots:
     """``render_png``'s picture (front camera by default, no colour map, no overlays) of one surface in pose after
     pose, from one off-screen render window kept between pictures: only the points and normals change
-    (``SurfaceArrays``), then the camera frames ``focus`` and the picture is written. A batch worker draws every
-    take's preview through one of these.
+    (``SurfaceArrays``), then the camera frames ``focus`` and the picture is taken (``image``, or ``png`` for a PNG
+    file's bytes). A batch worker draws every take's preview through one of these.
 
     Why not ``render_png`` each time: a new window is a new OpenGL context, whose shaders llvmpipe compiles again
     (LLVM) in its first render, and the faces' back sides are found again (``solvers.mesh.hidden_back_faces``):
     on ICT at 480x360 a picture took ~0.18 s that way and ~0.06 s here (see the README's batch figures). The back
-    sides are found once, on the first pose, as the viewport finds them on the rig it loads. ``matches`` tells
+    sides are found once, on the first pose, as the viewport finds them on the rig it loads, or come found with
+    ``view`` (``model.rig_prep.DefaultView``, as a batch's job carries them). ``matches`` tells
     whether a surface's faces, picture size and camera are this one's."""
 
     def __init__(self, face_counts: np.ndarray, face_indices: np.ndarray, *, size=(1024, 768), camera: str = "front",
@@ -173,13 +174,6 @@ class SurfaceSnapshots:
         Image.fromarray(np.ascontiguousarray(self.image(points, focus=focus))).save(
             buf, format="PNG", **({} if compress_level is None else {"compress_level": compress_level}))
         return buf.getvalue()
-
-    def write(self, points: np.ndarray, out_path, *, focus: np.ndarray | None = None,
-              compress_level: int | None = None) -> None:
-        """The surface at ``points`` to the PNG ``out_path`` (``png``), atomically (a temporary beside it, then
-        moved into place)."""
-        from model.atomic import atomic_write
-        atomic_write(out_path, self.png(points, focus=focus, compress_level=compress_level))
 
     def close(self) -> None:
         self.renderer.RemoveAllViewProps()
