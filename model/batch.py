@@ -390,8 +390,8 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     return row
 
 
-def solve_and_report(job: BatchJob, take_path: str, out_dir: str, name: str, topic: str) -> dict:
-    """``solve_take_file`` as a cluster's task: its row is also sent to the client as a Dask event under ``topic``
+def solve_and_report(job: BatchJob, take_path: str, out_dir: str, name: str) -> dict:
+    """``solve_take_file`` as a cluster's task: its row is also sent to the client as a Dask event under ``ROW_TOPIC``
     (``Worker.log_event``: it rides the worker's stream to the scheduler ahead of the task's completion, and the
     scheduler's stream to the client ahead of the news that the task is done), so that the client has it when it
     hears the take is done, without asking the worker for the task's result: that round trip through the scheduler
@@ -401,7 +401,7 @@ def solve_and_report(job: BatchJob, take_path: str, out_dir: str, name: str, top
     try:
         from distributed import get_worker
         worker = get_worker()
-        worker.log_event(topic, {"key": worker.get_current_task(), "row": row})
+        worker.log_event(ROW_TOPIC, {"key": worker.get_current_task(), "row": row})
     except (ImportError, ValueError, TypeError):    # not on a Dask worker, or a row msgpack cannot carry: the
         pass                                        # client asks for the result instead; the take stands
     return row
@@ -675,7 +675,7 @@ def solve_on_cluster(job_source: Callable[[], BatchJob], tasks: list[tuple[int, 
                     reported[message["key"]] = message["row"]
 
             client.subscribe_topic(ROW_TOPIC, heard)
-            futures = {client.submit(solve_and_report, shared, take, out, name, ROW_TOPIC, key=keys[i], pure=False,
+            futures = {client.submit(solve_and_report, shared, take, out, name, key=keys[i], pure=False,
                                      retries=retries): i
                        for i, take, out, name in tasks}
             paths = {i: Path(take) for i, take, _, _ in tasks}

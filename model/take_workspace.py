@@ -196,9 +196,9 @@ def prepare_solver(rig: Rig, marker_map: MarkerMap, settings: dict) -> dict:
     """``solve_take``'s ``prepared`` made before any take, for takes that carry every marker of ``marker_map``
     solved with ``settings``: the residual's preparation (``solvers.take_solve.residual_preparation``: the
     vertices it moves, the phantom ring and the kernel matrix; ~10 ms on ICT; not its evaluation matrix, which is
-    made where it is used: on ICT it is 12 MB, a third of the rig's deltas, made in ~5 ms). A batch makes it once,
-    with its job, and sends it to every worker with the job, instead of each worker's first take making it again;
-    a take without some of the map's markers makes its own."""
+    made where it is used: on ICT it is 12 MB, a third of the rig's deltas, made in ~12 ms in a fresh process). A
+    batch makes it once, with its job, and sends it to every worker with the job, instead of each worker's first take
+    making it again; a take without some of the map's markers makes its own."""
     options = take_solver_options(_settings_options(settings), rig.units)
     rest = marker_rest(rig.neutral, marker_map.binding(rig, marker_map.labels))
     prepared: dict = {}
