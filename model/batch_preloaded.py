@@ -17,6 +17,10 @@ import signal
 
 from distributed.versions import get_versions
 
+from model.batch_env import restore_yaml
+
+restore_yaml()     # the fork server's imports are done: PyYAML's own parser for anything read later
+
 # Dask's scheduler, each worker and the client describe their installation when they meet (the worker as it
 # registers, the scheduler for each worker and client that registers): the packages' versions, read from their
 # metadata on the disk, and the processor's name, for which Python runs ``uname -p`` in a subprocess (a fork of a

@@ -656,18 +656,32 @@ def test_local_workers_leave_what_the_fork_server_imported_out_of_garbage_collec
 
 
 def _installation_described(conn) -> None:
-    """Run in a process forked from the fork server: whether Dask's description of the installation is there."""
+    """Run in a process forked from the fork server: whether Dask's description of the installation is there, and
+    Dask's defaults as the fork server read them (with libyaml) beside what PyYAML's own parser reads from the same
+    files, and whether ``yaml.safe_load`` is PyYAML's own again."""
+    import os
     import platform
 
+    import dask
+    import distributed
+    import yaml
     from distributed.versions import _version_cached
-    conn.send(("processor" in vars(platform.uname()), _version_cached.cache_info().currsize))
+    files = [os.path.join(os.path.dirname(m.__file__), f"{m.__name__}.yaml") for m in (dask, distributed)]
+    pure = []
+    for f in files:
+        with open(f) as stream:
+            pure.append(yaml.load(stream, Loader=yaml.SafeLoader))
+    conn.send(("processor" in vars(platform.uname()), _version_cached.cache_info().currsize, pure,
+               dask.config.defaults, yaml.safe_load.__module__))
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="the local cluster's fork server (Linux)")
 def test_processes_forked_for_a_batch_find_dasks_description_of_the_installation_read():
     """The scheduler, each worker and the client describe the installation to each other when they meet (package
     versions read from the disk, the processor's name from a ``uname -p`` subprocess): the fork server read it once
-    (``model.batch_preloaded``), so a process forked from it has it before Dask asks, and runs no subprocess."""
+    (``model.batch_preloaded``), so a process forked from it has it before Dask asks, and runs no subprocess. Dask's
+    defaults, which the fork server's imports read with libyaml (``model.batch_env.fast_yaml``), are the values
+    PyYAML's own parser reads from those files, and the workers' ``yaml.safe_load`` is PyYAML's own."""
     import multiprocessing
 
     from app.batch_preload import BATCH_PRELOAD
@@ -679,11 +693,14 @@ def test_processes_forked_for_a_batch_find_dasks_description_of_the_installation
     child.start()
     try:
         assert ours.poll(120)
-        processor, versions = ours.recv()
+        processor, versions, pure, defaults, safe_load = ours.recv()
     finally:
         child.join(30)
     assert processor, "the processor's name is not cached: each process would run uname -p"
     assert versions >= 6, f"only {versions} package versions cached"     # Dask's required packages at least
+    for read in pure:     # dask.yaml's and distributed.yaml's values, each among the defaults the fork server read
+        assert read in defaults
+    assert safe_load == "yaml"
 
 
 _NO_DASK_HERE = """
