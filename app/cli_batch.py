@@ -32,68 +32,80 @@ def add_parser(sub, rig_arg) -> None:
     sp.set_defaults(func=cmd_batch)
 
 
-_snapshots = None      # this process's widgets.snapshots.SurfaceSnapshots: a worker draws every take's preview with it
+class PreviewMesh:
+    """What a preview draws of a surface, found once for every take of a rig: its triangles (``fan_triangulate``,
+    as VTK splits polygons), which of them may show their back (``hidden_back_faces``: from the job's view when
+    it has them, ``model.rig_prep.DefaultView``, else searched on the first pose as ``render_png`` does) and its
+    display normals."""
+
+    def __init__(self, face_counts, face_indices, points, view=None) -> None:
+        import numpy as np
+        self.face_counts, self.face_indices = np.array(face_counts), np.array(face_indices)
+        self.n_points = len(points)
+        if view is not None and len(view.hidden_backs) == len(self.face_counts) \
+                and view.normals.n_points == self.n_points:
+            hidden, self.normals = view.hidden_backs, view.normals
+        else:
+            from solvers.mesh import hidden_back_faces
+            from solvers.normals import VertexNormals
+            hidden = hidden_back_faces(points, self.face_counts, self.face_indices)
+            self.normals = VertexNormals(self.face_counts, self.face_indices, self.n_points)
+        self.triangles = np.ascontiguousarray(self.normals.tris, dtype=np.int64)
+        self.both_sides = (~np.repeat(np.asarray(hidden, dtype=bool), np.maximum(self.face_counts - 2, 0))
+                           ).astype(np.uint8)
+
+    def matches(self, face_counts, face_indices, n_points: int) -> bool:
+        import numpy as np
+        return (n_points == self.n_points and np.array_equal(face_counts, self.face_counts)
+                and np.array_equal(face_indices, self.face_indices))
 
 
-def preview_png(points, face_counts, face_indices, *, focus=None, view=None) -> bytes:
-    """A take's preview as a PNG file's bytes: ``widgets.scene.render_png``'s picture from the front, drawn by one
-    off-screen plotter kept in this process for every preview of the same surface (``SurfaceSnapshots``: ~0.06 s a
-    preview on ICT instead of ~0.18 with a new plotter each time), PNG compression level 1 (a 480x360 preview
-    encodes in 10 ms instead of 41 and weighs ~150 KB instead of ~125). On a local cluster's worker that chose EGL
-    over an X display (``app.batch_worker.prefer_egl``), a preview that fails through EGL is drawn again through the
-    display's window, which that worker keeps using. ``view``: the faces' hidden back sides and display normals
-    found beforehand (``model.rig_prep.DefaultView``: a batch's job carries them), instead of on the first preview
-    (~0.03 s on ICT)."""
-    from model.batch import PREVIEW_SIZE
-    from widgets.snapshots import SurfaceSnapshots
-
-    def draw(keep: bool) -> bytes:
-        global _snapshots
-        if _snapshots is not None and not (keep and _snapshots.size == PREVIEW_SIZE and _snapshots.camera == "front"):
-            _snapshots.close()
-            _snapshots = None
-        if _snapshots is not None and not _snapshots.matches(face_counts, face_indices, PREVIEW_SIZE, "front"):
-            _snapshots.set_faces(face_counts, face_indices, view)   # another rig, or ``warm_up_preview``'s stand-in
-        if _snapshots is None:
-            _snapshots = SurfaceSnapshots(face_counts, face_indices, size=PREVIEW_SIZE, camera="front", view=view)
-        return _snapshots.png(points, focus=focus, compress_level=1)
-
-    try:
-        return draw(keep=True)
-    except Exception:
-        worker = sys.modules.get("app.batch_worker")     # loaded by the local cluster's fork server only
-        if worker is None or not worker.leave_egl():
-            raise
-        return draw(keep=False)     # the plotter made through EGL goes; the new one draws through the display
+_preview_mesh: PreviewMesh | None = None     # the last preview's faces: a worker draws every take of a rig with it
 
 
-def warm_up_preview() -> None:
-    """Make this process's preview window and compile its shaders by drawing a stand-in (an open square, so that
-    both the culled front faces and the backs' actor are drawn, as on a face rig) at the preview's size: a batch
-    worker does it while it waits for its first take (``app.batch_worker.dask_setup``), which then draws its
-    preview into the same window (``SurfaceSnapshots.set_faces``) in ~0.02 s instead of ~0.14 s: llvmpipe
-    compiles the shaders of a new OpenGL context in its first render. A stand-in that cannot be drawn leaves
-    nothing behind: the first preview then tries as before."""
-    global _snapshots
+def preview_image(points, face_counts, face_indices, *, focus=None, view=None, size=None):
+    """``widgets.scene.render_png``'s picture from the front (the skin colour, the two lights, the gradient
+    behind, no colour map), (h, w, 3) uint8, drawn on the CPU (``solvers.raster.draw``: no OpenGL, no VTK) at
+    ``size`` (default ``model.batch.PREVIEW_SIZE``). ``view``: the faces' hidden back sides and display normals
+    found beforehand (``model.rig_prep.DefaultView``: a batch's job carries them); the faces' triangles are kept
+    for the next picture of the same faces."""
     import numpy as np
 
     from model.batch import PREVIEW_SIZE
-    from model.rig_prep import view_of
-    from widgets.snapshots import SurfaceSnapshots
-    if _snapshots is not None:
-        return
-    square = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]], dtype=np.float32)
-    counts, indices = np.array([3, 3]), np.array([0, 1, 2, 0, 2, 3])
-    # a flat open square hides neither back side; said here, not searched for: that search's first call imports
-    # scipy.sparse.csgraph (~45 ms, a third of a worker's warm-up), which the takes never need (the job's view)
-    view = view_of(counts, indices, len(square), np.zeros(len(counts), dtype=bool))
-    snapshots = SurfaceSnapshots(counts, indices, size=PREVIEW_SIZE, camera="front", view=view)
-    try:
-        snapshots.image(square)
-    except Exception:
-        snapshots.close()
-        raise
-    _snapshots = snapshots
+    from solvers import raster
+    from widgets import scene
+    global _preview_mesh
+    size = tuple(int(v) for v in (size or PREVIEW_SIZE))
+    points = np.asarray(points, dtype=np.float32)
+    if _preview_mesh is None or not _preview_mesh.matches(face_counts, face_indices, len(points)):
+        _preview_mesh = PreviewMesh(face_counts, face_indices, points, view)
+    mesh = _preview_mesh
+
+    def rgb(color):            # as pyvista passes a colour to VTK: 8 bits a channel
+        return np.array([round(255 * float(c)) / 255 for c in color])
+
+    skin = rgb(scene.SKIN)
+    key = -np.asarray(scene.KEY_LIGHT_POSITION, dtype=np.float64)    # a camera light towards the focal point
+    return raster.draw(points, mesh.normals(points), mesh.triangles, mesh.both_sides, size=size,
+                       camera=scene.camera_placement("front", points if focus is None else focus, size),
+                       view_angle=30.0, lights=[(key, scene.KEY_LIGHT_INTENSITY),
+                                                ((0.0, 0.0, -1.0), scene.FILL_LIGHT_INTENSITY)],   # the headlight
+                       ambient=scene.AMBIENT * skin, diffuse=scene.DIFFUSE * skin,
+                       specular=scene.SURFACE_SPECULAR * skin, specular_power=scene.SPECULAR_POWER,
+                       background_bottom=rgb(scene.BACKGROUND_BOTTOM), background_top=rgb(scene.BACKGROUND_TOP))
+
+
+def preview_png(points, face_counts, face_indices, *, focus=None, view=None) -> bytes:
+    """A take's preview as a PNG file's bytes: ``preview_image`` at ``model.batch.PREVIEW_SIZE``, PNG compression
+    level 1 (a 480x360 preview encodes in ~10 ms instead of ~41 and weighs ~150 KB instead of ~125)."""
+    import io
+
+    import numpy as np
+    from PIL import Image
+    buf = io.BytesIO()
+    Image.fromarray(np.ascontiguousarray(preview_image(points, face_counts, face_indices, focus=focus, view=view))
+                    ).save(buf, format="PNG", compress_level=1)
+    return buf.getvalue()
 
 
 def prepare_job(rig, args):

@@ -18,8 +18,8 @@ Qt-free; the ``batch`` command (app.cli_batch) and the GUI's File ▸ Batch Solv
   ``model.batch_scheduler``; one thread each, Dask's housekeeping made rarer: ``local_cluster_config``; the whole
   cluster driven from a process forked from the same fork server, ``model.batch_driver``, so that the command never
   imports Dask) or a scheduler address, with retries, and reports progress (``solve_on_cluster``, the same code in
-  the driver and in-process); ``write_summary`` writes ``batch.json`` and ``batch.csv``. Each worker readies its
-  preview window while the job is on its way (``app.batch_worker.dask_setup``) and keeps the take solver's per-rig
+  the driver and in-process); ``write_summary`` writes ``batch.json`` and ``batch.csv``. Each worker draws its
+  previews on the CPU (``app.cli_batch.preview_image``: no OpenGL context to ready) and keeps the take solver's per-rig
   preparation across its takes (``BatchJob.prepared``), starting from the one the job carries (made once, with the
   job, as are the preview's hidden back sides and normals).
 """
@@ -589,14 +589,11 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
     if forked:
         _skip_dask_forkserver_preload()
     _poll_worker_starts_often()
-    # One core a worker: Dask's nanny already sets one BLAS/OpenMP thread; llvmpipe, which draws the previews
-    # off screen, would otherwise rasterise on every core of the machine from each worker at once, and rasterises in
-    # the worker's own thread (``LP_NUM_THREADS=0``) rather than hand each picture to a raster thread of its own
-    # (which the system may run on the other worker's core). The workers
-    # also preload ``preload`` the Dask way: a module's ``dask_setup(worker)`` runs when the worker has started
-    # (``app.batch_worker.dask_setup`` readies the previews while the job is on its way).
+    # One core a worker (Dask's nanny already sets one BLAS/OpenMP thread). The workers also preload ``preload`` the
+    # Dask way, as they start: nothing more where they were forked from the fork server that imported it, the
+    # preview's modules while the job is on its way where they were spawned.
     options = dict(n_workers=n, threads_per_worker=1, host="127.0.0.1", dashboard_address=dashboard_address,
-                   silence_logs=logging.ERROR, env={"LP_NUM_THREADS": "0"}, preload=list(preload))
+                   silence_logs=logging.ERROR, env={}, preload=list(preload))
     cluster = _forked_scheduler_cluster(**options) if forked else LocalCluster(processes=True, **options)
     return Client(cluster), cluster
 

@@ -1,7 +1,8 @@
 """The compiled inner loop of a take solve (``solvers.take_solve.TakeSolver._pass``), loaded without numba; the
 same extension module also holds the OBJ vertex-line reader (``solvers.decimal_kernel_jit``), the per-shape
 deformation maps and the antagonist pairs' sums (``solvers.shape_kernels_jit``), which the readers, the
-segmentation and the antagonist pairs use through ``built()``.
+segmentation and the antagonist pairs use through ``built()``, and the batch previews' rasteriser
+(``solvers.raster_kernel_jit``).
 
 The kernel's source is ``solvers.take_kernel_jit`` (numba). Importing numba and initialising its compiler costs
 about 0.5 s of CPU in every fresh process (the command line's ``solve``, the GUI's first take), more than the
@@ -33,6 +34,7 @@ import numpy as np
 _SOURCE = Path(__file__).with_name("take_kernel_jit.py")
 _DECIMAL_SOURCE = Path(__file__).with_name("decimal_kernel_jit.py")
 _SHAPES_SOURCE = Path(__file__).with_name("shape_kernels_jit.py")
+_RASTER_SOURCE = Path(__file__).with_name("raster_kernel_jit.py")
 _MODULE = "_take_kernel_aot"
 # solve_pass's argument types, in take_kernel_jit.solve_pass's order (arrays C-contiguous: ``solve_pass`` below
 # makes them so)
@@ -45,6 +47,8 @@ _MAPS4_SIGNATURE = "i8(i4[::1], i4[::1], f8[::1], f8[:,:,::1], f8[:,::1], f8[:,:
 _PAIRS_SIGNATURE = "i8(f8[:,:,::1], f8[:,::1], b1[:,::1], f8[:,::1], f8[:,::1], f8[:,::1])"   # .antagonist_sums
 _QP_SIGNATURE = "i8(f8[:,::1], f8[::1], f8[::1], f8, f8, f8, i8)"   # take_kernel_jit.box_qp_fresh
 _NORMALS_SIGNATURE = "i8(f4[:,::1], i8[::1], i8[::1], i8[::1], f4[:,::1])"   # shape_kernels_jit.vertex_normals32
+_RASTER_SIGNATURE = ("i8(f4[:,::1], f4[:,::1], i8[:,::1], u1[::1], f8[::1], f8[:,::1], f8[:,::1], u1[:,::1], "
+                     "f8[:,::1], u1[:,:,::1])")                               # raster_kernel_jit.draw_mesh
 # the built module's Python wrappers release the GIL around each call: part of the cache key, so that a build
 # made without it is not loaded
 _RELEASES_GIL = "release_gil"
@@ -171,9 +175,10 @@ def _cpu() -> str:
 
 @functools.lru_cache(maxsize=1)
 def _key() -> str:
-    h = hashlib.sha256(_SOURCE.read_bytes() + _DECIMAL_SOURCE.read_bytes() + _SHAPES_SOURCE.read_bytes())
+    h = hashlib.sha256(_SOURCE.read_bytes() + _DECIMAL_SOURCE.read_bytes() + _SHAPES_SOURCE.read_bytes()
+                       + _RASTER_SOURCE.read_bytes())
     for part in (_SIGNATURE, _PARSE_SIGNATURE, _MAPS_SIGNATURE, _MAPS4_SIGNATURE, _PAIRS_SIGNATURE, _QP_SIGNATURE,
-                 _NORMALS_SIGNATURE,
+                 _NORMALS_SIGNATURE, _RASTER_SIGNATURE,
                  np.__version__, _cpu(), _RELEASES_GIL):
         h.update(part.encode())
     return h.hexdigest()[:16]
@@ -268,7 +273,7 @@ def _compile(folder: Path, name: str) -> None:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")   # numba.pycc's pending deprecation
             from numba.pycc import CC
-            from . import decimal_kernel_jit, shape_kernels_jit, take_kernel_jit
+            from . import decimal_kernel_jit, raster_kernel_jit, shape_kernels_jit, take_kernel_jit
             import llvmlite.binding as llvm
             cc = CC(_MODULE)
             cc.target_cpu = llvm.get_host_cpu_name()   # this processor's instructions (AVX2, FMA ...): the
@@ -282,6 +287,7 @@ def _compile(folder: Path, name: str) -> None:
             cc.export("antagonist_sums", _PAIRS_SIGNATURE)(shape_kernels_jit.antagonist_sums.py_func)
             cc.export("box_qp_fresh", _QP_SIGNATURE)(take_kernel_jit.box_qp_fresh.py_func)
             cc.export("vertex_normals32", _NORMALS_SIGNATURE)(shape_kernels_jit.vertex_normals32.py_func)
+            cc.export("draw_mesh", _RASTER_SIGNATURE)(raster_kernel_jit.draw_mesh.py_func)
             with _wrappers_release_gil():
                 cc.compile()
         os.replace(Path(tmp) / name, folder / name)   # atomic: a concurrent build wins or loses whole

@@ -18,10 +18,11 @@ BACKGROUND_TOP = (0.33, 0.35, 0.40)
 BACKGROUND_BOTTOM = (0.12, 0.12, 0.14)
 BACKGROUND_FLAT = (0.20, 0.21, 0.24)
 CAMERAS = ("front", "left", "right", "three-quarter")
-# The surface's material (``add_surface``) and the default view's lights (``style_plotter``); widgets.snapshots draws
-# the same look without pyvista.
+# The surface's material (``add_surface``) and the default view's lights (``style_plotter``); a batch's previews
+# draw the same look on the CPU (``app.cli_batch.preview_image``).
 EDGE_COLOR, EDGE_WIDTH = (0.15, 0.15, 0.18), 0.5
 DIFFUSE, AMBIENT, SPECULAR_POWER = 0.85, 0.12, 20
+SURFACE_SPECULAR = 0.25      # the skin's specular coefficient (``add_surface``'s default)
 KEY_LIGHT_POSITION, KEY_LIGHT_INTENSITY, FILL_LIGHT_INTENSITY = (-0.6, 0.8, 1.0), 0.75, 0.45
 
 
@@ -120,7 +121,7 @@ class ColorMap:
 
 
 def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: bool = False, name="surface",
-                specular: float = 0.25, cull_hidden: bool = False, base_colors: np.ndarray | None = None):
+                specular: float = SURFACE_SPECULAR, cull_hidden: bool = False, base_colors: np.ndarray | None = None):
     """Add the rig surface with smooth shading; colour by ``colormap`` with a legend if given, else by
     ``base_colors`` ((V, 3) uint8: each part in its material's colour, ``model.parts.vertex_colors``) if given,
     else in the one skin colour.
@@ -214,7 +215,7 @@ def _shade(plotter, mesh, actor, wireframe: bool, name: str, cull_hidden: bool):
 
 
 def shade_surface_actor(renderer, mesh, actor, cull_hidden: bool):
-    """``_shade``'s work on a plain VTK ``renderer`` (``widgets.snapshots`` draws without pyvista): per-vertex
+    """``_shade``'s work on a plain VTK ``renderer``: per-vertex
     lighting for ``actor`` and, with ``cull_hidden``, its hidden back sides culled; returns the actor of the
     reversed faces whose backs can show (for the caller to add after ``actor``), or None."""
     n_lights = _white_directional_lights(renderer)
@@ -557,7 +558,7 @@ def focus_vertices(neutral: np.ndarray, reach: np.ndarray) -> np.ndarray:
 
 def offscreen_plotter(size):
     """A pyvista plotter drawing off screen at ``size`` (w, h) pixels, in the application's look (``style_plotter``):
-    what ``render_png`` draws into (``widgets.snapshots.SurfaceSnapshots`` sets up the same without pyvista)."""
+    what ``render_png`` draws into (a batch's previews draw the same picture on the CPU: ``app.cli_batch.preview_image``)."""
     use_offscreen_backend_if_headless()
     import pyvista as pv
     plotter = pv.Plotter(off_screen=True, window_size=list(size))

@@ -220,8 +220,7 @@ def test_bench_batch_overhead_per_take(benchmark, take_dir, bench_takes, tmp_pat
 
 _SIDE_BY_SIDE = """
 import argparse, json, os, sys, tempfile, time
-os.environ["LP_NUM_THREADS"] = "0"              # as the local cluster's workers
-import app.batch_worker                         # as their fork server: previews through EGL beside a display
+import app.batch_worker                         # as the local cluster's fork server: the kernel, the preview's modules
 from app.runtime import limit_blas_threads
 limit_blas_threads()
 from app.cli_batch import prepare_job
