@@ -10,7 +10,8 @@ the standard 4x multisample pattern (the one llvmpipe and Direct3D use), each sa
 picture); a pixel's colour is computed once, at its centre, with perspective-correct weights (Heckbert & Moreton
 1991), and written to the samples it covers, then the samples are averaged: what OpenGL's multisampling does. On ICT
 FaceKit at 480x360 the picture is within a level or two of VTK's on llvmpipe at a few edge pixels and the same
-elsewhere (``tests/test_raster.py``).
+elsewhere (``tests/test_batch.py``; ``tests/test_raster.py`` tests the method against references worked out by
+hand: coverage, projection, depth order, lighting, culling).
 
 Why not OpenGL: a batch worker drew its previews through VTK on Mesa's llvmpipe, which cost each worker ~0.2 s of
 imports (VTK and the GL driver), ~0.1 s to make its context and compile its shaders before its first preview, and

@@ -93,13 +93,14 @@ def _draw_mesh(points, normals, tris, both_sides, camera, lights, material, back
             side = 1
         else:
             continue
-        # the pixels whose samples may lie inside (every sample of pixel p lies in [p, p + 1))
-        xmin = max(int(math.floor(min(x0, x1, x2))), 0)
-        xmax = min(int(math.floor(max(x0, x1, x2))), W - 1)
-        ymin = max(int(math.floor(min(y0, y1, y2))), 0)
-        ymax = min(int(math.floor(max(y0, y1, y2))), H - 1)
-        if xmin > xmax or ymin > ymax:
+        # the pixels whose samples may lie inside (every sample of pixel p lies in [p, p + 1)), clamped to the
+        # picture before they become integers (a corner near the eye's plane projects far outside it)
+        fx0, fx1 = max(min(x0, x1, x2), 0.0), min(max(x0, x1, x2), W - 0.5)
+        fy0, fy1 = max(min(y0, y1, y2), 0.0), min(max(y0, y1, y2), H - 0.5)
+        if not (fx0 <= fx1 and fy0 <= fy1):
             continue
+        xmin, xmax = int(math.floor(fx0)), int(math.floor(fx1))
+        ymin, ymax = int(math.floor(fy0)), int(math.floor(fy1))
         drawn += 1
         inv = 1.0 / area
         # barycentric weights as edge functions l_i(x, y) = A_i x + B_i y + C_i (Pineda 1988), l_2 = 1 - l_0 - l_1

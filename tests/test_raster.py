@@ -148,3 +148,18 @@ def test_what_it_cannot_draw_is_refused_before_the_compiled_loop_runs(bad):
         normals = np.zeros((2, 3))
     with pytest.raises(ValueError):
         _draw(pts, tris, normals=normals)
+
+
+def test_a_triangle_reaching_the_eyes_plane_is_drawn_clipped_to_the_picture():
+    """A corner a hair in front of the eye projects ~1e7 pixels away: the triangle is drawn where it covers the
+    picture (its bounds clamped to the picture before they become pixel indices), and a corner behind the eye
+    leaves its triangle out."""
+    tri = np.array([[-2.0, -2.0, 0.0], [-2.0, 2.0, 0.0], [1.0, 0.0, 10.0 - 1e-5]])   # float32 keeps the 1e-5
+    img = _draw(tri, [[0, 2, 1]], both=[True])
+    assert img.shape == (SIZE[1], SIZE[0], 3)
+    x_left = _project(tri[0])[0]
+    assert img[SIZE[1] // 2, int(x_left) + 2:].min() == 255         # from its near edge to the picture's right
+    assert img[SIZE[1] // 2, :int(x_left) - 1].max() == 0
+    behind = tri.copy()
+    behind[2, 2] = 11.0
+    assert not _draw(behind, [[0, 2, 1]], both=[True]).any()
