@@ -372,7 +372,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     weights = ws.playing_weights()
     frame, preview_error = preview_frame(weights), None
     if job.preview is not None:
-        try:          # a preview that cannot be drawn (no display, no EGL) costs the take its picture only
+        try:          # a preview that cannot be drawn (e.g. points that are not finite) costs the take its picture only
             surface = sol.dense(frame) if sol is not None else job.evaluator.pose(weights[frame])
             png = job.preview(surface, *job.preview_faces(), focus=job.focus, view=job.preview_view)
             writers[out_dir / OUTPUTS["preview"]] = lambda f: f.write(png)

@@ -976,3 +976,30 @@ def test_the_batch_command_starts_its_fork_server_before_it_imports_numpy(tmp_pa
     r = json.loads(proc.stdout.strip().splitlines()[-1])
     assert r["seen"] == ([[False, list(BATCH_PRELOAD)]] if starts else [])
     assert r["code"] == (0 if "--help" in argv else 2), proc.stderr[-2000:]
+
+
+def test_a_preview_that_cannot_be_drawn_costs_the_take_its_picture_only(tmp_path, ict_rig, take_dir):
+    """A surface the preview cannot draw (here: a point that is not a finite number, which the rasteriser refuses
+    before its compiled loop runs) leaves the take solved with its weights, report and done-marker, no preview, and
+    the reason in its row."""
+    import dataclasses
+
+    import numpy as np
+
+    from model.batch import solve_take_file
+    job = _job(ict_rig, take_dir)
+    real = job.preview
+
+    def broken_surface(points, *args, **kwargs):
+        points = np.array(points)
+        points[0, 0] = np.nan
+        return real(points, *args, **kwargs)
+
+    take = _short_takes(tmp_path, take_dir, 1)[0]
+    row = solve_take_file(dataclasses.replace(job, preview=broken_surface), str(take), str(tmp_path / "out"))
+    assert row["status"] == "solved"
+    assert row["preview_error"] == ("the preview could not be rendered (ValueError: the surface to draw has points "
+                                    "that are not finite numbers)")
+    written = {p.name for p in (tmp_path / "out").iterdir()}
+    assert "preview.png" not in written and {"weights.csv", "report.json", "done.json"} <= written
+    assert json.loads((tmp_path / "out" / "done.json").read_text())["row"]["preview_error"] == row["preview_error"]
