@@ -61,8 +61,8 @@ def solve_in_driver(job, tasks: list, *, solve: Callable, progress: Callable | N
                     cancel: Callable[[], bool] | None = None, **options) -> ClusterOutcome:
     """``solve(lambda: job, tasks, progress=..., stop=..., **options)`` (``model.batch.solve_on_cluster``, passed in:
     this module is below ``model.batch``) run by a driver process forked from the fork server;
-    ``progress`` is called here for each of its reports, ``cancel()`` is asked every ``_POLL`` seconds. Returns the
-    ``ClusterOutcome``; raises what the driver raised (e.g. the scheduler could not start), KeyboardInterrupt
+    ``progress`` is called here for each of its reports, ``cancel()`` after each and every ``_POLL`` seconds. Returns
+    the ``ClusterOutcome``; raises what the driver raised (e.g. the scheduler could not start), KeyboardInterrupt
     after the driver has stopped on a Ctrl-C that came before the cluster's start."""
     import multiprocessing
     from multiprocessing.reduction import send_handle
@@ -100,9 +100,11 @@ def solve_in_driver(job, tasks: list, *, solve: Callable, progress: Callable | N
         while outcome is None and error is None:
             try:
                 try:
+                    # asked after every report too: while takes end more often than every _POLL seconds, a wait
+                    # for the next report never times out
+                    if cancel is not None and said is None and cancel():
+                        tell("cancelled")
                     if not ours.poll(_POLL):
-                        if cancel is not None and cancel():
-                            tell("cancelled")
                         continue
                     kind, value = ours.recv()
                 except (EOFError, OSError):         # the driver is gone without its outcome (killed)

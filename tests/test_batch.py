@@ -825,8 +825,8 @@ def test_a_cancelled_batch_ends_the_takes_in_hand_and_fails_the_rest_as_cancelle
         monkeypatch.setattr(batch_driver, "available", lambda preload=(): False)
     elif not batch_driver.available():
         pytest.skip("no fork server a driver could adopt here")
-    # enough takes, long enough, that the cancel arrives with some still queued: the driver looks at ``cancel()``
-    # every 0.1 s, in which one worker solves 2-3 of these takes, more on a loaded machine
+    # takes that end more often than every 0.1 s, the driver's wait for news: the cancel must still be asked after
+    # each (it was asked only when that wait timed out, so a run of quick takes went on to its end)
     takes = _short_takes(tmp_path, take_dir, 16, frames=300)
     first = []
     rows = run_batch(_job(ict_rig, take_dir), takes, tmp_path / "out", workers=1, dashboard_address="127.0.0.1:0",
@@ -835,7 +835,8 @@ def test_a_cancelled_batch_ends_the_takes_in_hand_and_fails_the_rest_as_cancelle
     assert first and first[0]["status"] == "solved" and first[0]["take"] in complete
     assert {r["take"] for r in rows if r["status"] == "solved"} == complete
     cancelled = [r for r in rows if r["status"] == "failed"]
-    assert len(cancelled) >= 2 and len(cancelled) + len(complete) == 16
+    assert len(cancelled) + len(complete) == 16
+    assert len(cancelled) >= 8, f"{len(complete)} takes solved after the cancel"      # 2-3 are in hand
     assert all(r["error"] == f"{r['path']}: cancelled before it was solved." for r in cancelled), cancelled
     summary = json.loads((tmp_path / "out" / "batch.json").read_text())
     assert [r["status"] for r in summary["takes"]] == [r["status"] for r in rows]
