@@ -593,13 +593,13 @@ def start_client(workers: int | None = None, scheduler: str | None = None, *, ti
     # Dask way, as they start: nothing more where they were forked from the fork server that imported it, the
     # preview's modules while the job is on its way where they were spawned.
     options = dict(n_workers=n, threads_per_worker=1, host="127.0.0.1", dashboard_address=dashboard_address,
-                   silence_logs=logging.ERROR, env={}, preload=list(preload))
+                   silence_logs=logging.ERROR, preload=list(preload))
     cluster = _forked_scheduler_cluster(**options) if forked else LocalCluster(processes=True, **options)
     return Client(cluster), cluster
 
 
 def _forked_scheduler_cluster(*, n_workers: int, threads_per_worker: int, host: str, dashboard_address: str | None,
-                              silence_logs: int, env: dict, preload: list):
+                              silence_logs: int, preload: list):
     """The ``LocalCluster`` of these arguments (worker processes) with its scheduler in a process forked from the
     fork server (``model.batch_scheduler``) instead of this one: Dask's ``SpecCluster`` with the scheduler and the
     workers (nannies, their processes forked from the fork server) that ``LocalCluster`` would make."""
@@ -614,7 +614,7 @@ def _forked_scheduler_cluster(*, n_workers: int, threads_per_worker: int, host: 
         dashboard_address=dashboard_address)}
     worker = {"cls": Nanny, "options": dict(
         host=host, nthreads=threads_per_worker, protocol="tcp://", dashboard=False, silence_logs=silence_logs,
-        env=env, preload=preload,
+        preload=preload,
         memory_limit=parse_memory_limit("auto", 1, n_workers, logger=logging.getLogger("distributed")))}
     return SpecCluster(scheduler=scheduler, workers={i: worker for i in range(n_workers)}, worker=worker,
                        silence_logs=silence_logs)

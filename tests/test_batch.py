@@ -917,11 +917,6 @@ for k, pts in enumerate(poses):
 """
 
 
-def _far(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Per pixel, the largest difference of a channel between two pictures (8 bits a channel)."""
-    return np.abs(a[..., :3].astype(int) - b[..., :3].astype(int)).max(axis=2)
-
-
 def test_a_preview_is_the_picture_render_draws_without_opengl(tmp_path, ict_dir, ict_rig):
     """A worker draws each take's preview on the CPU (``preview_png``: ``solvers.raster``, no VTK, no OpenGL
     context to make), with the faces' hidden back sides and normals the job brought (``default_view``), as the
@@ -930,7 +925,7 @@ def test_a_preview_is_the_picture_render_draws_without_opengl(tmp_path, ict_dir,
     in the background gradient, and never the previous take's pose. On ICT's rig, in a process of its own, as a
     worker's."""
     from model.batch import PREVIEW_SIZE
-    from tests.image_compare import load_png
+    from tests.image_compare import load_png, pixel_difference
     assert {"jawOpen", "mouthSmile_L", "mouthSmile_R"} <= set(ict_rig.shape_names)
     proc = subprocess.run([sys.executable, "-c", _PREVIEW_AND_RENDER, str(ict_dir), str(tmp_path)],
                           capture_output=True, text=True, timeout=300)
@@ -939,11 +934,11 @@ def test_a_preview_is_the_picture_render_draws_without_opengl(tmp_path, ict_dir,
     renders = [load_png(tmp_path / f"render{k}.png") for k in range(3)]
     for k in range(3):
         assert previews[k].shape[:2] == (PREVIEW_SIZE[1], PREVIEW_SIZE[0])
-        d = _far(previews[k], renders[k])
+        d = pixel_difference(previews[k], renders[k])
         assert d.mean() < 0.6 and np.percentile(d, 99) <= 2 and (d > 2).mean() < 0.01, (k, d.mean())
     assert np.array_equal(previews[0], previews[2])      # the same pose, the same picture, after another pose
     # the nearest wrong answer, the previous take's pose, is far outside those bounds
-    wrong = _far(previews[1], renders[0])
+    wrong = pixel_difference(previews[1], renders[0])
     assert wrong.mean() > 1.0 and (wrong > 2).mean() > 0.02 and (wrong > 30).sum() > 500
 
 
