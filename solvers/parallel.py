@@ -1,13 +1,17 @@
 """Work split over the machine's cores with threads, for work that runs outside the GIL: the compiled kernels
 (``solvers.take_kernel``: the built module and the just-in-time one both release the GIL while they run), file
 reads and most of numpy's array operations. The results are the same as the work done one piece after another.
+
+The threads are started once a process and kept (``_pool``): starting a pool's threads for each call cost 0.3-0.6 ms
+on the 2-core test machine, more while the other core was busy, and a segmentation of ICT FaceKit makes five such
+calls.
 """
 from __future__ import annotations
 
 import os
 import threading
 from collections import deque
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import ThreadPoolExecutor, wait
 from itertools import islice
 from typing import Callable, Iterable, Iterator, TypeVar
 
@@ -28,20 +32,52 @@ def cores() -> int:
     return max(1, n)
 
 
+_POOLS: dict[int, ThreadPoolExecutor] = {}    # threads -> the pool of that many, made on first use
+_POOLS_LOCK = threading.Lock()
+_IN_POOL = threading.local()                  # ``inside`` is True on a pool's own threads
+
+
+def _pool(threads: int) -> ThreadPoolExecutor:
+    """The process's pool of ``threads`` threads, started on first use and kept (a forked child makes its own: the
+    parent's threads do not exist there, see ``_forget_pools``)."""
+    with _POOLS_LOCK:
+        pool = _POOLS.get(threads)
+        if pool is None:
+            pool = _POOLS[threads] = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="parallel",
+                                                        initializer=setattr, initargs=(_IN_POOL, "inside", True))
+        return pool
+
+
+def _forget_pools() -> None:
+    """In a forked child: the parent's pools have no threads here (their lock may even be held), so start afresh."""
+    global _POOLS_LOCK
+    _POOLS.clear()
+    _POOLS_LOCK = threading.Lock()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_pools)
+
+
 def ordered_map(fn: Callable[[T], R], items: Iterable[T], threads: int | None = None,
                 ahead: int | None = None) -> Iterator[R]:
     """``fn`` of each item, yielded in the items' order, computed on up to ``threads`` threads (default
     ``cores()``) at most ``ahead`` items (default twice the threads) ahead of the one yielded, which bounds the
     memory of results not yet taken; one thread runs them here, one after another. The first exception in the
     items' order is raised where its result would have been, and the items not yet started are cancelled, as a
-    loop would have stopped there; so are they when the caller stops taking results (the generator closed)."""
+    loop would have stopped there; so are they when the caller stops taking results (the generator closed). Items
+    still running then are waited for: when this returns or raises, no ``fn`` of its items runs any more.
+
+    The threads are the process's pool of that many (``_pool``), shared by the calls of every thread; called from
+    one of the pool's own threads (work nested in work), the items run there, one after another, so a pool never
+    waits on itself."""
     threads = max(1, threads or cores())
-    if threads == 1:
+    if threads == 1 or getattr(_IN_POOL, "inside", False):
         for item in items:
             yield fn(item)
         return
     items = iter(items)
-    pool = ThreadPoolExecutor(max_workers=threads, thread_name_prefix="parallel")
+    pool = _pool(threads)
     pending: deque = deque()
     try:
         for item in islice(items, max(1, ahead or 2 * threads)):
@@ -52,9 +88,8 @@ def ordered_map(fn: Callable[[T], R], items: Iterable[T], threads: int | None = 
                 pending.append(pool.submit(fn, item))
             yield result
     finally:
-        for future in pending:
-            future.cancel()
-        pool.shutdown(wait=True)
+        running = [future for future in pending if not future.cancel()]
+        wait(running)
 
 
 def for_spans(fn: Callable[[int, int], object], n: int, threads: int | None = None) -> None:

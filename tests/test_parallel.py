@@ -1,6 +1,8 @@
 """solvers.parallel: work on several threads gives what the loop gives, in order, errors and all."""
 from __future__ import annotations
 
+import os
+import signal
 import threading
 import time
 
@@ -106,3 +108,60 @@ def test_spans_cover_every_index_once_in_order_and_an_error_comes_back(n, thread
             raise ValueError("span")
     with pytest.raises(ValueError, match="span"):
         for_spans(fail, n, threads)
+
+
+def test_the_threads_are_started_once_and_kept_for_every_call():
+    def thread(_):
+        time.sleep(0.005)       # both threads take items
+        return threading.current_thread()
+    first = set(ordered_map(thread, range(8), threads=2))
+    second = set(ordered_map(thread, range(8), threads=2))
+    assert len(first) == 2 and second == first      # the same two Thread objects, not two new ones a call
+
+
+def test_a_caller_that_stops_taking_results_returns_after_the_running_items_end():
+    ended: list[int] = []
+
+    def work(i):
+        if i == 1:
+            time.sleep(0.1)
+            ended.append(i)
+        return i
+    gen = ordered_map(work, range(10), threads=2, ahead=2)
+    assert next(gen) == 0        # item 1 is running on the other thread now
+    gen.close()
+    assert ended == [1], "ordered_map returned while one of its items still ran"
+
+
+def test_work_nested_in_work_runs_on_the_pools_thread_and_never_waits_on_the_pool():
+    def outer(i):
+        here = threading.current_thread()
+        inner = list(ordered_map(lambda j: (j, threading.current_thread() is here), range(4), threads=2))
+        assert inner == [(j, True) for j in range(4)]
+        return i
+    done: list[list[int]] = []
+    worker = threading.Thread(target=lambda: done.append(list(ordered_map(outer, range(6), threads=2))), daemon=True)
+    worker.start()
+    worker.join(10)
+    assert done == [list(range(6))], "nested work waited on its own pool"
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="no fork here")
+def test_a_forked_child_starts_threads_of_its_own():
+    assert list(ordered_map(lambda i: i, range(4), threads=2)) == [0, 1, 2, 3]   # the parent's pool exists
+    pid = os.fork()
+    if pid == 0:                                  # the child: the parent's threads are not here
+        try:
+            ok = list(ordered_map(lambda i: i * i, range(6), threads=2)) == [0, 1, 4, 9, 16, 25]
+        finally:
+            os._exit(0 if ok else 1)
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            assert os.waitstatus_to_exitcode(status) == 0
+            return
+        time.sleep(0.01)
+    os.kill(pid, signal.SIGKILL)
+    os.waitpid(pid, 0)
+    pytest.fail("a forked child's ordered_map waited on the parent's threads")
