@@ -219,3 +219,26 @@ def test_the_gathered_matrix_is_the_same_on_any_number_of_threads(ict_rig, threa
         got = _gathered_columns(full, cols, dtype, threads=threads)
         assert got.dtype == dtype and np.array_equal(got, full[:, cols].astype(dtype))
     assert np.array_equal(PoseEvaluator(ict_rig)._D, _gathered_columns(full, cols, np.float32, threads=threads))
+
+
+def test_a_regional_pose_of_a_few_shapes_is_joshis_blend_of_each_regions_pose(ict_rig):
+    """Regions keyed with a few shapes each (what marker-keyed playback evaluates every frame, where only those
+    shapes' rows are read), and regions with every shape live, against Joshi §4 written out densely in float64:
+    x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v)."""
+    rig = ict_rig
+    rng = np.random.default_rng(11)
+    V, K = rig.n_vertices, rig.n_shapes
+    phi = rng.uniform(0.0, 1.0, (V, 4))
+    phi[rng.uniform(size=(V, 4)) < 0.5] = 0.0              # regions that cover part of the face
+    phi[phi.sum(axis=1) == 0, 0] = 1.0
+    phi /= phi.sum(axis=1, keepdims=True)
+    blend = sp.csr_matrix(phi)
+    W = np.zeros((4, K))
+    for r, names in enumerate((["jawOpen", "mouthSmile_L"], ["browInnerUp_L"], ["eyeBlink_L", "eyeBlink_R", "jawOpen"])):
+        W[r, [rig.shape_index(n) for n in names]] = rng.uniform(0.2, 1.0, len(names))
+    W[3] = rng.uniform(0.0, 0.5, K)                         # every shape live in the last region
+    deltas = np.asarray(rig.deltas, dtype=np.float64)
+    expected = rig.neutral + np.einsum("vr,rk,kvc->vc", phi, W, deltas)
+    np.testing.assert_allclose(PoseEvaluator(rig, dtype=np.float64).evaluate_regional(W, blend), expected,
+                               rtol=0, atol=1e-10)
+    np.testing.assert_allclose(PoseEvaluator(rig).evaluate_regional(W, blend), expected, rtol=0, atol=2e-5)
