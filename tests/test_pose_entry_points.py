@@ -234,7 +234,8 @@ def test_a_regional_pose_of_a_few_shapes_is_joshis_blend_of_each_regions_pose(ic
     phi /= phi.sum(axis=1, keepdims=True)
     blend = sp.csr_matrix(phi)
     W = np.zeros((4, K))
-    for r, names in enumerate((["jawOpen", "mouthSmile_L"], ["browInnerUp_L"], ["eyeBlink_L", "eyeBlink_R", "jawOpen"])):
+    keyed = (["jawOpen", "mouthSmile_L"], ["browInnerUp_L"], ["eyeBlink_L", "eyeBlink_R", "jawOpen"])
+    for r, names in enumerate(keyed):
         W[r, [rig.shape_index(n) for n in names]] = rng.uniform(0.2, 1.0, len(names))
     W[3] = rng.uniform(0.0, 0.5, K)                         # every shape live in the last region
     deltas = np.asarray(rig.deltas, dtype=np.float64)
