@@ -215,9 +215,9 @@ def _shade(plotter, mesh, actor, wireframe: bool, name: str, cull_hidden: bool):
 
 
 def shade_surface_actor(renderer, mesh, actor, cull_hidden: bool):
-    """``_shade``'s work on a plain VTK ``renderer``: per-vertex
-    lighting for ``actor`` and, with ``cull_hidden``, its hidden back sides culled; returns the actor of the
-    reversed faces whose backs can show (for the caller to add after ``actor``), or None."""
+    """``_shade``'s work on ``renderer``: per-vertex lighting for ``actor`` and, with ``cull_hidden``, its hidden
+    back sides culled; returns the actor of the reversed faces whose backs can show (for the caller to add after
+    ``actor``), or None."""
     n_lights = _white_directional_lights(renderer)
     if not n_lights or mesh.GetPointData().GetNormals() is None:
         return None
@@ -558,7 +558,8 @@ def focus_vertices(neutral: np.ndarray, reach: np.ndarray) -> np.ndarray:
 
 def offscreen_plotter(size):
     """A pyvista plotter drawing off screen at ``size`` (w, h) pixels, in the application's look (``style_plotter``):
-    what ``render_png`` draws into (a batch's previews draw the same picture on the CPU: ``app.cli_batch.preview_image``)."""
+    what ``render_png`` draws into (a batch's previews draw the same picture on the CPU:
+    ``app.cli_batch.preview_image``)."""
     use_offscreen_backend_if_headless()
     import pyvista as pv
     plotter = pv.Plotter(off_screen=True, window_size=list(size))
