@@ -46,6 +46,13 @@ def test_playhead_moves_with_only_its_columns_repainted(qtbot):
         QtWidgets.QApplication.instance().removeEventFilter(paints)
     painted = {type(obj).__name__ for obj, _ in paints.widgets}
     assert not painted & {"QDoubleSpinBox", "QLineEdit", "QComboBox"}, painted   # unchanged values: not redrawn
+    # the ruler and the time label are opaque: nothing beneath them (the panel, a dock, the window) is painted
+    assert panel not in {obj for obj, _ in paints.widgets}, painted
+    label = panel.time_label
+    label_shown = _on_screen(label)
+    label.repaint()
+    qtbot.wait(50)
+    np.testing.assert_array_equal(label_shown, _on_screen(label))   # its new text as a full repaint draws it
     ruler_rects = [r for obj, r in paints.widgets if obj is ruler]
     assert ruler_rects and all(r.width() < ruler.width() for r in ruler_rects)   # not the whole ruler
     shown = _on_screen(ruler)
