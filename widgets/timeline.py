@@ -114,7 +114,7 @@ class TimelinePanel(QtWidgets.QWidget):
         self.ruler.scrubbed.connect(self.time_changed)
         self.time_label = QtWidgets.QLabel("0.000 s")
         self.time_label.setMinimumWidth(110)
-        self.time_label.setAutoFillBackground(True)   # opaque: its new text each frame repaints it alone, not the window
+        self.time_label.setAutoFillBackground(True)   # opaque: a new text each frame repaints it alone, not the window
         self.interp = QtWidgets.QComboBox()
         self.interp.addItem("Smooth", "smooth")
         self.interp.addItem("Linear", "linear")
