@@ -24,6 +24,7 @@ class TimelineRuler(QtWidgets.QWidget):
         self.time = 0.0
         self.keys: list[float] = []
         self.margin = 10
+        self._backdrop: tuple[tuple, QtGui.QPixmap] | None = None   # (what it shows, the ruler without its playhead)
 
     def set_state(self, time: float, duration: float, fps: float, keys: list[float]) -> None:
         """Show this state; when only the time moved (playback, scrubbing), only the playhead's old and new
@@ -47,8 +48,23 @@ class TimelineRuler(QtWidgets.QWidget):
         t = min(max(t, 0.0), self.duration)
         return round(t * self.fps) / self.fps  # snap to frames
 
-    def paintEvent(self, _event) -> None:
-        p = QtGui.QPainter(self)
+    def _ruler_without_playhead(self) -> QtGui.QPixmap:
+        """The ruler's background, ticks, times and key diamonds, drawn once for its size and state: a playback
+        frame repaints only the playhead's columns, and copying them from here is ~10x cheaper than drawing the
+        ruler's ~30 shapes again in Python (clipped to those columns) every frame."""
+        dpr = self.devicePixelRatioF()
+        key = (self.width(), self.height(), dpr, self.duration, self.fps, tuple(self.keys), self.font().key())
+        if self._backdrop is None or self._backdrop[0] != key:
+            pixmap = QtGui.QPixmap(max(1, round(self.width() * dpr)), max(1, round(self.height() * dpr)))
+            pixmap.setDevicePixelRatio(dpr)
+            p = QtGui.QPainter(pixmap)
+            p.setFont(self.font())
+            self._draw_ruler(p)
+            p.end()
+            self._backdrop = (key, pixmap)
+        return self._backdrop[1]
+
+    def _draw_ruler(self, p: QtGui.QPainter) -> None:
         p.setRenderHint(QtGui.QPainter.Antialiasing)
         h = self.height()
         p.fillRect(self.rect(), QtGui.QColor(40, 42, 48))
@@ -69,9 +85,14 @@ class TimelineRuler(QtWidgets.QWidget):
             y = h - 8
             p.drawPolygon(QtGui.QPolygonF([QtCore.QPointF(x, y - 6), QtCore.QPointF(x + 5, y),
                                            QtCore.QPointF(x, y + 6), QtCore.QPointF(x - 5, y)]))
+
+    def paintEvent(self, _event) -> None:
+        p = QtGui.QPainter(self)
+        p.drawPixmap(0, 0, self._ruler_without_playhead())   # clipped to the repainted columns
+        p.setRenderHint(QtGui.QPainter.Antialiasing)
         p.setPen(QtGui.QPen(QtGui.QColor(255, 80, 80), 2))
         x = self.x_of(self.time)
-        p.drawLine(int(x), 0, int(x), h)
+        p.drawLine(int(x), 0, int(x), self.height())
         p.end()
 
     def mousePressEvent(self, event) -> None:
