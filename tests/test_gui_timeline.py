@@ -69,37 +69,37 @@ def test_playhead_moves_with_only_its_columns_repainted(qtbot):
     assert ruler.duration == 4.0 and ruler.fps == 30.0
 
 
-
 def test_ruler_draws_itself_anew_for_a_new_size_and_new_settings(qtbot):
     """The ruler draws its ticks, times and keys once and copies them for each playback frame; after a resize or
     new settings it must show what a new ruler of that size and those settings shows."""
-    def shown(width: int, duration: float, panel=None):
-        fresh = panel is None
-        if fresh:
-            panel = TimelinePanel()
-            qtbot.addWidget(panel)
-            panel.show()
-            qtbot.waitExposed(panel)
+    def new_panel() -> TimelinePanel:
+        panel = TimelinePanel()
+        qtbot.addWidget(panel)
+        panel.show()
+        qtbot.waitExposed(panel)
+        return panel
+
+    def shown(panel: TimelinePanel, width: int, duration: float) -> np.ndarray:
         panel.resize(width, 44)
         panel.set_state(0.5, duration, 24.0, [1.0], "smooth")
         qtbot.waitUntil(lambda: panel.width() == width)
         panel.layout().activate()   # the ruler takes its share of the new width now, not on a later turn
         qtbot.wait(50)
-        image = _on_screen(panel.ruler)
-        if fresh:
-            panel.hide()            # the screen's pixels are grabbed: it must not cover the panel under test
-            qtbot.wait(50)
-        return panel, image
+        return _on_screen(panel.ruler)
 
-    panel = TimelinePanel()
-    qtbot.addWidget(panel)
-    panel.show()
-    qtbot.waitExposed(panel)
-    _, wide = shown(1600, 2.0, panel)
+    def fresh(width: int, duration: float) -> np.ndarray:
+        panel = new_panel()
+        image = shown(panel, width, duration)
+        panel.hide()                # the screen's pixels are grabbed: it must not cover the panel under test
+        qtbot.wait(50)
+        return image
+
+    panel = new_panel()
+    wide = shown(panel, 1600, 2.0)
     assert panel.ruler.width() > 600
-    _, narrow = shown(1250, 2.0, panel)                        # narrower: every tick moves left
+    narrow = shown(panel, 1250, 2.0)                           # narrower: every tick moves left
     assert narrow.shape[1] < wide.shape[1] - 300
-    np.testing.assert_array_equal(narrow, shown(1250, 2.0)[1])
-    _, longer = shown(1250, 4.0, panel)                        # twice as long: 1 s is half as far along
+    np.testing.assert_array_equal(narrow, fresh(1250, 2.0))
+    longer = shown(panel, 1250, 4.0)                           # twice as long: 1 s is half as far along
     assert not np.array_equal(longer, narrow)
-    np.testing.assert_array_equal(longer, shown(1250, 4.0)[1])
+    np.testing.assert_array_equal(longer, fresh(1250, 4.0))
