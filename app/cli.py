@@ -32,7 +32,8 @@ def cmd_info(args) -> int:
         "correctives": [{"name": c.name, "drivers": list(c.drivers), "rule": c.rule, "muted": c.muted}
                         for c in rig.correctives],
         "presets": sorted(rig.presets),
-        "bounds": [rig.neutral.min(axis=0).round(6).tolist(), rig.neutral.max(axis=0).round(6).tolist()],
+        "bounds": {"min": rig.neutral.min(axis=0).round(6).tolist(),   # DESIGN.md's contract, as ``take-info``'s
+                   "max": rig.neutral.max(axis=0).round(6).tolist()},
     }
     if Path(args.rig).suffix.lower() in (".gltf", ".glb"):  # which mesh was read, and the others (--mesh NAME)
         from model.gltf import gltf_meshes

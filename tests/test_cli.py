@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from model.obj_io import read_obj
+from model.readers import load_rig
 from tests.cli_runner import run_cli
 from tests.rig_files import write_rig_folder
 
@@ -15,6 +16,10 @@ def test_info_json_on_ict(ict_dir):
     info = json.loads(run_cli("info", ict_dir, "--json").stdout)
     assert info["vertices"] == 26719 and info["faces"] == 26384 and len(info["shapes"]) == 57
     assert info["units"] == "cm" and "jawOpen" in info["shapes"]
+    # DESIGN.md's contract: the neutral's bounds as {"min": [x, y, z], "max": [x, y, z]}, in the rig's units
+    rig = load_rig(ict_dir)
+    np.testing.assert_allclose(info["bounds"]["min"], rig.neutral.min(axis=0), atol=1e-5)
+    np.testing.assert_allclose(info["bounds"]["max"], rig.neutral.max(axis=0), atol=1e-5)
 
 
 def test_export_keeps_vertex_order(ict_dir, ict_rig, tmp_path):

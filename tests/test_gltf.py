@@ -333,7 +333,7 @@ def test_cli_mesh_option(tmp_path, cube):
     assert info["meshes"] == [{"name": "Eye", "targets": 1, "vertices": 8}, {"name": "Head", "targets": 2, "vertices": 8}]
     assert "meshes (--mesh NAME): Eye (1 targets, 8 vertices), Head" in run_cli("info", path).stdout
     info = json.loads(run_cli("info", path, "--json", "--mesh", "Eye").stdout)
-    assert info["shapes"] == ["blink"] and info["bounds"][0][0] == pytest.approx(4.5)
+    assert info["shapes"] == ["blink"] and info["bounds"]["min"][0] == pytest.approx(4.5)
     bad = run_cli("info", path, "--mesh", "Nose", check=False)
     assert bad.returncode == 2 and "no mesh named 'Nose'" in bad.stderr and "Traceback" not in bad.stderr
     run_cli("export", path, "--mesh", "Eye", "-o", tmp_path / "eye.glb")
