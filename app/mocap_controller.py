@@ -420,7 +420,7 @@ class MocapController(QtCore.QObject):
         err = solution.marker_rmse * mm
         self.error_plot.title = "marker error RMS (mm)"
         self.error_plot.set_curves([("projection", err), ("dense", solution.marker_rmse_residual * mm)])
-        self._init_weight_curves(solution.weights)
+        self._init_weight_curves(solution.shape_weights)
         self.panel.set_frames(solution.n_frames, self.rate)
         with_c = "" if not solution.solver.C else f" with the rig's {count(solution.solver.C, 'corrective')}"
         self.panel.set_status(f"Solved {solution.n_frames} frames{with_c} in {solution.solve_seconds:.1f} s "

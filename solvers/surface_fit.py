@@ -21,18 +21,22 @@ from .weight_solve import WeightSolver
 
 
 def regional_grams(deltas: np.ndarray, blend) -> np.ndarray:
-    """(R, K, K) with M_r = Σ_v φ_r(v) d_k(v)·d_j(v): the gram of the deltas weighted by each region's blend."""
-    D = np.asarray(deltas, dtype=np.float64)
+    """(R, K, K) with M_r = Σ_v φ_r(v) d_k(v)·d_j(v): the gram of the deltas weighted by each region's blend.
+    Only the shapes that move some vertex of a region enter its product (the others' entries are 0): local shapes,
+    as a studio rig's split ones are, make each region's product small."""
+    D = np.asarray(deltas)
     K, V = D.shape[0], D.shape[1]
     B = sp.csc_matrix(blend)
     if B.shape[0] != V:
         raise RigInputError(f"The blend covers {B.shape[0]} vertices but the rig has {V}.")
-    out = np.empty((B.shape[1], K, K))
+    out = np.zeros((B.shape[1], K, K))
     for r in range(B.shape[1]):
         lo, hi = B.indptr[r], B.indptr[r + 1]
         verts, phi = B.indices[lo:hi], B.data[lo:hi]
         A = D[:, verts].reshape(K, -1)                     # (K, 3n)
-        out[r] = (A * np.repeat(phi, 3)) @ A.T
+        active = np.flatnonzero(np.any(A != 0, axis=1))
+        A = A[active].astype(np.float64, copy=False)
+        out[r][np.ix_(active, active)] = (A * np.repeat(phi, 3)) @ A.T
     return out
 
 

@@ -259,6 +259,9 @@ class TakeSolution:
 
     weights         (F, K) global weights (for a regional solve, the background row of each frame).
     region_weights  (F, R+1, K) per-region weights, or None for a global solve.
+    fitted_weights  (F, K) for a regional solve, the global weights whose surface is closest to each frame's
+                    blended regional surface (``solvers.surface_fit.global_weights_of_regional``), set by the
+                    caller: one weight per shape, what a weights CSV and a DCC's animation carry; None otherwise.
     head            (F, 4, 4) head transforms: rig space -> take space (take units), ``m ≈ head_f · x``.
     marker_rmse     (F,) RMS distance between the head-stabilised markers and the rig fit (rig units).
     marker_rmse_residual (F,) the same after adding the RBF residual (0-ish unless λ smooths it).
@@ -270,6 +273,7 @@ class TakeSolution:
     marker_rmse: np.ndarray
     marker_rmse_residual: np.ndarray
     region_weights: np.ndarray | None = None
+    fitted_weights: np.ndarray | None = None
     coefficients: np.ndarray | None = None
     calibration: np.ndarray | None = None
     misfit: np.ndarray | None = None
@@ -287,6 +291,11 @@ class TakeSolution:
     @property
     def n_frames(self) -> int:
         return int(self.weights.shape[0])
+
+    @property
+    def shape_weights(self) -> np.ndarray:
+        """(F, K) one weight per shape per frame: a global solve's weights, a regional solve's fitted ones."""
+        return self.weights if self.fitted_weights is None else self.fitted_weights
 
     @property
     def frames_per_second(self) -> float:
