@@ -20,6 +20,8 @@ def starts_local_cluster(argv: list[str]) -> bool:
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    from app.runtime import quiet_numeric_warnings
+    quiet_numeric_warnings()      # before the batch's fork server starts: its workers inherit it
     if not opens_window(argv):
         # A command's large arrays (the rig's deltas, the dense cache's blocks) are written once and dropped: numpy's
         # request for transparent huge pages (madvise) for every array of 4 MB or more then costs more in the

@@ -31,3 +31,15 @@ def blas_threads() -> dict[str, int]:
     """{library file: threads} for every BLAS library loaded in this process (threadpoolctl)."""
     from threadpoolctl import threadpool_info
     return {info["filepath"]: int(info["num_threads"]) for info in threadpool_info() if info["user_api"] == "blas"}
+
+
+def quiet_numeric_warnings() -> None:
+    """Hide numpy's RuntimeWarnings (a mean of an empty slice where a marker is never seen, ...) from a user of the
+    command line and the window, in this process and in the processes it starts (``PYTHONWARNINGS``: a batch's
+    workers): they print a source line meant for developers, while what matters reaches the user as a sentence (a
+    warning, a refusal, a report's field)."""
+    import warnings
+    warnings.filterwarnings("ignore", category=RuntimeWarning)
+    given = os.environ.get("PYTHONWARNINGS", "")
+    if "ignore::RuntimeWarning" not in given:
+        os.environ["PYTHONWARNINGS"] = ",".join(filter(None, (given, "ignore::RuntimeWarning")))

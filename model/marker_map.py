@@ -193,6 +193,16 @@ def calibration_cloud(take: MarkerTake, frames: int | slice = 30, units: str | N
 WARP_SCALE_CM, WARP_LAMBDA, WARP_ITERATIONS = 8.0, 10.0, 10
 # Markers farther than this from the warped face (cm; e.g. a head band's) are not mapped.
 OFF_FACE_CM = 1.0
+# A take whose markers do not look like a face on the rig is refused rather than mapped: the registration's scale
+# (the rig's face over the markers' size) outside this range, or the markers' median distance from the rig's face
+# after it, at the take's own size, beyond OFF_FACE_CM. A similarity with a free scale fits any cloud onto the face:
+# the 60 third-party body takes (C3D, TRC; gait, sports, whole bodies) register at scales 0.10-0.36 and lie a
+# median 0.6-4.8 cm off the face at their own size; the shared face takes (the rig's own face and another actor's)
+# at 0.99-1.0 and 0.01-0.14 cm.
+FACE_SCALE_RANGE = (0.4, 2.5)
+# Markers whose calibration positions all lie within this of their centroid (cm, RMS) do not span a face (a take
+# whose points are all written at the origin).
+MIN_SPREAD_CM = 0.1
 # Re-fitting each marker's rig point from the take's motion (``solvers.retarget.refit_points``): rounds of solve and
 # re-fit (it stops early when no point moves), the search radius around the registered point (cm), the prior's λ,
 # the uncertainty floor (cm) and how many frames besides the neutral the rounds solve (every n-th frame of a longer
@@ -237,6 +247,10 @@ def auto_marker_map(rig: Rig, take: MarkerTake, *, calibration_frames: int | sli
         raise RigInputError(f"{take.source or 'take'}: fewer than 3 markers are seen in the calibration frames.")
     labels_used = [lab for lab, u in zip(take.labels, usable) if u]
     cloud = full[usable]
+    spread = float(np.sqrt(np.mean(np.sum((cloud - cloud.mean(axis=0)) ** 2, axis=1))))
+    if not spread > length(MIN_SPREAD_CM, rig.units):
+        raise RigInputError(f"{take.source or 'take'}: its markers' positions in the calibration frames all lie within "
+                            f"{MIN_SPREAD_CM * 10:g} mm of one point, so they cannot be mapped onto a face.")
     if vertices is None:
         vertices = np.flatnonzero(np.abs(rig.deltas).max(axis=(0, 2)) > 0)
     vertices = np.asarray(vertices, dtype=np.int64)
@@ -282,6 +296,12 @@ def auto_marker_map(rig: Rig, take: MarkerTake, *, calibration_frames: int | sli
         if best is None or rms < best[0]:
             best = (rms, s, R, t, d, nn, moved)
     rms, s, R, t, d, nn, moved = best
+    off = float(np.median(d)) / s if s > 0 else float("inf")     # at the take's own size, rig units
+    if not (FACE_SCALE_RANGE[0] <= s <= FACE_SCALE_RANGE[1] and off <= length(OFF_FACE_CM, rig.units)):
+        raise RigInputError(f"{take.source or 'take'}: its markers do not look like a face on this rig (fitting them to "
+                            f"it needs a scale of {s:.2g} and leaves half of them more than {off:.2g} {rig.units} "
+                            "off its surface at their own size), so they are not mapped automatically; give a marker "
+                            "map if they are on a face, or check the take's units.")
     on_face = d <= np.quantile(d, 0.9) if d.size > 10 else np.ones(d.size, bool)
     surface = pts
     if warp and on_face.sum() >= 4:

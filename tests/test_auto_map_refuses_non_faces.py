@@ -1,0 +1,71 @@
+"""Automatic marker mapping maps face takes and refuses, in one sentence naming the file, takes whose markers are
+not on a face: every marker take other tools wrote (../shared/data/thirdparty: gait, sports and whole-body C3D
+and TRC files) and a take whose points are all at one place. A similarity with a free scale fits any cloud onto
+the face, so before this check these were mapped and "solved" (exit 0, a marker RMSE of 3-16 cm on the face).
+The shared face takes (the rig's own face, and an actor who is not the rig) are still mapped."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from model.errors import RigInputError
+from model.marker_map import FACE_SCALE_RANGE, auto_marker_map
+from model.take_workspace import read_take
+from model.takes import MarkerTake
+from tests.cli_runner import run_cli
+from tests.conftest import DATA, require_data
+
+THIRDPARTY = DATA / "thirdparty"
+TAKES = sorted([*(THIRDPARTY / "c3d").glob("*"), *(THIRDPARTY / "trc").glob("*.trc")]) \
+    if THIRDPARTY.is_dir() else []
+# Too few markers to tell a face from anything else: OpenSim's format example has 3 markers in 5 frames
+TOO_FEW_TO_TELL = {"opensim_exampleFormat.trc"}
+
+
+def _one_sentence_naming(message: str, path) -> None:
+    assert str(path) in message and "\n" not in message and message.endswith(".") and "Traceback" not in message
+
+
+@pytest.mark.parametrize("path", TAKES, ids=[p.name for p in TAKES])
+def test_a_third_party_body_take_is_not_mapped_onto_the_face(ict_rig, path):
+    try:
+        take = read_take(path, ict_rig)
+    except RigInputError:
+        return      # refused by its reader (tests/test_thirdparty_takes.py checks why)
+    if not isinstance(take, MarkerTake) or path.name in TOO_FEW_TO_TELL:
+        return
+    with pytest.raises(RigInputError) as refused:
+        auto_marker_map(ict_rig, take, calibration_frames=30, refine=0)
+    _one_sentence_naming(str(refused.value), path)
+
+
+def test_the_shared_face_takes_are_still_mapped(ict_rig):
+    for name in ("ict_livelink_take", "actor_take"):
+        take = read_take(require_data(DATA / "mocap" / name / "take.c3d"), ict_rig)
+        mm, info = auto_marker_map(ict_rig, take, calibration_frames=30, refine=0)
+        assert len(mm.markers) == 60, name
+        assert FACE_SCALE_RANGE[0] < 0.9 < info["scale"] < 1.1 < FACE_SCALE_RANGE[1], (name, info["scale"])
+
+
+def test_a_take_whose_points_all_coincide_is_refused(ict_rig):
+    take = MarkerTake(positions=np.zeros((40, 12, 3)), labels=[f"M{i}" for i in range(12)], rate=60.0, units="mm", source="zeros.c3d")
+    with pytest.raises(RigInputError, match="zeros.c3d: its markers' positions .* lie within 1 mm of one point"):
+        auto_marker_map(ict_rig, take)
+
+
+def test_solve_and_batch_refuse_a_body_take_in_one_sentence(ict_dir, take_dir, tmp_path):
+    body = require_data(THIRDPARTY / "c3d" / "Sample03__gait-raw.c3d")
+    proc = run_cli("solve", ict_dir, body, "-o", tmp_path / "w.csv", check=False)
+    assert proc.returncode == 2 and not (tmp_path / "w.csv").exists()
+    _one_sentence_naming(proc.stderr.strip(), body)     # and nothing else: no numpy RuntimeWarning lines either
+    assert "do not look like a face" in proc.stderr
+    # a batch solves the face take and marks the body take failed, with the same sentence
+    proc = run_cli("batch", ict_dir, take_dir / "take.c3d", body, "-o", tmp_path / "out", "--workers", "1",
+                   check=False)
+    takes = {t["take"]: t for t in json.loads((tmp_path / "out" / "batch.json").read_text())["takes"]}
+    statuses = {name: t["status"] for name, t in takes.items()}
+    assert sorted(statuses.values()) == ["failed", "solved"], statuses
+    failed = next(t for t in takes.values() if t["status"] == "failed")
+    assert "do not look like a face" in failed["error"] and proc.returncode == 2
