@@ -435,8 +435,10 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
             self.apply_preset(edit.preset)
 
     def set_pose(self, weights: np.ndarray, text: str) -> None:
+        """Make ``weights`` the global pose (one undo step); a regional pose is replaced even when the row the
+        Shapes panel shows already equals them (Reset Pose on a regional pose whose background row is 0)."""
         old = self.document.weights
-        if not np.array_equal(old, weights):
+        if self.document.is_regional or not np.array_equal(old, weights):
             self.document.undo_stack.push(SetWeightsCommand(self.document, old, weights, text))
 
     def reset_pose(self) -> None:

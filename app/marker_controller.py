@@ -423,14 +423,18 @@ class MarkerController(QtCore.QObject):
         old = doc.pose_state()
         level = self.level
         lvl = self._level_obj(level)
+        background = None
         if lvl is not None:
             blend, regions = lvl.blend, [r.vertices for r in lvl.regions]
             region_max = self._region_max_for(lvl)
+            column = sp.csc_matrix(blend)[:, -1]
+            background = column.indices[column.data > 0]          # the vertices the background blends into
         else:
             level, blend, regions, region_max = None, None, [], np.zeros((0, rig.n_shapes))
         W0 = pose_at_level(old, blend)
         ms = self.markers
-        solver = ms.drag_solver(rig, regions, region_max, lam_reg=self.lam_reg, antagonists=self._antagonists(rig))
+        solver = ms.drag_solver(rig, regions, region_max, lam_reg=self.lam_reg, antagonists=self._antagonists(rig),
+                                background=background)
         if blend is not None and not (old.is_regional and same_blend(old.blend, blend)):
             doc.set_pose_state(PoseState(old.weights, W0, blend, level))  # same pose, now per region
         start = self.marker_positions()

@@ -180,16 +180,18 @@ class MarkerSet:
         return np.ascontiguousarray(sampled.reshape(-1, K, 3).transpose(0, 2, 1).reshape(-1, K))
 
     def drag_solver(self, rig: Rig, regions: list[np.ndarray], region_max: np.ndarray, *,
-                    lam_reg: float = DRAG_LAM_REG, antagonists=None):
+                    lam_reg: float = DRAG_LAM_REG, antagonists=None, background: np.ndarray | None = None):
         """The regional solver a drag of these markers re-solves at each mouse move (``solvers.regional_solve``;
         ALGORITHMS.md §8): ``regions`` of the chosen level (none: one global solve), ``region_max`` their
-        per-shape displacement, ``lam_reg`` the pull toward the pose at the press in cm² (a physical weight,
+        per-shape displacement, ``background`` the level's vertices its background blends into (its row is solved
+        from the markers there), ``lam_reg`` the pull toward the pose at the press in cm² (a physical weight,
         converted to the rig's units by ``model.units``, so a drag poses a face in m, cm or mm alike)."""
         from solvers.regional_solve import RegionalSolver
         from .shape_weights import live_mask       # a muted shape does not follow the markers
         from .units import area
         return RegionalSolver(regions, self.S, self.delta_rows(rig.deltas) * live_mask(rig), region_max=region_max,
-                              solve_background=True, lam_reg=area(lam_reg, rig.units), antagonists=antagonists)
+                              solve_background=True, background=background, lam_reg=area(lam_reg, rig.units),
+                              antagonists=antagonists)
 
     # --- editing (returns new sets; markers are immutable) ----------------------------------------
     def with_marker(self, marker: Marker) -> "MarkerSet":

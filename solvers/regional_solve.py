@@ -72,16 +72,25 @@ class RegionalSolver:
     marker_rows    (3M, K) marker rows of the deltas (``MarkerSet.delta_rows``), row 3j + c.
     deltas         (K, V, 3) shape deltas, used only to find which shapes move in each region; or give
                    ``region_max`` (R, K) (``shape_region_max``) instead.
-    solve_background  also solve the background row globally from all markers (default: keep it).
+    solve_background  also solve the background row (default: keep it): from the markers on ``background``'s
+                   vertices (the level's vertices the background blends into) when given, as a region's from its
+                   markers, and kept when none is there; else globally from all markers. A drag gives it: solved
+                   from every marker, the background row followed a dragged chin with mouth shapes at 1 that
+                   creased the face where the background blends in, and pinned markers on it moved 0.2 mm.
     antagonists    shape index pairs that must not be both on (ALGORITHMS.md §13; ``model.antagonists``): when a
-                   region's solve leaves both above ``exclusion_level``, the weaker is held at 0 and the region
-                   solved again (an exclusion, the complementarity constraint w_i w_j = 0, by active set).
+                   region's solve leaves both above ``exclusion_level``, one of them is held at 0 and the region
+                   solved again (an exclusion, the complementarity constraint w_i w_j = 0, by active set): the one
+                   whose hold leaves the lower objective, both being tried (holding the weaker could hold the
+                   shape the drag needs: a chin dragged down with the lower lip pinned uses jawOpen with
+                   mouthShrugLower, and holding jawOpen, the weaker at first, left the chin 1.4 mm short of a
+                   5.4 mm move and moved a pinned marker 1.6 mm; ``tests/test_regional_solve.py``).
     Other keywords go to ``WeightSolver`` (mode, lam_sparsity, lam_temporal, lam_reg, lower, upper).
     """
 
     def __init__(self, regions: list[np.ndarray], sampling: sp.spmatrix, marker_rows: np.ndarray, *,
                  deltas: np.ndarray | None = None, region_max: np.ndarray | None = None,
-                 shape_threshold: float = 0.02, solve_background: bool = False, mode: str = "box",
+                 shape_threshold: float = 0.02, solve_background: bool = False,
+                 background: np.ndarray | None = None, mode: str = "box",
                  lam_sparsity: float = 0.0, lam_temporal: float = 0.0, lam_reg: float = 1e-3,
                  lower=0.0, upper=1.0, antagonists=None, exclusion_level: float = 0.1) -> None:
         A = np.asarray(marker_rows, dtype=np.float64)
@@ -119,8 +128,14 @@ class RegionalSolver:
             solver = WeightSolver(Ar[:, sh], lower=lo[sh], upper=hi[sh], **opts)
             self._problems.append((r, rows, sh, others, solver, Ar[:, others]))
         self._background = None
+        self._background_rows: np.ndarray | None = None      # the background's marker rows (None: all)
         if solve_background and M:
-            self._background = WeightSolver(A, lower=lo, upper=hi, **opts)
+            if background is not None:
+                mk = markers_in_regions(S, [np.asarray(background, dtype=np.int64)])[0]
+                self._background_rows = (3 * mk[:, None] + np.arange(3)).reshape(-1)
+            rows = self._background_rows
+            if rows is None or rows.size:
+                self._background = WeightSolver(A if rows is None else A[rows], lower=lo, upper=hi, **opts)
 
     @property
     def active_regions(self) -> list[int]:
@@ -161,13 +176,17 @@ class RegionalSolver:
         if self._background is not None:
             wr = W[self.R]
             prev = None if w_prev is None else np.asarray(w_prev)[self.R]
-            out[self.R] = self._excluding(self._background, b, np.arange(self.K), dict(w_ref=wr, w_start=wr,
-                                                                                     w_prev=prev))
+            bb = b if self._background_rows is None else b[self._background_rows]
+            if np.isfinite(bb).any():
+                out[self.R] = self._excluding(self._background, bb, np.arange(self.K), dict(w_ref=wr, w_start=wr,
+                                                                                          w_prev=prev))
         return out
 
     def _excluding(self, solver: WeightSolver, b: np.ndarray, shapes: np.ndarray, kw: dict) -> np.ndarray:
         """``solver.solve(b, **kw)`` for the region's ``shapes``, then, while an antagonist pair is both above the
-        exclusion level, the weaker held at 0 (a stiff diagonal term on it for this call) and solved again."""
+        exclusion level, one of the pair most on (the larger smaller weight) held at 0 and the region solved
+        again: each of the two is tried with the shapes held so far, and the hold whose solve has the lower
+        objective (``_objective``) is kept."""
         w = solver.solve(b, **kw)
         if not self.antagonists:
             return w
@@ -178,16 +197,24 @@ class RegionalSolver:
             on = [(i, j) for i, j in pairs if w[i] > self.exclusion_level and w[j] > self.exclusion_level]
             if not on:
                 break
-            held.update(i if w[i] < w[j] else j for i, j in on)
-            finite = np.isfinite(b)
-            A = solver.A
-            stiff = 1e6 * max(float(np.trace(solver.AtA)) / max(solver.K, 1), 1.0)
-            upd = np.zeros((solver.K, solver.K))
-            upd[list(held), list(held)] = stiff
-            if not finite.all():
-                upd -= A[~finite].T @ A[~finite]
-            w = solver.solve_gram(A[finite].T @ b[finite], gram_update=upd, **kw)
-            w[list(held)] = 0.0
+            pair = max(on, key=lambda p: min(w[p[0]], w[p[1]]))
+            tries = [(self._solve_holding(solver, b, held | {k}, kw), k) for k in pair]
+            w, k = min(tries, key=lambda t: _objective(solver, t[0], b, kw))
+            held.add(k)
+        return w
+
+    @staticmethod
+    def _solve_holding(solver: WeightSolver, b: np.ndarray, held: set[int], kw: dict) -> np.ndarray:
+        """The region's solve with the shapes ``held`` at 0 (a stiff diagonal term on them for this call)."""
+        finite = np.isfinite(b)
+        A = solver.A
+        stiff = 1e6 * max(float(np.trace(solver.AtA)) / max(solver.K, 1), 1.0)
+        upd = np.zeros((solver.K, solver.K))
+        upd[list(held), list(held)] = stiff
+        if not finite.all():
+            upd -= A[~finite].T @ A[~finite]
+        w = solver.solve_gram(A[finite].T @ b[finite], gram_update=upd, **kw)
+        w[list(held)] = 0.0
         return w
 
     def _solve_linearised(self, b, weights, w_prev, offset, J) -> np.ndarray:
@@ -216,7 +243,21 @@ class RegionalSolver:
                 target = target - (A_others + Jr[:, others]) @ W[r, others]
             out[r, sh] = step(solver, self.A[rows][:, sh], Jr[:, sh], target, sh, r)
         if self._background is not None:
+            rows = slice(None) if self._background_rows is None else self._background_rows
             allk = np.arange(self.K)
-            out[self.R] = step(self._background, self.A, J[self.R], b - offset[self.R], allk, self.R)
+            out[self.R] = step(self._background, self.A[rows], J[self.R][rows], (b - offset[self.R])[rows], allk,
+                               self.R)
         return out
 
+
+def _objective(solver: WeightSolver, w: np.ndarray, b: np.ndarray, kw: dict) -> float:
+    """The region's objective at ``w`` (ALGORITHMS.md §4): the misfit at its finite targets ``b`` plus the
+    solver's sparsity, and its λ_r and λ_t terms where ``kw`` gives their references."""
+    finite = np.isfinite(b)
+    r = solver.A[finite] @ w - b[finite]
+    f = float(r @ r) + solver.lam_sparsity * float(w.sum()) ** 2
+    if kw.get("w_ref") is not None and solver.lam_reg:
+        f += solver.lam_reg * float(np.sum((w - kw["w_ref"]) ** 2))
+    if kw.get("w_prev") is not None and solver.lam_temporal:
+        f += solver.lam_temporal * float(np.sum((w - kw["w_prev"]) ** 2))
+    return f

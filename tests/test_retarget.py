@@ -231,6 +231,41 @@ def test_a_mouth_corner_drag_on_ict_leaves_no_antagonist_pair_both_on(ict_rig):
     assert found["antagonists"][0] == [] and found["antagonists"][1] < 0.01
 
 
+
+def test_a_chin_drag_with_the_lower_lip_pinned_holds_the_antagonist_that_costs_least(ict_rig, take_dir):
+    """Eight markers of the take's map from chin to brow (every 6th by height), level 2, solved as a drag solves
+    them; the chin marker dragged 5.4 mm down in eight moves, the others pinned. Following it needs jawOpen with
+    mouthShrugLower (to hold the lower lip), an antagonist pair: the exclusion holds the member whose hold costs
+    least, so the chin reaches its target (within 0.2 mm), the pins hold (0.05 mm) and no pair is left on.
+    Holding the weaker member instead (the rule before) held jawOpen: the chin stopped 1.4 mm short and a pinned
+    marker moved 1.6 mm, the face creased between the regions. The background row is solved from the markers on
+    the background's vertices: from all of them, it also followed the chin and its pinned markers moved 0.2 mm."""
+    from model.antagonists import pair_indices, rig_antagonists, strong_pairs
+    from model.markers import Marker, MarkerSet
+    from model.segmentation import SegmentationSettings, segment_rig
+    from solvers.regional_solve import shape_region_max
+    rig = ict_rig
+    verts = list(load_marker_map(take_dir / "marker_map.json").markers.values())
+    chosen = sorted(verts, key=lambda v: rig.neutral[v, 1])[::6][:8]
+    ms = MarkerSet.for_rig(rig, [Marker(f"m{i}", vertex=int(v)) for i, v in enumerate(chosen)])
+    level = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, SegmentationSettings()).levels[2]
+    regions = [r.vertices for r in level.regions]
+    pairs = pair_indices(rig, rig_antagonists(rig))
+    solver = ms.drag_solver(rig, regions, shape_region_max(rig.deltas, regions), antagonists=pairs,
+                            background=np.flatnonzero(level.blend.toarray()[:, -1] > 0))
+    start = ms.positions(rig.neutral)
+    chin = int(np.argmin(start[:, 1]))
+    W = np.zeros((len(regions) + 1, rig.n_shapes))
+    for step in range(1, 9):
+        targets = start.copy()
+        targets[chin, 1] -= 0.54 * step / 8
+        W = solver.solve((targets - start).reshape(-1), W)
+    moved = ms.positions(PoseEvaluator(rig, dtype=np.float64).pose(W, blend=level.blend)) - start
+    assert np.linalg.norm(moved[chin] - (targets[chin] - start[chin])) < 0.02, moved[chin]
+    assert np.linalg.norm(np.delete(moved, chin, axis=0), axis=1).max() < 0.005
+    assert strong_pairs(W, pairs, 0.1) == []
+
+
 def test_refit_points_moves_a_marker_to_the_point_that_explains_its_motion_unless_the_prior_says_no():
     """``refit_points``: three candidate vertices with different motions; the marker moved like vertex 2. It moves
     there from vertex 0, unless vertex 2 is many σ from where the registration put it and the gain is small."""
