@@ -352,7 +352,8 @@ def _choose_layout(data: bytes, params: _Params, hdr: dict, path: Path, pblock: 
 
 
 def read_c3d(path: str | Path) -> MarkerTake:
-    """Read the 3D points of a C3D file into a MarkerTake (NaN where the residual is negative)."""
+    """Read the 3D points of a C3D file into a MarkerTake (NaN where the residual is negative, and where a sample
+    is exactly (0, 0, 0): many writers mark a gap so, and a marker is never exactly at the origin)."""
     path = Path(path)
     data = read_input_bytes(path)
     if len(data) < BLOCK or data[1] != 0x50:
@@ -393,6 +394,11 @@ def read_c3d(path: str | Path) -> MarkerTake:
                         "the C3D default.")
 
     xyz = _points(data, lay, params, lay.frames, scale)
+    origin = (xyz == 0.0).all(axis=2)
+    if origin.any():    # a gap, as many writers mark one (residual 0, not negative), not a marker at the origin
+        xyz[origin] = np.nan
+        warnings.append(f"{path}: {int(origin.sum())} samples at exactly (0, 0, 0) were read as missing, the way "
+                        "many writers mark a gap.")
     return MarkerTake(positions=xyz, labels=labels, rate=float(rate), units=units, source=str(path),
                       first_frame=hdr["first"], warnings=warnings)
 

@@ -494,3 +494,23 @@ def test_c3d_data_start_at_or_below_zero(bent_positions, tmp_path, data_start):
         assert path.name in str(exc) and "\n" not in str(exc)
         return
     np.testing.assert_allclose(take.positions, bent_positions.astype(np.float32), equal_nan=True)
+
+
+@pytest.mark.parametrize("integer", [False, True])
+def test_c3d_gaps_written_as_the_origin_are_read_as_missing(tmp_path, integer):
+    """The actor take with its gaps written as (0, 0, 0) and a residual of 0, as many capture systems write them:
+    read back with the same gaps (NaN), with a warning, not as markers at the origin (read as positions, they made
+    a solve of this take twice as far from the true weights)."""
+    from tests.conftest import DATA, require_data
+    take = read_c3d(require_data(DATA / "mocap" / "actor_take" / "take.c3d"))
+    gaps = np.isnan(take.positions).any(axis=2)
+    assert 0 < gaps.sum() < gaps.size
+    zeros = MarkerTake(positions=np.nan_to_num(take.positions, nan=0.0), labels=take.labels, rate=take.rate,
+                       units=take.units, source="zeros")
+    write_c3d(tmp_path / "zeros.c3d", zeros, integer=integer)
+    back = read_c3d(tmp_path / "zeros.c3d")
+    np.testing.assert_array_equal(np.isnan(back.positions).any(axis=2), gaps)
+    np.testing.assert_allclose(back.positions[~gaps], take.positions[~gaps], atol=0.01 if integer else 1e-4)
+    assert [w for w in back.warnings if "exactly (0, 0, 0)" in w] == \
+        [f"{tmp_path / 'zeros.c3d'}: {int(gaps.sum())} samples at exactly (0, 0, 0) were read as missing, the way many "
+         "writers mark a gap."]
