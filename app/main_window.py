@@ -274,10 +274,11 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         self.frame_selected_action = act("view", "&Frame Selected", self.frame_selected, "F",
                                          "Frame the selected marker (Marker mode) or region (Segmentation panel), "
                                          "else the face")
-        self.frame_all_action = act("view", "Frame &All", lambda: self.viewport.frame_points(), "A",
-                                    "Frame the whole face from where the camera looks now (also Home in the view)")
+        self.frame_all_action = act("view", "Frame &All", self.frame_all, "A",
+                                    "Frame the whole model as posed, from where the camera looks now (also Home in "
+                                    "the view)")
         # Home too, but only in the viewport: lists, sliders and boxes keep Home for their first item
-        home = QtGui.QShortcut(QtGui.QKeySequence("Home"), self.viewport, lambda: self.viewport.frame_points())
+        home = QtGui.QShortcut(QtGui.QKeySequence("Home"), self.viewport, self.frame_all)
         home.setContext(QtCore.Qt.WidgetWithChildrenShortcut)
         home.setWhatsThis("Frame All (in the viewport)")
         act("view", "Reset &View", self.viewport.reset_view, None, "Back to the camera preset, framing the face")
@@ -522,6 +523,13 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
             if (labels == region).any():
                 return f"region {region}", surface[labels == region]
         return None
+
+    def frame_all(self) -> None:
+        """View ▸ Frame All (A, Home in the view): every vertex of the surface as posed, from where the camera looks
+        now (the camera presets and Frame Selected with nothing selected frame the face)."""
+        points = self.viewport.points()
+        if points is not None:
+            self.viewport.frame_points(points)
 
     def frame_selected(self) -> None:
         """View ▸ Frame Selected (F): frame the selected marker or region from where the camera looks now."""

@@ -138,3 +138,28 @@ def test_blending_is_off_only_when_nothing_drawn_needs_it_and_the_picture_is_unc
     assert scene.needs_blending(ren) and blend_on
     assert np.array_equal(mapped, picture(blending=True)[0])
     assert not np.array_equal(mapped, picture(blending=False)[0])   # the bar's text does need it
+
+
+def test_frame_all_frames_the_whole_model_as_posed(qtbot, tmp_path):
+    """A (Frame All) frames every vertex of the surface as it is posed now, from where the camera looks: the
+    sparse glTF cube (Khronos sample) opens framed on the half its shape moves, and with the shape at 1 it
+    stretches out of the view; pressing A brings every vertex inside the view. It framed the rest pose of the
+    moved half before and left the camera where it was."""
+    from tests.conftest import DATA, require_data
+    from tests.gui_helpers import open_and_wait
+    w = make_window(qtbot, tmp_path)
+    open_and_wait(qtbot, w, require_data(DATA / "thirdparty" / "gltf" / "singleBlendshapeCube_sparse.glb"))
+    vp = w.viewport
+    w.set_pose(np.ones(w.document.rig.n_shapes), "pose")
+    qtbot.waitUntil(lambda: not w.redraw_pending)
+
+    def inside() -> bool:
+        xy = vp.world_to_display(vp.points())[:, :2]
+        width, height = vp.plotter.window_size
+        return bool(((xy >= 0) & (xy <= [width, height])).all())
+
+    assert not inside(), "the posed cube fits the view already: the test lost its point"
+    from tests.test_gui_rigger_habits import _key
+    _key(qtbot, vp.canvas, QtCore.Qt.Key_A)
+    qtbot.waitUntil(lambda: not w.redraw_pending)
+    assert inside()
