@@ -20,11 +20,20 @@ def run_gui(path: str | None = None) -> int:
     window.show()
     window.prepare_take_solver()
     if not window.autosave.offer_recovery(path):   # a crash left an autosave: restoring it replaces the open
+        if not path or _is_take_or_map(path):
+            window.open_sample()                   # a take or a map plays on a rig: the sample until one is opened
         if path:
             window.open_path(path)
-        else:
-            window.open_sample()
     return app.exec()
+
+
+def _is_take_or_map(path) -> bool:
+    from app.loading import dropped_kind
+    from model.errors import RigInputError
+    try:
+        return dropped_kind(path) != "rig"
+    except RigInputError:
+        return False
 
 
 def install_excepthook(window) -> None:

@@ -268,6 +268,25 @@ def test_a_rig_folder_take_and_marker_map_dropped_together_open(qtbot, tmp_path,
     assert w.last_error is None
 
 
+
+def test_a_take_given_to_open_goes_to_the_mocap_panel(qtbot, tmp_path, ict_dir, take_dir):
+    """``open_path`` (``blendshape-studio TAKE``, a recent file) with a take or a marker map loads it in the Mocap
+    panel on the open rig, as a drop does; a truncated C3D is refused by the take reader in one sentence saying so,
+    and the rig and take stay. It said "unknown rig format '.c3d'" for any take, good or bad."""
+    w = make_window(qtbot, tmp_path)
+    open_and_wait(qtbot, w, ict_dir)
+    w.open_path(take_dir / "take.c3d")
+    w.open_path(take_dir / "marker_map.json")
+    qtbot.waitUntil(lambda: w.mocap.workspace.marker_map is not None, timeout=20000)
+    assert w.mocap.workspace.take_path == take_dir / "take.c3d" and w.last_error is None
+    cut = tmp_path / "cut.c3d"
+    cut.write_bytes((take_dir / "take.c3d").read_bytes()[:3000])
+    w.open_path(cut)
+    qtbot.waitUntil(lambda: w.last_error is not None, timeout=20000)
+    assert str(cut) in w.last_error and "rig format" not in w.last_error and ". " not in w.last_error
+    assert w.mocap.workspace.take_path == take_dir / "take.c3d" and w.document.rig.n_vertices == 26719
+
+
 def test_a_dropped_project_gltf_or_take_opens_and_anything_else_is_one_sentence(qtbot, tmp_path, llf_csv):
     from model.project import Project, save_project
     from resources.sample_rig import build_sample_rig
