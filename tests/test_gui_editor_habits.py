@@ -184,3 +184,16 @@ def test_no_opening_dialog_stays_up_after_an_open(qtbot, tmp_path, ict_rig):
         open_and_wait(qtbot, w, target)
         qtbot.wait(1500)                       # well past the dialog's own 300 ms show delay
         assert shown() == [], target
+
+
+def test_the_preset_list_and_apply_are_enabled_only_with_presets(qtbot, tmp_path):
+    """A rig without presets (ICT FaceKit) opened straight into a new window left the empty preset list and its
+    Apply button enabled (Apply did nothing, silently): they follow the presets there are, from the first rig on."""
+    from tests.gui_helpers import shapes_panel_alone
+    panel = shapes_panel_alone(qtbot, tmp_path)
+    panel.set_shapes(["jawOpen", "mouthSmile_L"], [])
+    assert not panel.presets.isEnabled() and not panel.apply_preset.isEnabled()
+    panel.set_shapes(["jawOpen", "mouthSmile_L"], ["happy"])
+    assert panel.presets.isEnabled() and panel.apply_preset.isEnabled()
+    panel.set_shapes(["jawOpen"], [])
+    assert not panel.presets.isEnabled() and not panel.apply_preset.isEnabled()

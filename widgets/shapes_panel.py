@@ -559,8 +559,10 @@ class ShapesPanel(QtWidgets.QWidget):
         if current != list(presets or []):
             self.presets.clear()
             self.presets.addItems(presets or [])
-            self.presets.setEnabled(bool(presets))
-            self.apply_preset.setEnabled(bool(presets))
+        # enabled only with presets to apply, whatever the list was (a window opened straight on a rig without
+        # presets kept the empty list's controls enabled: Apply did nothing)
+        self.presets.setEnabled(bool(presets))
+        self.apply_preset.setEnabled(bool(presets))
         if [r.name for r in self.rows] == names:
             return
         old = [r.name for r in self.rows]
