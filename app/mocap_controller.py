@@ -299,7 +299,16 @@ class MocapController(QtCore.QObject):
 
     def use_frame_as_neutral(self) -> bool:
         """Animation ▸ Use Take Frame as Neutral (Alt+N): the frame shown."""
-        return self.use_neutral_frames(self.frame) if self.n_frames else False
+        return False if self._says_no_frames() else self.use_neutral_frames(self.frame)
+
+    def _says_no_frames(self) -> bool:
+        """Whether there is no take frame to play or pick, said in the status bar (the take actions did nothing,
+        silently, with no take or an unsolved marker take)."""
+        if self.n_frames:
+            return False
+        self.window.show_status("There is no take to play: load one in the Mocap panel." if self.take is None else
+                                "Solve the take first: a marker take has frames to play once it is solved.", 4000)
+        return True
 
     def show_neutral_frames(self, value: str | None) -> None:
         """Show the neutral frames setting in the panel (the undo commands call this)."""
@@ -549,11 +558,13 @@ class MocapController(QtCore.QObject):
 
     def toggle_play(self) -> None:
         """Play or pause the take (Ctrl+Space)."""
-        self.playback.toggle()
+        if not self._says_no_frames():
+            self.playback.toggle()
 
     def step(self, frames: int) -> None:
         """Pause and move ``frames`` frames (Alt+, / Alt+.), clamped to the take."""
-        self.playback.step(frames)
+        if not self._says_no_frames():
+            self.playback.step(frames)
 
     # --- rig changes ------------------------------------------------------------------------------
     def _on_shapes_change(self) -> None:

@@ -476,3 +476,20 @@ def test_region_legend_is_white_text_at_a_readable_size_in_the_corner(qtbot, tmp
     lw, lh = legend.GetPosition2()
     assert vw > 846 and lw * vw == pytest.approx(220, abs=1) and lh * vh / n >= 18   # rows of 19 px
     assert (x + lw) * vw < 0.5 * vw and y * vh > 0.5 * vh         # in the upper left, clear of the lower-right title
+
+
+def test_take_actions_without_a_take_to_play_say_why(qtbot, tmp_path, take_dir):
+    """Play / Pause Take (Ctrl+Space), Previous / Next Take Frame (Alt+, / Alt+.) and Use Take Frame as Neutral
+    (Alt+N) did nothing, silently, with no take or an unsolved marker take: each now says why in the status bar."""
+    w = make_window(qtbot, tmp_path)
+    for key in (QtCore.Qt.Key_Space, QtCore.Qt.Key_Period):
+        w.statusBar().clearMessage()
+        _key(qtbot, w.viewport.canvas, key, QtCore.Qt.ControlModifier if key == QtCore.Qt.Key_Space
+             else QtCore.Qt.AltModifier)
+        assert w.statusBar().currentMessage() == "There is no take to play: load one in the Mocap panel."
+    assert w.mocap.load_take(take_dir / "take.c3d") and w.mocap.n_frames == 0
+    for key, modifier in ((QtCore.Qt.Key_Comma, QtCore.Qt.AltModifier), (QtCore.Qt.Key_N, QtCore.Qt.AltModifier)):
+        w.statusBar().clearMessage()
+        _key(qtbot, w.viewport.canvas, key, modifier)
+        assert w.statusBar().currentMessage().startswith("Solve the take first"), key
+    assert not w.mocap.playback.playing and w.document.undo_stack.count() == 0
