@@ -103,3 +103,27 @@ def test_ruler_draws_itself_anew_for_a_new_size_and_new_settings(qtbot):
     longer = shown(panel, 1250, 4.0)                           # twice as long: 1 s is half as far along
     assert not np.array_equal(longer, narrow)
     np.testing.assert_array_equal(longer, fresh(1250, 4.0))
+
+
+def test_the_last_time_on_the_ruler_is_shown_whole(qtbot):
+    """Each second's time is written right of its tick; the last one ran past the ruler's end ("2s" showed as
+    "2"): it is written left of its tick. Nothing is drawn right of the last tick, and its label is there."""
+    panel = TimelinePanel()
+    qtbot.addWidget(panel)
+    panel.resize(1600, 44)
+    panel.show()
+    qtbot.waitExposed(panel)
+    panel.set_state(0.5, 2.0, 24.0, [], "smooth")
+    qtbot.wait(50)
+    ruler = panel.ruler
+    assert ruler.width() > 600
+    image = ruler.grab().toImage().convertToFormat(QtGui.QImage.Format_RGB888)
+    pixels = np.frombuffer(image.constBits(), np.uint8).reshape(image.height(), image.bytesPerLine())[
+        :, :image.width() * 3].reshape(image.height(), image.width(), 3).astype(int)
+    text_rows = pixels[:14]                                   # the times, above the ticks
+    background = text_rows[0, 0]
+    drawn = np.abs(text_rows - background).sum(axis=2) > 60
+    end = int(ruler.x_of(2.0))
+    width = ruler.fontMetrics().horizontalAdvance("2s")
+    assert not drawn[:, end + 2:].any()                       # nothing right of the last tick but its line
+    assert drawn[:, end - 2 - width:end - 1].sum() > 10       # "2s", left of it

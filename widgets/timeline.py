@@ -76,8 +76,10 @@ class TimelineRuler(QtWidgets.QWidget):
             x = self.x_of(f / self.fps)
             major = f % int(max(self.fps, 1)) == 0
             p.drawLine(int(x), h - 8, int(x), h - (16 if major else 11))
-            if major:
-                p.drawText(int(x) + 2, 12, f"{f / self.fps:g}s")
+            if major:   # right of its tick, or left of it where it would run past the end (the last one)
+                label = f"{f / self.fps:g}s"
+                width = p.fontMetrics().horizontalAdvance(label)
+                p.drawText(int(x) + 2 if int(x) + 2 + width <= self.width() else int(x) - 2 - width, 12, label)
         p.setPen(QtCore.Qt.NoPen)
         p.setBrush(QtGui.QColor(250, 200, 60))
         for t in self.keys:
