@@ -258,6 +258,8 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         e.addAction(undo)
         e.addAction(redo)
         self.undo_action, self.redo_action = undo, redo
+        for action, name in ((undo, "Undo"), (redo, "Redo")):   # their text names the step ("Undo Key the pose…")
+            action.setProperty("shortcutName", name)
         self.add_separator("edit")
         act("edit", "Reset &Pose", self.reset_pose, "Ctrl+0", "Set every weight to 0")
         act("edit", "&Mirror Pose", self.mirror_pose, "Ctrl+M",
@@ -382,7 +384,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
 
     def _update_counts(self) -> None:
         rig = self.document.rig
-        self.counts_label.setText(f"{rig.n_vertices:,} vertices · {rig.n_faces:,} faces · "
+        self.counts_label.setText(f"{count(rig.n_vertices, 'vertex', 'vertices')} · {count(rig.n_faces, 'face')} · "
                                   f"{count(rig.n_shapes, 'shape')} · {count(len(rig.correctives), 'corrective')} · {rig.units}")
 
     def _on_rig_shapes_change(self) -> None:
@@ -835,7 +837,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
             keys = ", ".join(dict.fromkeys(k.toString(QtGui.QKeySequence.NativeText) for k in act.shortcuts()
                                            if not k.isEmpty()))
             if keys:
-                rows.append((where or "Window", act.text().replace("&", ""), keys))
+                rows.append((where or "Window", act.property("shortcutName") or act.text().replace("&", ""), keys))
         for sc in self.findChildren(QtGui.QShortcut):   # panel keys that are not menu actions (region nudges)
             if not sc.key().isEmpty():
                 rows.append(("Panels", sc.whatsThis() or "(panel shortcut)",

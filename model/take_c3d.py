@@ -331,7 +331,7 @@ def _choose_layout(data: bytes, params: _Params, hdr: dict, path: Path, pblock: 
     best, held = min(readable, key=rank)
     if held < SHORT_FILE_FRACTION * best.frames:
         raise RigInputError(f"{path}: the C3D file is truncated: {best.frames} frames declared "
-                            f"but only {held} complete frames present.")
+                            f"but only {held} complete {'frame is' if held == 1 else 'frames are'} present.")
     for key in deviations(best):
         shown = " or ".join(str(v) for v in said[key])
         warnings.append(f"{path}: {_PARAMETER_NAMES[key]} says {shown}, which does not fit the data; "
