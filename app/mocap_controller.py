@@ -344,6 +344,7 @@ class MocapController(QtCore.QObject):
         self._cancel = cancel = threading.Event()
         relay, version = self._relay, self.document.rig_version
         take, marker_map = ws.take, ws.marker_map
+        rig, faces = self.rig, self._shown_faces()
 
         def job():
             try:
@@ -351,7 +352,8 @@ class MocapController(QtCore.QObject):
                                         progress=lambda d, t, w: relay.progress.emit(d, t, w))
             except SolveCancelled:
                 return None
-            return sol, settings, (version, take, marker_map)
+            # the views' surface and first frames too, here: on the GUI thread they froze the window 0.2-0.3 s
+            return sol, settings, (version, take, marker_map), (faces, views_data(rig, take, sol, faces))
 
         dlg = QtWidgets.QProgressDialog("Solving the take…", "Cancel", 0, ws.take.n_frames, self.window)
         dlg.setWindowTitle("Solving")
@@ -379,18 +381,19 @@ class MocapController(QtCore.QObject):
             self._progress.deleteLater()
             self._progress = None
 
-    def _set_views_surface(self, solution, keep_camera: bool = False) -> None:
-        """The Mocap Views' faces for ``solution`` (the captured area's, of the parts View ▸ Parts shows) and the
-        frame cache of their vertices; the views frame the face unless ``keep_camera``."""
+    def _shown_faces(self):
         parts = getattr(self.window, "parts", None)
-        counts, indices = captured_area_faces(self.rig, solution.solver.residual_vertices,
-                                              parts.shown_faces() if parts is not None else None)
-        shown, local = compact_faces(indices)  # the views draw these vertices only
-        normals = VertexNormals(counts, local, len(shown))  # one for the cache and both views
-        self.cache = FrameCache(solution, self.take, self.rig.units, normals=normals, shown=shown)
-        first, _, _ = self.cache.frame(0)
+        return parts.shown_faces() if parts is not None else None
+
+    def _set_views_surface(self, solution, keep_camera: bool = False, prepared: tuple | None = None) -> None:
+        """The Mocap Views' faces for ``solution`` (the captured area's, of the parts View ▸ Parts shows) and the
+        frame cache of their vertices (``prepared`` by ``views_data`` on the solve's thread, else here); the views
+        frame the face unless ``keep_camera``."""
+        if prepared is None:
+            prepared = views_data(self.rig, self.take, solution, self._shown_faces())
+        counts, indices, normals, self.cache, first, clim = prepared
         self.views.set_surface(first, counts, indices, focus=self._face_box(solution.solver.rest),
-                               n_markers=len(solution.labels), clim=self._residual_clim(),
+                               n_markers=len(solution.labels), clim=clim,
                                residual_title="residual (mm)", normals=normals, keep_camera=keep_camera)
 
     def parts_changed(self) -> None:
@@ -415,7 +418,7 @@ class MocapController(QtCore.QObject):
             self.panel.set_status("Solve cancelled; nothing changed.")
             self.solve_failed.emit("cancelled")
             return
-        solution, settings, (version, take, marker_map) = result
+        solution, settings, (version, take, marker_map), (faces, prepared) = result
         ws = self.workspace
         if version != self.document.rig_version or ws.take is not take or ws.marker_map is not marker_map:
             self.panel.set_status("The rig, the take or the map changed during the solve; solve again.")
@@ -423,7 +426,8 @@ class MocapController(QtCore.QObject):
             return
         self._drop_solution()
         self.workspace.accept(solution, settings)
-        self._set_views_surface(solution)
+        same_parts = faces is None if self._shown_faces() is None else np.array_equal(faces, self._shown_faces())
+        self._set_views_surface(solution, prepared=prepared if same_parts else None)
         mm = unit_scale(self.rig.units, "mm")
         self._show_views_dock()
         err = solution.marker_rmse * mm
@@ -467,13 +471,6 @@ class MocapController(QtCore.QObject):
         pad = 0.25 * (hi - lo)
         return np.array([lo - pad, hi + pad])
 
-    def _residual_clim(self) -> tuple[float, float]:
-        """Colour range of the residual in mm: from a few sampled frames (99th percentile), fixed for the take."""
-        c = self.cache
-        samples = np.unique(np.linspace(0, c.n_frames - 1, 6).astype(int))
-        vals = np.concatenate([c.frame(int(f))[2] for f in samples])
-        hi = float(np.percentile(vals[vals > 0], 99)) if (vals > 0).any() else 1.0
-        return 0.0, max(hi, 1e-3)
 
     def _drop_solution(self) -> None:
         self.pause()
@@ -697,3 +694,19 @@ def _add_take_actions(window, controller: MocapController) -> None:
              "take's slider for a range)")):
         window.add_action("animation", text, lambda _=False, f=slot: f(), key, tip)
     controller.panel.play_button.setToolTip("Play or pause the take (Ctrl+Space); Alt+, and Alt+. step a frame")
+
+
+def views_data(rig, take, solution, shown_faces) -> tuple:
+    """(counts, indices, normals, frame cache, first frame's surface, residual colour range) of the Mocap Views
+    for ``solution``: the captured area's faces among ``shown_faces`` (View ▸ Parts; None: all), the vertices they
+    use, one normals function for the cache and both views, and the residual's range in mm from a few sampled
+    frames (99th percentile), fixed for the take. No Qt: the solve's thread makes it."""
+    counts, indices = captured_area_faces(rig, solution.solver.residual_vertices, shown_faces)
+    shown, local = compact_faces(indices)  # the views draw these vertices only
+    normals = VertexNormals(counts, local, len(shown))
+    cache = FrameCache(solution, take, rig.units, normals=normals, shown=shown)
+    first, _, _ = cache.frame(0)
+    samples = np.unique(np.linspace(0, cache.n_frames - 1, 6).astype(int))
+    vals = np.concatenate([cache.frame(int(f))[2] for f in samples])
+    hi = float(np.percentile(vals[vals > 0], 99)) if (vals > 0).any() else 1.0
+    return counts, indices, normals, cache, first, (0.0, max(hi, 1e-3))
