@@ -112,6 +112,8 @@ class SegmentationPanel(QtWidgets.QWidget):
         form.addRow("Level", lvl_row)
         self.status = QtWidgets.QLabel("")
         self.status.setStyleSheet("color: gray;")
+        # a failure is a sentence: wrapped in the panel's width, it never widens the panel past its dock
+        self.status.setWordWrap(True)
         form.addRow("", self.status)
 
         self.regions = QtWidgets.QTreeWidget()
