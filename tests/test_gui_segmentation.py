@@ -154,6 +154,7 @@ def test_a_failed_segmentation_wraps_its_message_inside_the_dock(qtbot, tmp_path
     qtbot.waitUntil(lambda: panel.status.text().startswith("No segmentation: "), timeout=10000)
     sentence = panel.status.text()
     assert sentence.endswith("lower the threshold or the minimum region size.")
+    assert panel.level_label.text() == ""   # not the level count of the segmentation before
     _fits_its_dock(qtbot, w)
     _whole_sentence_shown(panel.status, sentence)
     # a third-party glTF smaller than the default minimum region fails as it opens
