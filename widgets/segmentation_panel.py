@@ -114,7 +114,7 @@ class SegmentationPanel(QtWidgets.QWidget):
         self.status.setStyleSheet("color: gray;")
         # a failure is a sentence: wrapped in the panel's width, it never widens the panel past its dock
         self.status.setWordWrap(True)
-        form.addRow("", self.status)
+        form.addRow(self.status)   # the whole row: its sentence wraps less
 
         self.regions = QtWidgets.QTreeWidget()
         self.regions.setHeaderLabels(["Region", "Vertices", "Most active shapes"])
