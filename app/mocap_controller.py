@@ -652,8 +652,10 @@ def install(window) -> MocapController:
     # the solve's mode, residual kernel and calibration length come back in the next session (the λs and the
     # kernel length stay at their measured defaults: they depend on the rig's units and the take)
     for widget, key in ((panel.mode_combo, "mocap/mode"), (panel.residual_combo, "mocap/residual"),
-                        (panel.calibration_spin, "mocap/calibrationFrames")):
+                        (panel.calibration_spin, "mocap/calibrationFrames"),
+                        (panel.advanced_button, "mocap/advancedShown")):   # unfolded by who tunes them
         app_settings.remember(widget, key)
+    panel.show_advanced(panel.advanced_button.isChecked())
     dock = window.add_dock("Mocap", panel, QtCore.Qt.RightDockWidgetArea, scroll=True)
     views = SideBySideView()
     weight_plot, error_plot = CurvePlot("weights"), CurvePlot("marker error RMS (mm)")

@@ -170,6 +170,7 @@ class SegmentationController(QtCore.QObject):
     def _on_failed(self, message: str) -> None:
         self.segmentation = None
         self.panel.set_status(f"No segmentation: {message}")
+        self.panel.set_levels([], 0)   # no level count of the last segmentation beside it
         self.panel.set_regions([], [])
         if self.view != "shaded":
             self.refresh_view()

@@ -38,9 +38,9 @@ def remember(widget: QtWidgets.QWidget, key: str) -> None:
     """Bring back the value ``widget`` had in the last session (saved under ``key``) and save every change.
 
     For a QComboBox (its item data, else its text), a QSpinBox or QDoubleSpinBox (its value, clamped to its
-    range), a QCheckBox and a QLineEdit (its text). A saved value that no longer fits (an item gone) is ignored.
-    The widget's signals are blocked while it is restored, so start-up triggers no work; a widget that is not one
-    of those raises.
+    range), a QCheckBox or another checkable button (whether it is checked) and a QLineEdit (its text). A saved
+    value that no longer fits (an item gone) is ignored. The widget's signals are blocked while it is restored,
+    so start-up triggers no work; a widget that is not one of those raises.
     """
     saved = settings().value(key)
     widget.blockSignals(True)
@@ -61,7 +61,7 @@ def remember(widget: QtWidgets.QWidget, key: str) -> None:
                 if value is not None:
                     widget.setValue(int(round(value)) if isinstance(widget, QtWidgets.QSpinBox) else value)
             widget.valueChanged.connect(lambda v: settings().setValue(key, v))
-        elif isinstance(widget, QtWidgets.QCheckBox):
+        elif isinstance(widget, QtWidgets.QAbstractButton) and widget.isCheckable():
             if saved is not None:
                 widget.setChecked(str(saved).lower() in ("true", "1"))
             widget.toggled.connect(lambda on: settings().setValue(key, bool(on)))

@@ -430,3 +430,46 @@ def test_personalize_from_the_mocap_panels_marker_take(qtbot, tmp_path):
     assert actor.shape_names == rig.shape_names
     # the take and its map came along with the project
     assert w.mocap.take is not None and w.mocap.marker_map is not None
+
+
+def _overlapping_widgets(dialog: QtWidgets.QWidget) -> list:
+    """Pairs of visible widgets laid out side by side in ``dialog`` (by any of its layouts, nested ones too) whose
+    geometries overlap."""
+    def widgets_of(layout):
+        for i in range(layout.count()):
+            item = layout.itemAt(i)
+            if item.widget() is not None:
+                yield item.widget()
+            elif item.layout() is not None:
+                yield from widgets_of(item.layout())
+    bad = []
+    for layout in [dialog.layout(), *dialog.findChildren(QtWidgets.QLayout)]:
+        shown = [wd for wd in widgets_of(layout) if wd.isVisible()]
+        for i, a in enumerate(shown):
+            for b in shown[i + 1:]:
+                if a.parentWidget() is b.parentWidget() and a.geometry().intersects(b.geometry()):
+                    bad.append((type(a).__name__, getattr(a, "text", str)(), a.geometry().getRect(),
+                                type(b).__name__, getattr(b, "text", str)(), b.geometry().getRect()))
+    return bad
+
+
+def test_the_personalize_dialog_opens_at_its_size_and_nothing_in_it_overlaps(qtbot, tmp_path):
+    """File ▸ Personalize to Actor… opens at least at the dialog's preferred size (within the screen) and no widget
+    sits on another: it opened at 560x453 (preferred 497x559), the Add Files…/Add Folder…/Remove buttons inside
+    the Pose scans list and the next group over the Scans group's border. Made narrower by the user, the dialog
+    stays tall enough for its wrapped introduction."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    w.actor.action.trigger()                 # File ▸ Personalize to Actor…
+    dlg = w.actor.dialog
+    assert dlg is not None
+    qtbot.waitExposed(dlg)
+    qtbot.wait(50)
+    screen = dlg.screen().availableGeometry()
+    hint = dlg.sizeHint()
+    assert dlg.width() >= min(hint.width(), screen.width()) and dlg.height() >= min(hint.height(), screen.height())
+    assert not _overlapping_widgets(dlg)
+    for size in ((380, 300), (900, 400)):
+        dlg.resize(*size)
+        qtbot.wait(100)
+        assert not _overlapping_widgets(dlg), (size, dlg.size().toTuple())
+    dlg.reject()

@@ -347,3 +347,75 @@ def test_the_views_of_a_solve_are_prepared_off_the_gui_thread(qtbot, tmp_path, i
     with qtbot.waitSignal(mc.solved, timeout=120000):
         mc.solve()
     assert threads == [False] and mc.cache is not None and mc.views.left_mesh.n_points > 1000
+
+
+def _shown_whole_in(widget, dock) -> None:
+    """``widget`` is drawn whole inside ``dock``: inside the view of every scroll area around it (no scrolling
+    needed to see it) and not clipped by anything."""
+    from PySide6 import QtCore
+    parent = widget.parentWidget()
+    while parent is not None and parent is not dock:
+        if isinstance(parent, QtWidgets.QAbstractScrollArea):
+            view = parent.viewport()
+            where = QtCore.QRect(widget.mapTo(view, QtCore.QPoint(0, 0)), widget.size())
+            assert view.rect().contains(where), (widget, where, view.rect())
+        parent = parent.parentWidget()
+    assert parent is dock
+    assert widget.isVisible() and widget.visibleRegion().boundingRect() == widget.rect(), widget
+
+
+def test_after_a_solve_the_transport_and_the_status_are_in_view(qtbot, tmp_path, ict_dir, take_dir):
+    """After a solve (the Mocap Views dock taking the lower part of the window) the solve's result line, Play,
+    the frame slider and the frame label are in view without scrolling, at the default 1400x900 and at 1366x768;
+    neither the Mocap nor the Segmentation panel needs a horizontal scroll bar. The Mocap panel needed ~900 px of
+    height: all of them sat below the dock's bottom, and the Segmentation panel was 10 px too wide for its dock
+    once its vertical scroll bar showed."""
+    from PySide6 import QtCore
+    w, mc = _install(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    mc.dock.show()
+    mc.dock.raise_()
+    panel = mc.panel
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    QtWidgets.QApplication.processEvents()
+    _shown_whole_in(panel.status_label, mc.dock)           # "Ready: Solve the take."
+    _shown_whole_in(panel.solve_button, mc.dock)
+    with qtbot.waitSignal(mc.solved, timeout=180000):
+        qtbot.mouseClick(panel.solve_button, QtCore.Qt.LeftButton)
+    assert mc.views_dock.isVisible() and panel.status_label.text().startswith("Solved 358 frames")
+    for size in ((1400, 900), (1366, 768)):
+        w.resize(*size)
+        qtbot.wait(200)
+        assert w.size().toTuple() == size
+        for widget in (panel.status_label, panel.play_button, panel.slider, panel.frame_label):
+            _shown_whole_in(widget, mc.dock)
+        label = panel.status_label
+        assert label.height() >= label.heightForWidth(label.width()), size     # every line of the result
+        for dock, content in ((mc.dock, panel), (w.segmentation_dock, w.segmentation_panel)):
+            area = dock.widget()
+            assert not area.horizontalScrollBar().isVisible(), (size, dock.windowTitle())
+            assert content.minimumSizeHint().width() <= area.viewport().width(), (size, dock.windowTitle())
+    # the transport is live: a click on Play plays the take
+    qtbot.mouseClick(panel.play_button, QtCore.Qt.LeftButton)
+    assert panel.play_button.isChecked()
+    qtbot.mouseClick(panel.play_button, QtCore.Qt.LeftButton)
+    assert not panel.play_button.isChecked()
+
+
+def test_the_advanced_solver_settings_unfold_with_a_click_and_stay_unfolded(qtbot, tmp_path):
+    """The residual kernel, the λs and the RBF kernel are folded away under 'Advanced solver settings' (so that
+    Solve stays in view above the transport); a click shows them, and the next session shows them again."""
+    from PySide6 import QtCore
+    w, mc = _install(qtbot, tmp_path, size=(1400, 900))
+    mc.dock.show()
+    mc.dock.raise_()
+    panel = mc.panel
+    boxes = (panel.residual_combo, panel.lam_sparsity, panel.lam_temporal, panel.rbf_scale, panel.rbf_lambda)
+    assert not any(b.isVisibleTo(panel) for b in boxes)
+    qtbot.mouseClick(panel.advanced_button, QtCore.Qt.LeftButton)
+    assert all(b.isVisibleTo(panel) for b in boxes)
+    w.close()
+    w2 = make_window(qtbot, tmp_path, size=(1400, 900))
+    assert all(b.isVisibleTo(w2.mocap.panel) for b in (w2.mocap.panel.residual_combo, w2.mocap.panel.rbf_lambda))
+    qtbot.mouseClick(w2.mocap.panel.advanced_button, QtCore.Qt.LeftButton)
+    assert not w2.mocap.panel.rbf_lambda.isVisibleTo(w2.mocap.panel)

@@ -119,3 +119,47 @@ def test_a_new_rig_never_shows_the_last_rigs_regions(qtbot, tmp_path, ict_dir):
     _ready(qtbot, w)
     assert panel.regions.topLevelItemCount() == w.segmentation.segmentation.levels[0].n_regions == 11   # ICT's
     assert panel.level_label.text().startswith("0 of ") and panel.status.text().endswith((" ms", " s"))
+
+
+def _fits_its_dock(qtbot, w) -> None:
+    """The Segmentation panel fits its dock's width: no horizontal scroll bar, nothing wider than the view."""
+    area = w.segmentation_dock.widget()
+    qtbot.wait(100)   # the scroll area lays out again on a posted event
+    assert not area.horizontalScrollBar().isVisible()
+    assert w.segmentation_panel.minimumSizeHint().width() <= area.viewport().width()
+    assert w.segmentation_panel.width() <= area.viewport().width()
+
+
+def _whole_sentence_shown(label, sentence: str) -> None:
+    assert label.text() == sentence and label.wordWrap()
+    assert label.height() >= label.heightForWidth(label.width())   # every wrapped line shown
+
+
+def test_a_failed_segmentation_wraps_its_message_inside_the_dock(qtbot, tmp_path):
+    """A failed segmentation's sentence is wrapped in the panel's width; it used to be one line that widened the
+    panel to ~900 px in a 370 px dock, behind a scroll bar that hid the threshold box, the level and the nudge."""
+    from PySide6 import QtCore
+    from PySide6.QtTest import QTest
+    from tests.conftest import DATA, require_data
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    _ready(qtbot, w)
+    panel = w.segmentation_panel
+    # typed in Min region, as a user does: more vertices than the sample face has
+    edit = panel.min_size.lineEdit()
+    QTest.mouseClick(edit, QtCore.Qt.LeftButton)
+    QTest.keyClick(edit, QtCore.Qt.Key_A, QtCore.Qt.ControlModifier)
+    QTest.keyClicks(edit, "60000")
+    QTest.keyClick(edit, QtCore.Qt.Key_Return)
+    w.segmentation.wait()
+    qtbot.waitUntil(lambda: panel.status.text().startswith("No segmentation: "), timeout=10000)
+    sentence = panel.status.text()
+    assert sentence.endswith("lower the threshold or the minimum region size.")
+    assert panel.level_label.text() == ""   # not the level count of the segmentation before
+    _fits_its_dock(qtbot, w)
+    _whole_sentence_shown(panel.status, sentence)
+    # a third-party glTF smaller than the default minimum region fails as it opens
+    open_and_wait(qtbot, w, require_data(DATA / "thirdparty" / "gltf" / "SimpleMorph.gltf"))
+    w.segmentation.wait()
+    qtbot.waitUntil(lambda: panel.status.text().startswith("No segmentation: "), timeout=10000)
+    _fits_its_dock(qtbot, w)
+    _whole_sentence_shown(panel.status, panel.status.text())

@@ -13,6 +13,35 @@ from widgets.length_box import length_units, show_length_in
 RESIDUALS = ("none", "joshi", "gaussian", "multiquadric")
 
 
+class _VerticalScroll(QtWidgets.QScrollArea):
+    """Scrolls a panel up and down, never sideways: as wide as the panel needs beside the scroll bar, as short as
+    a few lines (the height left to it is what the dock has after what is kept in view)."""
+
+    def __init__(self, widget: QtWidgets.QWidget) -> None:
+        super().__init__()
+        self.setWidget(widget)
+        self.setWidgetResizable(True)
+        self.setFrameShape(QtWidgets.QFrame.NoFrame)
+        self.setHorizontalScrollBarPolicy(QtCore.Qt.ScrollBarAlwaysOff)
+        widget.installEventFilter(self)
+
+    def eventFilter(self, watched, event) -> bool:
+        if watched is self.widget() and event.type() == QtCore.QEvent.LayoutRequest:
+            self.updateGeometry()    # the panel's minimum width is this area's
+        return super().eventFilter(watched, event)
+
+    def _with_bar(self, size: QtCore.QSize, height: int) -> QtCore.QSize:
+        bar = self.style().pixelMetric(QtWidgets.QStyle.PM_ScrollBarExtent, None, self.verticalScrollBar())
+        return QtCore.QSize(size.width() + bar + 2 * self.frameWidth(), height)
+
+    def minimumSizeHint(self) -> QtCore.QSize:
+        return self._with_bar(self.widget().minimumSizeHint(), 4 * self.fontMetrics().lineSpacing())
+
+    def sizeHint(self) -> QtCore.QSize:
+        hint = self.widget().sizeHint()
+        return self._with_bar(hint, hint.height() + 2 * self.frameWidth())
+
+
 class MocapPanel(QtWidgets.QWidget):
     load_take_requested = QtCore.Signal()
     load_map_requested = QtCore.Signal()
@@ -32,7 +61,10 @@ class MocapPanel(QtWidgets.QWidget):
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
-        lay = QtWidgets.QVBoxLayout(self)
+        # The take, the solve and the curves scroll; under them the transport and the status stay in view
+        # whatever the dock's height: after a solve the Mocap Views dock leaves the panel ~360 px at 1366x768.
+        body = QtWidgets.QWidget()
+        lay = QtWidgets.QVBoxLayout(body)
 
         files = QtWidgets.QGroupBox("Take")
         fl = QtWidgets.QGridLayout(files)
@@ -92,11 +124,6 @@ class MocapPanel(QtWidgets.QWidget):
         self.calibration_spin.setToolTip("Neutral frames at the start of the take used for calibration")
         form.addRow("Mode", self.mode_combo)
         form.addRow("Level", self.level_spin)
-        form.addRow("Residual", self.residual_combo)
-        form.addRow("λ sparsity", self.lam_sparsity)
-        form.addRow("λ temporal", self.lam_temporal)
-        form.addRow("RBF scale", self.rbf_scale)
-        form.addRow("RBF λ", self.rbf_lambda)
         form.addRow("Calibration frames", self.calibration_spin)
         self.neutral_edit = QtWidgets.QLineEdit()
         self.neutral_edit.setPlaceholderText("the calibration frames")
@@ -109,6 +136,21 @@ class MocapPanel(QtWidgets.QWidget):
                                     "(e.g. root-* for a head band's markers)")
         form.addRow("Neutral frames", self.neutral_edit)
         form.addRow("Stable markers", self.stable_edit)
+        # the residual kernel and the weights of the solve's terms: measured defaults, rarely changed; folded
+        # away so that Solve stays in view above the transport
+        self.advanced_button = QtWidgets.QToolButton()
+        self.advanced_button.setText("Advanced solver settings")
+        self.advanced_button.setCheckable(True)
+        self.advanced_button.setAutoRaise(True)
+        self.advanced_button.setToolButtonStyle(QtCore.Qt.ToolButtonTextBesideIcon)
+        self.advanced_button.setToolTip("Show or hide the residual kernel, the sparsity and temporal λ and the "
+                                        "RBF kernel length and λ")
+        form.addRow(self.advanced_button)
+        self._advanced = (self.residual_combo, self.lam_sparsity, self.lam_temporal, self.rbf_scale, self.rbf_lambda)
+        for label, box in zip(("Residual", "λ sparsity", "λ temporal", "RBF scale", "RBF λ"), self._advanced):
+            form.addRow(label, box)
+        self._solve_form = form
+        self.advanced_button.toggled.connect(self.show_advanced)
         self.solve_button = QtWidgets.QPushButton("Solve")
         self.solve_button.setToolTip("Solve head motion, weights and residual for every frame of the take "
                                      "(in the background, with progress; Esc cancels)")
@@ -129,6 +171,16 @@ class MocapPanel(QtWidgets.QWidget):
         form.addRow(exp)  # under their label, full width: the panel stays narrow enough for its dock
         lay.addWidget(solve)
 
+        curves = QtWidgets.QGroupBox("Curves")
+        cl = QtWidgets.QVBoxLayout(curves)
+        self.curve_list = QtWidgets.QListWidget()
+        self.curve_list.setMaximumHeight(110)
+        self.curve_list.setToolTip("Shapes whose weight curves are plotted")
+        cl.addWidget(self.curve_list)
+        lay.addWidget(curves)
+        lay.addStretch(1)
+        self.scroll = _VerticalScroll(body)
+
         play = QtWidgets.QGroupBox("Playback")
         pl = QtWidgets.QGridLayout(play)
         self.play_button = QtWidgets.QPushButton("Play")
@@ -146,17 +198,23 @@ class MocapPanel(QtWidgets.QWidget):
         pl.addWidget(self.frame_label, 0, 2, 1, 2)
         pl.addWidget(self.slider, 1, 0, 1, 4)
         pl.addWidget(self.fps_label, 2, 0, 1, 4)
-        self.curve_list = QtWidgets.QListWidget()
-        self.curve_list.setMaximumHeight(110)
-        self.curve_list.setToolTip("Shapes whose weight curves are plotted")
-        pl.addWidget(QtWidgets.QLabel("Curves"), 3, 0)
-        pl.addWidget(self.curve_list, 4, 0, 1, 4)
-        lay.addWidget(play)
-
         self.status_label = QtWidgets.QLabel("")
         self.status_label.setWordWrap(True)
-        lay.addWidget(self.status_label)
-        lay.addStretch(1)
+
+        outer = QtWidgets.QVBoxLayout(self)
+        outer.setContentsMargins(0, 0, 0, 0)
+        outer.setSpacing(0)
+        outer.addWidget(self.scroll, 1)
+        edge = QtWidgets.QFrame()     # where the settings scroll under what stays
+        edge.setFrameShape(QtWidgets.QFrame.HLine)
+        edge.setFrameShadow(QtWidgets.QFrame.Sunken)
+        outer.addWidget(edge)
+        footer = self._footer = QtWidgets.QVBoxLayout()
+        margins = lay.contentsMargins()
+        footer.setContentsMargins(margins.left(), 0, margins.right(), margins.bottom())
+        footer.addWidget(play)
+        footer.addWidget(self.status_label)
+        outer.addLayout(footer)
 
         self.load_take_button.clicked.connect(self.load_take_requested)
         self.load_map_button.clicked.connect(self.load_map_requested)
@@ -174,6 +232,24 @@ class MocapPanel(QtWidgets.QWidget):
             w.setContextMenuPolicy(QtCore.Qt.CustomContextMenu)
             w.customContextMenuRequested.connect(lambda pos, w=w: self.neutral_menu(w.mapToGlobal(pos)))
         self.set_marker_mode(False)
+        self.show_advanced(False)
+
+    def show_advanced(self, on: bool) -> None:
+        """Unfold (or fold) the advanced solver settings: the residual kernel, the λs, the RBF kernel."""
+        if self.advanced_button.isChecked() != on:
+            self.advanced_button.setChecked(on)    # comes back here through toggled
+            return
+        self.advanced_button.setArrowType(QtCore.Qt.DownArrow if on else QtCore.Qt.RightArrow)
+        for box in self._advanced:
+            self._solve_form.setRowVisible(box, on)
+
+    def heightForWidth(self, width: int) -> int:
+        """The least height at ``width``: the transport and the wrapped status, and a few lines of the settings
+        (they scroll). The dock's scroll area asks this of a panel with a wrapped text; the layout's answer, the
+        settings' whole height, pushed the transport below the dock's bottom."""
+        footer = self._footer
+        need = footer.heightForWidth(width) if footer.hasHeightForWidth() else footer.sizeHint().height()
+        return need + self.scroll.minimumSizeHint().height()
 
     @staticmethod
     def _spin(value, lo, hi, decimals, tip) -> QtWidgets.QDoubleSpinBox:

@@ -39,6 +39,7 @@ class PersonalizeDialog(QtWidgets.QDialog):
             "changed: a new project is written and opened.")
         intro.setWordWrap(True)
         lay.addWidget(intro)
+        self._intro = intro
 
         scans = QtWidgets.QGroupBox("Scans")
         sl = QtWidgets.QVBoxLayout(scans)
@@ -89,7 +90,29 @@ class PersonalizeDialog(QtWidgets.QDialog):
         self.buttons.accepted.connect(self.accept)
         self.buttons.rejected.connect(self.reject)
         lay.addWidget(self.buttons)
-        self.resize(560, 0)
+        self._fit_screen(560)
+
+    # --- size -----------------------------------------------------------------------------------------
+    # A dialog's layout takes a wrapped text's minimum height as one line: the introduction's four lines at 560 px
+    # pushed the Scans group's Add buttons into the Pose scans list and the next group over its border. The text's
+    # minimum height follows its width, and the dialog opens at least at its preferred size.
+    def _hold_intro(self) -> None:
+        need = self._intro.heightForWidth(self._intro.width())
+        if need > 0 and need != self._intro.minimumHeight():
+            self._intro.setMinimumHeight(need)
+
+    def _fit_screen(self, width: int) -> None:
+        """Open ``width`` wide (at least the preferred width) and as tall as the content needs, within the
+        screen."""
+        screen = (self.parentWidget() or self).screen().availableGeometry()
+        width = min(max(width, self.sizeHint().width()), screen.width())
+        margins = self.layout().contentsMargins()
+        self._intro.setMinimumHeight(self._intro.heightForWidth(width - margins.left() - margins.right()))
+        self.resize(width, min(max(self.sizeHint().height(), self.minimumSizeHint().height()), screen.height()))
+
+    def resizeEvent(self, event) -> None:
+        super().resizeEvent(event)
+        self._hold_intro()
 
     # --- choosing files -------------------------------------------------------------------------------
     def _pick_neutral(self) -> None:

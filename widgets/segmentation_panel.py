@@ -112,7 +112,9 @@ class SegmentationPanel(QtWidgets.QWidget):
         form.addRow("Level", lvl_row)
         self.status = QtWidgets.QLabel("")
         self.status.setStyleSheet("color: gray;")
-        form.addRow("", self.status)
+        # a failure is a sentence: wrapped in the panel's width, it never widens the panel past its dock
+        self.status.setWordWrap(True)
+        form.addRow(self.status)   # the whole row: its sentence wraps less
 
         self.regions = QtWidgets.QTreeWidget()
         self.regions.setHeaderLabels(["Region", "Vertices", "Most active shapes"])
