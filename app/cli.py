@@ -92,6 +92,8 @@ def cmd_export(args) -> int:
     weights = pose_weights(rig, args)
     animation = load_animation(args.animation, rig) if args.animation else None
     export_rig(rig, args.output, weights, animation, units=args.out_units, up=args.up)
+    for message in animation.warnings if animation is not None else ():
+        print(f"warning: {message}", file=sys.stderr)
     frames = f", {animation.n_frames} frames" if animation is not None else ""
     print(f"wrote {args.output} ({rig.n_vertices} vertices, {rig.n_faces} faces, {rig.n_shapes} shapes, "
           f"{len(rig.correctives)} correctives{frames})")
