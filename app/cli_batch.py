@@ -184,6 +184,10 @@ def cmd_batch(args) -> int:
     rows = run_batch(job, takes, args.output, names=names, force=args.force, workers=args.workers,
                      scheduler=args.scheduler, progress=ProgressPrinter())
     print(f"{counts_text(rows)}; wrote {args.output}/batch.json and batch.csv")
+    for r in rows:                # what the readers decided for the takes solved now (also in batch.json, per take)
+        if r["status"] == "solved":
+            for message in r.get("warnings") or ():
+                print(f"warning: {message}", file=sys.stderr)
     if status_counts(rows)["failed"]:
         for r in rows:
             if r["status"] == "failed":

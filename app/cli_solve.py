@@ -122,6 +122,8 @@ def cmd_solve(args) -> int:
     announce_solver_build()
     sol = ws.solve(settings, segmentation=segmentation)
     report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
+    for message in report["warnings"]:            # the take reader's (a file cut short), also in the report
+        print(f"warning: {message}", file=sys.stderr)
     for lab in report["markers_left_out"]:
         print(f"warning: marker {lab} left out ({report['markers_left_out_why'][lab]})", file=sys.stderr)
     with_c = f" with {len(report['correctives'])} corrective(s)" if report["correctives"] else ""

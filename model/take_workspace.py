@@ -293,6 +293,7 @@ def solve_report(rig: Rig, take: MarkerTake, solution: TakeSolution, settings: d
         # the project's edited antagonist pairs ("A+B"), or None: the pairs found from the rig
         "antagonists": None if settings.get("antagonists") is None else
         [p if isinstance(p, str) else "+".join(p) for p in settings["antagonists"]],
+        "warnings": list(take.warnings),     # what the take's reader decided (a file cut short, labels renamed)
     }
 
 

@@ -165,6 +165,30 @@ def test_solve_bad_calibration_input(ict_dir, take_dir, tmp_path, option, words)
     assert not (tmp_path / "w.csv").exists()
 
 
+@pytest.mark.parametrize("cut", ["c3d", "trc"])
+def test_solve_says_what_the_take_reader_decided(ict_dir, take_dir, tmp_path, cut):
+    """A take cut short (a C3D at 90% of its bytes, a TRC with its first 300 of 358 frames) is read to its last whole
+    frame with a warning: `solve` prints it (`warning: ...` on stderr, as `take-info` does) and the report lists it
+    under `warnings` (before: exit 0, nothing said, nothing in the report)."""
+    if cut == "c3d":
+        raw = (take_dir / "take.c3d").read_bytes()
+        take = tmp_path / "cut.c3d"
+        take.write_bytes(raw[: int(len(raw) * 0.9)])
+        words = "the file ends early"
+    else:
+        lines = (take_dir / "take.trc").read_text().splitlines(keepends=True)
+        start = next(i for i, line in enumerate(lines) if line.split("\t", 1)[0] == "1")   # the first data row
+        take = tmp_path / "cut.trc"
+        take.write_text("".join(lines[: start + 300]))
+        words = "declares 358 frames but the file holds 300"
+    proc = run_cli("solve", ict_dir, take, "--map", take_dir / "marker_map.json", "--global", "--residual", "none",
+                   "-o", tmp_path / "w.csv", "--report", tmp_path / "r.json")
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert len(rep["warnings"]) == 1, rep["warnings"]
+    assert words in rep["warnings"][0] and str(take) in rep["warnings"][0], rep["warnings"]
+    assert f"warning: {rep['warnings'][0]}\n" in proc.stderr
+
+
 def test_solve_reports_the_neutral_it_found(ict_dir, take_dir, tmp_path):
     proc = run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json",
                    "--neutral-frames", "auto", "--global", "--residual", "none",
