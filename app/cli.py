@@ -14,7 +14,7 @@ import numpy as np
 
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.command_line import opens_window
-from app.cli_common import EXIT_INPUT, EXIT_UNEXPECTED, load_rig_arg, parse_size, pose_weights
+from app.cli_common import EXIT_INPUT, EXIT_UNEXPECTED, check_outputs, load_rig_arg, parse_size, pose_weights
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -200,6 +200,7 @@ def build_parser() -> argparse.ArgumentParser:
     rig_arg(sp)
     pose_args(sp)
     sp.add_argument("-o", "--output", required=True, help="PNG file to write")
+    sp.set_defaults(output_files=(("output", "-o"),))
     sp.add_argument("--view", default="shaded", choices=["shaded", "deformation", "deformation-rgb", "segmentation"])
     sp.add_argument("--threshold", type=float, default=None,
                     help="segmentation quantile t in [0, 1] of the moving skin (default 0.5)")
@@ -223,6 +224,7 @@ def build_parser() -> argparse.ArgumentParser:
     rig_arg(sp)
     pose_args(sp)
     sp.add_argument("-o", "--output", required=True, help=".glb, .gltf, .usd, .usda, .usdc or .obj file to write")
+    sp.set_defaults(output_files=(("output", "-o"),))
     sp.add_argument("--animation", help="weights CSV (as solve writes) or Live Link Face CSV to animate (glTF, USD)")
     sp.add_argument("--out-units", choices=["m", "cm", "mm"],
                     help="units of the file written (default: m for glTF and USD, the rig's for OBJ)")
@@ -249,7 +251,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--min-size", type=int, default=30, help="smallest region in vertices (default 30)")
     sp.add_argument("--overlap", type=int, default=1, help="overlap rings between regions (default 1)")
     sp.add_argument("-o", "--output", required=True, help="JSON file to write")
-    sp.set_defaults(func=cmd_segment)
+    sp.set_defaults(func=cmd_segment, output_files=(("output", "-o"),))
 
     sp = sub.add_parser("corrective", help="add a corrective shape for a driver combination from a scan (Smith)")
     rig_arg(sp)
@@ -262,7 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--mirror", action="store_true",
                     help="also add the other side's corrective (drivers _L<->_R, reflected across x = 0)")
     sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
-    sp.set_defaults(func=cmd_corrective)
+    sp.set_defaults(func=cmd_corrective, output_files=(("output", "-o"),))
 
     cli_solve.add_parser(sub, rig_arg)
     cli_pairs.add_parser(sub, rig_arg)
@@ -271,7 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder, with its UVs and generated textures")
     sp.add_argument("-o", "--output", required=True, help="folder to write")
-    sp.set_defaults(func=cmd_sample)
+    sp.set_defaults(func=cmd_sample, output_folders=(("output", "-o"),))
 
     return p
 
@@ -289,6 +291,7 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     try:
+        check_outputs(args)      # before any work: an output that cannot be written is refused, nothing written
         return int(args.func(args) or 0)
     except RigInputError as exc:
         print(f"error: {exc}", file=sys.stderr)

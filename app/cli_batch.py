@@ -29,7 +29,7 @@ def add_parser(sub, rig_arg) -> None:
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="a running Dask scheduler (tcp://host:8786) whose workers see the same paths")
     sp.add_argument("--force", action="store_true", help="solve again the takes whose outputs are complete")
-    sp.set_defaults(func=cmd_batch)
+    sp.set_defaults(func=cmd_batch, output_folders=(("output", "-o"),))
 
 
 class PreviewMesh:

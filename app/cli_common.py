@@ -1,7 +1,9 @@
 """What every ``blendshape-studio`` command shares: the exit code for bad input, argument parsing of
-weights and sizes, and loading the RIG argument. The commands' modules (app.cli, app.cli_solve,
-app.cli_pairs) import it; it imports none of them."""
+weights and sizes, the checks of every output path before any work, and loading the RIG argument. The commands'
+modules (app.cli, app.cli_solve, app.cli_pairs) import it; it imports none of them."""
 from __future__ import annotations
+
+import os
 
 import numpy as np
 
@@ -9,6 +11,28 @@ from model.errors import RigInputError
 
 EXIT_INPUT = 2        # bad input: one sentence naming the file and the problem
 EXIT_UNEXPECTED = 1   # anything else: one sentence and a crash log with the traceback
+
+
+def check_outputs(args) -> None:
+    """Refuse, before any work, an output option naming what cannot be written (``model.atomic``: a folder where a
+    file goes, a file where a folder goes, a device, a path through a file) and two outputs naming the same file.
+    Each command lists its outputs: ``output_files`` and ``output_folders``, (dest, option) pairs."""
+    from model.atomic import check_output_file, check_output_folder
+    seen: dict[str, str] = {}
+    for dest, option in getattr(args, "output_files", ()):
+        path = getattr(args, dest, None)
+        if path is None:
+            continue
+        check_output_file(path)
+        key = os.path.realpath(path)
+        if key in seen:
+            raise RigInputError(f"{path}: is given for both {seen[key]} and {option}; each output needs its own "
+                                "file.")
+        seen[key] = option
+    for dest, _option in getattr(args, "output_folders", ()):
+        path = getattr(args, dest, None)
+        if path is not None:
+            check_output_folder(path)
 
 
 def parse_weights(text: str | None) -> dict[str, float]:

@@ -27,7 +27,7 @@ def add_parser(sub, rig_arg) -> None:
     sp.add_argument("--top", type=int, default=10, help="changed shapes to list (default 10)")
     sp.add_argument("--report", help="JSON report to write (the summary and every shape's change)")
     sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
-    sp.set_defaults(func=cmd_personalize)
+    sp.set_defaults(func=cmd_personalize, output_files=(("output", "-o"), ("report", "--report")))
 
 
 def cmd_personalize(args) -> int:

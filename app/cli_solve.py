@@ -26,7 +26,8 @@ def add_parser(sub, rig_arg) -> None:
     sp.add_argument("--report", help="JSON report to write")
     sp.add_argument("--gltf", metavar="OUT.glb", help="the rig animated by the weights, as .glb or .gltf (metres, "
                                                       "correctives as extra targets)")
-    sp.set_defaults(func=cmd_solve)
+    sp.set_defaults(func=cmd_solve, output_files=(("output", "-o"), ("cache", "--cache"), ("report", "--report"),
+                                                  ("gltf", "--gltf")))
 
 
 def add_solve_options(sp) -> None:

@@ -42,7 +42,7 @@ from typing import Callable
 import numpy as np
 
 from . import batch_driver, shared_pickle
-from .atomic import process_alive
+from .atomic import check_output_file, check_output_folder, process_alive
 from .batch_driver import ClusterOutcome
 from .errors import RigInputError
 from .fork_server import start_fork_server
@@ -355,6 +355,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     name = name or out_dir.name
     start = time.perf_counter()
     try:
+        check_output_folder(out_dir)              # no file where the take's folder goes: fail before any work
         ws = TakeWorkspace(job.rig)
         solved = ws.prepare_solve(take_path, job.marker_map, job.settings)   # False: a weight take, played as it is
         identity = _take_identity(take_path)
@@ -386,7 +387,10 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     done = {"take_file": identity, "signature": job.signature, "outputs": [Path(p).name for p in writers],
             "row": row}
     writers[out_dir / DONE] = lambda f: f.write((json.dumps(done, indent=1) + "\n").encode())
-    write_set(writers)
+    try:
+        write_set(writers)     # refuses, before writing any, a set with a folder where one of its files goes
+    except RigInputError as exc:
+        return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
     return row
 
 
@@ -745,6 +749,9 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
     ``cancel()`` true stops the run (unfinished takes are failed rows, 'cancelled'); so does Ctrl-C (SIGINT:
     'interrupted'), after which the summary is written and KeyboardInterrupt raised again."""
     out_dir = Path(out_dir)
+    check_output_folder(out_dir)           # before any take: the folder and its summary can be written
+    for summary in (SUMMARY_JSON, SUMMARY_CSV):
+        check_output_file(out_dir / summary)
     takes = [Path(t).resolve() for t in takes]
     names = names or take_names(takes)
     rows: list[dict | None] = [None] * len(takes)
