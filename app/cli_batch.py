@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 
 from app.batch_preload import BATCH_PRELOAD
-from app.cli_solve import add_solve_options, announce_solver_build, load_solve_rig, solve_settings
+from app.cli_solve import add_solve_options, announce_solver_build, check_solve_options, load_solve_rig, solve_settings
 from model.errors import RigInputError
 
 
@@ -169,6 +169,7 @@ def cmd_batch(args) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
+    check_solve_options(args)
     takes = find_takes(args.takes, exclude=args.output)
     if not args.scheduler:
         start_fork_server(BATCH_PRELOAD)   # running already when the command came through app.launch (a no-op then)

@@ -41,7 +41,10 @@ def add_solve_options(sp) -> None:
     sp.add_argument("--level", type=int, default=None, help="hierarchy level whose regions are solved")
     sp.add_argument("--residual", choices=["none", "joshi", "gaussian", "multiquadric"], default=None,
                     help="RBF residual kernel added to the blendshape fit (default: the best measured)")
-    sp.add_argument("--calibration-frames", type=int, default=30, help="neutral frames at the start of the take that settle scale and pose (0: none)")
+    sp.add_argument("--calibration-frames", type=int, default=30,
+                    help="neutral frames at the start of the take that settle scale and pose (default 30; at most the "
+                         "take's frames); 0: no calibration, the markers are taken as the rig's own face in rig "
+                         "space (head motion is still solved; --fixed-head stops that too)")
     sp.add_argument("--neutral-frames", default=None, metavar="A:B|auto",
                     help="the actor's neutral: frames A to B (inclusive), or 'auto' for the most neutral stretch "
                          "(default: the first --calibration-frames)")
@@ -67,6 +70,13 @@ def load_solve_rig(args):
     if args.rig_units:
         rig.units = args.rig_units
     return rig
+
+
+def check_solve_options(args) -> None:
+    """The solve options that need no rig or take, checked before either is read: a --calibration-frames count of 0
+    or more, not 0 with --neutral-frames (``check_calibration_settings``)."""
+    from model.take_workspace import check_calibration_settings
+    check_calibration_settings(solve_options(args))
 
 
 def solve_options(args) -> dict:
@@ -115,6 +125,7 @@ def cmd_solve(args) -> int:
     from model.take_exports import export_solve_outputs
     from model.take_workspace import TakeWorkspace
 
+    check_solve_options(args)
     rig = load_solve_rig(args)
     ws = TakeWorkspace(rig)
     if not ws.prepare_solve(args.take, load_marker_map(args.map) if args.map else None, solve_options(args)):
@@ -131,9 +142,15 @@ def cmd_solve(args) -> int:
     print(f"solved {sol.n_frames} frames{with_c} in {sol.solve_seconds:.2f} s ({sol.frames_per_second:.0f} fps); "
           f"marker RMSE {report['marker_rmse']:.4g} {rig.units}; motion explained "
           f"{report['motion_explained'] if report['motion_explained'] is not None else float('nan'):.3f}; "
-          f"neutral frames {report['neutral_frames']}; wrote {args.output}"
+          f"neutral frames {_neutral_text(report)}; wrote {args.output}"
           + _written(args))
     return 0
+
+
+def _neutral_text(report: dict) -> str:
+    if report["neutral_frames"] is not None:
+        return str(report["neutral_frames"])
+    return "none (fixed head)" if report["head"] == "fixed" else "none (no calibration)"
 
 
 def _written(args) -> str:
