@@ -14,7 +14,8 @@ import numpy as np
 
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.command_line import opens_window
-from app.cli_common import EXIT_INPUT, EXIT_UNEXPECTED, check_outputs, load_rig_arg, parse_size, pose_weights
+from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, check_outputs, check_threshold,
+                             join_dash_values, load_rig_arg, parse_size, pose_weights)
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -59,12 +60,14 @@ def cmd_render(args) -> int:
     from widgets.scene import use_offscreen_backend_if_headless
     use_offscreen_backend_if_headless()
     from app.views import build_view
+    check_threshold(args)
+    size = parse_size(args.size)
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
-    size = parse_size(args.size)
     from model.segmentation import SegmentationSettings
     t = SegmentationSettings().t if args.threshold is None else args.threshold
-    view = build_view(rig, weights, args.view, threshold=t, level=args.level)
+    with about(args.rig):       # a --level the segmentation lacks, a threshold that leaves no region: name the rig
+        view = build_view(rig, weights, args.view, threshold=t, level=args.level)
     from model.parts import checked_hidden, drawn_faces, rig_parts, vertex_colors
     from widgets.scene import SKIN, render_png
     parts = rig_parts(rig)
@@ -104,14 +107,16 @@ def cmd_segment(args) -> int:
     from model.atomic import atomic_write
     from model.segmentation import SegmentationSettings, segment_rig, segmentation_to_json
     from model.wording import duration
+    check_threshold(args)
     rig = load_rig_arg(args)
     chosen = {"t": args.threshold, "map_kind": args.map, "smoothing": args.smoothing,
               "separate_meshes": args.separate_meshes,
               "normalise": None if args.normalise is None else args.normalise == "per-shape",
               "split_by_shapes": None if args.split is None else args.split == "shapes"}
-    settings = SegmentationSettings(levels=args.levels, min_region_size=args.min_size, overlap_rings=args.overlap,
-                                    method=args.method, **{k: v for k, v in chosen.items() if v is not None})
-    seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, settings)
+    with about(args.rig):      # settings out of range, a threshold that leaves no region: name the rig
+        settings = SegmentationSettings(levels=args.levels, min_region_size=args.min_size, overlap_rings=args.overlap,
+                                        method=args.method, **{k: v for k, v in chosen.items() if v is not None})
+        seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, settings)
     atomic_write(args.output, json.dumps(segmentation_to_json(seg)).encode("utf-8"))
     counts = ", ".join(str(lvl.n_regions) for lvl in seg.levels)
     print(f"wrote {args.output}: {len(seg.levels)} levels with {counts} regions "
@@ -172,8 +177,8 @@ def cmd_sample(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="blendshape-studio",
-                                description="Blendshape Studio: edit, segment, solve and render blendshape face rigs.")
+    p = ArgumentParser(prog="blendshape-studio",
+                       description="Blendshape Studio: edit, segment, solve and render blendshape face rigs.")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     def rig_arg(sp):
@@ -286,7 +291,7 @@ def main(argv: list[str] | None = None) -> int:
         from app.gui import run_gui
         return run_gui(argv[0] if argv else None)
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(join_dash_values(parser, argv))   # a mistake in the options: one sentence, exit 2
     if not getattr(args, "func", None):
         parser.print_help()
         return 0

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from app.cli_common import load_rig_arg
-from model.errors import RigInputError
+from app.cli_common import about, check_threshold, load_rig_arg
 
 
 def add_parser(sub, rig_arg) -> None:
@@ -73,9 +72,10 @@ def load_solve_rig(args):
 
 
 def check_solve_options(args) -> None:
-    """The solve options that need no rig or take, checked before either is read: a --calibration-frames count of 0
-    or more, not 0 with --neutral-frames (``check_calibration_settings``)."""
+    """The solve options that need no rig or take, checked before either is read: --threshold in [0, 1], a
+    --calibration-frames count of 0 or more, not 0 with --neutral-frames (``check_calibration_settings``)."""
     from model.take_workspace import check_calibration_settings
+    check_threshold(args)
     check_calibration_settings(solve_options(args))
 
 
@@ -103,12 +103,17 @@ def solve_settings(args, rig) -> tuple[dict, object]:
     regional = settings["mode"] == "region"
     segmentation = None
     if regional:
+        from model.errors import RigInputError
         from model.segmentation import SegmentationSettings, segment_rig
         t = args.threshold if args.threshold is not None else SOLVE_DEFAULTS["threshold"]
-        segmentation = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas,
-                                   SegmentationSettings(t=t))
-        settings["level"] = args.level if args.level is not None else \
-            min(SOLVE_DEFAULTS["level"], len(segmentation.levels) - 1)
+        with about(args.rig):         # a threshold that leaves no region of the rig: name the rig
+            segmentation = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas,
+                                       SegmentationSettings(t=t))
+        n = len(segmentation.levels)
+        if args.level is not None and not 0 <= args.level < n:
+            raise RigInputError(f"{args.rig}: --level {args.level} does not exist: the rig's segmentation at "
+                                f"threshold {t:g} has levels 0 to {n - 1}.")
+        settings["level"] = args.level if args.level is not None else min(SOLVE_DEFAULTS["level"], n - 1)
     return settings, segmentation
 
 

@@ -219,7 +219,8 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
                            head_markers=take.positions[:, head_cols] if head_cols else None,
                            progress=progress, cancel=cancel)
     except ValueError as exc:
-        raise RigInputError(f"{take.source or 'The take'}: {exc}") from None
+        text = str(exc)
+        raise RigInputError(f"{take.source or 'The take'}: {text[:1].lower()}{text[1:]}") from None
     sol.labels = labels
     sol.left_out = left_out
     sol.head_labels = [take.labels[c] for c in head_cols]
@@ -444,8 +445,9 @@ class TakeWorkspace:
         frames: int | slice = n
         if isinstance(neutral, tuple):
             if not 0 <= neutral[0] <= neutral[1] < take.n_frames:
-                raise RigInputError(f"--neutral-frames: the neutral frames {neutral[0]}:{neutral[1]} are outside the "
-                                    f"take, which has frames 0 to {take.n_frames - 1}.")
+                raise RigInputError(f"{take.source or 'The take'}: the neutral frames {neutral[0]}:{neutral[1]} "
+                                    f"(--neutral-frames) are outside the take, which has frames 0 to "
+                                    f"{take.n_frames - 1}.")
             frames = slice(neutral[0], neutral[1] + 1)
         elif neutral == "auto":
             # a first map from the whole take finds the most neutral stretch, which is then mapped again
@@ -506,6 +508,8 @@ class TakeWorkspace:
         try:
             return solve_take(self.rig, self.take, self.marker_map, evaluator=evaluator, progress=progress,
                               cancel=cancel, calibration_frames=calibration, prepared=prepared, **options)
+        except RigInputError:       # already one sentence naming the file
+            raise
         except ValueError as exc:
             raise RigInputError(f"The take could not be solved: {exc}") from None
 
