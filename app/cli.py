@@ -14,7 +14,8 @@ import numpy as np
 
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.command_line import opens_window
-from app.cli_common import EXIT_INPUT, EXIT_UNEXPECTED, load_rig_arg, parse_size, pose_weights
+from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, check_outputs, check_threshold,
+                             join_dash_values, load_rig_arg, parse_size, pose_weights)
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -59,12 +60,14 @@ def cmd_render(args) -> int:
     from widgets.scene import use_offscreen_backend_if_headless
     use_offscreen_backend_if_headless()
     from app.views import build_view
+    check_threshold(args)
+    size = parse_size(args.size)
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
-    size = parse_size(args.size)
     from model.segmentation import SegmentationSettings
     t = SegmentationSettings().t if args.threshold is None else args.threshold
-    view = build_view(rig, weights, args.view, threshold=t, level=args.level)
+    with about(args.rig):       # a --level the segmentation lacks, a threshold that leaves no region: name the rig
+        view = build_view(rig, weights, args.view, threshold=t, level=args.level)
     from model.parts import checked_hidden, drawn_faces, rig_parts, vertex_colors
     from widgets.scene import SKIN, render_png
     parts = rig_parts(rig)
@@ -92,6 +95,8 @@ def cmd_export(args) -> int:
     weights = pose_weights(rig, args)
     animation = load_animation(args.animation, rig) if args.animation else None
     export_rig(rig, args.output, weights, animation, units=args.out_units, up=args.up)
+    for message in animation.warnings if animation is not None else ():
+        print(f"warning: {message}", file=sys.stderr)
     frames = f", {animation.n_frames} frames" if animation is not None else ""
     print(f"wrote {args.output} ({rig.n_vertices} vertices, {rig.n_faces} faces, {rig.n_shapes} shapes, "
           f"{len(rig.correctives)} correctives{frames})")
@@ -102,14 +107,16 @@ def cmd_segment(args) -> int:
     from model.atomic import atomic_write
     from model.segmentation import SegmentationSettings, segment_rig, segmentation_to_json
     from model.wording import duration
+    check_threshold(args)
     rig = load_rig_arg(args)
     chosen = {"t": args.threshold, "map_kind": args.map, "smoothing": args.smoothing,
               "separate_meshes": args.separate_meshes,
               "normalise": None if args.normalise is None else args.normalise == "per-shape",
               "split_by_shapes": None if args.split is None else args.split == "shapes"}
-    settings = SegmentationSettings(levels=args.levels, min_region_size=args.min_size, overlap_rings=args.overlap,
-                                    method=args.method, **{k: v for k, v in chosen.items() if v is not None})
-    seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, settings)
+    with about(args.rig):      # settings out of range, a threshold that leaves no region: name the rig
+        settings = SegmentationSettings(levels=args.levels, min_region_size=args.min_size, overlap_rings=args.overlap,
+                                        method=args.method, **{k: v for k, v in chosen.items() if v is not None})
+        seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, settings)
     atomic_write(args.output, json.dumps(segmentation_to_json(seg)).encode("utf-8"))
     counts = ", ".join(str(lvl.n_regions) for lvl in seg.levels)
     print(f"wrote {args.output}: {len(seg.levels)} levels with {counts} regions "
@@ -170,8 +177,8 @@ def cmd_sample(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="blendshape-studio",
-                                description="Blendshape Studio: edit, segment, solve and render blendshape face rigs.")
+    p = ArgumentParser(prog="blendshape-studio",
+                       description="Blendshape Studio: edit, segment, solve and render blendshape face rigs.")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
     def rig_arg(sp):
@@ -198,6 +205,7 @@ def build_parser() -> argparse.ArgumentParser:
     rig_arg(sp)
     pose_args(sp)
     sp.add_argument("-o", "--output", required=True, help="PNG file to write")
+    sp.set_defaults(output_files=(("output", "-o"),))
     sp.add_argument("--view", default="shaded", choices=["shaded", "deformation", "deformation-rgb", "segmentation"])
     sp.add_argument("--threshold", type=float, default=None,
                     help="segmentation quantile t in [0, 1] of the moving skin (default 0.5)")
@@ -221,6 +229,7 @@ def build_parser() -> argparse.ArgumentParser:
     rig_arg(sp)
     pose_args(sp)
     sp.add_argument("-o", "--output", required=True, help=".glb, .gltf, .usd, .usda, .usdc or .obj file to write")
+    sp.set_defaults(output_files=(("output", "-o"),))
     sp.add_argument("--animation", help="weights CSV (as solve writes) or Live Link Face CSV to animate (glTF, USD)")
     sp.add_argument("--out-units", choices=["m", "cm", "mm"],
                     help="units of the file written (default: m for glTF and USD, the rig's for OBJ)")
@@ -247,7 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--min-size", type=int, default=30, help="smallest region in vertices (default 30)")
     sp.add_argument("--overlap", type=int, default=1, help="overlap rings between regions (default 1)")
     sp.add_argument("-o", "--output", required=True, help="JSON file to write")
-    sp.set_defaults(func=cmd_segment)
+    sp.set_defaults(func=cmd_segment, output_files=(("output", "-o"),))
 
     sp = sub.add_parser("corrective", help="add a corrective shape for a driver combination from a scan (Smith)")
     rig_arg(sp)
@@ -260,7 +269,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--mirror", action="store_true",
                     help="also add the other side's corrective (drivers _L<->_R, reflected across x = 0)")
     sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
-    sp.set_defaults(func=cmd_corrective)
+    sp.set_defaults(func=cmd_corrective, output_files=(("output", "-o"),))
 
     cli_solve.add_parser(sub, rig_arg)
     cli_pairs.add_parser(sub, rig_arg)
@@ -269,7 +278,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("sample", help="write the bundled sample rig as an OBJ folder, with its UVs and generated textures")
     sp.add_argument("-o", "--output", required=True, help="folder to write")
-    sp.set_defaults(func=cmd_sample)
+    sp.set_defaults(func=cmd_sample, output_folders=(("output", "-o"),))
 
     return p
 
@@ -282,11 +291,12 @@ def main(argv: list[str] | None = None) -> int:
         from app.gui import run_gui
         return run_gui(argv[0] if argv else None)
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(join_dash_values(parser, argv))   # a mistake in the options: one sentence, exit 2
     if not getattr(args, "func", None):
         parser.print_help()
         return 0
     try:
+        check_outputs(args)      # before any work: an output that cannot be written is refused, nothing written
         return int(args.func(args) or 0)
     except RigInputError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -11,7 +11,7 @@ from __future__ import annotations
 import sys
 
 from app.batch_preload import BATCH_PRELOAD
-from app.cli_solve import add_solve_options, announce_solver_build, load_solve_rig, solve_settings
+from app.cli_solve import add_solve_options, announce_solver_build, check_solve_options, load_solve_rig, solve_settings
 from model.errors import RigInputError
 
 
@@ -29,7 +29,7 @@ def add_parser(sub, rig_arg) -> None:
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="a running Dask scheduler (tcp://host:8786) whose workers see the same paths")
     sp.add_argument("--force", action="store_true", help="solve again the takes whose outputs are complete")
-    sp.set_defaults(func=cmd_batch)
+    sp.set_defaults(func=cmd_batch, output_folders=(("output", "-o"),))
 
 
 class PreviewMesh:
@@ -169,6 +169,7 @@ def cmd_batch(args) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
+    check_solve_options(args)
     takes = find_takes(args.takes, exclude=args.output)
     if not args.scheduler:
         start_fork_server(BATCH_PRELOAD)   # running already when the command came through app.launch (a no-op then)
@@ -184,6 +185,10 @@ def cmd_batch(args) -> int:
     rows = run_batch(job, takes, args.output, names=names, force=args.force, workers=args.workers,
                      scheduler=args.scheduler, progress=ProgressPrinter())
     print(f"{counts_text(rows)}; wrote {args.output}/batch.json and batch.csv")
+    for r in rows:                # what the readers decided for the takes solved now (also in batch.json, per take)
+        if r["status"] == "solved":
+            for message in r.get("warnings") or ():
+                print(f"warning: {message}", file=sys.stderr)
     if status_counts(rows)["failed"]:
         for r in rows:
             if r["status"] == "failed":

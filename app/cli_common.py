@@ -1,7 +1,13 @@
-"""What every ``blendshape-studio`` command shares: the exit code for bad input, argument parsing of
-weights and sizes, and loading the RIG argument. The commands' modules (app.cli, app.cli_solve,
-app.cli_pairs) import it; it imports none of them."""
+"""What every ``blendshape-studio`` command shares: the exit code for bad input, the argument parser whose errors
+are one sentence, argument parsing of weights and sizes, the checks of every output path before any work, and
+loading the RIG argument. The commands' modules (app.cli, app.cli_solve, app.cli_pairs) import it; it imports none
+of them."""
 from __future__ import annotations
+
+import argparse
+import os
+import re
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -9,6 +15,83 @@ from model.errors import RigInputError
 
 EXIT_INPUT = 2        # bad input: one sentence naming the file and the problem
 EXIT_UNEXPECTED = 1   # anything else: one sentence and a crash log with the traceback
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse's parser whose errors (an unknown choice, a missing value or option) are one sentence on stderr,
+    ``error: ...``, with exit code 2, as every other bad input is, instead of the usage block. The command's
+    subparsers are of this class too (``add_subparsers`` makes its parsers of the parent's class)."""
+
+    def error(self, message: str):
+        message = " ".join(str(message).split()).rstrip(".")
+        self.exit(EXIT_INPUT, f"error: {message} (see {self.prog} --help).\n")
+
+
+_DASH_VALUE = re.compile(r"^-[\d.]")
+
+
+def join_dash_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """``argv`` with a value that starts with a dash and a digit given to an option that takes a value joined to
+    it (``--size -5,100`` as ``--size=-5,100``): argparse would take ``-5,100`` for an option and stop with
+    "expected one argument"; given as the option's value, the option's own check says what is wrong with it."""
+    def valued(p: argparse.ArgumentParser) -> set[str]:
+        return {flag for a in p._actions if a.option_strings and a.nargs is None for flag in a.option_strings}
+
+    target = parser
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction) and argv and argv[0] in a.choices:
+            target = a.choices[argv[0]]
+    takes_value = valued(target)
+    out: list[str] = []
+    for arg in argv:
+        if out and out[-1] in takes_value and _DASH_VALUE.match(arg):
+            out[-1] = f"{out[-1]}={arg}"
+        else:
+            out.append(arg)
+    return out
+
+
+def check_outputs(args) -> None:
+    """Refuse, before any work, an output option naming what cannot be written (``model.atomic``: a folder where a
+    file goes, a file where a folder goes, a device, a path through a file) and two outputs naming the same file.
+    Each command lists its outputs: ``output_files`` and ``output_folders``, (dest, option) pairs."""
+    from model.atomic import check_output_file, check_output_folder
+    seen: dict[str, str] = {}
+    for dest, option in getattr(args, "output_files", ()):
+        path = getattr(args, dest, None)
+        if path is None:
+            continue
+        check_output_file(path)
+        key = os.path.realpath(path)
+        if key in seen:
+            raise RigInputError(f"{path}: is given for both {seen[key]} and {option}; each output needs its own "
+                                "file.")
+        seen[key] = option
+    for dest, _option in getattr(args, "output_folders", ()):
+        path = getattr(args, dest, None)
+        if path is not None:
+            check_output_folder(path)
+
+
+@contextmanager
+def about(path):
+    """A RigInputError raised inside whose sentence does not name ``path`` (the rig or take the command works on)
+    is raised again naming it: "The threshold t=0.5 leaves no region ..." becomes "RIG: the threshold ..."."""
+    try:
+        yield
+    except RigInputError as exc:
+        text = str(exc)
+        if str(path) in text:
+            raise
+        raise RigInputError(f"{path}: {text[:1].lower()}{text[1:]}") from None
+
+
+def check_threshold(args) -> None:
+    """--threshold, a quantile of the rig's moving skin, in [0, 1] (before the rig is read)."""
+    t = getattr(args, "threshold", None)
+    if t is not None and not 0.0 <= t <= 1.0:
+        raise RigInputError(f"{args.rig}: --threshold {t:g} is outside 0 to 1 (a quantile of the rig's moving "
+                            "skin).")
 
 
 def parse_weights(text: str | None) -> dict[str, float]:
@@ -38,6 +121,8 @@ def parse_size(text: str) -> tuple[int, int]:
         w, h = (int(x) for x in text.split(","))
     except ValueError:
         raise RigInputError(f"--size: '{text}' is not W,H (two whole numbers).") from None
+    if w <= 0 or h <= 0:
+        raise RigInputError(f"--size: {w}x{h} is not a positive size in pixels (16..8192 each).")
     if not (16 <= w <= 8192 and 16 <= h <= 8192):
         raise RigInputError(f"--size: {w}x{h} is outside 16..8192 pixels.")
     return w, h
@@ -55,8 +140,14 @@ def pose_weights(rig, args) -> np.ndarray:
     named = {}
     if getattr(args, "preset", None):
         if args.preset not in rig.presets:
-            raise RigInputError(f"--preset: the rig has no preset '{args.preset}' "
-                                f"(it has: {', '.join(sorted(rig.presets)) or 'none'}).")
+            raise RigInputError(f"{args.rig}: the rig has no preset '{args.preset}' (--preset; it has: "
+                                f"{', '.join(sorted(rig.presets)) or 'none'}).")
         named.update(rig.presets[args.preset])
-    named.update(parse_weights(getattr(args, "weights", None)))
+    given = parse_weights(getattr(args, "weights", None))
+    unknown = [n for n in given if n not in rig.shape_names]
+    if unknown:
+        names = ", ".join(f"'{n}'" for n in unknown[:5]) + (" ..." if len(unknown) > 5 else "")
+        raise RigInputError(f"{args.rig}: the rig has no shape{'s' if len(unknown) > 1 else ''} named {names} "
+                            "(--weights).")
+    named.update(given)
     return rig.weights_from_dict(named)

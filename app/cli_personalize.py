@@ -22,12 +22,12 @@ def add_parser(sub, rig_arg) -> None:
     sp.add_argument("--take", metavar="TAKE", help="a marker take of the actor (.c3d, .trc, .csv) for an actor without scans")
     sp.add_argument("--map", metavar="MAP.json", help="marker map of the take (default: mapped automatically)")
     sp.add_argument("--calibration-frames", type=int, default=30,
-                    help="neutral frames at the start of the take (default 30)")
+                    help="neutral frames at the start of the take (default 30; 1 to the take's frames)")
     sp.add_argument("--iterations", type=int, default=None, help="weight/delta alternations (default 3)")
     sp.add_argument("--top", type=int, default=10, help="changed shapes to list (default 10)")
     sp.add_argument("--report", help="JSON report to write (the summary and every shape's change)")
     sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
-    sp.set_defaults(func=cmd_personalize)
+    sp.set_defaults(func=cmd_personalize, output_files=(("output", "-o"), ("report", "--report")))
 
 
 def cmd_personalize(args) -> int:
@@ -46,7 +46,12 @@ def cmd_personalize(args) -> int:
         from model.takes import MarkerTake, load_take
         take = load_take(args.take)
         if not isinstance(take, MarkerTake):
-            raise RigInputError(f"{args.take}: is a weight take (Live Link Face), not marker trajectories.")
+            raise RigInputError(f"{args.take}: is a weight take (Live Link Face or weights CSV), not marker "
+                                "trajectories.")
+        if not 1 <= args.calibration_frames <= take.n_frames:   # the actor's neutral: 0 or too many read no neutral
+            raise RigInputError(f"{args.take}: has {take.n_frames} frames; --calibration-frames "
+                                f"{args.calibration_frames} must be 1 to {take.n_frames} (the actor's neutral "
+                                "frames at its start).")
         if args.map:
             from model.marker_map import load_marker_map
             marker_map = load_marker_map(args.map)

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from app.cli_common import load_rig_arg
-from model.errors import RigInputError
+from app.cli_common import about, check_threshold, load_rig_arg
 
 
 def add_parser(sub, rig_arg) -> None:
@@ -26,7 +25,8 @@ def add_parser(sub, rig_arg) -> None:
     sp.add_argument("--report", help="JSON report to write")
     sp.add_argument("--gltf", metavar="OUT.glb", help="the rig animated by the weights, as .glb or .gltf (metres, "
                                                       "correctives as extra targets)")
-    sp.set_defaults(func=cmd_solve)
+    sp.set_defaults(func=cmd_solve, output_files=(("output", "-o"), ("cache", "--cache"), ("report", "--report"),
+                                                  ("gltf", "--gltf")))
 
 
 def add_solve_options(sp) -> None:
@@ -40,7 +40,10 @@ def add_solve_options(sp) -> None:
     sp.add_argument("--level", type=int, default=None, help="hierarchy level whose regions are solved")
     sp.add_argument("--residual", choices=["none", "joshi", "gaussian", "multiquadric"], default=None,
                     help="RBF residual kernel added to the blendshape fit (default: the best measured)")
-    sp.add_argument("--calibration-frames", type=int, default=30, help="neutral frames at the start of the take that settle scale and pose (0: none)")
+    sp.add_argument("--calibration-frames", type=int, default=30,
+                    help="neutral frames at the start of the take that settle scale and pose (default 30; at most the "
+                         "take's frames); 0: no calibration, the markers are taken as the rig's own face in rig "
+                         "space (head motion is still solved; --fixed-head stops that too)")
     sp.add_argument("--neutral-frames", default=None, metavar="A:B|auto",
                     help="the actor's neutral: frames A to B (inclusive), or 'auto' for the most neutral stretch "
                          "(default: the first --calibration-frames)")
@@ -68,6 +71,14 @@ def load_solve_rig(args):
     return rig
 
 
+def check_solve_options(args) -> None:
+    """The solve options that need no rig or take, checked before either is read: --threshold in [0, 1], a
+    --calibration-frames count of 0 or more, not 0 with --neutral-frames (``check_calibration_settings``)."""
+    from model.take_workspace import check_calibration_settings
+    check_threshold(args)
+    check_calibration_settings(solve_options(args))
+
+
 def solve_options(args) -> dict:
     """The solve settings of ``model.take_workspace`` from the solve options, before a per-region solve's level
     (``solve_settings`` adds it with the segmentation)."""
@@ -92,12 +103,17 @@ def solve_settings(args, rig) -> tuple[dict, object]:
     regional = settings["mode"] == "region"
     segmentation = None
     if regional:
+        from model.errors import RigInputError
         from model.segmentation import SegmentationSettings, segment_rig
         t = args.threshold if args.threshold is not None else SOLVE_DEFAULTS["threshold"]
-        segmentation = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas,
-                                   SegmentationSettings(t=t))
-        settings["level"] = args.level if args.level is not None else \
-            min(SOLVE_DEFAULTS["level"], len(segmentation.levels) - 1)
+        with about(args.rig):         # a threshold that leaves no region of the rig: name the rig
+            segmentation = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas,
+                                       SegmentationSettings(t=t))
+        n = len(segmentation.levels)
+        if args.level is not None and not 0 <= args.level < n:
+            raise RigInputError(f"{args.rig}: --level {args.level} does not exist: the rig's segmentation at "
+                                f"threshold {t:g} has levels 0 to {n - 1}.")
+        settings["level"] = args.level if args.level is not None else min(SOLVE_DEFAULTS["level"], n - 1)
     return settings, segmentation
 
 
@@ -114,6 +130,7 @@ def cmd_solve(args) -> int:
     from model.take_exports import export_solve_outputs
     from model.take_workspace import TakeWorkspace
 
+    check_solve_options(args)
     rig = load_solve_rig(args)
     ws = TakeWorkspace(rig)
     if not ws.prepare_solve(args.take, load_marker_map(args.map) if args.map else None, solve_options(args)):
@@ -122,15 +139,23 @@ def cmd_solve(args) -> int:
     announce_solver_build()
     sol = ws.solve(settings, segmentation=segmentation)
     report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
+    for message in report["warnings"]:            # the take reader's (a file cut short), also in the report
+        print(f"warning: {message}", file=sys.stderr)
     for lab in report["markers_left_out"]:
         print(f"warning: marker {lab} left out ({report['markers_left_out_why'][lab]})", file=sys.stderr)
     with_c = f" with {len(report['correctives'])} corrective(s)" if report["correctives"] else ""
     print(f"solved {sol.n_frames} frames{with_c} in {sol.solve_seconds:.2f} s ({sol.frames_per_second:.0f} fps); "
           f"marker RMSE {report['marker_rmse']:.4g} {rig.units}; motion explained "
           f"{report['motion_explained'] if report['motion_explained'] is not None else float('nan'):.3f}; "
-          f"neutral frames {report['neutral_frames']}; wrote {args.output}"
+          f"neutral frames {_neutral_text(report)}; wrote {args.output}"
           + _written(args))
     return 0
+
+
+def _neutral_text(report: dict) -> str:
+    if report["neutral_frames"] is not None:
+        return str(report["neutral_frames"])
+    return "none (fixed head)" if report["head"] == "fixed" else "none (no calibration)"
 
 
 def _written(args) -> str:

@@ -1,15 +1,20 @@
 """Atomic file writes: write a temporary file in the same folder, fsync, then os.replace.
 
-A crash mid-save leaves the previous file intact (DESIGN.md, Project). The file gets the permissions a
-plain ``open(path, "w")`` would give (0666 minus the user's umask), so a team on a shared drive can read
-it; ``mkstemp`` alone would leave it readable by its owner only (0600).
+A crash mid-save leaves the previous file intact (DESIGN.md, Project). A target that cannot be a file (a
+folder, a device, a path through a file) is refused in one sentence before anything is written
+(``check_output_file``; the command line checks every output option with it before any work). The file gets
+the permissions a plain ``open(path, "w")`` would give (0666 minus the user's umask), so a team on a shared
+drive can read it; ``mkstemp`` alone would leave it readable by its owner only (0600).
 """
 from __future__ import annotations
 
 import os
 import secrets
+import stat
 from pathlib import Path
 from typing import Callable, IO
+
+from .errors import RigInputError
 
 
 def current_umask() -> int:
@@ -26,13 +31,59 @@ def current_umask() -> int:
     return mask
 
 
+class OutputPathError(RigInputError, OSError):
+    """A path that cannot be written as asked (``check_output_file``, ``check_output_folder``): bad input, one
+    sentence naming it (the command line's exit code 2), and an OSError to the callers that catch a failed write as
+    one (the window's Save shows it as it showed IsADirectoryError)."""
+
+
+def check_output_file(path: str | Path) -> Path:
+    """``path`` as a file to write, or RigInputError (one sentence naming it) before anything is written: an
+    existing folder (or a name ending in a slash), a device, pipe or socket, or a path through a file."""
+    text = os.fspath(path)
+    if not text:
+        raise OutputPathError("An output file name is empty.")
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except OSError:
+        st = None
+    if (st is not None and stat.S_ISDIR(st.st_mode)) or text.endswith(("/", os.sep)):
+        raise OutputPathError(f"{text}: is a folder, not a file.")
+    if st is not None and not stat.S_ISREG(st.st_mode):
+        raise OutputPathError(f"{text}: is not a regular file (a device, pipe or socket); nothing was written.")
+    _check_folders_above(text, p)
+    return p
+
+
+def check_output_folder(path: str | Path) -> Path:
+    """``path`` as a folder to write into (made if missing), or RigInputError (one sentence naming it): an
+    existing file, or a path through a file."""
+    text = os.fspath(path)
+    if not text:
+        raise OutputPathError("An output folder name is empty.")
+    p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise OutputPathError(f"{text}: is a file, not a folder.")
+    _check_folders_above(text, p)
+    return p
+
+
+def _check_folders_above(text: str, p: Path) -> None:
+    for parent in p.parents:               # the nearest that exists must be a folder (mkdir makes the rest)
+        if os.path.lexists(parent):
+            if not parent.is_dir():
+                raise OutputPathError(f"{text}: {parent} is a file, not a folder.")
+            return
+
+
 def atomic_write(path: str | Path, data: bytes) -> None:
     atomic_write_with(path, lambda f: f.write(data))
 
 
 def atomic_write_with(path: str | Path, writer: Callable[[IO[bytes]], object]) -> None:
     """Call writer(file) on a temporary file beside path and move it into place when complete."""
-    path = Path(path)
+    path = check_output_file(path)      # a folder, a device or a path through a file: refused before writing
     path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path.parent)
     tmp = write_temporary(path, writer)

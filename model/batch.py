@@ -42,7 +42,7 @@ from typing import Callable
 import numpy as np
 
 from . import batch_driver, shared_pickle
-from .atomic import process_alive
+from .atomic import check_output_file, check_output_folder, process_alive
 from .batch_driver import ClusterOutcome
 from .errors import RigInputError
 from .fork_server import start_fork_server
@@ -58,7 +58,7 @@ OUTPUTS = {"weights": "weights.csv", "report": "report.json", "preview": "previe
 SUMMARY_JSON, SUMMARY_CSV = "batch.json", "batch.csv"
 STATUSES = ("solved", "skipped", "failed")
 ROW_KEYS = ("take", "status", "error", "frames", "rate", "frames_per_second", "marker_rmse", "motion_explained",
-            "seconds", "path", "output")
+            "seconds", "path", "output", "warnings")     # warnings: the take reader's sentences (a file cut short)
 PREVIEW_SIZE = (480, 360)
 # the Dask event topic under which the takes send their rows (``solve_and_report``): one name for every batch, so
 # that a long-lived scheduler keeps one bounded log of them (Dask keeps each topic's last events), not one per batch
@@ -355,6 +355,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     name = name or out_dir.name
     start = time.perf_counter()
     try:
+        check_output_folder(out_dir)              # no file where the take's folder goes: fail before any work
         ws = TakeWorkspace(job.rig)
         solved = ws.prepare_solve(take_path, job.marker_map, job.settings)   # False: a weight take, played as it is
         identity = _take_identity(take_path)
@@ -381,12 +382,15 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     measured = {k: None if report.get(k) is None else float(report[k])
                 for k in ("frames_per_second", "marker_rmse", "motion_explained")}
     row = _row(name, take_path, out_dir, "solved", frames=int(report["frames"]), rate=float(report["rate"]),
-               **measured, preview_frame=frame, preview_error=preview_error)
+               **measured, preview_frame=frame, preview_error=preview_error, warnings=list(report["warnings"]))
     row["seconds"] = time.perf_counter() - start
     done = {"take_file": identity, "signature": job.signature, "outputs": [Path(p).name for p in writers],
             "row": row}
     writers[out_dir / DONE] = lambda f: f.write((json.dumps(done, indent=1) + "\n").encode())
-    write_set(writers)
+    try:
+        write_set(writers)     # refuses, before writing any, a set with a folder where one of its files goes
+    except RigInputError as exc:
+        return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
     return row
 
 
@@ -417,7 +421,9 @@ def write_summary(out_dir: str | Path, rows: list[dict], meta: dict | None = Non
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(ROW_KEYS)
     for r in doc["takes"]:
-        w.writerow(["" if r[k] is None else (repr(r[k]) if isinstance(r[k], float) else r[k]) for k in ROW_KEYS])
+        w.writerow(["" if r[k] is None else (repr(r[k]) if isinstance(r[k], float) else
+                                             " ".join(map(str, r[k])) if isinstance(r[k], list) else r[k])
+                    for k in ROW_KEYS])
     write_set({out_dir / SUMMARY_JSON: lambda f: f.write((json.dumps(doc, indent=1) + "\n").encode()),
                out_dir / SUMMARY_CSV: lambda f: f.write(buf.getvalue().encode())})
 
@@ -470,6 +476,8 @@ def read_summary(path: str | Path) -> tuple[Path, dict]:
                 row[k] = None                   # a value that is not a number is shown as none
         for k in ("error", "path", "output"):
             row[k] = row[k] if isinstance(row[k], str) else None
+        if not (isinstance(row["warnings"], list) and all(isinstance(w, str) for w in row["warnings"])):
+            row["warnings"] = None              # a summary written before takes recorded their warnings
         rows.append(row)
     summary = {k: v for k, v in doc.items() if k != "takes"}
     summary["takes"] = rows
@@ -669,7 +677,10 @@ def solve_on_cluster(job_source: Callable[[], BatchJob], tasks: list[tuple[int, 
             def heard(event) -> None:   # on the client's event loop; rows of other batches on the scheduler: not ours
                 message = event[1]
                 if isinstance(message, dict) and message.get("key") in ours:
-                    reported[message["key"]] = message["row"]
+                    row = message["row"]
+                    if isinstance(row, dict) and isinstance(row.get("warnings"), tuple):   # msgpack: a list comes
+                        row = {**row, "warnings": list(row["warnings"])}                  # back as a tuple
+                    reported[message["key"]] = row
 
             client.subscribe_topic(ROW_TOPIC, heard)
             futures = {client.submit(solve_and_report, shared, take, out, name, key=keys[i], pure=False,
@@ -738,6 +749,9 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
     ``cancel()`` true stops the run (unfinished takes are failed rows, 'cancelled'); so does Ctrl-C (SIGINT:
     'interrupted'), after which the summary is written and KeyboardInterrupt raised again."""
     out_dir = Path(out_dir)
+    check_output_folder(out_dir)           # before any take: the folder and its summary can be written
+    for summary in (SUMMARY_JSON, SUMMARY_CSV):
+        check_output_file(out_dir / summary)
     takes = [Path(t).resolve() for t in takes]
     names = names or take_names(takes)
     rows: list[dict | None] = [None] * len(takes)

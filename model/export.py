@@ -11,7 +11,7 @@ Coordinates are converted to ``units`` (default metres for glTF and USD, the rig
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +32,7 @@ class WeightAnimation:
     times: np.ndarray
     weights: np.ndarray
     source: str = ""
+    warnings: list[str] = field(default_factory=list)     # what reading it decided (a rate assumed)
 
     def __post_init__(self) -> None:
         self.times = np.asarray(self.times, dtype=np.float64).reshape(-1)
@@ -79,7 +80,8 @@ def animation_from_timeline(timeline, rate: float = 30.0, *, deltas=None, blend=
 
 
 def load_animation(path: str | Path, rig: Rig) -> WeightAnimation:
-    """A weights CSV (``frame,time,<shapes>``, as ``solve`` writes) or a Live Link Face CSV, for ``rig``."""
+    """A weights CSV (``frame,time,<shapes>``, as ``solve`` writes, or ``frame,<shapes>`` at
+    ``model.weights_csv.UNTIMED_RATE`` with a warning) or a Live Link Face CSV, for ``rig``."""
     path = regular_file(path)   # a missing file, a folder, a FIFO or a device: one sentence, nothing read
     if path.suffix.lower() != ".csv":
         raise RigInputError(f"{path}: an animation is a weights CSV or a Live Link Face CSV.")
@@ -89,9 +91,15 @@ def load_animation(path: str | Path, rig: Rig) -> WeightAnimation:
         take = read_livelink_csv(path, rig.shape_names)
         times = np.asarray(take.times(), dtype=np.float64)   # the frame times from the timecodes
         return WeightAnimation(times=times - times[0], weights=take.weights, source=str(path))
-    from .weights_csv import read_weights_csv
-    _frames, times, names, W = read_weights_csv(path)
-    return animation_for_rig(rig, names, W, times - times[0], source=str(path))
+    from .weights_csv import UNTIMED_RATE, read_weights_table
+    frames, times, names, W = read_weights_table(path)
+    warnings = []
+    if times is None:           # frame,<shapes>: no time column
+        times = (frames - (frames[0] if frames.size else 0)) / UNTIMED_RATE
+        warnings.append(f"{path}: has no time column; {UNTIMED_RATE:g} frames a second assumed.")
+    animation = animation_for_rig(rig, names, W, times - (times[0] if times.size else 0.0), source=str(path))
+    animation.warnings = warnings
+    return animation
 
 
 @dataclass

@@ -15,7 +15,8 @@ import os
 from pathlib import Path
 from typing import IO, Callable
 
-from .atomic import atomic_write, remove_stale_temporaries, write_temporary
+from .atomic import atomic_write, check_output_file, remove_stale_temporaries, write_temporary
+from .errors import RigInputError
 
 JOURNAL_SUFFIX = ".bs-set.json"
 
@@ -34,10 +35,20 @@ def _fsync_dir(folder: Path) -> None:
 
 
 def write_set(writers: dict[str | Path, Callable[[IO[bytes]], object]]) -> None:
-    """Write every ``path: writer(file)`` as one set (all in their own folders; one journal beside the first)."""
+    """Write every ``path: writer(file)`` as one set (all in their own folders; one journal beside the first).
+    Every target is checked first (``check_output_file``: not a folder, a device or a path through a file; no
+    two the same file): a set that cannot be written whole is refused in one sentence before anything is
+    written, not found out after some of its files were replaced."""
     items = [(Path(p), w) for p, w in writers.items()]
     if not items:
         return
+    seen: dict[str, Path] = {}
+    for path, _ in items:
+        check_output_file(path)
+        key = os.path.realpath(path)
+        if key in seen:
+            raise RigInputError(f"{path}: is named for two of the files written together ({seen[key]} too).")
+        seen[key] = path
     for folder in {p.parent for p, _ in items}:
         folder.mkdir(parents=True, exist_ok=True)
         finish_interrupted_sets(folder)

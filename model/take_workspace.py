@@ -21,7 +21,7 @@ import numpy as np
 from solvers.take_solve import DEFAULTS, Progress, TakeSolution, TakeSolver, marker_rest, residual_preparation
 
 from .correctives import solver_correctives
-from .errors import RigInputError
+from .errors import RigInputError, shown
 from .marker_map import MarkerMap, auto_marker_map, load_marker_map
 from .pose import PoseEvaluator
 from .rig import Rig
@@ -59,6 +59,45 @@ def parse_neutral_frames(value, where: str = "--neutral-frames"):
     if a > b:
         raise RigInputError(f"{where}: the neutral range {a}:{b} ends before it starts.")
     return a, b
+
+
+def check_calibration_settings(settings: dict) -> None:
+    """The solve settings' calibration, before any take: a count of calibration frames that is a whole number of 0
+    or more (0: no calibration, the markers taken as the rig's own face in rig space; head motion is still solved),
+    and no neutral range for a solve that calibrates nothing. RigInputError (one sentence) otherwise."""
+    n = settings.get("calibration_frames", DEFAULTS["calibration_frames"])
+    try:
+        whole = float(n) == int(n) and int(n) >= 0
+    except (TypeError, ValueError, OverflowError):
+        whole = False
+    if not whole:
+        raise RigInputError(f"--calibration-frames: {shown(n, 20)} is not a count of frames (0, no calibration, or "
+                            "more).")
+    neutral = parse_neutral_frames(settings.get("neutral_frames"))
+    if n == 0 and neutral is not None and not settings.get("fixed_head"):
+        raise RigInputError("--neutral-frames: a solve with --calibration-frames 0 calibrates on no neutral; give "
+                            "the neutral frames or no calibration, not both.")
+
+
+def check_take_calibration(take: MarkerTake, settings: dict) -> None:
+    """The solve settings' neutral against ``take``, before any work on it: a range ``--neutral-frames A:B``
+    inside the take, and no more calibration frames than it has (the first ``calibration_frames``, or the length of
+    the stretch ``auto`` looks for: the whole take, expressions and all, taken as the neutral gave a marker RMSE 3x
+    larger on the shared actor take). RigInputError (one sentence naming the take and its frames) otherwise."""
+    check_calibration_settings(settings)
+    fixed_head, calibration, _ = _head_and_options(settings, take)
+    if fixed_head or calibration == 0:
+        return
+    where, F = take.source or "The take", take.n_frames
+    neutral = parse_neutral_frames(settings.get("neutral_frames"))
+    if isinstance(neutral, tuple):
+        a, b = neutral
+        if not 0 <= a <= b < F:
+            raise RigInputError(f"{where}: the neutral frames {a}:{b} (--neutral-frames) are outside the take, which "
+                                f"has frames 0 to {F - 1}.")
+    elif calibration > F:
+        raise RigInputError(f"{where}: has {F} frames, fewer than the {calibration} calibration frames its neutral "
+                            f"would come from (--calibration-frames); give at most {F}, or --neutral-frames A:B.")
 
 
 def resolve_stable(labels: list[str], spec) -> list[str]:
@@ -180,7 +219,8 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
                            head_markers=take.positions[:, head_cols] if head_cols else None,
                            progress=progress, cancel=cancel)
     except ValueError as exc:
-        raise RigInputError(f"{take.source or 'The take'}: {exc}") from None
+        text = str(exc)
+        raise RigInputError(f"{take.source or 'The take'}: {text[:1].lower()}{text[1:]}") from None
     sol.labels = labels
     sol.left_out = left_out
     sol.head_labels = [take.labels[c] for c in head_cols]
@@ -279,7 +319,9 @@ def solve_report(rig: Rig, take: MarkerTake, solution: TakeSolution, settings: d
                                f"({sol.neutral_reason['distance_to_rig_neutral']:.2f} of the take's median) and "
                                f"still ({sol.neutral_reason['stillness']:.2f} of the median motion)"
                                if sol.neutral_reason else
-                               "fixed head: none" if sol.neutral_frames is None else "as chosen"
+                               "fixed head: none" if fixed_head else
+                               "no calibration (calibration frames 0): the markers taken as the rig's own face"
+                               if sol.neutral_frames is None else "as chosen"
                                if settings.get("neutral_frames") else "the first calibration frames"),
         "motion_explained": clean([sol.motion_explained])[0],
         "motion_explained_per_marker": dict(zip(labels, clean(sol.motion_explained_per_marker)))
@@ -293,6 +335,7 @@ def solve_report(rig: Rig, take: MarkerTake, solution: TakeSolution, settings: d
         # the project's edited antagonist pairs ("A+B"), or None: the pairs found from the rig
         "antagonists": None if settings.get("antagonists") is None else
         [p if isinstance(p, str) else "+".join(p) for p in settings["antagonists"]],
+        "warnings": list(take.warnings),     # what the take's reader decided (a file cut short, labels renamed)
     }
 
 
@@ -340,11 +383,13 @@ class TakeWorkspace:
     def prepare_solve(self, path: str | Path, marker_map: MarkerMap | None, settings: dict) -> bool:
         """What ``solve`` and ``batch`` do with a take file before solving it: load it, then map its markers with
         ``marker_map`` (markers the take lacks are warnings, not a refusal) or automatically from its neutral
-        frames (``settings``' ``calibration_frames``, ``neutral_frames`` and ``stable``). False for a weight take
-        (Live Link Face, weights CSV): it has nothing to solve, it plays on the rig as it is."""
+        frames (``settings``' ``calibration_frames``, ``neutral_frames`` and ``stable``; checked against the take
+        first: ``check_take_calibration``). False for a weight take (Live Link Face, weights CSV): it has nothing
+        to solve, it plays on the rig as it is."""
         self.load_take(path)
         if self.marker_take is None:
             return False
+        check_take_calibration(self.take, settings)
         if marker_map is not None:
             self.set_map(marker_map, strict=False)
         else:
@@ -400,8 +445,9 @@ class TakeWorkspace:
         frames: int | slice = n
         if isinstance(neutral, tuple):
             if not 0 <= neutral[0] <= neutral[1] < take.n_frames:
-                raise RigInputError(f"--neutral-frames: the neutral frames {neutral[0]}:{neutral[1]} are outside the "
-                                    f"take, which has frames 0 to {take.n_frames - 1}.")
+                raise RigInputError(f"{take.source or 'The take'}: the neutral frames {neutral[0]}:{neutral[1]} "
+                                    f"(--neutral-frames) are outside the take, which has frames 0 to "
+                                    f"{take.n_frames - 1}.")
             frames = slice(neutral[0], neutral[1] + 1)
         elif neutral == "auto":
             # a first map from the whole take finds the most neutral stretch, which is then mapped again
@@ -462,6 +508,8 @@ class TakeWorkspace:
         try:
             return solve_take(self.rig, self.take, self.marker_map, evaluator=evaluator, progress=progress,
                               cancel=cancel, calibration_frames=calibration, prepared=prepared, **options)
+        except RigInputError:       # already one sentence naming the file
+            raise
         except ValueError as exc:
             raise RigInputError(f"The take could not be solved: {exc}") from None
 

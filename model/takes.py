@@ -1,4 +1,4 @@
-"""Takes: marker trajectories (C3D, TRC, CSV) and weight takes (Live Link Face CSV).
+"""Takes: marker trajectories (C3D, TRC, CSV) and weight takes (Live Link Face CSV, weights CSV).
 
 A ``MarkerTake`` holds positions (F, M, 3) float64 with NaN where a marker is missing, its labels,
 frame rate and units. A ``WeightTake`` holds per-frame weights (F, K) for named shapes.
@@ -20,7 +20,8 @@ __all__ = ["MarkerTake", "WeightTake", "load_take", "take_summary", "unique_labe
 
 
 def load_take(path: str | Path, **kwargs) -> MarkerTake | WeightTake:
-    """Open a take: ``.c3d``, ``.trc``, or ``.csv`` (marker trajectories or a Live Link Face recording)."""
+    """Open a take: ``.c3d``, ``.trc``, or ``.csv`` (marker trajectories, a Live Link Face recording, or a weights CSV
+    read on its own columns: ``model.take_workspace.read_take`` reads one onto a rig's shapes)."""
     path = regular_file(path)   # a missing file, a folder, a FIFO or a device: one sentence, nothing read
     suffix = path.suffix.lower()
     if suffix == ".c3d":
@@ -33,6 +34,9 @@ def load_take(path: str | Path, **kwargs) -> MarkerTake | WeightTake:
         from .livelink import is_livelink_csv, read_livelink_csv
         if is_livelink_csv(path):
             return read_livelink_csv(path, **kwargs)
+        from .weights_csv import is_weights_csv, read_weights_take
+        if is_weights_csv(path):       # frame,time,<shapes> as solve writes, or frame,<shapes>: on its own columns
+            return read_weights_take(path, None)
         from .take_csv import read_marker_csv
         return read_marker_csv(path, **kwargs)
     raise RigInputError(f"{path}: unknown take format '{path.suffix}'; open a .c3d, .trc or .csv file.")

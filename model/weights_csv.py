@@ -1,4 +1,9 @@
-"""Per-frame weights as CSV: ``frame,time,<shape names...>``, one row per frame (written atomically)."""
+"""Per-frame weights as CSV: ``frame,time,<shape names...>``, one row per frame (written atomically).
+
+Read back, the time column may be left out: ``frame,<shape names...>`` (as a script or another tool writes the
+weights of a take: the shared data's ``truth_weights.csv``) is a weights CSV too, at ``UNTIMED_RATE`` frames a
+second with a warning, unless its columns are marker coordinates (``name_X, name_Y, name_Z``: a marker CSV,
+``model.take_csv``)."""
 from __future__ import annotations
 
 import csv
@@ -10,6 +15,9 @@ import numpy as np
 from .atomic import atomic_write
 from .errors import RigInputError, shown
 from .input_files import regular_file
+
+UNTIMED_RATE = 30.0      # frames a second of a weights CSV without a time column (as of a one-frame weights CSV)
+_AXIS_SEPARATORS = "_.:- "
 
 
 def write_weights_csv(path: str | Path, weights: np.ndarray, names: list[str], *, rate: float | None = None,
@@ -44,8 +52,38 @@ def weights_csv_bytes(path: str | Path, weights: np.ndarray, names: list[str], *
     return buf.getvalue().encode("utf-8")
 
 
+def _looks_like_axes(names: list[str]) -> bool:
+    """Whether columns are marker coordinates: ``X``, ``name_X`` (any of ``_.:- `` before the axis), or three in a
+    row that differ only in a last letter x, y, z (``M00x, M00y, M00z``)."""
+    low = [n.strip().lower() for n in names]
+    if any(n in ("x", "y", "z") or (len(n) > 1 and n[-1] in "xyz" and n[-2] in _AXIS_SEPARATORS) for n in low):
+        return True
+    return any(len(a) > 1 and a[:-1] == b[:-1] == c[:-1] and a[-1] + b[-1] + c[-1] == "xyz"
+               for a, b, c in zip(low, low[1:], low[2:]))
+
+
+def weights_header(header: list[str]) -> str | None:
+    """'timed' for ``frame,time,<names>``, 'untimed' for ``frame,<names>`` whose names are not marker coordinates,
+    None for any other header."""
+    head = [c.strip().lower() for c in header]
+    if len(head) < 2 or head[0] != "frame":
+        return None
+    if head[1] == "time":
+        return "timed" if len(head) >= 3 else None
+    return None if _looks_like_axes(header[1:]) else "untimed"
+
+
 def read_weights_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, list[str], np.ndarray]:
-    """(frames (F,) int, times (F,), names (K), weights (F, K)) from a weights CSV."""
+    """(frames (F,) int, times (F,), names (K), weights (F, K)) from a weights CSV; the times of one without a time
+    column are frame steps at ``UNTIMED_RATE`` from its first frame (``read_weights_table`` tells them apart)."""
+    frames, times, names, W = read_weights_table(path)
+    if times is None:
+        times = (frames - frames[0]) / UNTIMED_RATE if frames.size else np.zeros(0)
+    return frames, times, names, W
+
+
+def read_weights_table(path: str | Path) -> tuple[np.ndarray, np.ndarray | None, list[str], np.ndarray]:
+    """(frames (F,) int, times (F,) or None where the file has no time column, names (K), weights (F, K))."""
     path = regular_file(path)   # a missing file, a folder, a FIFO or a device: one sentence, nothing read
     text = path.read_text(encoding="utf-8-sig", errors="replace")
     try:
@@ -55,9 +93,12 @@ def read_weights_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, list[str
     if not rows:
         raise RigInputError(f"{path}: the file is empty.")
     header = [c.strip() for c in rows[0]]
-    if len(header) < 3 or header[0].lower() != "frame" or header[1].lower() != "time":
-        raise RigInputError(f"{path}: a weights CSV starts with the columns frame,time,<shape names>.")
-    names = header[2:]
+    kind = weights_header(header)
+    if kind is None:
+        raise RigInputError(f"{path}: a weights CSV starts with the columns frame,time,<shape names> (or "
+                            "frame,<shape names>).")
+    lead = 2 if kind == "timed" else 1
+    names = header[lead:]
     if len(set(names)) != len(names):
         raise RigInputError(f"{path}: duplicate shape names in the header.")
     data = rows[1:]
@@ -74,22 +115,31 @@ def read_weights_csv(path: str | Path) -> tuple[np.ndarray, np.ndarray, list[str
     bad = (frames != np.round(frames)) | (np.abs(frames) > 2 ** 53)
     if bad.any():
         raise RigInputError(f"{path}: row {int(np.argmax(bad)) + 2} has a frame number that is not a whole number.")
-    return frames.astype(np.int64), arr[:, 1], names, arr[:, 2:]
+    return frames.astype(np.int64), (arr[:, 1] if lead == 2 else None), names, arr[:, lead:]
 
 
 def is_weights_csv(path: str | Path) -> bool:
-    """True if the CSV's header starts with ``frame,time`` (a weights CSV, as ``solve`` writes)."""
-    with open(path, encoding="utf-8-sig", errors="replace") as f:
-        head = [c.strip().lower() for c in f.readline().split(",")]
-    return len(head) >= 3 and head[0] == "frame" and head[1] == "time"
+    """True if the CSV's header is a weights CSV's (``weights_header``): ``frame,time,<names>`` as ``solve``
+    writes, or ``frame,<names>`` whose names are not marker coordinates."""
+    with open(path, encoding="utf-8-sig", errors="replace", newline="") as f:
+        line = f.readline(1 << 20)
+    try:
+        header = next(csv.reader([line]), [])
+    except csv.Error:
+        return False
+    return weights_header(header) is not None
 
 
-def read_weights_take(path: str | Path, shape_names: list[str]):
+def read_weights_take(path: str | Path, shape_names: list[str] | None):
     """A weights CSV as a weight take (``model.take_data.WeightTake``) on a rig's ``shape_names``: each column in
-    its shape's place, shapes without a column at 0. The rate comes from the time column, which must step evenly
-    with the frame column (RigInputError, one sentence, otherwise, or for a column the rig has no shape for)."""
+    its shape's place, shapes without a column at 0 (None: the file's own columns, for ``take-info``). The rate
+    comes from the time column, which must step evenly with the frame column (RigInputError, one sentence,
+    otherwise, or for a column the rig has no shape for); without a time column it is ``UNTIMED_RATE``, with a
+    warning."""
     from .take_data import WeightTake
-    frames, times, names, W = read_weights_csv(path)
+    frames, times, names, W = read_weights_table(path)
+    if shape_names is None:
+        shape_names = list(names)
     unknown = [n for n in names if n not in shape_names]
     if unknown:
         raise RigInputError(f"{path}: names shapes the rig does not have: {', '.join(unknown[:5])}"
@@ -100,6 +150,10 @@ def read_weights_take(path: str | Path, shape_names: list[str]):
         if (steps != 1).any():
             raise RigInputError(f"{path}: its frame numbers do not count up one by one (row "
                                 f"{int(np.argmax(steps != 1)) + 3}).")
+    if times is None:
+        rate = UNTIMED_RATE
+        warnings.append(f"{path}: has no time column; {UNTIMED_RATE:g} frames a second assumed.")
+    elif frames.size > 1:
         rate = 1.0 / float(np.median(np.diff(times)))
         if not np.isfinite(rate) or rate <= 0 or np.abs(times - times[0] - np.arange(frames.size) / rate).max() \
                 > 1e-3 / rate:

@@ -999,3 +999,41 @@ def test_a_preview_that_cannot_be_drawn_costs_the_take_its_picture_only(tmp_path
     written = {p.name for p in (tmp_path / "out").iterdir()}
     assert "preview.png" not in written and {"weights.csv", "report.json", "done.json"} <= written
     assert json.loads((tmp_path / "out" / "done.json").read_text())["row"]["preview_error"] == row["preview_error"]
+
+
+def test_a_takes_reader_warnings_reach_its_report_its_row_and_the_summary(tmp_path, ict_dir, ict_rig, take_dir):
+    """A take cut short (a C3D at 90% of its bytes: read to its last whole frame, with a warning) is solved in a
+    batch as `solve` solves it, and what its reader decided is in its report.json, its row (batch.json's
+    ``warnings``, an extra key beside DESIGN.md's) and on the command's stderr (before: nowhere); a take whose reader
+    said nothing has an empty list. Where a file stands in the way of a take's folder, or a folder where one of its
+    files goes, that take fails in one sentence naming it; nothing is written for it."""
+    from model.batch import BatchJob, read_summary, solve_take_file, write_summary
+    from model.marker_map import load_marker_map
+    raw = (take_dir / "take.c3d").read_bytes()
+    cut = tmp_path / "cut.c3d"
+    cut.write_bytes(raw[: int(len(raw) * 0.9)])
+    job = BatchJob.prepare(ict_rig, {"mode": "global", "residual": None, "calibration_frames": 30,
+                                     "fixed_head": False}, marker_map=load_marker_map(take_dir / "marker_map.json"))
+    row = solve_take_file(job, str(cut), str(tmp_path / "out" / "cut"))
+    assert row["status"] == "solved" and len(row["warnings"]) == 1, row
+    assert "the file ends early" in row["warnings"][0] and str(cut) in row["warnings"][0]
+    assert json.loads((tmp_path / "out" / "cut" / "report.json").read_text())["warnings"] == row["warnings"]
+    plain = solve_take_file(job, str(take_dir / "take.c3d"), str(tmp_path / "out" / "take"))
+    assert plain["status"] == "solved" and plain["warnings"] == []
+    write_summary(tmp_path / "out", [row, plain])
+    assert [r["warnings"] for r in read_summary(tmp_path / "out")[1]["takes"]] == [row["warnings"], []]
+
+    (tmp_path / "out" / "blocked").write_text("mine")                       # a file where the take's folder goes
+    failed = solve_take_file(job, str(cut), str(tmp_path / "out" / "blocked"))
+    assert failed["status"] == "failed" and failed["error"] == \
+        f"{tmp_path / 'out' / 'blocked'}: is a file, not a folder."
+    (tmp_path / "out" / "odd" / "report.json").mkdir(parents=True)        # a folder where one of its files goes
+    failed = solve_take_file(job, str(cut), str(tmp_path / "out" / "odd"))
+    assert failed["status"] == "failed" and failed["error"] == \
+        f"{tmp_path / 'out' / 'odd' / 'report.json'}: is a folder, not a file."
+    assert (tmp_path / "out" / "blocked").read_text() == "mine"
+    assert sorted(p.name for p in (tmp_path / "out" / "odd").iterdir()) == ["report.json"]
+
+    proc = _batch(ict_dir, take_dir, [cut], tmp_path / "cli", "--workers", "1", check=True)
+    assert f"warning: {row['warnings'][0]}\n" in proc.stderr
+    assert _summary(tmp_path / "cli")["cut"]["warnings"] == row["warnings"]

@@ -9,6 +9,7 @@ import pytest
 from model.obj_io import read_obj
 from model.readers import load_rig
 from tests.cli_runner import run_cli
+from tests.conftest import DATA, require_data
 from tests.rig_files import write_rig_folder
 
 
@@ -71,3 +72,41 @@ def test_cli_bad_target_names_the_file(tmp_path):
     (folder / "raise.obj").write_text("v 1 2\n")
     proc = run_cli("info", folder, check=False)
     assert proc.returncode == 2 and "raise.obj" in proc.stderr
+
+
+@pytest.mark.parametrize("args, sentence", [
+    (["render", "{folder}", "-o", "{tmp}/x.png", "--weights", "nosuchshape=1"],
+     "{folder}: the rig has no shape named 'nosuchshape' (--weights)."),
+    (["export", "{folder}", "-o", "{tmp}/x.obj", "--weights", "nosuchshape=1"],
+     "{folder}: the rig has no shape named 'nosuchshape' (--weights)."),
+    (["render", "{folder}", "-o", "{tmp}/x.png", "--view", "segmentation", "--threshold", "5"],
+     "{folder}: --threshold 5 is outside 0 to 1 (a quantile of the rig's moving skin)."),
+    (["segment", "{folder}", "-o", "{tmp}/x.json", "--threshold", "5"],
+     "{folder}: --threshold 5 is outside 0 to 1 (a quantile of the rig's moving skin)."),
+    (["render", "{folder}", "-o", "{tmp}/x.png", "--size", "-5,100"],
+     "--size: -5x100 is not a positive size in pixels (16..8192 each)."),
+    (["render", "{folder}", "-o", "{tmp}/x.png", "--camera", "above"],
+     "argument --camera: invalid choice: 'above' (choose from … (see blendshape-studio render --help)."),
+    (["render", "{folder}"], "the following arguments are required: -o/--output (see blendshape-studio render "
+                             "--help)."),
+])
+def test_errors_are_one_sentence_naming_the_rig_and_argparse_gives_no_usage_block(tmp_path, args, sentence):
+    """Audit item 11: the rig's path in a sentence about the rig; argparse's complaints (an unknown choice, a
+    missing option) as one `error:` line, exit 2, not its usage block; `--size -5,100` read as --size's value
+    (argparse took it for an option: "expected one argument") and refused as not positive."""
+    folder = tmp_path / "rig"
+    write_rig_folder(folder)
+    proc = run_cli(*[a.format(folder=folder, tmp=tmp_path) for a in args], check=False)
+    assert proc.returncode == 2 and proc.stdout == ""
+    head, _, tail = f"error: {sentence.format(folder=folder)}\n".partition("…")   # "…": argparse's list of choices
+    assert proc.stderr.startswith(head) and proc.stderr.endswith(tail) and proc.stderr.count("\n") == 1, proc.stderr
+
+
+def test_a_segmentation_or_level_the_rig_cannot_give_names_the_rig(ict_dir, tmp_path):
+    proc = run_cli("render", ict_dir, "--view", "segmentation", "--level", "99", "-o", tmp_path / "x.png", check=False)
+    assert proc.returncode == 2 and proc.stderr == \
+        f"error: {ict_dir}: --level 99 does not exist: this segmentation has levels 0 to 4.\n", proc.stderr
+    morph = require_data(DATA / "thirdparty" / "gltf" / "SimpleMorph.gltf")
+    proc = run_cli("render", morph, "--view", "segmentation", "-o", tmp_path / "x.png", check=False)
+    assert proc.returncode == 2 and proc.stderr.startswith(f"error: {morph}: the threshold t=0.5 leaves no region")
+    assert proc.stderr.count("\n") == 1 and not (tmp_path / "x.png").exists()

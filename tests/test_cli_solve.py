@@ -156,6 +156,11 @@ def test_solve_a_project_with_a_corrective(ict_dir, tmp_path):
     (["--neutral-frames", "400:420"], "outside the take"),
     (["--stable", "root-*"], "not in the take"),
     (["--stable", "M00,M01"], "at least 3 stable markers"),
+    # a count the take cannot give (before: the whole take, expressions and all, silently taken as the neutral),
+    # a negative count (before: no calibration, silently), and a neutral range for a solve that calibrates on none
+    (["--calibration-frames", "100000"], "has 358 frames, fewer than the 100000 calibration frames"),
+    (["--calibration-frames", "-1"], "--calibration-frames: -1 is not a count of frames"),
+    (["--calibration-frames", "0", "--neutral-frames", "0:29"], "calibrates on no neutral"),
 ])
 def test_solve_bad_calibration_input(ict_dir, take_dir, tmp_path, option, words):
     proc = run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json", *option,
@@ -163,6 +168,54 @@ def test_solve_bad_calibration_input(ict_dir, take_dir, tmp_path, option, words)
     assert proc.returncode == 2, proc.stderr
     assert proc.stderr.startswith("error: ") and words in proc.stderr and proc.stderr.count("\n") == 1, proc.stderr
     assert not (tmp_path / "w.csv").exists()
+
+
+@pytest.mark.parametrize("mapped", [True, False])
+def test_a_neutral_range_outside_the_take_is_one_sentence_naming_it(ict_dir, take_dir, tmp_path, mapped):
+    """With a map or mapped automatically, the same sentence naming the take (before: "The take could not be
+    solved: TAKE: The neutral frames ..." with a map, and "--neutral-frames: ...", not naming the take, without one)."""
+    take = take_dir / "take.c3d"
+    options = ["--map", take_dir / "marker_map.json"] if mapped else []
+    proc = run_cli("solve", ict_dir, take, *options, "--neutral-frames", "500:600", "-o", tmp_path / "w.csv",
+                   check=False)
+    assert proc.returncode == 2 and proc.stderr == (f"error: {take}: the neutral frames 500:600 (--neutral-frames) are "
+                                                    "outside the take, which has frames 0 to 357.\n"), proc.stderr
+
+
+def test_no_calibration_takes_the_markers_as_the_rigs_own_face(ict_dir, take_dir, tmp_path):
+    """--calibration-frames 0: no neutral, no similarity; the markers (in the take's units) are the rig's own face in
+    rig space, and the head motion is still solved. The shared ICT take is that face: it solves as well as with its
+    30 calibration frames (marker RMSE 0.0334 cm against 0.0335). The report says so, not "fixed head"."""
+    proc = run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json", "--global",
+                   "--calibration-frames", "0", "-o", tmp_path / "w.csv", "--report", tmp_path / "r.json")
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert rep["neutral_frames"] is None and rep["head"] == "solved" and rep["marker_rmse"] < 0.04
+    assert rep["neutral_frames_how"].startswith("no calibration")
+    assert "neutral frames none (no calibration)" in proc.stdout
+
+
+@pytest.mark.parametrize("cut", ["c3d", "trc"])
+def test_solve_says_what_the_take_reader_decided(ict_dir, take_dir, tmp_path, cut):
+    """A take cut short (a C3D at 90% of its bytes, a TRC with its first 300 of 358 frames) is read to its last whole
+    frame with a warning: `solve` prints it (`warning: ...` on stderr, as `take-info` does) and the report lists it
+    under `warnings` (before: exit 0, nothing said, nothing in the report)."""
+    if cut == "c3d":
+        raw = (take_dir / "take.c3d").read_bytes()
+        take = tmp_path / "cut.c3d"
+        take.write_bytes(raw[: int(len(raw) * 0.9)])
+        words = "the file ends early"
+    else:
+        lines = (take_dir / "take.trc").read_text().splitlines(keepends=True)
+        start = next(i for i, line in enumerate(lines) if line.split("\t", 1)[0] == "1")   # the first data row
+        take = tmp_path / "cut.trc"
+        take.write_text("".join(lines[: start + 300]))
+        words = "declares 358 frames but the file holds 300"
+    proc = run_cli("solve", ict_dir, take, "--map", take_dir / "marker_map.json", "--global", "--residual", "none",
+                   "-o", tmp_path / "w.csv", "--report", tmp_path / "r.json")
+    rep = json.loads((tmp_path / "r.json").read_text())
+    assert len(rep["warnings"]) == 1, rep["warnings"]
+    assert words in rep["warnings"][0] and str(take) in rep["warnings"][0], rep["warnings"]
+    assert f"warning: {rep['warnings'][0]}\n" in proc.stderr
 
 
 def test_solve_reports_the_neutral_it_found(ict_dir, take_dir, tmp_path):

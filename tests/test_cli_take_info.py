@@ -47,3 +47,31 @@ def test_take_info_bad_input_is_one_sentence(tmp_path):
     scale = require_data(DATA / "thirdparty" / "c3d" / "Sample06__MACsample.c3d")
     proc = run_cli("take-info", scale, "--json", check=False)
     assert proc.returncode == 2 and "POINT:SCALE" in proc.stderr and proc.stderr.count("\n") == 1
+
+
+def test_a_weights_csv_without_a_time_column_is_a_weight_take(ict_rig, ict_dir, tmp_path):
+    """`frame,<shape names>` (the shared actor take's truth_weights.csv) is a weights CSV, not a marker CSV: before,
+    `take-info` and `solve` said "after the frame column the header needs X, Y and Z columns per marker". It reads at
+    30 frames a second with a warning (the file holds no rate), and `solve` plays it on the rig; a weights CSV as
+    `solve` writes it (`frame,time,...`) is a weight take to `take-info` too. Marker CSV headers keep their message."""
+    truth = require_data(DATA / "mocap" / "actor_take" / "truth_weights.csv")
+    header = truth.read_text().splitlines()[0].split(",")
+    proc = run_cli("take-info", truth, "--json")
+    info = json.loads(proc.stdout)
+    assert info["kind"] == "weights" and info["frames"] == 358 and info["rate"] == 30.0
+    assert info["labels"] == header[1:] and info["warnings"] == [f"{truth}: has no time column; 30 frames a second "
+                                                                 "assumed."]
+    run_cli("solve", ict_dir, truth, "-o", tmp_path / "w.csv", "--report", tmp_path / "r.json")
+    from model.weights_csv import read_weights_csv
+    _, times, names, W = read_weights_csv(tmp_path / "w.csv")
+    truth_w = np.loadtxt(truth, delimiter=",", skiprows=1)[:, 1:]
+    assert names == ict_rig.shape_names and np.allclose(times, np.arange(358) / 30.0)
+    assert np.array_equal(W[:, [names.index(n) for n in header[1:]]], truth_w)
+    assert json.loads((tmp_path / "r.json").read_text())["warnings"] == info["warnings"]
+    info = json.loads(run_cli("take-info", tmp_path / "w.csv", "--json").stdout)
+    assert info["kind"] == "weights" and info["rate"] == 30.0 and info["labels"] == ict_rig.shape_names
+    for text, words in (("frame,A_X,A_Y\n0,1,2\n", "after the frame column the header needs X, Y and Z columns"),
+                        ("frame,M0x,M0y,M0z\n0,1,2,3\n", "columns M0x, M0y, M0z are not one marker's name_X")):
+        (tmp_path / "m.csv").write_text(text)
+        proc = run_cli("take-info", tmp_path / "m.csv", check=False)
+        assert proc.returncode == 2 and words in proc.stderr, proc.stderr

@@ -72,6 +72,28 @@ def test_a_writer_that_fails_leaves_the_old_set(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a", "b"]
 
 
+def test_a_set_with_a_folder_where_a_file_goes_is_refused_before_any_file_is_written(tmp_path):
+    """A target that is an existing folder (or a path through a file) is one sentence naming it, raised before
+    anything is written: the set stays the old one whole and no temporary or journal is left (before, the other
+    files were replaced, then the move onto the folder failed with IsADirectoryError, leaving both)."""
+    from model.atomic import atomic_write
+    from model.errors import RigInputError
+    names = ("w.csv", "c.pc2")
+    write_set({tmp_path / n: lambda f: f.write(b"old") for n in names})
+    (tmp_path / "report").mkdir()
+    for bad, words in ((tmp_path / "report", f"{tmp_path / 'report'}: is a folder, not a file."),
+                       (tmp_path / "w.csv" / "r.json", f"{tmp_path / 'w.csv'} is a file, not a folder.")):
+        with pytest.raises(RigInputError) as refused:
+            write_set({tmp_path / "w.csv": lambda f: f.write(b"new"), tmp_path / "c.pc2": lambda f: f.write(b"new"),
+                       bad: lambda f: f.write(b"new")})
+        assert str(refused.value).endswith(words), str(refused.value)
+        assert [(tmp_path / n).read_bytes() for n in names] == [b"old", b"old"]
+        assert sorted(p.name for p in tmp_path.iterdir()) == ["c.pc2", "report", "w.csv"]
+    with pytest.raises(RigInputError, match="is a folder, not a file"):
+        atomic_write(tmp_path / "report", b"new")
+    assert list((tmp_path / "report").iterdir()) == [] and len(list(tmp_path.iterdir())) == 3
+
+
 def test_files_get_the_users_umask(tmp_path):
     old = os.umask(0o002)
     try:

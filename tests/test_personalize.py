@@ -318,3 +318,15 @@ def test_what_sixty_markers_can_say_of_the_actors_neutral(ict_rig, actor_dir):
           f"{placed_rms(warped):.2f} mm, oracle fit of every vertex by affine + 57 shapes {placed_rms(fitted):.2f} mm")
     assert 2.3 < placed_rms(warped) < 2.7 and placed_rms(warped) < placed_rms(base) - 1.0
     assert 1.0 < placed_rms(fitted) < 2.2
+
+
+@pytest.mark.parametrize("count", ["0", "100000"])
+def test_personalize_refuses_calibration_frames_the_take_cannot_give(ict_dir, take_dir, tmp_path, count):
+    """0 frames (before: "markers M00, M01, ... are missing in every calibration frame", all 60 named) or more than
+    the take has (before: the whole take's mean taken as the actor's neutral): one sentence naming the take."""
+    proc = run_cli("personalize", ict_dir, "--take", take_dir / "take.c3d", "--map", take_dir / "marker_map.json",
+                   "--calibration-frames", count, "-o", tmp_path / "actor.bsproj", check=False)
+    assert proc.returncode == 2 and proc.stderr == (
+        f"error: {take_dir / 'take.c3d'}: has 358 frames; --calibration-frames {count} must be 1 to 358 (the "
+        "actor's neutral frames at its start).\n"), proc.stderr
+    assert not (tmp_path / "actor.bsproj").exists()

@@ -63,3 +63,23 @@ def test_workspace_solves_a_keyframe_and_reports_it(sample_rig, tmp_path):
     small.deltas = small.deltas[:, :10]
     dropped = ws.set_rig(small)
     assert ws.marker_map is None and ws.solution is None and "marker map" in dropped[0]
+
+
+def test_a_neutral_range_outside_the_take_is_one_sentence_in_the_window_too(sample_rig):
+    """The window's Solve (``TakeWorkspace.solve``, not the command's checks first): a neutral range outside the take
+    is the solver's one sentence after the take's name, not "The take could not be solved: TAKE: The neutral ..."
+    (two sentences run together); Auto Map with it names the take too (it said "--neutral-frames: ...")."""
+    rig = sample_rig
+    take, mm = _keyframe(rig, np.zeros(rig.n_shapes))
+    take = MarkerTake(positions=np.repeat(take.positions, 10, axis=0), labels=take.labels, rate=24.0, units="cm",
+                      source="ten.trc")
+    ws = TakeWorkspace(rig)
+    ws.take = take
+    ws.set_map(mm)
+    with pytest.raises(RigInputError) as err:
+        ws.solve({"mode": "global", "neutral_frames": "20:30"})
+    assert str(err.value) == "ten.trc: the neutral frames 20:30 are outside the take, which has frames 0 to 9."
+    with pytest.raises(RigInputError) as err:
+        ws.find_auto_map(neutral_frames="20:30")
+    assert str(err.value) == ("ten.trc: the neutral frames 20:30 (--neutral-frames) are outside the take, which has "
+                              "frames 0 to 9.")
