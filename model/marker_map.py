@@ -298,8 +298,8 @@ def auto_marker_map(rig: Rig, take: MarkerTake, *, calibration_frames: int | sli
     rms, s, R, t, d, nn, moved = best
     off = float(np.median(d)) / s if s > 0 else float("inf")     # at the take's own size, rig units
     if not (FACE_SCALE_RANGE[0] <= s <= FACE_SCALE_RANGE[1] and off <= length(OFF_FACE_CM, rig.units)):
-        raise RigInputError(f"{take.source or 'take'}: its markers do not look like a face on this rig (fitting them to "
-                            f"it needs a scale of {s:.2g} and leaves half of them more than {off:.2g} {rig.units} "
+        raise RigInputError(f"{take.source or 'take'}: its markers do not look like a face on this rig (fitting them "
+                            f"to it needs a scale of {s:.2g} and leaves half of them more than {off:.2g} {rig.units} "
                             "off its surface at their own size), so they are not mapped automatically; give a marker "
                             "map if they are on a face, or check the take's units.")
     on_face = d <= np.quantile(d, 0.9) if d.size > 10 else np.ones(d.size, bool)

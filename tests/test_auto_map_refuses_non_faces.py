@@ -50,7 +50,8 @@ def test_the_shared_face_takes_are_still_mapped(ict_rig):
 
 
 def test_a_take_whose_points_all_coincide_is_refused(ict_rig):
-    take = MarkerTake(positions=np.zeros((40, 12, 3)), labels=[f"M{i}" for i in range(12)], rate=60.0, units="mm", source="zeros.c3d")
+    take = MarkerTake(positions=np.zeros((40, 12, 3)), labels=[f"M{i}" for i in range(12)], rate=60.0, units="mm",
+                      source="zeros.c3d")
     with pytest.raises(RigInputError, match="zeros.c3d: its markers' positions .* lie within 1 mm of one point"):
         auto_marker_map(ict_rig, take)
 
