@@ -496,7 +496,7 @@ def install(window) -> CorrectiveController:
         dock.show()
         dock.raise_()
         panel.tabs.setCurrentIndex(INTERFERENCE_TAB)
-        ctrl.finder.find_pairs()
+        ctrl.finder.find_pairs_in_background()
     act("&Find Interfering Pairs", _find, "Ctrl+Shift+F", "Rank shape pairs by the overlap of their displacements")
     window.add_separator("correctives")
     window.add_menu("brush", "&Brush", parent="correctives")

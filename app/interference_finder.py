@@ -13,6 +13,7 @@ from PySide6 import QtCore, QtWidgets
 from model.correctives import find_corrective
 from model.interference import (PairRow, corrective_status, hot_area, pair_heat, pair_scores, ranked_pairs,
                                 rig_vertex_areas)
+from app.background import BackgroundRunner
 from widgets.correctives_panel import INTERFERENCE_TAB, PAIR_HINT, CorrectivesPanel
 from widgets.scene import ColorMap
 
@@ -23,7 +24,7 @@ class InterferenceFinder:
     """Owned by the CorrectiveController; ``start_authoring(drivers, rule)`` enters sculpt mode on a pair."""
 
     def __init__(self, window, panel: CorrectivesPanel, start_authoring) -> None:
-        self.panel, self._start_authoring = panel, start_authoring
+        self.window, self.panel, self._start_authoring = window, panel, start_authoring
         self.document, self.viewport = window.document, window.viewport
         self._overlap: dict[str, np.ndarray] = {}  # (K, K) scores by measure, until the shapes change
         self._scored_deltas: np.ndarray | None = None   # the rig.deltas array the scores were computed from
@@ -33,7 +34,8 @@ class InterferenceFinder:
         self._saved_colormap = _UNSET
         self.heat: np.ndarray | None = None
         self._heat_colormap: ColorMap | None = None
-        panel.find_requested.connect(self.find_pairs)
+        self._runner = BackgroundRunner(panel)      # the ranking's pass over the shapes, off the GUI thread
+        panel.find_requested.connect(self.find_pairs_in_background)
         panel.pair_selected.connect(self.show_pair)
         panel.create_pair_requested.connect(self.create_for_pair)
 
@@ -73,6 +75,42 @@ class InterferenceFinder:
     def pair_mirrors(self) -> list[tuple[int, int, float] | None]:
         """Each listed row's mirror pair, when it stands for both sides."""
         return [r.mirror for r in self.rows]
+
+    def find_pairs_in_background(self) -> None:
+        """Find Pairs (the panel's button, Ctrl+Shift+F): the scores of the panel's measure are computed on a worker
+        (``pair_scores``: 0.3-0.5 s on ICT, a pass over every pair of shapes; the window froze for it), the panel
+        saying so, then listed by ``find_pairs``; scores already computed for these shapes are listed at once."""
+        rig = self.document.rig
+        if rig is None:
+            return
+        measure = self.measure
+        self.shapes_changed()
+        if measure in self._overlap:
+            self.find_pairs()
+            return
+        deltas = rig.deltas
+        areas = self._areas
+
+        def job():
+            return pair_scores(rig, measure, rig_vertex_areas(rig) if areas is None else areas)
+
+        def done(scores) -> None:
+            self.panel.find_button.setEnabled(True)
+            self.panel.pair_info.setText(PAIR_HINT)
+            if self.document.rig is rig and rig.deltas is deltas:   # else the shapes changed meanwhile: stale
+                self._overlap[measure] = scores
+                self._scored_deltas = deltas
+                self.find_pairs()
+
+        def failed(message: str) -> None:
+            self.panel.find_button.setEnabled(True)
+            self.panel.pair_info.setText(PAIR_HINT)
+            self.window.show_error("Find Interfering Pairs", message)
+
+        self.panel.find_button.setEnabled(False)
+        self.panel.set_pairs([])
+        self.panel.pair_info.setText("Ranking the shape pairs…")
+        self._runner.submit(job, done, failed)
 
     def find_pairs(self) -> list[tuple[int, int, float]]:
         """Rank the pairs by the panel's measure (computed once per measure until the shapes change) and list

@@ -556,3 +556,30 @@ def test_sculpt_symmetry_follows_the_drivers_sides(qtbot, win):
         assert ctrl.panel.symmetric.isChecked() is symmetric, drivers
         assert ("symmetric strokes on" in w.statusBar().currentMessage()) is symmetric
         ctrl.stop_sculpting()
+
+
+def test_find_pairs_ranks_the_shapes_off_the_gui_thread(qtbot, win, monkeypatch):
+    """The Find pairs button ranks every pair of shapes (``pair_scores``: 0.3-0.5 s on ICT, the window frozen
+    under a wait cursor before) on a worker, the button off and the panel saying so meanwhile; the list then
+    fills as ``find_pairs`` lists it, and a second click lists the kept scores at once."""
+    import threading
+
+    import app.interference_finder as finder_module
+    threads = []
+    scores = finder_module.pair_scores
+
+    def recording(*args):
+        threads.append(threading.current_thread() is threading.main_thread())
+        return scores(*args)
+    monkeypatch.setattr(finder_module, "pair_scores", recording)
+    w, ctrl = win
+    panel = ctrl.panel
+    panel.tabs.setCurrentIndex(1)
+    qtbot.mouseClick(panel.find_button, QtCore.Qt.LeftButton)
+    assert not panel.find_button.isEnabled() and panel.pair_info.text().startswith("Ranking")
+    qtbot.waitUntil(lambda: panel.pairs.topLevelItemCount() > 0, timeout=30000)
+    assert threads == [False] and panel.find_button.isEnabled()
+    listed = [panel.pairs.topLevelItem(i).text(2) for i in range(panel.pairs.topLevelItemCount())]
+    assert listed == [w.document.rig.shape_names[i] for i, _, _ in ctrl.finder.pairs]
+    qtbot.mouseClick(panel.find_button, QtCore.Qt.LeftButton)
+    assert threads == [False] and panel.pairs.topLevelItemCount() == len(listed)
