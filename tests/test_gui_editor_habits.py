@@ -197,3 +197,15 @@ def test_the_preset_list_and_apply_are_enabled_only_with_presets(qtbot, tmp_path
     assert panel.presets.isEnabled() and panel.apply_preset.isEnabled()
     panel.set_shapes(["jawOpen"], [])
     assert not panel.presets.isEnabled() and not panel.apply_preset.isEnabled()
+
+
+def test_the_shapes_panels_controls_are_whole_at_its_narrowest(qtbot, tmp_path):
+    """At the Shapes panel's minimum width (400 px, its dock's default) every control above the list gets at least
+    its size hint: the grouping box sat at the end of the edit buttons' row and was cut to "No grc"."""
+    from tests.gui_helpers import shapes_panel_alone
+    panel = shapes_panel_alone(qtbot, tmp_path, size=(400, 300))
+    panel.set_shapes(["browDown_L", "browDown_R", "jawOpen"], [])
+    qtbot.waitUntil(lambda: panel.width() == 400)
+    controls = [panel.grouping, panel.active_only, panel.apply_preset, panel.reset, *panel.buttons.values()]
+    assert all(c.width() >= c.sizeHint().width() for c in controls), \
+        [(type(c).__name__, c.width(), c.sizeHint().width()) for c in controls]

@@ -477,6 +477,7 @@ class ShapesPanel(QtWidgets.QWidget):
         self.grouping.currentIndexChanged.connect(lambda _i: self._arrange())
         top.addWidget(self.filter, 1)
         top.addWidget(self.active_only)
+        top.addWidget(self.grouping)     # here, not in the edit buttons' row: there it was cut ("No grc") at 400 px
         lay.addLayout(top)
         row = QtWidgets.QHBoxLayout()
         self.presets = QtWidgets.QComboBox()
@@ -520,7 +521,6 @@ class ShapesPanel(QtWidgets.QWidget):
         sort.setMenu(sort_menu)
         edit_row.addWidget(sort)
         edit_row.addStretch(1)
-        edit_row.addWidget(self.grouping)
         lay.addLayout(edit_row)
         self.scroll = QtWidgets.QScrollArea()
         self.scroll.setWidgetResizable(True)
