@@ -11,6 +11,7 @@ def run_gui(path: str | None = None) -> int:
     if os.environ.get("WAYLAND_DISPLAY") and os.environ.get("DISPLAY"):
         os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
     from PySide6 import QtWidgets
+    from app.loading import opens_as
     from app.main_window import MainWindow
     app = QtWidgets.QApplication.instance() or QtWidgets.QApplication(sys.argv[:1])
     app.setApplicationName("Blendshape Studio")
@@ -20,20 +21,11 @@ def run_gui(path: str | None = None) -> int:
     window.show()
     window.prepare_take_solver()
     if not window.autosave.offer_recovery(path):   # a crash left an autosave: restoring it replaces the open
-        if not path or _is_take_or_map(path):
+        if not path or opens_as(path) != "rig":
             window.open_sample()                   # a take or a map plays on a rig: the sample until one is opened
         if path:
             window.open_path(path)
     return app.exec()
-
-
-def _is_take_or_map(path) -> bool:
-    from app.loading import dropped_kind
-    from model.errors import RigInputError
-    try:
-        return dropped_kind(path) != "rig"
-    except RigInputError:
-        return False
 
 
 def install_excepthook(window) -> None:

@@ -41,6 +41,15 @@ def dropped_kind(path: str | Path) -> str:
                         f"an OBJ, a take in C3D, TRC or CSV, or a marker map in JSON).")
 
 
+def opens_as(path: str | Path) -> str:
+    """``dropped_kind`` for a path given to open (the command line, Open Recent): "rig" for what it cannot tell,
+    whose loader then says what is wrong with it."""
+    try:
+        return dropped_kind(path)
+    except RigInputError:
+        return "rig"
+
+
 def sort_dropped(paths) -> list[tuple[str, Path]]:
     """(kind, path) for dropped files in the order they must open (``DROP_ORDER``); raises on the first file
     that is not a rig, project, take or marker map."""

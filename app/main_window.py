@@ -568,12 +568,8 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         """Open a rig or project in the background; on failure keep what is open and say why. A take or a marker
         map (the command line's ``blendshape-studio TAKE``, a recent file) goes to the Mocap panel, as if dropped:
         on the rig that is open (the window opens the bundled sample first when it starts on a take)."""
-        from app.loading import dropped_kind
-        try:
-            kind = dropped_kind(path)
-        except RigInputError:
-            kind = "rig"       # the loader says what is wrong with it, as for any rig
-        if kind != "rig":
+        from app.loading import opens_as
+        if opens_as(path) != "rig":
             self.open_dropped([path])
             return
         if self._worker is not None or not self._maybe_discard():

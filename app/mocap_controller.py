@@ -426,7 +426,8 @@ class MocapController(QtCore.QObject):
             return
         self._drop_solution()
         self.workspace.accept(solution, settings)
-        same_parts = faces is None if self._shown_faces() is None else np.array_equal(faces, self._shown_faces())
+        now = self._shown_faces()
+        same_parts = faces is None if now is None else np.array_equal(faces, now)
         self._set_views_surface(solution, prepared=prepared if same_parts else None)
         mm = unit_scale(self.rig.units, "mm")
         self._show_views_dock()
@@ -470,7 +471,6 @@ class MocapController(QtCore.QObject):
         lo, hi = markers.min(axis=0), markers.max(axis=0)
         pad = 0.25 * (hi - lo)
         return np.array([lo - pad, hi + pad])
-
 
     def _drop_solution(self) -> None:
         self.pause()

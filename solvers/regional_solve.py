@@ -20,7 +20,7 @@ import scipy.sparse as sp
 
 from .errors import RigInputError
 
-from .weight_solve import WeightSolver
+from .weight_solve import WeightSolver, weight_objective
 
 
 def shape_region_max(deltas: np.ndarray, regions: list[np.ndarray]) -> np.ndarray:
@@ -251,13 +251,9 @@ class RegionalSolver:
 
 
 def _objective(solver: WeightSolver, w: np.ndarray, b: np.ndarray, kw: dict) -> float:
-    """The region's objective at ``w`` (ALGORITHMS.md §4): the misfit at its finite targets ``b`` plus the
-    solver's sparsity, and its λ_r and λ_t terms where ``kw`` gives their references."""
+    """The region's objective at ``w`` (``weight_objective``, ALGORITHMS.md §4) over its finite targets ``b``, with
+    the solver's λ's and the references ``kw`` gives."""
     finite = np.isfinite(b)
-    r = solver.A[finite] @ w - b[finite]
-    f = float(r @ r) + solver.lam_sparsity * float(w.sum()) ** 2
-    if kw.get("w_ref") is not None and solver.lam_reg:
-        f += solver.lam_reg * float(np.sum((w - kw["w_ref"]) ** 2))
-    if kw.get("w_prev") is not None and solver.lam_temporal:
-        f += solver.lam_temporal * float(np.sum((w - kw["w_prev"]) ** 2))
-    return f
+    return weight_objective(solver.A[finite], b[finite], w, lam_sparsity=solver.lam_sparsity,
+                            lam_temporal=solver.lam_temporal, lam_reg=solver.lam_reg, w_prev=kw.get("w_prev"),
+                            w_ref=kw.get("w_ref"))

@@ -41,6 +41,20 @@ def open_and_wait(qtbot, window, path, timeout=60000):
     QtWidgets.QApplication.processEvents()
 
 
+def calls_on_gui_thread(monkeypatch, module, name: str) -> list[bool]:
+    """Wrap ``module.name`` so that each call records whether it ran on the GUI (main) thread; returns that list
+    (work moved off the GUI thread: the list is [False] after it ran)."""
+    import threading
+    calls: list[bool] = []
+    original = getattr(module, name)
+
+    def recording(*args, **kwargs):
+        calls.append(threading.current_thread() is threading.main_thread())
+        return original(*args, **kwargs)
+    monkeypatch.setattr(module, name, recording)
+    return calls
+
+
 def mouse(widget, kind, pos, buttons=QtCore.Qt.LeftButton, button=QtCore.Qt.LeftButton):
     """Send a real mouse event (press/move/release) at widget-local ``pos`` with buttons held."""
     types = {"press": QtCore.QEvent.MouseButtonPress, "move": QtCore.QEvent.MouseMove,

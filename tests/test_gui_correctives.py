@@ -562,16 +562,9 @@ def test_find_pairs_ranks_the_shapes_off_the_gui_thread(qtbot, win, monkeypatch)
     """The Find pairs button ranks every pair of shapes (``pair_scores``: 0.3-0.5 s on ICT, the window frozen
     under a wait cursor before) on a worker, the button off and the panel saying so meanwhile; the list then
     fills as ``find_pairs`` lists it, and a second click lists the kept scores at once."""
-    import threading
-
     import app.interference_finder as finder_module
-    threads = []
-    scores = finder_module.pair_scores
-
-    def recording(*args):
-        threads.append(threading.current_thread() is threading.main_thread())
-        return scores(*args)
-    monkeypatch.setattr(finder_module, "pair_scores", recording)
+    from tests.gui_helpers import calls_on_gui_thread
+    threads = calls_on_gui_thread(monkeypatch, finder_module, "pair_scores")
     w, ctrl = win
     panel = ctrl.panel
     panel.tabs.setCurrentIndex(1)

@@ -379,16 +379,9 @@ def test_the_levels_shapes_per_region_are_found_before_the_first_press(qtbot, tm
     """A drag needs the chosen level's shapes per region (``shape_region_max``, a pass over every shape's deltas:
     0.1 s of a first press's 0.23 s on ICT, the window frozen). Marker mode on (M) finds them on a worker thread;
     the first press takes them from there, and a drag poses the face as before."""
-    import threading
-
     import app.marker_controller as marker_controller
-    threads = []
-    found = marker_controller.shape_region_max
-
-    def recording(*args):
-        threads.append(threading.current_thread() is threading.main_thread())
-        return found(*args)
-    monkeypatch.setattr(marker_controller, "shape_region_max", recording)
+    from tests.gui_helpers import calls_on_gui_thread
+    threads = calls_on_gui_thread(monkeypatch, marker_controller, "shape_region_max")
     w = _window(qtbot, tmp_path)
     c = _pins(w, geometry, nose_tip)
     from tests.test_gui_rigger_habits import _key

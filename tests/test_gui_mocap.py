@@ -331,16 +331,9 @@ def test_the_views_of_a_solve_are_prepared_off_the_gui_thread(qtbot, tmp_path, i
     """The Mocap Views' faces, frame cache, first frame and residual range of a solve (``views_data``: 0.2-0.3 s
     on ICT, a frozen window after each solve when the GUI thread made them) are made on the solve's thread; the
     GUI thread only uploads them."""
-    import threading
-
     import app.mocap_controller as mocap_controller
-    threads = []
-    made = mocap_controller.views_data
-
-    def recording(*args):
-        threads.append(threading.current_thread() is threading.main_thread())
-        return made(*args)
-    monkeypatch.setattr(mocap_controller, "views_data", recording)
+    from tests.gui_helpers import calls_on_gui_thread
+    threads = calls_on_gui_thread(monkeypatch, mocap_controller, "views_data")
     w, mc = _install(qtbot, tmp_path)
     open_and_wait(qtbot, w, ict_dir)
     assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
