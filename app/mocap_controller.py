@@ -428,9 +428,9 @@ class MocapController(QtCore.QObject):
         self.workspace.accept(solution, settings)
         now = self._shown_faces()
         same_parts = faces is None if now is None else np.array_equal(faces, now)
+        self._show_views_dock()   # first: the views are framed at their size, and drawn once (set_frame)
         self._set_views_surface(solution, prepared=prepared if same_parts else None)
         mm = unit_scale(self.rig.units, "mm")
-        self._show_views_dock()
         err = solution.marker_rmse * mm
         self.error_plot.title = "marker error RMS (mm)"
         self.error_plot.set_curves([("projection", err), ("dense", solution.marker_rmse_residual * mm)])
@@ -455,15 +455,14 @@ class MocapController(QtCore.QObject):
         curves)."""
         self.views_dock.show()
         self.views_dock.raise_()   # in front of the Graph Editor, which shares its place above the timeline
+        # the dock's size now, not on the event loop's next turn: the views are framed and drawn once, at it
+        self.window.layout().activate()
         splitter = self.views.parentWidget()
         if not self._views_split and isinstance(splitter, QtWidgets.QSplitter):
             self._views_split = True
             saved = app_settings.settings().value("mocap/viewsSplitter")
-
-            def split() -> None:  # once the dock has its size (the next turn of the event loop)
-                if saved is None or not splitter.restoreState(saved):
-                    splitter.setSizes([max(1, sum(splitter.sizes()) // 2)] * 2)
-            QtCore.QTimer.singleShot(0, split)
+            if saved is None or not splitter.restoreState(saved):
+                splitter.setSizes([max(1, sum(splitter.sizes()) // 2)] * 2)
 
     @staticmethod
     def _face_box(markers: np.ndarray) -> np.ndarray:

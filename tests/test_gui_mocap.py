@@ -412,3 +412,26 @@ def test_the_advanced_solver_settings_unfold_with_a_click_and_stay_unfolded(qtbo
     assert all(b.isVisibleTo(w2.mocap.panel) for b in (w2.mocap.panel.residual_combo, w2.mocap.panel.rbf_lambda))
     qtbot.mouseClick(w2.mocap.panel.advanced_button, QtCore.Qt.LeftButton)
     assert not w2.mocap.panel.rbf_lambda.isVisibleTo(w2.mocap.panel)
+
+
+def test_the_first_solve_frames_the_views_at_their_size_and_draws_them_once(qtbot, tmp_path, ict_dir, take_dir):
+    """The Mocap Views dock opens with a solve's result at its final size, framed for it and drawn once: before, the
+    views were drawn five times while still hidden (each mesh added, the framing, the first frame) and framed again
+    when the dock's splitter took its size on the event loop's next turn, a window frozen 0.25 s after the first
+    solve (the progress dialog just closed)."""
+    w, mc = _install(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    assert not mc.views_dock.isVisible()
+    renders: list[int] = []
+    mc.views.plotter.ren_win.AddObserver("EndEvent", lambda *_: renders.append(1))
+    at_solved: dict = {}
+    mc.solved.connect(lambda: at_solved.update(renders=len(renders), size=mc.views.size().toTuple(),
+                                               camera=mc.views.plotter.camera_position))
+    with qtbot.waitSignal(mc.solved, timeout=180000):
+        mc.solve()
+    assert at_solved["renders"] <= 2, at_solved["renders"]   # the first frame, and the colour bar as it is added
+    qtbot.wait(400)
+    assert mc.views.size().toTuple() == at_solved["size"]
+    assert mc.views.plotter.camera_position == at_solved["camera"]   # not framed again at another size
+    assert at_solved["size"][0] > 600 and at_solved["size"][1] > 150

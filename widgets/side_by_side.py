@@ -65,7 +65,8 @@ class SideBySideView(QtWidgets.QWidget):
         """Upload a surface's faces with the vertices they use (both views), ``n_markers`` marker spheres and
         error vectors, the colour range. ``normals``: the VertexNormals of these faces renumbered by
         ``compact_faces`` if the caller has one (both views share it; so may the caller's frame cache).
-        ``keep_camera``: the views keep where they look (other faces of the same solve), else they frame ``focus``."""
+        ``keep_camera``: the views keep where they look (other faces of the same solve), else they frame ``focus``.
+        Nothing is drawn: the caller shows a frame next (``show_frame`` renders), one render for the new surface."""
         import pyvista as pv
         p = self.plotter
         self.residual_title = residual_title
@@ -84,11 +85,11 @@ class SideBySideView(QtWidgets.QWidget):
         if n_markers:
             self.marker_cloud = pv.PolyData(np.zeros((n_markers, 3), np.float32))
             p.add_mesh(self.marker_cloud, color=MARKER_COLOR, point_size=6, render_points_as_spheres=True,
-                       name="markers", reset_camera=False, lighting=False)
+                       name="markers", reset_camera=False, lighting=False, render=False)
             lines = np.column_stack([np.full(n_markers, 2), np.arange(n_markers), np.arange(n_markers) + n_markers])
             self.error_lines = pv.PolyData(np.zeros((2 * n_markers, 3), np.float32), lines=lines.ravel())
             p.add_mesh(self.error_lines, color=ERROR_COLOR, line_width=3, name="errors", reset_camera=False,
-                       lighting=False)
+                       lighting=False, render=False)
             # numpy views of the clouds' own point arrays, rewritten in place each frame
             self._marker_points = vtk_to_numpy(self.marker_cloud.GetPoints().GetData())
             self._line_points = vtk_to_numpy(self.error_lines.GetPoints().GetData())
@@ -107,7 +108,7 @@ class SideBySideView(QtWidgets.QWidget):
         self._update_culling()
         self._focus = np.asarray(points if focus is None else focus)
         if not keep_camera:
-            self.set_camera(self._camera)
+            self.set_camera(self._camera, render=False)
 
     def clear(self) -> None:
         """Show nothing: the surfaces, markers, error vectors and residual bar of the last solve go (a new take,
@@ -171,15 +172,16 @@ class SideBySideView(QtWidgets.QWidget):
     def has_residual_bar(self) -> bool:
         return self.residual_title in self.plotter.scalar_bars
 
-    def set_camera(self, name: str, size: tuple[int, int] | None = None) -> None:
-        """Frame both views (one shared camera) from a preset; ``size`` is one view's (w, h)."""
+    def set_camera(self, name: str, size: tuple[int, int] | None = None, render: bool = True) -> None:
+        """Frame both views (one shared camera) from a preset; ``size`` is one view's (w, h); ``render``: draw now."""
         self._camera = name
         if self._focus is not None:
             w, h = self.plotter.window_size
             self.plotter.subplot(0, 0)
             set_camera(self.plotter, name, self._focus, size=size or (max(1, w // 2), h))
             self._framed = None if size else self.plotter.camera_position
-            self.render()
+            if render:
+                self.render()
 
     def resizeEvent(self, event) -> None:  # Qt override
         """Keep a preset framing fitted to the new size (the views were framed before the dock had its size);
