@@ -156,9 +156,11 @@ def cmd_take_info(args) -> int:
         print(json.dumps(info, indent=2))
         return 0
     gaps = sum(info["missing"].values())
+    outputs = info.get("model_outputs_left_out")
     print(f"{Path(args.take).name}: {info['kind']} take, {info['frames']} frames at {info['rate']:g} fps, "
           f"{len(info['labels'])} {'markers' if info['kind'] == 'markers' else 'weight columns'}"
-          + (f" ({info['units']}), {gaps} missing samples" if info["kind"] == "markers" else ""))
+          + (f" ({info['units']}), {gaps} missing samples" if info["kind"] == "markers" else "")
+          + (f"; {outputs} model outputs left out" if outputs else ""))
     if info["bounds"]:
         print(f"  bounds: {info['bounds']['min']} .. {info['bounds']['max']}")
     print(f"  labels: {', '.join(info['labels'])}")

@@ -13,8 +13,11 @@ analog layout only in the ANALOG group, others leave the parameters zero). The r
 frame layout from the parameters, cross-checks it with the header and the file size, and takes the reading
 whose frames fill the data exactly (parameters first, the header where they do not fit); a file that ends
 early is read to its last whole frame. Every decision that changes what a plain reading would give is a
-sentence in ``MarkerTake.warnings``; a file no layout fits is refused in one sentence. The own reader is
-kept rather than ezc3d: it also reads SGI/MIPS files, which ezc3d 1.7 refuses.
+sentence in ``MarkerTake.warnings``; a file no layout fits is refused in one sentence. Where POINT:SCALE and the
+header's scale disagree in an integer file, the header's is used (as BTK does), with a warning. Points that are
+model outputs rather than markers (the labels POINT:ANGLES, FORCES, MOMENTS, POWERS, SCALARS and REACTIONS list)
+are left out, the markers keeping their order; ``MarkerTake.model_outputs`` names them. The own reader is kept
+rather than ezc3d: it also reads SGI/MIPS files, which ezc3d 1.7 refuses.
 """
 from __future__ import annotations
 
@@ -144,11 +147,12 @@ class _Params:
         n = dims[0]
         return [_text(raw[i:i + n]) for i in range(0, len(raw), n)] if n else []
 
-    def labels(self) -> list[str]:
-        """POINT:LABELS, then LABELS2, LABELS3, ... (writers split more than 255 labels that way)."""
-        out = list(self.strings("POINT", "LABELS") or [])
+    def labels(self, name: str = "LABELS") -> list[str]:
+        """POINT:LABELS, then LABELS2, LABELS3, ... (writers split more than 255 labels that way); the same for
+        another list of point labels (``name`` ANGLES: POINT:ANGLES, ANGLES2, ...)."""
+        out = list(self.strings("POINT", name) or [])
         k = 2
-        while (more := self.strings("POINT", f"LABELS{k}")) is not None:
+        while (more := self.strings("POINT", f"{name}{k}")) is not None:
             out += more
             k += 1
         return out
@@ -351,6 +355,34 @@ def _choose_layout(data: bytes, params: _Params, hdr: dict, path: Path, pblock: 
     return best
 
 
+# POINT parameters in which Vicon Nexus / Plug-in Gait (and pyCGM2) list the points that are model outputs: joint
+# angles, forces, moments, powers, scalars and ground reactions stored as points beside the markers, in degrees,
+# newtons, newton-millimetres or watts (POINT:ANGLE_UNITS, FORCE_UNITS, ...), not positions.
+MODEL_OUTPUTS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
+
+
+def _model_outputs(params: _Params, labels: list[str], path: Path) -> tuple[np.ndarray, str | None]:
+    """Which of the points (by their labels in file order) are markers, and the sentence that says which points
+    were left out as model outputs (None if none were)."""
+    keep = np.ones(len(labels), dtype=bool)
+    counts = []
+    for name in MODEL_OUTPUTS:
+        listed = {s for s in params.labels(name) if s}
+        hit = keep & np.array([s in listed for s in labels], dtype=bool)
+        if hit.any():
+            keep &= ~hit
+            counts.append(f"POINT:{name} ({int(hit.sum())})")
+    if not counts:
+        return keep, None
+    if not keep.any():
+        raise RigInputError(f"{path}: holds no markers: all {len(labels)} points are model outputs (listed in "
+                            f"{', '.join(counts)}), not positions.")
+    listed = ", ".join(counts[:-1]) + " and " + counts[-1] if len(counts) > 1 else counts[0]
+    n = int((~keep).sum())
+    return keep, (f"{path}: {n} of the {len(labels)} points are model outputs listed in {listed}, computed values "
+                  f"rather than marker positions; they were left out and the other {int(keep.sum())} read as markers.")
+
+
 def read_c3d(path: str | Path) -> MarkerTake:
     """Read the 3D points of a C3D file into a MarkerTake (NaN where the residual is negative, and where a sample
     is exactly (0, 0, 0): many writers mark a gap so, and a marker is never exactly at the origin)."""
@@ -373,13 +405,24 @@ def read_c3d(path: str | Path) -> MarkerTake:
             warnings.append(f"{path}: POINT:RATE is not positive; the header's rate ({rate:g}) was used.")
     scale = params.number("POINT", "SCALE") or hdr["scale"] or 1.0
     if not lay.is_float and hdr["scale"] and abs(abs(scale) - abs(hdr["scale"])) > 1e-5 * abs(scale):
-        raise RigInputError(f"{path}: POINT:SCALE ({abs(scale):.6g}) and the header's scale "
-                            f"({abs(hdr['scale']):.6g}) disagree, and nothing in the file says which is right.")
+        # Integer points: the scale sizes every coordinate. The header's is kept, as BTK (Mokka) keeps it: on the one
+        # such file we know (a Motion Analysis gait trial), it gives an adult walking (1.46 m shoulders, 1.3 m
+        # strides at 1.2 m/s), POINT:SCALE a 0.57 m tall figure taking 0.5 m strides at the same cadence.
+        ratio = abs(hdr["scale"]) / abs(scale)
+        warnings.append(f"{path}: POINT:SCALE ({abs(scale):.6g}) and the header's scale ({abs(hdr['scale']):.6g}) "
+                        f"disagree; the header's was used (POINT:SCALE would make every coordinate "
+                        f"{ratio if ratio > 1 else 1 / ratio:.3g} times {'smaller' if ratio > 1 else 'larger'}).")
+        scale = hdr["scale"]
     labels = params.labels()[:lay.points]
     if len(labels) < lay.points:
         warnings.append(f"{path}: POINT:LABELS names {len(labels)} of the {lay.points} points; the others "
                         f"were named M{len(labels):02d}..M{lay.points - 1:02d}.")
     labels += [f"M{i:02d}" for i in range(len(labels), lay.points)]
+    markers, left_out = _model_outputs(params, labels, path)
+    if left_out:
+        warnings.append(left_out)
+    model_outputs = [s for s, marker in zip(labels, markers) if not marker]
+    labels = [s for s, marker in zip(labels, markers) if marker]
     labels, renamed = unique_labels(labels, str(path))
     if renamed:
         warnings.append(renamed)
@@ -393,14 +436,14 @@ def read_c3d(path: str | Path) -> MarkerTake:
         warnings.append(f"{path}: POINT:UNITS is {'empty' if units_text else 'missing'}; read as millimetres, "
                         "the C3D default.")
 
-    xyz = _points(data, lay, params, lay.frames, scale)
+    xyz = _points(data, lay, params, lay.frames, scale)[:, markers]
     origin = (xyz == 0.0).all(axis=2)
     if origin.any():    # a gap, as many writers mark one (residual 0, not negative), not a marker at the origin
         xyz[origin] = np.nan
         warnings.append(f"{path}: {int(origin.sum())} samples at exactly (0, 0, 0) were read as missing, the way "
                         "many writers mark a gap.")
     return MarkerTake(positions=xyz, labels=labels, rate=float(rate), units=units, source=str(path),
-                      first_frame=hdr["first"], warnings=warnings)
+                      first_frame=hdr["first"], warnings=warnings, model_outputs=model_outputs)
 
 
 # --- writer --------------------------------------------------------------------------------------

@@ -26,6 +26,7 @@ class MarkerTake:
     source: str = ""
     first_frame: int = 1
     warnings: list[str] = field(default_factory=list)
+    model_outputs: list[str] = field(default_factory=list)   # labels of points the reader left out (not markers)
 
     def __post_init__(self) -> None:
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float64)
@@ -157,7 +158,8 @@ def unique_labels(labels: list[str], where: str) -> tuple[list[str], str | None]
 
 def take_summary(take: MarkerTake | WeightTake) -> dict:
     """What a take holds, as the readers see it (``take-info --json``): frames, rate, units, labels, missing
-    samples per label, the coordinates' bounds per axis, and the readers' warnings."""
+    samples per label, the coordinates' bounds per axis, how many points the reader left out as model outputs
+    (computed angles, forces, ... that a C3D stores as points: not markers) and the readers' warnings."""
     if isinstance(take, MarkerTake):
         miss = take.missing
         seen = take.positions[~miss]
@@ -166,7 +168,8 @@ def take_summary(take: MarkerTake | WeightTake) -> dict:
         return {"path": take.source, "kind": "markers", "frames": take.n_frames, "rate": take.rate,
                 "units": take.units, "labels": list(take.labels),
                 "missing": {label: int(n) for label, n in zip(take.labels, miss.sum(axis=0))},
-                "bounds": bounds, "first_frame": take.first_frame, "warnings": list(take.warnings)}
+                "bounds": bounds, "first_frame": take.first_frame, "model_outputs_left_out": len(take.model_outputs),
+                "warnings": list(take.warnings)}
     filled = take.filled if take.filled is not None else np.zeros(take.n_frames, dtype=bool)
     return {"path": take.source, "kind": "weights", "frames": take.n_frames, "rate": take.rate, "units": None,
             "labels": list(take.names), "missing": {}, "bounds": None, "dropped_frames": int(filled.sum()),

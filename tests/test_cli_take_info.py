@@ -44,9 +44,9 @@ def test_take_info_bad_input_is_one_sentence(tmp_path):
     proc = run_cli("take-info", junk, check=False)
     assert proc.returncode == 2 and proc.stdout == ""
     assert proc.stderr.strip() == f"error: {junk}: is not a C3D file (no C3D header)."
-    scale = require_data(DATA / "thirdparty" / "c3d" / "Sample06__MACsample.c3d")
-    proc = run_cli("take-info", scale, "--json", check=False)
-    assert proc.returncode == 2 and "POINT:SCALE" in proc.stderr and proc.stderr.count("\n") == 1
+    analog = require_data(DATA / "thirdparty" / "c3d" / "Sample30__emgwl.c3d")
+    proc = run_cli("take-info", analog, "--json", check=False)
+    assert proc.returncode == 2 and "holds no 3D points" in proc.stderr and proc.stderr.count("\n") == 1
 
 
 def test_a_weights_csv_without_a_time_column_is_a_weight_take(ict_rig, ict_dir, tmp_path):

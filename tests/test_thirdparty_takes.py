@@ -9,6 +9,7 @@ the README's (Formats).
 from __future__ import annotations
 
 import re
+import struct
 import warnings as pywarnings
 
 import numpy as np
@@ -53,15 +54,20 @@ REPAIRED = {
     "Sample18__bad_parameter_section.c3d": (5572, b"\xc7\x00", b"\x00\x00", "py-c3d",
                                             "the last parameter (EVENT:LABELS) points past the section into the "
                                             "frames; the repair makes it the last entry"),
+    "Sample06__MACsample.c3d": (2979, b"\x3c\xb0\x77\x13", b"\x3d\x61\xbe\xd7", "py-c3d",
+                                "POINT:SCALE 0.0215 (a big-endian float) disagrees with the header's 0.0551 and "
+                                "py-c3d refuses the file; the repair writes the header's scale into POINT:SCALE"),
 }
 # Refused, with the reason the sentence must give.
 REFUSED = {
     "Sample00__Cometa_Systems__EMG_Data_Cometa.c3d": "no 3D points",
     "Sample30__emgwl.c3d": "no 3D points",
-    "Sample06__MACsample.c3d": "POINT:SCALE .* disagree",   # 0.0215 vs the header's 0.0551; py-c3d refuses too
 }
+# Vicon Nexus / Plug-in Gait and pyCGM2 store model outputs (joint angles, forces, moments, powers, ...) as points and
+# list their labels in these POINT parameters: not markers.
+MODEL_OUTPUTS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
 # What the README's Formats table reports.
-C3D_COUNTS = {"exact": 42, "warning": 32, "refused": 3}
+C3D_COUNTS = {"exact": 41, "warning": 34, "refused": 2}
 TRC_COUNTS = {"exact": 11, "warning": 1, "refused": 0}
 
 
@@ -72,7 +78,8 @@ def _ezc3d_reading(path) -> dict:
     while f"LABELS{k}" in point:
         labels += list(point[f"LABELS{k}"]["value"])
         k += 1
-    return {"positions": c["data"]["points"][:3].transpose(2, 1, 0), "labels": labels,
+    outputs = {s for g in MODEL_OUTPUTS for s in point.get(g, {}).get("value", [])}
+    return {"positions": c["data"]["points"][:3].transpose(2, 1, 0), "labels": labels, "outputs": outputs,
             "rate": float(point["RATE"]["value"][0]), "units": list(point.get("UNITS", {}).get("value", []))}
 
 
@@ -85,8 +92,10 @@ def _pyc3d_reading(path) -> dict:
         pos[np.stack([p[:, 3] for p in frames]) < 0] = np.nan
         units = r.get("POINT:UNITS")
         labels = r.get("POINT:LABELS")
+        outputs = {s.strip() for g in MODEL_OUTPUTS if r.get(f"POINT:{g}") for s in r.get(f"POINT:{g}").string_array}
         return {"positions": pos, "labels": [s.strip() for s in labels.string_array] if labels else [],
-                "rate": float(r.point_rate), "units": [units.string_value.strip()] if units else []}
+                "outputs": outputs, "rate": float(r.point_rate),
+                "units": [units.string_value.replace("\x00", " ").strip()] if units else []}
 
 
 def _reference(name: str, tmp_path) -> dict:
@@ -134,7 +143,13 @@ def _check_c3d(name: str, tmp_path) -> str:
     for w in take.warnings:
         _check_one_sentence(w, name)
     ref = _reference(name, tmp_path)
-    pos = ref["positions"].astype(np.float64)
+    # model outputs (the labels POINT:ANGLES, FORCES, ... list) are left out, with a warning; markers keep their order
+    markers = [i for i in range(ref["positions"].shape[1])
+               if i >= len(ref["labels"]) or ref["labels"][i] not in ref["outputs"]]
+    left_out = ref["positions"].shape[1] - len(markers)
+    assert len(take.model_outputs) == left_out, name
+    assert bool(left_out) == any("are model outputs listed in POINT:" in w for w in take.warnings), name
+    pos = ref["positions"][:, markers].astype(np.float64)
     origin = (pos == 0).all(axis=2)             # gaps as many writers mark them: read as missing, with a warning
     pos[origin] = np.nan
     assert origin.any() == any("exactly (0, 0, 0)" in w for w in take.warnings), name
@@ -150,7 +165,7 @@ def _check_c3d(name: str, tmp_path) -> str:
     else:   # nothing in the file: millimetres, the C3D default, said aloud
         assert take.units == "mm" and any("POINT:UNITS" in w for w in take.warnings), name
     # labels: the file's, a repeated one made unique (LABEL_2, ...) with a warning; unnamed points named M00...
-    labels = ref["labels"][:take.n_markers]
+    labels = [ref["labels"][i] for i in markers if i < len(ref["labels"])][:take.n_markers]
     assert len(set(take.labels)) == take.n_markers
     for i, (ours, theirs) in enumerate(zip(take.labels, labels)):
         assert ours == theirs or (labels.index(theirs) < i and ours.startswith(theirs + "_")), (name, ours, theirs)
@@ -179,6 +194,31 @@ def test_thirdparty_c3d_counts(tmp_path):
     for name in C3D_FILES:
         counts[_classify_c3d(name, tmp_path)] += 1
     assert counts == C3D_COUNTS
+
+
+def test_a_c3d_whose_two_scales_disagree_is_read_with_the_header_scale():
+    """Sample06__MACsample.c3d (Motion Analysis, SGI/MIPS, int16 points): POINT:SCALE says 0.0215, the header 0.0551.
+    It was refused; it is read with the header's scale, as BTK (Mokka) reads it, with a warning. Decoded here by
+    hand (big-endian words from block 8, 33 points and 272 analog words a frame) at the header's scale, and so
+    read the figure is an adult walking: shoulders 1.46 m up, heel to toe 0.19 m, shoulders 0.40 m apart, a
+    stride of 1.3 m in 1.08 s. POINT:SCALE would make it a 0.57 m tall figure taking 0.5 m strides at that pace."""
+    path = require_data(THIRDPARTY / "c3d" / "Sample06__MACsample.c3d")
+    data = path.read_bytes()
+    header_scale = struct.unpack(">f", data[12:16])[0]
+    words = np.frombuffer(data, ">i2", count=180 * 404, offset=7 * 512).reshape(180, 404)[:, :132].reshape(180, 33, 4)
+    ref = words[..., :3] * header_scale
+    ref[words[..., 3] < 0] = np.nan
+    take = read_c3d(path)
+    assert take.n_frames == 180 and take.rate == 60.0 and take.units == "mm"
+    np.testing.assert_allclose(take.positions, ref, rtol=1e-12, atol=0, equal_nan=True)
+    assert take.warnings[0] == (f"{path}: POINT:SCALE (0.0215412) and the header's scale (0.0551136) disagree; the "
+                                "header's was used (POINT:SCALE would make every coordinate 2.56 times smaller).")
+    xyz = {s: take.positions[:, take.labels.index(s)] for s in ("RSHO", "LSHO", "RHEE", "RTOE")}
+
+    def apart(a, b):
+        return np.nanmedian(np.linalg.norm(xyz[a] - xyz[b], axis=1))
+    assert 1400 < np.nanmedian(xyz["RSHO"][:, 2]) < 1500
+    assert 170 < apart("RHEE", "RTOE") < 210 and 380 < apart("RSHO", "LSHO") < 420
 
 
 def test_files_ezc3d_misreads_are_misread_by_it():
