@@ -4,6 +4,8 @@ issue 15's personalisation target, kept in one place so that a change of the tak
 ``dense_error_solved``: solve the take with its marker map on the rig (``model.take_workspace.solve_take``)
 and compare the dense head-stabilised result with ``truth_dense_face.npz`` over its ``moving`` vertices.
 ``dense_error_true_weights``: pose the rig with ``truth_weights.csv`` (no solve) and compare the same way.
+``weights_error_solved``: the take solved on the rig, its weights against ``truth_weights.csv`` (RMS over every
+frame and shape the truth names).
 Both: RMS distance per frame over the moving vertices, averaged over the truth's frames, in rig units. With
 ``within`` (rig units) only the moving vertices that near a marker (the face the markers cover) are measured.
 """
@@ -78,3 +80,16 @@ def dense_error_solved(rig, take_dir: Path, *, within: float | None = None, plac
     if within is None:
         return error(moving)
     return error(moving), error(covered(rig, take_dir, within))
+
+
+def weights_error_solved(rig, take_dir: Path) -> float:
+    """The take solved on the rig with its marker map: RMS of its weights minus the true weights (every frame, every
+    shape ``truth_weights.csv`` names)."""
+    from model.marker_map import load_marker_map
+    from model.takes import load_take
+    from model.take_workspace import solve_take
+    _, _, _, names, table = truth(take_dir)
+    sol = solve_take(rig, load_take(take_dir / "take.c3d"), load_marker_map(take_dir / "marker_map.json"))
+    W = sol.shape_weights[:, [rig.shape_index(n) for n in names]]
+    assert W.shape == table[:, 1:].shape and (table[:, 0] == np.arange(len(table))).all()
+    return float(np.sqrt(((W - table[:, 1:]) ** 2).mean()))
