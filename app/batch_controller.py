@@ -134,8 +134,10 @@ class BatchController(QtCore.QObject):
         self.dialog.set_progress(p.done, p.total, text)
 
     def _on_done(self, rows: list) -> None:
+        from app.crash import log_unexpected_rows
         from model.batch import counts_text
         self.running = False
+        log_unexpected_rows(rows, "solving the take")
         text = f"Batch: {counts_text(rows)}; summary in {Path(self.dialog.output()) / 'batch.json'}."
         self.dialog.set_running(False)
         self._show_rows(Path(self.dialog.output()), rows, self._units)   # the RMSE is in the solved rig's units

@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 
 from app.batch_preload import BATCH_PRELOAD
+from app.crash import log_unexpected_rows
 from app.cli_solve import add_solve_options, announce_solver_build, check_solve_options, load_solve_rig, solve_settings
 from model.errors import RigInputError
 
@@ -184,6 +185,7 @@ def cmd_batch(args) -> int:
         announce_solver_build()      # the local workers' fork server compiles it before the first take
     rows = run_batch(job, takes, args.output, names=names, force=args.force, workers=args.workers,
                      scheduler=args.scheduler, progress=ProgressPrinter())
+    log_unexpected_rows(rows, "solving the take")
     print(f"{counts_text(rows)}; wrote {args.output}/batch.json and batch.csv")
     for r in rows:                # what the readers decided for the takes solved now (also in batch.json, per take)
         if r["status"] == "solved":

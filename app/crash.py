@@ -27,6 +27,21 @@ def crash_dir() -> Path:
 def write_crash_log(exc: BaseException, context: str) -> Path | None:
     """Write the traceback of ``exc`` (raised while doing ``context``) to a new log file and return its
     path; None if even that fails (a read-only home), so reporting never raises in turn."""
+    return _write_log(traceback.format_exception(type(exc), exc, exc.__traceback__), context)
+
+
+def log_unexpected_rows(rows: list[dict], context: str) -> None:
+    """Batch rows that failed unexpectedly (``model.batch.solve_and_report``: a ``"traceback"`` from the worker):
+    each traceback to a crash log, whose path the row's error then names, as ``describe_unexpected`` does."""
+    for row in rows:
+        text = row.pop("traceback", None)
+        if text:
+            log = _write_log([text], f"{context} {row.get('path')}")
+            if log is not None and row.get("error"):
+                row["error"] = f"{row['error'].rstrip('.')}; the details are in {log}."
+
+
+def _write_log(traceback_lines: list[str], context: str) -> Path | None:
     stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S-%f")
     try:
         folder = crash_dir()
@@ -36,7 +51,7 @@ def write_crash_log(exc: BaseException, context: str) -> Path | None:
                  f"while: {context}",
                  f"python {sys.version.split()[0]} on {platform.platform()}",
                  f"command: {' '.join(sys.argv)}", ""]
-        lines += traceback.format_exception(type(exc), exc, exc.__traceback__)
+        lines += traceback_lines
         with open(path, "w", encoding="utf-8") as f:
             f.write("\n".join(line.rstrip("\n") for line in lines) + "\n")
         old = sorted(folder.glob("crash-*.log"))[:-KEEP_LOGS]

@@ -400,8 +400,18 @@ def solve_and_report(job: BatchJob, take_path: str, out_dir: str, name: str) -> 
     scheduler's stream to the client ahead of the news that the task is done), so that the client has it when it
     hears the take is done, without asking the worker for the task's result: that round trip through the scheduler
     and back was a third of Dask's own CPU time per take (issue 21: ~2% of a 2-worker run). The row is returned
-    too, for a client that has not heard it (``solve_on_cluster`` then asks for it as before)."""
-    row = solve_take_file(job, take_path, out_dir, name)
+    too, for a client that has not heard it (``solve_on_cluster`` then asks for it as before).
+
+    An error nobody expected (a bug, not the take: ``solve_take_file`` turns a bad take into a failed row) fails the
+    take here, with its traceback in the row's ``"traceback"`` for the front end's crash log: raised, Dask retried
+    the take on every worker (the same error each time) and printed a worker's traceback for each try. A worker
+    that dies is still retried."""
+    try:
+        row = solve_take_file(job, take_path, out_dir, name)
+    except Exception as exc:      # noqa: BLE001 (not BaseException: a worker shut down mid-take is Dask's to retry)
+        import traceback
+        row = _row(name, Path(take_path), None, "failed", _unexpected(Path(take_path), exc),
+                   traceback="".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
     try:
         from distributed import get_worker
         worker = get_worker()

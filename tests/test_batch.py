@@ -1037,3 +1037,34 @@ def test_a_takes_reader_warnings_reach_its_report_its_row_and_the_summary(tmp_pa
     proc = _batch(ict_dir, take_dir, [cut], tmp_path / "cli", "--workers", "1", check=True)
     assert f"warning: {row['warnings'][0]}\n" in proc.stderr
     assert _summary(tmp_path / "cli")["cut"]["warnings"] == row["warnings"]
+
+
+def test_a_take_that_fails_unexpectedly_fails_once_without_worker_tracebacks(tmp_path, ict_rig, take_dir, capfd,
+                                                                            monkeypatch):
+    """An error nobody expected (a bug, here settings the solver cannot read) fails the take on its first try: no
+    worker prints a traceback, the take is not retried on every worker (before: three tries a take, a worker's
+    "Compute Failed" traceback for each), its row says it in one sentence, and the front end writes the traceback
+    to a crash log that the row's error then names."""
+    import dataclasses
+
+    from app.crash import log_unexpected_rows
+    from model.batch import run_batch
+    job = _job(ict_rig, take_dir)
+    broken = dataclasses.replace(job, settings={**job.settings, "stable": 5})
+    takes = _short_takes(tmp_path, take_dir, 2)
+    capfd.readouterr()
+    rows = run_batch(broken, takes, tmp_path / "out", workers=1, dashboard_address="127.0.0.1:0")
+    printed = capfd.readouterr()
+    assert "Compute Failed" not in printed.err and "Traceback" not in printed.err + printed.out
+    assert [r["status"] for r in rows] == ["failed", "failed"]
+    for take, row in zip(takes, rows):
+        assert row["error"] == f"{take}: the solve stopped unexpectedly (TypeError: 'int' object is not iterable)."
+        assert "Traceback" in row["traceback"] and "TypeError" in row["traceback"]
+    summary = json.loads((tmp_path / "out" / "batch.json").read_text())
+    assert all("traceback" not in r for r in summary["takes"])
+    monkeypatch.setenv("BLENDSHAPE_STUDIO_LOGS", str(tmp_path / "logs"))
+    log_unexpected_rows(rows, "solving the take")
+    logs = sorted((tmp_path / "logs").glob("crash-*.log"))
+    assert len(logs) == 2 and all("TypeError" in p.read_text() for p in logs)
+    assert all("traceback" not in r for r in rows)
+    assert {r["error"].split("; the details are in ")[1] for r in rows} == {f"{p}." for p in logs}
