@@ -126,7 +126,7 @@ class Viewport(QtWidgets.QWidget):
         self._arrays: SurfaceArrays | None = None
         self._given_normals: tuple[np.ndarray, np.ndarray] | None = None   # use_normals
         self._focus = None
-        self._framed = None   # (points, direction or None for the preset's, camera position) of the last framing
+        self._framed = None   # the last framing: (points, direction or None: the preset's, camera position, room)
         self._colormap: ColorMap | None = None
         self._wireframe = False
         self._textured = None   # widgets.texture_view.TexturedSurface while a texture is shown
@@ -240,13 +240,15 @@ class Viewport(QtWidgets.QWidget):
 
     def set_colormap(self, colormap: ColorMap | None) -> None:
         """Colour the surface by ``colormap`` (None: plain shading). When its legend or bar takes another side of the
-        view than the last one's, an untouched framing is made again beside them (``_reframe_if_untouched``)."""
+        view than the last framing left clear, or more of it, an untouched framing is made again beside them
+        (``_reframe_if_untouched``); a legend that only narrows (a threshold dragged) leaves the camera still."""
         self._colormap = colormap
         if self.mesh is not None:
-            room = overlay_room(self.plotter)
             self._redraw_surface()
-            if overlay_room(self.plotter) != room:
-                self._reframe_if_untouched()
+            if self._framed is not None:
+                room, framed = overlay_room(self.plotter), self._framed[3]
+                if any((a > 0) != (b > 0) or a > b for a, b in zip(room, framed)):
+                    self._reframe_if_untouched()
             self.render()
 
     def set_texture(self, split, image8: np.ndarray | None) -> None:
@@ -460,8 +462,7 @@ class Viewport(QtWidgets.QWidget):
         self._camera = name
         focus = self.focus_points()
         if focus is not None:
-            set_camera(self.plotter, name, focus)
-            self._framed = (focus, None, self.plotter.camera_position)
+            self._frame(focus, None)
             if render:
                 self.render()
 
@@ -479,21 +480,23 @@ class Viewport(QtWidgets.QWidget):
         if pts is None or not len(pts):
             return
         cam = self.camera_frame()
-        direction = (-cam.forward, cam.up)
-        set_camera(self.plotter, self._camera, pts, direction=direction)
-        self._framed = (pts, direction, self.plotter.camera_position)
+        self._frame(pts, (-cam.forward, cam.up))
         self.render()
+
+    def _frame(self, points: np.ndarray, direction: tuple | None, size: tuple[int, int] | None = None) -> None:
+        """Frame ``points`` from the preset's direction (None) or ``direction`` (``scene.set_camera``), beside the
+        legend and bar, and remember it (``_reframe_if_untouched``) unless it is for a picture of another ``size``."""
+        set_camera(self.plotter, self._camera, points, size=size, direction=direction)
+        if size is None:
+            self._framed = (points, direction, self.plotter.camera_position, overlay_room(self.plotter))
 
     def _reframe_if_untouched(self, size: tuple[int, int] | None = None) -> bool:
         """Frame again what the last framing framed (a camera preset, Frame All or Selected), for ``size`` (w, h)
         pixels (default: the view's) and the colour map's legend and bar as they are now, if the camera has not
         moved since (a camera the user orbited or zoomed is left alone). Whether it did."""
-        if self._framed is None or self.plotter.camera_position != self._framed[2]:
+        if self._framed is None or self.plotter._closed or self.plotter.camera_position != self._framed[2]:
             return False
-        pts, direction, _ = self._framed
-        set_camera(self.plotter, self._camera, pts, size=size, direction=direction)
-        if size is None:
-            self._framed = (pts, direction, self.plotter.camera_position)
+        self._frame(*self._framed[:2], size=size)
         return True
 
     def render(self) -> None:
