@@ -20,7 +20,7 @@ VIEWS = ("shaded", "deformation", "deformation-rgb", "segmentation")
 @dataclass
 class View:
     points: np.ndarray
-    focus: np.ndarray
+    focus: np.ndarray | None   # what the camera frames (widgets.scene.focus_vertices); None: the posed points
     colormap: ColorMap | None
     title: str
 

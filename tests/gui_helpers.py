@@ -8,7 +8,8 @@ def isolate_settings(tmp_path) -> None:
     QtCore.QSettings.setPath(QtCore.QSettings.IniFormat, QtCore.QSettings.UserScope, str(tmp_path / "settings"))
 
 
-def make_window(qtbot, tmp_path, size=(1200, 800)):
+def make_window(qtbot, tmp_path, size=(1200, 800), sample: bool = True):
+    """The main window at ``size``, on the bundled sample rig (``sample``) or on nothing yet."""
     from app.main_window import MainWindow
     isolate_settings(tmp_path)
     w = MainWindow()
@@ -17,7 +18,8 @@ def make_window(qtbot, tmp_path, size=(1200, 800)):
     w.resize(*size)
     w.show()
     qtbot.waitExposed(w)
-    w.open_sample()
+    if sample:
+        w.open_sample()
     QtWidgets.QApplication.processEvents()
     return w
 

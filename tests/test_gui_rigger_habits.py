@@ -229,10 +229,11 @@ def test_f_frames_the_selected_region_and_a_frames_the_whole_model(qtbot, tmp_pa
     assert abs(centre[0] - wx / 2) < 0.15 * wx and abs(centre[1] - wy / 2) < 0.15 * wy
     assert "region" in w.statusBar().currentMessage()
     assert _view_extent(w, face) > 1.2
-    # A frames the whole model as posed (the sample's head and neck): the face inside, smaller than as opened
+    # A frames the whole model as posed (the sample's head and neck): the face inside, no larger than as opened (the
+    # sample opens framed whole: its shapes act across most of it, widgets.scene.focus_vertices)
     _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_A)
     all_in = _view_extent(w, w.viewport.points())
-    assert 0.45 < all_in <= 1.0 and 0.3 < _view_extent(w, face) < whole and 0.45 < whole <= 1.0
+    assert 0.45 < all_in <= 1.0 and 0.3 < _view_extent(w, face) <= whole + 1e-6 and 0.45 < whole <= 1.0
     _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_F)
     _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_Home)        # Home frames all too
     assert _view_extent(w, w.viewport.points()) == pytest.approx(all_in, abs=0.01)
@@ -474,7 +475,8 @@ def test_region_legend_is_white_text_at_a_readable_size_in_the_corner(qtbot, tmp
     vw, vh = w.viewport.plotter.window_size
     x, y = legend.GetPosition()
     lw, lh = legend.GetPosition2()
-    assert vw > 846 and lw * vw == pytest.approx(220, abs=1) and lh * vh / n >= 18   # rows of 19 px
+    # rows of 18-30 px (widgets.scene.overlay_layout: min(w, h) / 46), as wide as the labels need: at least 220 px
+    assert vw > 846 and lw * vw >= 220 and 18 <= lh * vh / n <= 30
     assert (x + lw) * vw < 0.5 * vw and y * vh > 0.5 * vh         # in the upper left, clear of the lower-right title
 
 

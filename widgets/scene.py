@@ -18,6 +18,7 @@ BACKGROUND_TOP = (0.33, 0.35, 0.40)
 BACKGROUND_BOTTOM = (0.12, 0.12, 0.14)
 BACKGROUND_FLAT = (0.20, 0.21, 0.24)
 CAMERAS = ("front", "left", "right", "three-quarter")
+FACE_SHARE = 0.75   # the cameras frame where the shapes act if it is at most this share of the model (focus_vertices)
 # The surface's material (``add_surface``) and the default view's lights (``style_plotter``); a batch's previews
 # draw the same look on the CPU (``app.cli_batch.preview_image``).
 EDGE_COLOR, EDGE_WIDTH = (0.15, 0.15, 0.18), 0.5
@@ -141,19 +142,15 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
     if colormap.legend:
         entries = colormap.legend if len(colormap.legend) <= 10 else \
             colormap.legend[:9] + [(f"… {len(colormap.legend) - 9} more", (0.7, 0.7, 0.7))]
-        # a fixed size in pixels (the text scales to its box): 220 px wide and 19 px a row, at most a quarter of
-        # a small picture's width, in the upper left corner (the colour bar is right, the legend's title lower right)
-        w, h = plotter.window_size
-        width = min(220.0, 0.26 * max(w, 1))
-        size = (width / max(w, 1), min(0.9, width * 19 / 220 * len(entries) / max(h, 1)))
         legend = plotter.add_legend(entries, bcolor=(0.1, 0.1, 0.12), border=False, face="rectangle", name="legend",
-                                    size=size, loc="upper left")
+                                    loc="upper left")
         _legend_white_text(legend, entries)
         if colormap.title:
             plotter.add_text(colormap.title, position="lower_right", font_size=10, color="white", name="legend_title")
     if colormap.rgb:
         mesh.point_data["colors"] = np.asarray(colormap.scalars, dtype=np.uint8)
         actor = plotter.add_mesh(mesh, scalars="colors", rgb=True, **kwargs)
+        fit_overlays(plotter)
         _map_directly(actor, mesh, "colors")
         return _shade(plotter, mesh, actor, wireframe, name, cull_hidden)
     mesh.point_data["values"] = np.asarray(colormap.scalars, dtype=np.float32)
@@ -168,6 +165,7 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
                                  scalar_bar_args=bar, **kwargs)
         if bar["title"] in plotter.scalar_bars:
             plotter.scalar_bars[bar["title"]].SetVerticalTitleSeparation(8)  # pixels between title and top label
+    fit_overlays(plotter)
     _map_directly(actor, mesh, "values")
     return _shade(plotter, mesh, actor, wireframe, name, cull_hidden)
 
@@ -336,6 +334,118 @@ def _legend_white_text(legend, entries) -> None:
     legend.SetPadding(4)
 
 
+@dataclass(frozen=True)
+class OverlayLayout:
+    """Where a colour map's legend and colour bar go in a picture of ``size`` (w, h) pixels (``overlay_layout``):
+    boxes (x, y, width, height) in pixels from the lower left corner (VTK's display), None when not shown;
+    ``font``: the size in pixels of the bar's text and of the titles; ``room`` (left, right): the pixels at each
+    side that the camera keeps clear of the model (``camera_placement``)."""
+    legend: tuple[float, float, float, float] | None
+    bar: tuple[float, float, float, float] | None
+    font: int
+    room: tuple[float, float]
+
+
+def overlay_layout(size, legend_labels=None, bar_title: str | None = None, titled: bool = False) -> OverlayLayout:
+    """The legend (``legend_labels``: a row each) in the upper left corner (below the picture's title if ``titled``)
+    and the colour bar (titled ``bar_title``, None: no bar) at the right edge, its labels right of it and its title
+    above, for a picture of ``size``.
+
+    Their text grows with the picture's smaller side: a legend row is min(w, h) / 46 pixels high, kept within 15 and
+    24 (readable in a 600x300 picture, not huge at 4K), the bar's text and the titles 0.72 of a row. The legend is
+    as wide as its longest label needs (at most 45% of the picture; its text shrinks to fit a narrower box). Was: a
+    legend of 220 pixels sized for the viewport and drawn at that fraction of an exported picture (600x300: rows of
+    7 pixels), over the character's right eye at the viewport's default size, as the bar was over the head's side."""
+    w, h = (max(int(v), 1) for v in size)
+    row = float(np.clip(min(w, h) / 46, 15, 24))
+    font = int(round(0.72 * row))
+    margin = round(0.6 * row)
+    legend = bar = None
+    left = right = 0.0
+    if legend_labels:
+        chars = max(len(str(t)) for t in legend_labels)
+        width = min(row * (1.6 + 0.5 * chars), 0.45 * w)
+        top = margin + (1.6 * font if titled else 0)
+        height = min(row * len(legend_labels) + 8, h - top - margin)
+        legend = (margin, h - top - height, width, height)
+        left = width + 2 * margin
+    if bar_title is not None:
+        lines = bar_title.splitlines() or [""]
+        title_width = 0.62 * font * max(len(t) for t in lines)     # centred over the bar and its labels
+        width = 3.6 * row
+        bottom = 0.1 * h
+        bar = (w - margin - (max(width, title_width) + width) / 2, bottom, width, h - margin - bottom)
+        right = max(width, title_width) + 2 * margin
+    return OverlayLayout(legend, bar, font, (left, right))
+
+
+TITLES = ("legend_title", "title")   # the corner texts that ``fit_overlays`` sizes: a colour map's, a picture's
+
+
+def _overlays(renderer) -> tuple:
+    """(legend actor, colour bar actor, titles (``TITLES``)) that ``renderer`` shows (None where it shows none)."""
+    legend = bar = None
+    named = getattr(renderer, "actors", {})
+    texts = [named[n] for n in TITLES if n in named and named[n].GetVisibility()]
+    for actor in renderer.GetViewProps():
+        if not actor.GetVisibility():
+            continue
+        if actor.IsA("vtkLegendBoxActor"):
+            legend = actor
+        elif actor.IsA("vtkScalarBarActor"):
+            bar = actor
+    return legend, bar, texts
+
+
+def _layout_of(renderer, size) -> OverlayLayout:
+    legend, bar, _texts = _overlays(renderer)
+    labels = [legend.GetEntryString(i) or "" for i in range(legend.GetNumberOfEntries())] if legend else None
+    titled = "title" in getattr(renderer, "actors", {})
+    return overlay_layout(size, labels, (bar.GetTitle() or "") if bar is not None else None, titled)
+
+
+def renderer_size(plotter, size=None) -> tuple[int, int]:
+    """``size`` if given, else the pixels of the plotter's active renderer (its subplot's share of the window)."""
+    if size:
+        return max(1, int(size[0])), max(1, int(size[1]))
+    w, h = plotter.window_size
+    x0, y0, x1, y1 = plotter.renderer.GetViewport()
+    return max(1, round(w * (x1 - x0))), max(1, round(h * (y1 - y0)))
+
+
+def overlay_room(plotter, size=None) -> tuple[float, float]:
+    """The pixels at the left and right of the plotter's active renderer, ``size`` (w, h) pixels (default: as it is
+    now), that its legend and colour bar take (``overlay_layout``): (0, 0) without them (or once it is closed)."""
+    if getattr(plotter, "_closed", False):
+        return 0.0, 0.0
+    return _layout_of(plotter.renderer, renderer_size(plotter, size)).room
+
+
+def fit_overlays(plotter, size=None) -> None:
+    """Place and size the legend, colour bar and titles of the plotter's active renderer, ``size`` (w, h) pixels
+    (default: as it is now), as ``overlay_layout`` says: when a colour map is drawn and before a picture is taken at
+    another size (``Viewport.write_image``). Nothing here runs per frame."""
+    if getattr(plotter, "_closed", False):      # its window is gone (a colour map set as the window closes)
+        return
+    w, h = renderer_size(plotter, size)
+    legend, bar, texts = _overlays(plotter.renderer)
+    layout = _layout_of(plotter.renderer, (w, h))
+    if legend is not None and layout.legend is not None:
+        x, y, lw, lh = layout.legend
+        legend.SetPosition(x / w, y / h)
+        legend.SetPosition2(lw / w, lh / h)
+    if bar is not None and layout.bar is not None:
+        x, y, bw, bh = layout.bar
+        bar.SetPosition(x / w, y / h)
+        bar.SetPosition2(bw / w, bh / h)
+        bar.UnconstrainedFontSizeOn()
+        for prop in (bar.GetTitleTextProperty(), bar.GetLabelTextProperty()):
+            prop.SetFontSize(layout.font)
+    for text in texts:
+        text.SetMinimumFontSize(layout.font)
+        text.SetMaximumFontSize(layout.font)
+
+
 def _map_directly(actor, mesh, name: str) -> None:
     """Feed the mesh to the mapper directly, colouring by point array ``name``.
 
@@ -500,8 +610,11 @@ def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float =
 
     The camera looks at the centre of the points' box and stands as close as it can with every point inside
     the view (each at its own depth: the nose nearer than the ears), with a margin of 10%: a box's bounding
-    sphere wasted a third of the view on a face, which is much deeper and narrower than it is tall."""
-    center, position, up = camera_placement(name, focus_points, size or plotter.window_size, view_angle, direction)
+    sphere wasted a third of the view on a face, which is much deeper and narrower than it is tall. The points
+    are framed beside the colour map's legend and bar, not under them (``overlay_room``)."""
+    room = overlay_room(plotter, size)
+    center, position, up = camera_placement(name, focus_points, renderer_size(plotter, size), view_angle, direction,
+                                            room=room)
     # the renderer's camera, not ``plotter.camera``: for a camera never set (a new view's first surface) pyvista's
     # getter first frames the scene's bounds itself and renders it twice, whole pictures for nothing (every value it
     # sets is set here; on a 422k-vertex rig ~0.1 s each); marked set, so that its later reads keep this one
@@ -515,8 +628,12 @@ def set_camera(plotter, name: str, focus_points: np.ndarray, view_angle: float =
 
 
 def camera_placement(name: str, focus_points: np.ndarray, size: tuple[int, int], view_angle: float = 30.0,
-                     direction: tuple | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(focal point, position, view up) of ``set_camera``'s camera for a picture of ``size`` (w, h) pixels."""
+                     direction: tuple | None = None, room: tuple[float, float] = (0.0, 0.0)
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(focal point, position, view up) of ``set_camera``'s camera for a picture of ``size`` (w, h) pixels, the
+    points framed in the part of it between ``room`` (left, right) pixels kept clear at its sides (at least a
+    quarter of the picture's width is used): the camera looks beside the points' centre so that they sit in the
+    middle of that part."""
     pts = np.asarray(focus_points, dtype=np.float64).reshape(-1, 3)
     lo, hi = bounds(pts)
     center = (lo + hi) / 2
@@ -531,29 +648,42 @@ def camera_placement(name: str, focus_points: np.ndarray, size: tuple[int, int],
     rel = pts - center
     x, y, z = np.abs(rel @ right) * 1.1, np.abs(rel @ true_up) * 1.1, rel @ d   # z: towards the eye
     w, h = size
+    left, right_room = (float(v) for v in room)
+    free = max(w - left - right_room, 0.25 * w)
     t = np.tan(np.radians(view_angle / 2))
-    aspect = w / h if w > 0 and h > 0 else 1.0
+    aspect = free / h if free > 0 and h > 0 else 1.0
     dist = float(np.max(z + np.maximum(y / t, x / (t * aspect)))) if len(pts) else 1.0
     dist = max(dist, 1e-6 + float(z.max(initial=0.0)), 1e-6)
-    return center, center + d * dist, true_up
+    # the free part's middle lies (left - right) / 2 pixels right of the picture's: the camera looks that far left
+    shift = (left - right_room) / 2 if free > 0.25 * w else 0.0
+    focal = center - right * (shift / (h / 2) * t * dist if h > 0 else 0.0)
+    return focal, focal + d * dist, true_up
 
 
-def focus_vertices(neutral: np.ndarray, reach: np.ndarray) -> np.ndarray:
-    """The points a camera should frame: where the shapes act (the face), else all vertices. ``reach`` (V,): each
-    vertex's largest displacement over the shapes (``model.rig_prep.shape_reach``).
+def focus_vertices(neutral: np.ndarray, reach: np.ndarray) -> np.ndarray | None:
+    """The points a camera should frame: where the shapes act (the face) when that is a part inside a larger model,
+    else None: the whole model, as posed (as Frame All frames it). ``reach`` (V,): each vertex's largest displacement
+    over the shapes (``model.rig_prep.shape_reach``).
 
     A vertex counts when some shape moves it by at least a tenth of what the shapes typically move the most
     (the 99th percentile of each vertex's largest displacement): on ICT FaceKit a few shapes drag the scalp
     and neck by a fraction of a millimetre, and framing every vertex that moves at all showed a small head
     and shoulders instead of the face. Interior parts that move (teeth, tongue) lie inside the face's box.
-    """
+    Those vertices are framed only when their box is at most ``FACE_SHARE`` of the model's box along every axis (ICT
+    FaceKit's face: 54-58% of the head and shoulders): where the shapes act across most of the model along some axis
+    (a glTF cube whose one side moves: its box is the whole cube's but flat), framing them alone cut the rest of the
+    model out of the picture (half the cube)."""
     reach = np.asarray(reach, dtype=np.float64)
     if reach.size:
         moving = reach > 1e-6 * max(1.0, float(np.abs(neutral).max()))
         if moving.sum() >= 3:
             acts = reach >= 0.1 * float(np.percentile(reach[moving], 99))
-            return neutral[acts if acts.sum() >= 3 else moving]
-    return neutral
+            face = neutral[acts if acts.sum() >= 3 else moving]
+            lo, hi = bounds(neutral)
+            face_lo, face_hi = bounds(face)
+            if np.all(face_hi - face_lo <= FACE_SHARE * (hi - lo)):
+                return face
+    return None
 
 
 def offscreen_plotter(size):
@@ -588,7 +718,8 @@ def render_png(points, face_counts, face_indices, out_path, *, focus=None, color
         for add in overlays or ():
             add(plotter)
         if title:
-            plotter.add_text(title, position="upper_left", font_size=11, color="white")
+            plotter.add_text(title, position="upper_left", font_size=11, color="white", name="title")
+            fit_overlays(plotter)
         set_camera(plotter, camera, points if focus is None else focus)
         write_image_atomically(plotter, out_path)
     finally:

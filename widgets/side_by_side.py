@@ -14,7 +14,7 @@ from vtkmodules.util.numpy_support import vtk_to_numpy
 
 from solvers.normals import VertexNormals, compact_faces
 
-from .scene import ColorMap, SurfaceArrays, add_surface, rig_mesh, set_camera, style_plotter
+from .scene import ColorMap, SurfaceArrays, add_surface, fit_overlays, rig_mesh, set_camera, style_plotter
 
 MARKER_COLOR = (0.15, 0.85, 0.35)
 ERROR_COLOR = (1.0, 0.25, 0.2)
@@ -184,17 +184,26 @@ class SideBySideView(QtWidgets.QWidget):
                 self.render()
 
     def resizeEvent(self, event) -> None:  # Qt override
-        """Keep a preset framing fitted to the new size (the views were framed before the dock had its size);
-        a camera the user has orbited or zoomed is left alone."""
+        """Keep the residual bar laid out for the new size and a preset framing fitted to it (the views were framed
+        before the dock had its size); a camera the user has orbited or zoomed is left alone."""
         super().resizeEvent(event)
-        if not self._closed and self._framed is not None and self.plotter.camera_position == self._framed:
+        if not self._closed and self.right_mesh is not None:
             QtCore.QTimer.singleShot(0, self._reframe)
 
     def _reframe(self) -> None:
-        if self._closed:                 # the window closed between the resize and this turn of the event loop
+        if self._closed or self.right_mesh is None:   # closed or cleared between the resize and this turn
             return
+        self._fit_bar()
         if self._framed is not None and self.plotter.camera_position == self._framed:
             self.set_camera(self._camera)
+        else:
+            self.render()
+
+    def _fit_bar(self, size: tuple[int, int] | None = None) -> None:
+        """The residual bar laid out for the right view at ``size`` (w, h) (default: as it is now)."""
+        self.plotter.subplot(0, 1)
+        fit_overlays(self.plotter, size)
+        self.plotter.subplot(0, 0)
 
     def grab_image(self, size: tuple[int, int] | None = None) -> np.ndarray:
         """Both views side by side as one (H, W, 3) uint8 image; ``size`` renders each view at (w, h)."""
@@ -202,11 +211,13 @@ class SideBySideView(QtWidgets.QWidget):
         if not size:
             return np.asarray(self.plotter.screenshot(return_img=True))[:, :, :3]
         saved = self.plotter.camera_position
+        self._fit_bar(size)
         self.set_camera(self._camera, size=size)
         try:
             img = self.plotter.screenshot(return_img=True, window_size=[2 * size[0], size[1]])
             return np.asarray(img)[:, :, :3]
         finally:
+            self._fit_bar()
             self.plotter.camera_position = saved
             self.render()
 

@@ -25,8 +25,8 @@ from PySide6 import QtCore, QtWidgets
 
 from model.parts import subset_faces
 
-from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, drop_cached_background, rig_mesh, \
-    set_camera, style_plotter, surface_face
+from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, drop_cached_background, fit_overlays, \
+    overlay_room, rig_mesh, set_camera, style_plotter, surface_face
 
 CLICK_SLOP_PX = 3   # a press and release this close (display pixels, |dx| + |dy|) is a click
 
@@ -126,6 +126,7 @@ class Viewport(QtWidgets.QWidget):
         self._arrays: SurfaceArrays | None = None
         self._given_normals: tuple[np.ndarray, np.ndarray] | None = None   # use_normals
         self._focus = None
+        self._framed = None   # the last framing: (points, direction or None: the preset's, camera position, room)
         self._colormap: ColorMap | None = None
         self._wireframe = False
         self._textured = None   # widgets.texture_view.TexturedSurface while a texture is shown
@@ -156,7 +157,7 @@ class Viewport(QtWidgets.QWidget):
         see ``set_parts``. ``prepared``: ``model.rig_prep.DefaultView``, made off the GUI thread: its hidden back
         faces and normals are used whenever the faces drawn are its faces. ``render`` False: drawn by the caller's
         next render (the window's, on the event loop's next turn)."""
-        self._focus = focus if focus is not None else points
+        self._focus = None if focus is None else np.asarray(focus, dtype=np.float64).reshape(-1, 3)
         self._prepared = prepared
         if self._colormap is not None and len(self._colormap.scalars) != len(points):
             self._colormap = None   # the last rig's colours: its owner sets the new rig's when they are ready
@@ -238,9 +239,16 @@ class Viewport(QtWidgets.QWidget):
         return self._colormap
 
     def set_colormap(self, colormap: ColorMap | None) -> None:
+        """Colour the surface by ``colormap`` (None: plain shading). When its legend or bar takes another side of the
+        view than the last framing left clear, or more of it, an untouched framing is made again beside them
+        (``_reframe_if_untouched``); a legend that only narrows (a threshold dragged) leaves the camera still."""
         self._colormap = colormap
         if self.mesh is not None:
             self._redraw_surface()
+            if self._framed is not None:
+                room, framed = overlay_room(self.plotter), self._framed[3]
+                if any((a > 0) != (b > 0) or a > b for a, b in zip(room, framed)):
+                    self._reframe_if_untouched()
             self.render()
 
     def set_texture(self, split, image8: np.ndarray | None) -> None:
@@ -449,10 +457,12 @@ class Viewport(QtWidgets.QWidget):
         return CameraFrame(position, focal, up, forward, right)
 
     def set_camera(self, name: str, render: bool = True) -> None:
-        """Look at the face from camera preset ``name``; ``render=False``: the caller renders (once) after."""
+        """Look at the face (or the whole surface as posed, ``focus_points``) from camera preset ``name``;
+        ``render=False``: the caller renders (once) after."""
         self._camera = name
-        if self._focus is not None:
-            set_camera(self.plotter, name, self._focus)
+        focus = self.focus_points()
+        if focus is not None:
+            self._frame(focus, None)
             if render:
                 self.render()
 
@@ -460,17 +470,34 @@ class Viewport(QtWidgets.QWidget):
         self.set_camera(self._camera)
 
     def focus_points(self) -> np.ndarray | None:
-        """The points the camera presets frame (the face: the vertices the shapes move)."""
-        return self._focus
+        """The points the camera presets frame: the face (the vertices the shapes move, as ``set_surface`` was given
+        them), else the whole surface as drawn now; None without a surface."""
+        return self._focus if self._focus is not None else self.points()
 
     def frame_points(self, points: np.ndarray | None = None) -> None:
-        """Frame ``points`` (default: the face) from where the camera looks now (Maya's F and A)."""
-        pts = self._focus if points is None else np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        """Frame ``points`` (default: ``focus_points``) from where the camera looks now (Maya's F and A)."""
+        pts = self.focus_points() if points is None else np.asarray(points, dtype=np.float64).reshape(-1, 3)
         if pts is None or not len(pts):
             return
         cam = self.camera_frame()
-        set_camera(self.plotter, self._camera, pts, direction=(-cam.forward, cam.up))
+        self._frame(pts, (-cam.forward, cam.up))
         self.render()
+
+    def _frame(self, points: np.ndarray, direction: tuple | None, size: tuple[int, int] | None = None) -> None:
+        """Frame ``points`` from the preset's direction (None) or ``direction`` (``scene.set_camera``), beside the
+        legend and bar, and remember it (``_reframe_if_untouched``) unless it is for a picture of another ``size``."""
+        set_camera(self.plotter, self._camera, points, size=size, direction=direction)
+        if size is None:
+            self._framed = (points, direction, self.plotter.camera_position, overlay_room(self.plotter))
+
+    def _reframe_if_untouched(self, size: tuple[int, int] | None = None) -> bool:
+        """Frame again what the last framing framed (a camera preset, Frame All or Selected), for ``size`` (w, h)
+        pixels (default: the view's) and the colour map's legend and bar as they are now, if the camera has not
+        moved since (a camera the user orbited or zoomed is left alone). Whether it did."""
+        if self._framed is None or self.plotter._closed or self.plotter.camera_position != self._framed[2]:
+            return False
+        self._frame(*self._framed[:2], size=size)
+        return True
 
     def render(self) -> None:
         self.plotter.render()
@@ -482,33 +509,57 @@ class Viewport(QtWidgets.QWidget):
         if not size:
             return np.asarray(self.plotter.screenshot(return_img=True))[:, :, :3]
         saved = self.plotter.camera_position
-        if self._focus is not None:
-            set_camera(self.plotter, self._camera, self._focus, size=size)
+        focus = self.focus_points()
+        fit_overlays(self.plotter, size)
+        if focus is not None:
+            set_camera(self.plotter, self._camera, focus, size=size)
         try:
             return np.asarray(self.plotter.screenshot(return_img=True, window_size=list(size)))[:, :, :3]
         finally:
+            fit_overlays(self.plotter)
             self.plotter.camera_position = saved
             self.render()
 
     def write_image(self, path, size: tuple[int, int] | None = None) -> tuple[int, int]:
         """Write the view as shown (camera, colour map and bar, wireframe) as an image at ``size`` (w, h) pixels
-        (default: the view's), through the ``render`` command's writer (``scene.write_image_atomically``). A size
-        narrower than the view widens the view angle so that what is seen across stays in the picture."""
+        (default: the view's), through the ``render`` command's writer (``scene.write_image_atomically``). The
+        legend, bar and titles are laid out for the picture's size (``scene.overlay_layout``), and a framing the user
+        has not moved since is made again for it, beside them; a camera the user moved is kept, and a size narrower
+        than the view widens the view angle so that what is seen across stays in the picture."""
         from .scene import write_image_atomically
         w, h = size or tuple(self.plotter.window_size)
         vw, vh = self.plotter.window_size
         cam = self.plotter.camera
-        angle = cam.view_angle
-        if vw > 0 and vh > 0 and w * vh < vw * h:      # narrower than the view: keep its horizontal field
+        angle, saved = cam.view_angle, self.plotter.camera_position
+        if size:
+            fit_overlays(self.plotter, (int(w), int(h)))
+        reframed = bool(size) and self._reframe_if_untouched((int(w), int(h)))
+        if not reframed and vw > 0 and vh > 0 and w * vh < vw * h:   # narrower than the view: keep its horizontal field
             half = np.arctan(np.tan(np.radians(angle) / 2) * (vw / vh) / (w / h))
             cam.view_angle = float(np.degrees(2 * half))
         try:
             self.render()
             write_image_atomically(self.plotter, path, (int(w), int(h)) if size else None)
         finally:
+            fit_overlays(self.plotter)
             cam.view_angle = angle
+            self.plotter.camera_position = saved
             self.render()
         return int(w), int(h)
+
+    def resizeEvent(self, event) -> None:  # Qt override
+        """The legend and bar laid out for the new size, and an untouched framing made again for it, on the event
+        loop's next turn (the render window takes its new size with the resize)."""
+        super().resizeEvent(event)
+        if self.mesh is not None:
+            QtCore.QTimer.singleShot(0, self._fit_to_size)
+
+    def _fit_to_size(self) -> None:
+        if self.mesh is None or self.plotter._closed:
+            return
+        fit_overlays(self.plotter)
+        self._reframe_if_untouched()
+        self.render()
 
     def close_viewport(self) -> None:
         self._tools.clear()
