@@ -62,6 +62,9 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
         self._shown_size: tuple | None = None    # the window's size at its last whole render
         # whether its owner will render it on the event loop's next turn (a coalesced redraw): set by the owner
         self.render_pending: Callable[[], bool] = lambda: False
+        # called by resizeEvent once the render window has its new size, before the paint the resize brings: the owner
+        # lays out there what depends on the size (a legend, a framing), and that one paint draws it
+        self.resized: Callable[[], None] = lambda: None
         BasePlotter.__init__(self, **kwargs)
         self.interactor = self
         self.ren_win = self.GetRenderWindow()
@@ -142,6 +145,7 @@ class NativePlotter(QVTKRenderWindowInteractor, BasePlotter):
     def resizeEvent(self, event) -> None:  # Qt override
         if not self._closed:
             super().resizeEvent(event)
+            self.resized()
 
     def close(self) -> None:  # both BasePlotter.close and QWidget.close; returns None like pyvistaqt's
         """Release the render window now, X display connection included: left to the garbage collector it

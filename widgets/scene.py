@@ -156,7 +156,7 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
     mesh.point_data["values"] = np.asarray(colormap.scalars, dtype=np.float32)
     bar = dict(title=colormap.title or " ", vertical=True, position_x=0.82, position_y=0.12, height=0.76,
                width=0.06, title_font_size=14, label_font_size=12, n_labels=5, fmt="%.3g",
-               color="white")
+               color="white", render=False)   # pyvista's default: render as the bar is added, a whole picture
     if colormap.categorical:
         actor = plotter.add_mesh(mesh, scalars="values", cmap=colormap.cmap, clim=colormap.clim,
                                  show_scalar_bar=False, interpolate_before_map=False, **kwargs)

@@ -27,6 +27,7 @@ class SideBySideView(QtWidgets.QWidget):
         from .native_plotter import NativePlotter
         # No multi-sampling (see Viewport): playback speed on software OpenGL matters more.
         self.plotter = NativePlotter(self, multi_samples=0, shape=(1, 2), border=False)
+        self.plotter.resized = self._fit_to_size
         for col in (0, 1):
             self.plotter.subplot(0, col)
             style_plotter(self.plotter, playback=True)  # playback speed: see style_plotter
@@ -183,21 +184,15 @@ class SideBySideView(QtWidgets.QWidget):
             if render:
                 self.render()
 
-    def resizeEvent(self, event) -> None:  # Qt override
-        """Keep the residual bar laid out for the new size and a preset framing fitted to it (the views were framed
-        before the dock had its size); a camera the user has orbited or zoomed is left alone."""
-        super().resizeEvent(event)
-        if not self._closed and self.right_mesh is not None:
-            QtCore.QTimer.singleShot(0, self._reframe)
-
-    def _reframe(self) -> None:
-        if self._closed or self.right_mesh is None:   # closed or cleared between the resize and this turn
+    def _fit_to_size(self) -> None:
+        """The render window took a new size (``NativePlotter.resized``): the residual bar laid out for it and a preset
+        framing fitted to it, drawn by the paint the resize brings; a camera the user has orbited or zoomed is left
+        alone."""
+        if self._closed or self.right_mesh is None:
             return
         self._fit_bar()
         if self._framed is not None and self.plotter.camera_position == self._framed:
-            self.set_camera(self._camera)
-        else:
-            self.render()
+            self.set_camera(self._camera, render=False)
 
     def _fit_bar(self, size: tuple[int, int] | None = None) -> None:
         """The residual bar laid out for the right view at ``size`` (w, h) (default: as it is now)."""

@@ -116,6 +116,7 @@ class Viewport(QtWidgets.QWidget):
         # No multi-sampling: on software OpenGL (Xvfb, llvmpipe) 4x MSAA makes a frame of ICT FaceKit
         # cost ~150 ms instead of ~30 ms; interactive speed matters more here than smooth edges.
         self.plotter = NativePlotter(self, multi_samples=0)
+        self.plotter.resized = self._fit_to_size
         style_plotter(self.plotter)
         copy_cached_background(self.plotter.renderer)   # the gradient copied into each frame, not drawn anew
         self.plotter.enable_trackball_style()
@@ -547,19 +548,14 @@ class Viewport(QtWidgets.QWidget):
             self.render()
         return int(w), int(h)
 
-    def resizeEvent(self, event) -> None:  # Qt override
-        """The legend and bar laid out for the new size, and an untouched framing made again for it, on the event
-        loop's next turn (the render window takes its new size with the resize)."""
-        super().resizeEvent(event)
-        if self.mesh is not None:
-            QtCore.QTimer.singleShot(0, self._fit_to_size)
-
     def _fit_to_size(self) -> None:
+        """The render window took a new size (``NativePlotter.resized``): the legend and bar laid out for it, and an
+        untouched framing made again for it, drawn by the paint the resize brings (one render: a second one, on the
+        event loop's next turn, made the first solve's opening of the Mocap Views dock a frozen window)."""
         if self.mesh is None or self.plotter._closed:
             return
         fit_overlays(self.plotter)
         self._reframe_if_untouched()
-        self.render()
 
     def close_viewport(self) -> None:
         self._tools.clear()
