@@ -94,6 +94,16 @@ def atomic_write_with(path: str | Path, writer: Callable[[IO[bytes]], object]) -
         raise
 
 
+def write_png(path: str | Path, pixels, compress_level: int | None = None) -> None:
+    """``pixels`` ((H, W, 3) or (H, W, 4) uint8) as a PNG at ``path``, written atomically (``atomic_write_with``);
+    ``compress_level``: zlib's 0-9 (Pillow's default 6 if None: a 3840x2160 picture encodes in ~1.6 s here)."""
+    import numpy as np
+    from PIL import Image
+    image = Image.fromarray(np.ascontiguousarray(pixels))
+    options = {} if compress_level is None else {"compress_level": compress_level}
+    atomic_write_with(path, lambda f: image.save(f, format="PNG", **options))
+
+
 def write_temporary(path: Path, writer: Callable[[IO[bytes]], object]) -> Path:
     """Write a new temporary beside ``path`` completely (``writer(file)``, flushed and fsynced, the user's umask)
     and return it; on any failure it is removed and the error raised. Moving it into place is the caller's."""

@@ -350,6 +350,7 @@ def test_export_image_at_a_chosen_size_keeps_the_view(qtbot, tmp_path, monkeypat
         qtbot.keyClick(box.lineEdit(), QtCore.Qt.Key_A, QtCore.Qt.ControlModifier)
         qtbot.keyClicks(box.lineEdit(), str(value))
     qtbot.keyClick(height.lineEdit(), QtCore.Qt.Key_Return)
+    w.jobs.wait()                               # the PNG is written in the background
     img = np.asarray(Image.open(tmp_path / "tall.png").convert("RGB"))
     assert img.shape[:2] == (size[1], size[0])
     assert _skin_extent(img, 1) == pytest.approx(_skin_extent(shown, 1), abs=0.03)   # the same view across
@@ -358,6 +359,7 @@ def test_export_image_at_a_chosen_size_keeps_the_view(qtbot, tmp_path, monkeypat
     assert w.viewport.plotter.camera.view_angle == 30.0                             # the view itself unchanged
     # wider than the view: the same view top to bottom
     assert w.save_image(tmp_path / "wide.png", (3 * vw, vh))
+    w.jobs.wait()
     img = np.asarray(Image.open(tmp_path / "wide.png").convert("RGB"))
     assert img.shape[:2] == (vh, 3 * vw)
     assert _skin_extent(img, 0) == pytest.approx(_skin_extent(shown, 0), abs=0.03)

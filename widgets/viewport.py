@@ -521,13 +521,13 @@ class Viewport(QtWidgets.QWidget):
             self.plotter.camera_position = saved
             self.render()
 
-    def write_image(self, path, size: tuple[int, int] | None = None) -> tuple[int, int]:
-        """Write the view as shown (camera, colour map and bar, wireframe) as an image at ``size`` (w, h) pixels
-        (default: the view's), through the ``render`` command's writer (``scene.write_image_atomically``). The
-        legend, bar and titles are laid out for the picture's size (``scene.overlay_layout``), and a framing the user
-        has not moved since is made again for it, beside them; a camera the user moved is kept, and a size narrower
-        than the view widens the view angle so that what is seen across stays in the picture."""
-        from .scene import write_image_atomically
+    def picture(self, size: tuple[int, int] | None = None) -> np.ndarray:
+        """The view as shown (camera, colour map and bar, wireframe) as (h, w, 3) uint8 pixels at ``size`` (w, h)
+        (default: the view's), drawn by VTK on this thread: File ▸ Export Image's picture, which its caller encodes
+        and writes off the GUI thread (``write_image``: at once). The legend, bar and titles are laid out for the
+        picture's size (``scene.overlay_layout``), and a framing the user has not moved since is made again for it,
+        beside them; a camera the user moved is kept, and a size narrower than the view widens the view angle so that
+        what is seen across stays in the picture."""
         w, h = size or tuple(self.plotter.window_size)
         vw, vh = self.plotter.window_size
         cam = self.plotter.camera
@@ -540,13 +540,20 @@ class Viewport(QtWidgets.QWidget):
             cam.view_angle = float(np.degrees(2 * half))
         try:
             self.render()
-            write_image_atomically(self.plotter, path, (int(w), int(h)) if size else None)
+            window_size = [int(w), int(h)] if size else None
+            return np.asarray(self.plotter.screenshot(None, return_img=True, window_size=window_size))[:, :, :3]
         finally:
             fit_overlays(self.plotter)
             cam.view_angle = angle
             self.plotter.camera_position = saved
             self.render()
-        return int(w), int(h)
+
+    def write_image(self, path, size: tuple[int, int] | None = None) -> tuple[int, int]:
+        """``picture(size)`` written as a PNG at ``path`` now (``model.atomic.write_png``); its (w, h)."""
+        from model.atomic import write_png
+        pixels = self.picture(size)
+        write_png(path, pixels)
+        return pixels.shape[1], pixels.shape[0]
 
     def _fit_to_size(self) -> None:
         """The render window took a new size (``NativePlotter.resized``): the legend and bar laid out for it, and an
