@@ -26,10 +26,10 @@ from app.segmentation_controller import SegmentationController
 from app.shape_list_controller import ShapeListController
 from model.errors import RigInputError
 from model.project import Project
+from model.rig_prep import focus_vertices
 from model.wording import count
 from solvers.mesh import extent
 from widgets.file_drops import FileDropTarget
-from widgets.scene import focus_vertices
 from widgets.segmentation_panel import SegmentationPanel
 from widgets.shapes_panel import PoseEdit, ShapesPanel
 from widgets.viewport import Viewport

@@ -11,8 +11,8 @@ import numpy as np
 from model.errors import RigInputError
 from model.pose import PoseEvaluator
 from model.rig import Rig
-from model.rig_prep import shape_reach
-from widgets.scene import ColorMap, focus_vertices
+from model.rig_prep import focus_vertices, shape_reach
+from widgets.scene import ColorMap
 
 VIEWS = ("shaded", "deformation", "deformation-rgb", "segmentation")
 
@@ -20,7 +20,7 @@ VIEWS = ("shaded", "deformation", "deformation-rgb", "segmentation")
 @dataclass
 class View:
     points: np.ndarray
-    focus: np.ndarray | None   # what the camera frames (widgets.scene.focus_vertices); None: the posed points
+    focus: np.ndarray | None   # what the camera frames (model.rig_prep.focus_vertices); None: the posed points
     colormap: ColorMap | None
     title: str
 

@@ -50,7 +50,7 @@ from .marker_map import MarkerMap
 from .output_set import finish_interrupted_sets, write_set
 from .pose import PoseEvaluator
 from .rig import Rig
-from .rig_prep import shape_reach
+from .rig_prep import focus_vertices, shape_reach
 
 TAKE_SUFFIXES = (".c3d", ".trc", ".csv")
 DONE = "done.json"                      # the done-marker, written last in a take's set
@@ -328,14 +328,14 @@ def _sweep_temporaries(out_dir: Path) -> None:
             shutil.rmtree(d, ignore_errors=True)
 
 
-def preview_focus(rig: Rig, fraction: float = 0.05) -> np.ndarray:
-    """The points a preview frames: the neutral where some shape moves a vertex more than ``fraction`` of the
-    rig's largest displacement (the face, not the still head and neck), else the whole neutral."""
+def preview_focus(rig: Rig) -> np.ndarray | None:
+    """The points a preview frames, as the window's cameras and ``render`` frame them (``rig_prep.focus_vertices``):
+    the face where the shapes act on a part inside the model, else None (the posed surface, whole). Was its own rule,
+    the neutral where a shape moves a vertex over 5% of the largest displacement, which cut half of a glTF cube whose
+    one side moves out of its picture."""
     if not rig.n_shapes:
-        return rig.neutral
-    reach = shape_reach(rig)        # one shape at a time: no (K, V, 3) temporaries on a studio rig
-    face = reach > fraction * reach.max()
-    return rig.neutral[face] if face.sum() >= 3 else rig.neutral
+        return None
+    return focus_vertices(rig.neutral, shape_reach(rig))   # one shape at a time: no (K, V, 3) temporaries
 
 
 def preview_frame(weights: np.ndarray) -> int:

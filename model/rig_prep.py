@@ -6,7 +6,7 @@ dialog had closed.
 - the display pose evaluator (``model.pose.PoseEvaluator``, float32: the deltas of the vertices that move, gathered);
 - the shapes' reach: each vertex's largest displacement over the shapes, ``max_k ‖d_k(v)‖`` (Joshi et al. 2003, §4:
   the point mobility of ``solvers.damping``), which frames the camera on where the shapes act
-  (``widgets.scene.focus_vertices``) and damps marker drags (``solvers.damping.damping_gains``);
+  (``focus_vertices``) and damps marker drags (``solvers.damping.damping_gains``);
 - the default view's faces (``model.parts.drawn_faces``: the helper shells left out): which of them have a back side
   no one can see (``solvers.mesh.hidden_back_faces`` on the neutral), which the viewport culls, a graph search over
   the faces, 0.17 s at 106k vertices and ~0.7 s at 422k; and their triangulation for the display's vertex normals
@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solvers.damping import point_mobility
-from solvers.mesh import cell_layout, hidden_back_faces, reversed_faces
+from solvers.mesh import bounds, cell_layout, hidden_back_faces, reversed_faces
 from solvers.normals import VertexNormals
 from solvers.parallel import Background
 
@@ -28,6 +28,8 @@ from .pages import small_pages_for
 from .parts import drawn_faces
 from .pose import PoseEvaluator
 from .rig import Rig
+
+FACE_SHARE = 0.75   # the cameras frame where the shapes act if it is at most this share of the model (focus_vertices)
 
 
 @dataclass
@@ -65,6 +67,32 @@ def shape_reach(rig: Rig) -> np.ndarray:
     """(V,) each vertex's largest displacement over the rig's shapes (``solvers.damping.point_mobility``; zeros
     for a rig without shapes, whose deltas are (0, V, 3))."""
     return point_mobility(rig.deltas)
+
+
+def focus_vertices(neutral: np.ndarray, reach: np.ndarray) -> np.ndarray | None:
+    """The points a camera should frame: where the shapes act (the face) when that is a part inside a larger model,
+    else None: the whole model, as posed (as Frame All frames it). ``reach`` (V,): each vertex's largest displacement
+    over the shapes (``model.rig_prep.shape_reach``).
+
+    A vertex counts when some shape moves it by at least a tenth of what the shapes typically move the most
+    (the 99th percentile of each vertex's largest displacement): on ICT FaceKit a few shapes drag the scalp
+    and neck by a fraction of a millimetre, and framing every vertex that moves at all showed a small head
+    and shoulders instead of the face. Interior parts that move (teeth, tongue) lie inside the face's box.
+    Those vertices are framed only when their box is at most ``FACE_SHARE`` of the model's box along every axis (ICT
+    FaceKit's face: 54-58% of the head and shoulders): where the shapes act across most of the model along some axis
+    (a glTF cube whose one side moves: its box is the whole cube's but flat), framing them alone cut the rest of the
+    model out of the picture (half the cube)."""
+    reach = np.asarray(reach, dtype=np.float64)
+    if reach.size:
+        moving = reach > 1e-6 * max(1.0, float(np.abs(neutral).max()))
+        if moving.sum() >= 3:
+            acts = reach >= 0.1 * float(np.percentile(reach[moving], 99))
+            face = neutral[acts if acts.sum() >= 3 else moving]
+            lo, hi = bounds(neutral)
+            face_lo, face_hi = bounds(face)
+            if np.all(face_hi - face_lo <= FACE_SHARE * (hi - lo)):
+                return face
+    return None
 
 
 def default_view(rig: Rig) -> DefaultView:

@@ -1068,3 +1068,25 @@ def test_a_take_that_fails_unexpectedly_fails_once_without_worker_tracebacks(tmp
     assert len(logs) == 2 and all("TypeError" in p.read_text() for p in logs)
     assert all("traceback" not in r for r in rows)
     assert {r["error"].split("; the details are in ")[1] for r in rows} == {f"{p}." for p in logs}
+
+
+def test_a_preview_frames_the_whole_model_where_the_shapes_act_across_it():
+    """A batch's preview frames what the window's cameras and ``render`` frame (``model.rig_prep.focus_vertices``):
+    the third-party glTF cube, whose one shape moves one side of it, whole. Its own rule (the vertices a shape moves
+    over 5% of the largest displacement) framed that side alone: half the cube was out of the picture."""
+    import numpy as np
+
+    from app.cli_batch import preview_image
+    from model.batch import preview_focus
+    from model.parts import drawn_faces
+    from model.pose import PoseEvaluator
+    from model.readers import load_rig
+    from tests.conftest import DATA, require_data
+    rig = load_rig(require_data(DATA / "thirdparty" / "gltf" / "singleBlendshapeCube_sparse.glb"))
+    points = PoseEvaluator(rig).pose(np.ones(rig.n_shapes))
+    counts, indices = drawn_faces(rig)[1:]
+    img = preview_image(points, counts, indices, focus=preview_focus(rig), size=(400, 300)).astype(int)
+    skin = img[..., 0] - img[..., 2] > 25                       # the shaded cube, not the grey-blue backdrop
+    assert skin.mean() > 0.15
+    rows, cols = np.flatnonzero(skin.any(axis=1)), np.flatnonzero(skin.any(axis=0))
+    assert rows.min() > 2 and rows.max() < skin.shape[0] - 3 and cols.min() > 2 and cols.max() < skin.shape[1] - 3

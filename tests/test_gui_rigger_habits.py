@@ -230,7 +230,7 @@ def test_f_frames_the_selected_region_and_a_frames_the_whole_model(qtbot, tmp_pa
     assert "region" in w.statusBar().currentMessage()
     assert _view_extent(w, face) > 1.2
     # A frames the whole model as posed (the sample's head and neck): the face inside, no larger than as opened (the
-    # sample opens framed whole: its shapes act across most of it, widgets.scene.focus_vertices)
+    # sample opens framed whole: its shapes act across most of it, model.rig_prep.focus_vertices)
     _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_A)
     all_in = _view_extent(w, w.viewport.points())
     assert 0.45 < all_in <= 1.0 and 0.3 < _view_extent(w, face) <= whole + 1e-6 and 0.45 < whole <= 1.0

@@ -18,7 +18,6 @@ BACKGROUND_TOP = (0.33, 0.35, 0.40)
 BACKGROUND_BOTTOM = (0.12, 0.12, 0.14)
 BACKGROUND_FLAT = (0.20, 0.21, 0.24)
 CAMERAS = ("front", "left", "right", "three-quarter")
-FACE_SHARE = 0.75   # the cameras frame where the shapes act if it is at most this share of the model (focus_vertices)
 # The surface's material (``add_surface``) and the default view's lights (``style_plotter``); a batch's previews
 # draw the same look on the CPU (``app.cli_batch.preview_image``).
 EDGE_COLOR, EDGE_WIDTH = (0.15, 0.15, 0.18), 0.5
@@ -658,32 +657,6 @@ def camera_placement(name: str, focus_points: np.ndarray, size: tuple[int, int],
     shift = (left - right_room) / 2 if free > 0.25 * w else 0.0
     focal = center - right * (shift / (h / 2) * t * dist if h > 0 else 0.0)
     return focal, focal + d * dist, true_up
-
-
-def focus_vertices(neutral: np.ndarray, reach: np.ndarray) -> np.ndarray | None:
-    """The points a camera should frame: where the shapes act (the face) when that is a part inside a larger model,
-    else None: the whole model, as posed (as Frame All frames it). ``reach`` (V,): each vertex's largest displacement
-    over the shapes (``model.rig_prep.shape_reach``).
-
-    A vertex counts when some shape moves it by at least a tenth of what the shapes typically move the most
-    (the 99th percentile of each vertex's largest displacement): on ICT FaceKit a few shapes drag the scalp
-    and neck by a fraction of a millimetre, and framing every vertex that moves at all showed a small head
-    and shoulders instead of the face. Interior parts that move (teeth, tongue) lie inside the face's box.
-    Those vertices are framed only when their box is at most ``FACE_SHARE`` of the model's box along every axis (ICT
-    FaceKit's face: 54-58% of the head and shoulders): where the shapes act across most of the model along some axis
-    (a glTF cube whose one side moves: its box is the whole cube's but flat), framing them alone cut the rest of the
-    model out of the picture (half the cube)."""
-    reach = np.asarray(reach, dtype=np.float64)
-    if reach.size:
-        moving = reach > 1e-6 * max(1.0, float(np.abs(neutral).max()))
-        if moving.sum() >= 3:
-            acts = reach >= 0.1 * float(np.percentile(reach[moving], 99))
-            face = neutral[acts if acts.sum() >= 3 else moving]
-            lo, hi = bounds(neutral)
-            face_lo, face_hi = bounds(face)
-            if np.all(face_hi - face_lo <= FACE_SHARE * (hi - lo)):
-                return face
-    return None
 
 
 def offscreen_plotter(size):
