@@ -252,8 +252,9 @@ def test_actor_take_on_the_personalised_rig_is_within_target(actor_rig, ict_rig,
     print(f"\nactor_take solved on the personalised rig: {10 * solved:.3f} mm; posed with the true weights: "
           f"{10 * posed:.3f} mm; {summary['unknowns']} unknowns, "
           f"{summary['seconds']:.1f} s, scan fit {summary['fit_rms']}")
-    # Issue 15 asks for 0.21 mm; measured 0.191 mm (λ_s 0.01 and Ma's λ_d 0.05: 0.212 mm; the ICT shapes on the
-    # actor's neutral scan: 0.243 mm; the actor's own linear shapes posed with the true weights: 0.17 mm)
+    # Issue 15 asks for 0.21 mm; measured 0.190 mm (0.191 with the head pose read over the whole surface; λ_s 0.01 and
+    # Ma's λ_d 0.05: 0.212 mm; the ICT shapes on the actor's neutral scan: 0.243 mm; the actor's own linear shapes
+    # posed with the true weights: 0.17 mm)
     assert solved < 0.021                                     # cm
     # and the weights keep their meaning: posed with the performance's true weights the rig is 0.263 mm from the
     # actor (the ICT shapes on the scan: 0.267 mm; with λ_s 0.01 the scans' weights shrank, the shapes grew: 0.84)
@@ -267,7 +268,7 @@ def test_pose_scans_without_a_neutral_scan_find_the_actors_neutral(ict_rig, acto
     (``solvers.personalize._neutral_from_poses``). Started from ICT's neutral, the actor's identity went into the
     shapes: the neutral ended 4.4 mm RMS from the actor's neutral scan over the moving face (placed by one rigid
     transform) and the take solved on the result had weights 0.086 RMS off the truth, worse than ICT's own 0.057.
-    Measured now: 2.3 mm and 0.057."""
+    Measured now: 2.0 mm and 0.056 (2.3 mm with the head's pose read over the whole surface)."""
     from model.obj_io import read_obj
     from solvers.rigid import kabsch
     from tests.actor_take_measure import truth, weights_error_solved
@@ -280,7 +281,7 @@ def test_pose_scans_without_a_neutral_scan_find_the_actors_neutral(ict_rig, acto
     weights, template = weights_error_solved(rig, actor_dir), weights_error_solved(ict_rig, actor_dir)
     print(f"\npose scans alone: the neutral {10 * neutral:.2f} mm from the actor's scan; the take's weights "
           f"{weights:.4f} RMS off the truth (ICT's own {template:.4f}); {summary['seconds']:.1f} s")
-    assert neutral < 0.26                                     # cm
+    assert neutral < 0.22                                     # cm
     assert weights < 0.06 and weights < template + 0.003
 
 
