@@ -4,15 +4,20 @@ naming the file (or, for what only the texture or shading uses, left out with a 
 huge allocation. The hostile files listed in issue 17 are in tests/test_hostile_inputs.py and test_hostile_files.py."""
 from __future__ import annotations
 
+import copy
+import json
 import shutil
+import struct
 
 import numpy as np
 import pytest
 
 from model.readers import load_rig
+from tests.conftest import DATA, require_data
 from tests.test_hostile_inputs import _refused as refused
 
 NEUTRAL = "generic_neutral_mesh.obj"
+GLTF = DATA / "thirdparty" / "gltf"
 
 
 def _refused(path, *words):
@@ -62,3 +67,53 @@ def test_obj_normals_that_are_not_finite_are_left_out(ict_two):
     assert rig.corners.normals is None or np.isfinite(rig.corners.normals).all()
     assert any("('vn')" in note and NEUTRAL in note for note in rig.corners.notes), rig.corners.notes
     assert rig.corners.uvs is not None   # the UVs are not touched
+
+
+def _glb(path):
+    raw = path.read_bytes()
+    length = struct.unpack_from("<I", raw, 12)[0]
+    return json.loads(raw[20:20 + length]), raw[20 + length:]
+
+
+def _write_glb(path, doc, rest):
+    text = json.dumps(doc).encode()
+    text += b" " * (-len(text) % 4)
+    body = struct.pack("<II", len(text), 0x4E4F534A) + text + rest
+    path.write_bytes(struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body)
+    return path
+
+
+def test_a_zero_filled_accessor_of_10_to_the_12_values_is_refused_before_allocating(tmp_path):
+    """A sparse morph target's accessor (no buffer view: zeros, the sparse values on top) with its count set to 10¹²:
+    was a MemoryError from allocating 12 TB."""
+    doc, rest = _glb(require_data(GLTF / "singleBlendshapeCube_sparse.glb"))
+    index = next(i for i, a in enumerate(doc["accessors"]) if "bufferView" not in a)
+    doc["accessors"][index]["count"] = 10**12
+    out = _write_glb(tmp_path / "huge.glb", doc, rest)
+    _refused(out, "huge.glb", f"accessor {index}", "1000000000000")
+
+
+@pytest.mark.parametrize("edit", ["normalized", "no buffer view", "float"])
+def test_triangle_indices_that_are_not_whole_numbers_are_refused(tmp_path, edit):
+    """Were read as vertex 0 (normalised: i / 65535; no buffer view: zeros; float: tiny numbers truncated), every
+    triangle collapsed on one vertex and the rig accepted."""
+    doc = json.loads(require_data(GLTF / "SimpleMorph.gltf").read_text())
+    doc = copy.deepcopy(doc)
+    index = doc["meshes"][0]["primitives"][0]["indices"]
+    acc = doc["accessors"][index]
+    if edit == "normalized":
+        acc["normalized"] = True
+    elif edit == "no buffer view":
+        del acc["bufferView"]
+    else:   # three float32 where the three uint16 were: the view widened to hold them
+        acc["componentType"] = 5126
+        doc["bufferViews"][acc["bufferView"]]["byteLength"] = 12
+    out = tmp_path / "indices.gltf"
+    out.write_text(json.dumps(doc))
+    _refused(out, "indices.gltf", f"accessor {index}")
+
+
+def test_the_real_gltf_samples_still_open():
+    for name in ("SimpleMorph.gltf", "singleBlendshapeCube_sparse.glb", "MorphStressTest.gltf"):
+        rig = load_rig(require_data(GLTF / name))
+        assert rig.n_shapes >= 1 and np.isfinite(rig.deltas).all()
