@@ -22,6 +22,7 @@ from __future__ import annotations
 import base64
 import re
 import struct
+from collections import Counter
 from pathlib import Path
 from urllib.parse import unquote
 
@@ -504,7 +505,7 @@ def _load_mesh(doc: _Doc, path: Path, units: str, mesh_index: int, mesh: dict) -
     names = [str(n) for n in names]
     if len(names) != K:
         raise doc.fail(f"lists {len(names)} target names for {K} morph targets.")
-    dup = sorted({n for n in names if names.count(n) > 1})
+    dup = sorted(n for n, c in Counter(names).items() if c > 1)
     if dup:
         raise doc.fail(f"has duplicate morph target names: {', '.join(dup)}.")
     rig = Rig(neutral=neutral, face_counts=np.full(T.shape[0], 3, np.int32), face_indices=T.reshape(-1),

@@ -5,6 +5,7 @@ reader.
 """
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,7 +37,7 @@ class MarkerTake:
             raise RigInputError(f"{where}: marker positions must be frames x markers x 3.")
         if self.positions.shape[1] != len(self.labels):
             raise RigInputError(f"{where}: {len(self.labels)} labels but {self.positions.shape[1]} markers.")
-        dup = sorted({s for s in self.labels if self.labels.count(s) > 1})
+        dup = sorted(s for s, n in Counter(self.labels).items() if n > 1)
         if dup:
             raise RigInputError(f"{where}: duplicate marker labels: {', '.join(dup)}.")
         if self.units not in UNIT_IN_METRES:

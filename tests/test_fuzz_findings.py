@@ -6,14 +6,18 @@ from __future__ import annotations
 
 import copy
 import json
+import os
 import shutil
 import struct
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 
 from model.readers import load_rig
-from tests.conftest import DATA, require_data
+from tests.cli_runner import run_cli
+from tests.conftest import DATA, REPO, require_data
 from tests.test_hostile_inputs import _refused as refused
 
 NEUTRAL = "generic_neutral_mesh.obj"
@@ -117,3 +121,73 @@ def test_the_real_gltf_samples_still_open():
     for name in ("SimpleMorph.gltf", "singleBlendshapeCube_sparse.glb", "MorphStressTest.gltf"):
         rig = load_rig(require_data(GLTF / name))
         assert rig.n_shapes >= 1 and np.isfinite(rig.deltas).all()
+
+
+# --- lists checked for repeats with list.count: n² on 10⁵ entries, minutes for a file of a few MB ---------------
+def _finishes(code: str, timeout: float = 60) -> str:
+    """Run ``code`` in a fresh interpreter (this checkout, the test data); a hang is killed and fails the test."""
+    env = dict(os.environ, PYTHONPATH=str(REPO), BLENDSHAPE_STUDIO_DATA=str(DATA))
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=timeout)
+    assert proc.returncode == 0 and "Traceback" not in proc.stderr, proc.stderr
+    return proc.stdout
+
+
+def test_a_corrective_with_300000_drivers_is_refused_at_once(tmp_path, sample_rig):
+    """Found by the fuzz (a long line in a project's manifest): the drivers' repeat check took minutes."""
+    from model.correctives import Corrective
+    from model.project import Project, save_project
+    from tests.test_hostile_files import _rewrite_manifest
+    rig = sample_rig.copy()
+    rig.correctives = [Corrective(drivers=["jawOpen", "mouthSmile_L"], delta=np.zeros_like(rig.neutral))]
+    save_project(Project(rig=rig), tmp_path / "c.bsproj")
+
+    def edit(manifest):
+        manifest["correctives"][0]["drivers"] = ["jawOpen"] * 300_000
+        return manifest
+    out = _rewrite_manifest(tmp_path / "c.bsproj", tmp_path / "drivers.bsproj", edit)
+    proc = run_cli("info", out, check=False, timeout=60)
+    assert proc.returncode == 2 and "drivers.bsproj" in proc.stderr and "more than once: jawOpen" in proc.stderr
+
+
+def test_a_gltf_with_150000_morph_targets_opens(tmp_path):
+    """SimpleMorph's first target listed 150,000 times under distinct names: the target names' and then the rig's
+    shape names' repeat checks took minutes."""
+    doc = json.loads(require_data(GLTF / "SimpleMorph.gltf").read_text())
+    mesh = doc["meshes"][0]
+    mesh["primitives"][0]["targets"] = mesh["primitives"][0]["targets"][:1] * 150_000
+    mesh["weights"] = [0.0] * 150_000
+    mesh["extras"] = {"targetNames": [f"t{k}" for k in range(150_000)]}
+    out = tmp_path / "many.gltf"
+    out.write_text(json.dumps(doc))
+    proc = run_cli("info", out, "--json", check=False, timeout=60)
+    assert proc.returncode == 0 and len(json.loads(proc.stdout)["shapes"]) == 150_000, proc.stderr
+
+
+def test_a_trc_naming_150000_markers_reads_at_once(tmp_path, take_dir):
+    """The real take's header with 150,000 more marker names (two frames kept): MarkerTake's repeat check of the
+    labels took minutes."""
+    lines = (take_dir / "take.trc").read_text().splitlines()[:7]
+    extra = 150_000
+    lines[3] += "".join(f"\tX{k}\t\t" for k in range(extra))
+    lines[4] += "".join(f"\tX{k}\tY{k}\tZ{k}" for k in range(extra))
+    out = tmp_path / "wide.trc"
+    out.write_text("\n".join(lines) + "\n")
+    proc = run_cli("take-info", out, "--json", check=False, timeout=60)
+    assert proc.returncode == 0 and len(json.loads(proc.stdout)["labels"]) == 60 + extra, proc.stderr
+
+
+def test_a_markers_section_of_150000_markers_is_checked_at_once():
+    """A project's markers section (Marker ▸ markers on the rig) with 150,000 names: the names' repeat check took
+    minutes before the first two markers on one vertex were refused."""
+    out = _finishes(
+        "from model.errors import RigInputError\n"
+        "from model.markers import MarkerSet\n"
+        "from model.readers import load_rig\n"
+        "from tests.conftest import DATA\n"
+        "rig = load_rig(DATA / 'thirdparty' / 'gltf' / 'SimpleMorph.gltf')\n"
+        "d = {'markers': [{'name': f'm{i}', 'vertex': 0} for i in range(150_000)]}\n"
+        "try:\n"
+        "    MarkerSet.from_dict(d, rig, source='project')\n"
+        "except RigInputError as e:\n"
+        "    print(e)\n")
+    assert "m0 and m1 sit on the same surface point" in out, out
