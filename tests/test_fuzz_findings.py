@@ -170,6 +170,7 @@ def test_a_trc_naming_150000_markers_reads_at_once(tmp_path, take_dir):
     extra = 150_000
     lines[3] += "".join(f"\tX{k}\t\t" for k in range(extra))
     lines[4] += "".join(f"\tX{k}\tY{k}\tZ{k}" for k in range(extra))
+    lines[5:] = [row + "\t" * (3 * extra) for row in lines[5:]]   # the new markers missing in both frames
     out = tmp_path / "wide.trc"
     out.write_text("\n".join(lines) + "\n")
     proc = run_cli("take-info", out, "--json", check=False, timeout=60)
@@ -191,3 +192,26 @@ def test_a_markers_section_of_150000_markers_is_checked_at_once():
         "except RigInputError as e:\n"
         "    print(e)\n")
     assert "m0 and m1 sit on the same surface point" in out, out
+
+
+# --- rows far shorter than the header: filled in with NaN to the header's width, GBs from a few MB ----------------
+@pytest.mark.parametrize("kind", ["trc", "csv"])
+def test_a_header_naming_20000_markers_over_short_rows_is_refused(tmp_path, take_dir, kind):
+    """The real take (358 frames of 60 markers) under a header naming 20,000 more: was read as a 358 x 20,060 take,
+    all NaN but the 60 (172 MB; 150,000 more markers took 3.9 GB and 17 s from a 5 MB file)."""
+    extra = 20_000
+    if kind == "trc":
+        lines = (take_dir / "take.trc").read_text().splitlines()
+        lines[3] += "".join(f"\tX{k}\t\t" for k in range(extra))
+        lines[4] += "".join(f"\tX{k}\tY{k}\tZ{k}" for k in range(extra))
+    else:
+        from model.take_csv import write_marker_csv
+        from model.takes import load_take
+        write_marker_csv(tmp_path / "real.csv", load_take(take_dir / "take.c3d"))
+        lines = (tmp_path / "real.csv").read_text().splitlines()
+        lines[0] += "".join(f",X{k}_X,X{k}_Y,X{k}_Z" for k in range(extra))
+    out = tmp_path / f"wide.{kind}"
+    out.write_text("\n".join(lines) + "\n")
+    proc = run_cli("take-info", out, check=False, timeout=120)
+    assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
+    assert f"wide.{kind}" in proc.stderr and "20060 markers" in proc.stderr, proc.stderr
