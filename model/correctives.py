@@ -33,6 +33,7 @@ order by ``set_correctives`` / ``add_corrective``.
 """
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 from functools import lru_cache
 from math import comb
@@ -75,7 +76,7 @@ class Corrective:
         if len(self.drivers) < 2:
             raise RigInputError(f"Corrective '{self.name}': needs two or more driver shapes, "
                                 f"got {len(self.drivers)}.")
-        dup = sorted({d for d in self.drivers if self.drivers.count(d) > 1})
+        dup = sorted(d for d, n in Counter(self.drivers).items() if n > 1)   # not list.count: n² on 10⁵ drivers
         if dup:
             raise RigInputError(f"Corrective '{self.name}': driver listed more than once: {', '.join(dup)}.")
 

@@ -22,6 +22,7 @@ from __future__ import annotations
 import base64
 import re
 import struct
+from collections import Counter
 from pathlib import Path
 from urllib.parse import unquote
 
@@ -141,12 +142,16 @@ class _Doc:
                 shape=(count, elem), strides=(stride, 1)).copy().view(dtype).reshape(count, ncomp)
         return arr
 
-    def accessor(self, index: int) -> np.ndarray:
-        """(count, ncomp) float64 (or int64 for index data) values of an accessor, sparse applied."""
+    def accessor_entry(self, index: int) -> dict:
+        """The JSON of accessor ``index`` (RigInputError when there is none)."""
         accs = self.gltf.get("accessors", [])
         if not isinstance(index, int) or not 0 <= index < len(accs):
             raise self.fail(f"refers to accessor {index}, which does not exist.")
-        a = accs[index]
+        return accs[index]
+
+    def accessor(self, index: int) -> np.ndarray:
+        """(count, ncomp) float64 (or int64 for index data) values of an accessor, sparse applied."""
+        a = self.accessor_entry(index)
         ctype, typ, count = a.get("componentType"), a.get("type"), _int(a.get("count", -1), -1)
         if ctype not in _COMPONENT:
             raise self.fail(f"accessor {index} has an unsupported component type {ctype}.")
@@ -155,7 +160,11 @@ class _Doc:
         ncomp = _NCOMP[typ]
         if "bufferView" in a:
             arr = self._read_view(_int(a["bufferView"], -1), _int(a.get("byteOffset", 0), -1), ctype, ncomp, count)
-        else:
+        else:   # zeros (sparse values go on top): no more of them than the file's buffers hold bytes
+            held = sum(len(self.buffer(i)) for i in range(len(self.gltf.get("buffers", []))))
+            if count * ncomp > held:
+                raise self.fail(f"accessor {index} declares {count} values without a buffer view, more than the "
+                                f"{held} bytes its buffers hold; the file is damaged.")
             arr = np.zeros((count, ncomp), dtype=_COMPONENT[ctype])
         if ctype == 5126:
             out = arr.astype(np.float64)
@@ -307,6 +316,13 @@ def _parse(path: Path) -> _Doc:
 
 def _primitive_triangles(doc: _Doc, prim: dict, n: int) -> np.ndarray:
     mode = int(prim.get("mode", 4))
+    if "indices" in prim:   # whole numbers, one each (glTF 2.0 §3.7.2.1): a float or normalised one is no vertex
+        acc = doc.accessor_entry(prim["indices"])
+        if acc.get("componentType") == 5126 or acc.get("normalized") or acc.get("type") != "SCALAR":
+            raise doc.fail(f"the indices of a primitive (accessor {prim['indices']}) are not whole numbers, "
+                           "one per corner.")
+        if "bufferView" not in acc:   # all zero: every triangle on vertex 0
+            raise doc.fail(f"the indices of a primitive (accessor {prim['indices']}) have no buffer view holding them.")
     idx = doc.accessor(prim["indices"])[:, 0] if "indices" in prim else np.arange(n, dtype=np.int64)
     if mode == 4:
         if idx.size % 3:
@@ -489,7 +505,7 @@ def _load_mesh(doc: _Doc, path: Path, units: str, mesh_index: int, mesh: dict) -
     names = [str(n) for n in names]
     if len(names) != K:
         raise doc.fail(f"lists {len(names)} target names for {K} morph targets.")
-    dup = sorted({n for n in names if names.count(n) > 1})
+    dup = sorted(n for n, c in Counter(names).items() if c > 1)
     if dup:
         raise doc.fail(f"has duplicate morph target names: {', '.join(dup)}.")
     rig = Rig(neutral=neutral, face_counts=np.full(T.shape[0], 3, np.int32), face_indices=T.reshape(-1),

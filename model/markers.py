@@ -15,6 +15,7 @@ triangle form used here, so both readers give every marker the same surface poin
 from __future__ import annotations
 
 import json
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -89,7 +90,7 @@ class MarkerSet:
         self.moving = None if moving is None else np.asarray(moving, dtype=np.int64)
         where = f"{source}: " if source else ""
         names = [m.name for m in self.markers]
-        dup = sorted({n for n in names if names.count(n) > 1})
+        dup = sorted(n for n, c in Counter(names).items() if c > 1)
         if dup:
             raise RigInputError(f"{where}duplicate marker names: {', '.join(dup)}.")
         rows, cols, vals = [], [], []

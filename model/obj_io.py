@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError
-from .rig import CornerAttributes
+from .rig import MAX_COORDINATE, CornerAttributes
 
 # The start of a 'v' line and of any other line: finding the one run of consecutive "v x y z" lines
 # this way is the fast path for files written by every DCC we know.
@@ -40,6 +40,7 @@ class ObjMesh:
     # Everything after the one run of 'v' lines, when no face record comes before it: a target whose bytes
     # end with it has the neutral's faces, vt/vn and groups, and its own 'v' run just before it.
     vertex_tail: bytes | None = None
+    path: str = ""              # the file, named when a target's faces differ from these
 
 
 def _read_bytes(path: Path) -> bytes:
@@ -152,6 +153,10 @@ def _parse_vertices(path: Path, data: bytes, span: tuple[int, int] | None | bool
     bad = ~np.isfinite(verts).all(axis=1)
     if bad.any():
         raise RigInputError(f"{path}: vertex {int(np.argmax(bad))} has a NaN or infinite coordinate.")
+    bad = (np.abs(verts) > MAX_COORDINATE).any(axis=1)   # named here, in this file, not later by the rig's folder
+    if bad.any():
+        raise RigInputError(f"{path}: vertex {int(np.argmax(bad))} has a coordinate beyond ±{MAX_COORDINATE:g}; "
+                            "the file is damaged.")
     return verts
 
 
@@ -334,6 +339,9 @@ def _parse_corners(path: Path, data: bytes, n_corners: int, faces: list[bytes], 
     if uvs is not None and not np.isfinite(uvs).all():   # the geometry still loads; the texture cannot
         notes.append(f"{path}: its texture coordinates ('vt') hold NaN or infinite values; they are left out.")
         uvs = None
+    if normals is not None and not np.isfinite(normals).all():   # nor written back on export: shading is computed
+        notes.append(f"{path}: its normals ('vn') hold NaN or infinite values; they are left out.")
+        normals = None
     if uvs is None and normals is None and not records and not notes:
         return None
     corner_uv = corner_normal = None
@@ -373,7 +381,8 @@ def read_obj(path: str | Path) -> ObjMesh:
     columns = _uniform_columns(tokens)
     counts, idx = _parse_faces(path, data, len(verts), faces, columns)
     return ObjMesh(verts, counts, idx, _face_section(data),
-                   _parse_corners(path, data, idx.size, faces, tokens, columns), vertex_tail=_vertex_tail(data, span))
+                   _parse_corners(path, data, idx.size, faces, tokens, columns), vertex_tail=_vertex_tail(data, span),
+                   path=str(path))
 
 
 def _vertex_tail(data: bytes, span: tuple[int, int] | None) -> bytes | None:
@@ -399,7 +408,7 @@ def _target_vertices(data: bytes, neutral: ObjMesh) -> np.ndarray | None:
     n = len(neutral.vertices)
     verts = _compiled_vertex_block(block, rows=n)      # checks that the block is n plain 'v x y z' lines itself
     if verts is not None:
-        return verts if np.isfinite(verts).all() else None
+        return verts if _plain_lengths(verts) else None
     # every line of the run is one 'v ' record, and there are V of them
     chars = np.frombuffer(block, np.uint8)
     ends = np.flatnonzero(chars == 10)
@@ -409,9 +418,28 @@ def _target_vertices(data: bytes, neutral: ObjMesh) -> np.ndarray | None:
     if not ((chars[starts] == ord("v")) & (chars[starts + 1] == ord(" "))).all():
         return None
     verts = _parse_vertex_block(block)
-    if verts is None or len(verts) != n or not np.isfinite(verts).all():
+    if verts is None or len(verts) != n or not _plain_lengths(verts):
         return None
     return verts
+
+
+def _plain_lengths(verts: np.ndarray) -> bool:
+    """Every coordinate finite and within ±MAX_COORDINATE (else ``_parse_vertices`` names the vertex)."""
+    extent = np.abs(verts).max(initial=0.0)
+    return bool(np.isfinite(extent) and extent <= MAX_COORDINATE)
+
+
+def _first_difference(counts: np.ndarray, idx: np.ndarray, neutral: ObjMesh) -> str:
+    """Which face of a target first differs from the neutral's: 'face N differs first' (1-based)."""
+    n = min(counts.size, neutral.face_counts.size)
+    differ = counts[:n] != neutral.face_counts[:n]
+    k = int(np.argmax(differ)) if differ.any() else n
+    starts = np.concatenate(([0], np.cumsum(counts[:k], dtype=np.int64)))
+    if k:   # the corners of the faces before k are in the same places in both
+        same = idx[:starts[-1]] == neutral.face_indices[:starts[-1]]
+        if not same.all():
+            k = int(np.searchsorted(starts, int(np.argmin(same)), side="right")) - 1
+    return f"face {k + 1} differs first"
 
 
 def read_obj_target(path: str | Path, neutral: ObjMesh) -> np.ndarray:
@@ -433,8 +461,11 @@ def read_obj_target(path: str | Path, neutral: ObjMesh) -> np.ndarray:
         if counts.size == 0:
             pass  # points-only targets are fine: faces come from the neutral
         elif not (np.array_equal(counts, neutral.face_counts) and np.array_equal(idx, neutral.face_indices)):
-            raise RigInputError(f"{path}: its face list differs from the neutral's "
-                                f"({counts.size} faces vs {neutral.face_counts.size}).")
+            # both named: a damaged neutral makes every target differ, and the first target is no more to blame
+            first = _first_difference(counts, idx, neutral)
+            raise RigInputError(f"{path}: its face list differs from the neutral's, {Path(neutral.path).name or '?'} "
+                                f"({counts.size} faces vs {neutral.face_counts.size}; {first}); "
+                                "one of the two files is damaged.")
     return verts
 
 

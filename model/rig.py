@@ -5,6 +5,7 @@ every shape has exactly the neutral's vertex count and order.
 """
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -202,7 +203,7 @@ class Rig:
             raise RigInputError(f"{where}: a face refers to a vertex that does not exist.")
         if not all(isinstance(n, str) and n for n in self.shape_names):
             raise RigInputError(f"{where}: every shape needs a name (a non-empty text).")
-        dup = sorted({n for n in self.shape_names if self.shape_names.count(n) > 1})
+        dup = sorted(n for n, c in Counter(self.shape_names).items() if c > 1)
         if dup:
             raise RigInputError(f"{where}: duplicate shape names: {shown(', '.join(dup), 200)}.")
         if not isinstance(self.units, str) or self.units not in UNITS:

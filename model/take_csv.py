@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError, shown
-from .take_data import MarkerTake, unique_labels, units_from_text
+from .take_data import MarkerTake, check_row_cells, unique_labels, units_from_text
 
 
 def _rows(path: Path) -> list[list[str]]:
@@ -79,6 +79,7 @@ def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings) -> Mar
     if not xyz_columns:
         raise RigInputError(f"{path}: names no marker positions.")
     labels = _names(raw_names, path, warnings)
+    check_row_cells(path, data_rows, 1 + max(c for trip in xyz_columns for c in trip), len(labels))
     table = _table(path, data_rows, [c for trip in xyz_columns for c in trip])
     pos = table.reshape(len(data_rows), len(labels), 3)
     pos[~np.isfinite(pos).all(axis=2)] = np.nan

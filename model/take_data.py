@@ -5,6 +5,7 @@ reader.
 """
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -36,7 +37,7 @@ class MarkerTake:
             raise RigInputError(f"{where}: marker positions must be frames x markers x 3.")
         if self.positions.shape[1] != len(self.labels):
             raise RigInputError(f"{where}: {len(self.labels)} labels but {self.positions.shape[1]} markers.")
-        dup = sorted({s for s in self.labels if self.labels.count(s) > 1})
+        dup = sorted(s for s, n in Counter(self.labels).items() if n > 1)
         if dup:
             raise RigInputError(f"{where}: duplicate marker labels: {', '.join(dup)}.")
         if self.units not in UNIT_IN_METRES:
@@ -112,6 +113,19 @@ class WeightTake:
     def times(self) -> np.ndarray:
         """Seconds from the first frame; frames are evenly spaced (dropped frames are filled in)."""
         return np.arange(self.n_frames) / self.rate
+
+
+SHORT_ROWS = 4   # a text take whose rows hold less than 1/SHORT_ROWS of the cells its header implies is refused
+
+
+def check_row_cells(path, rows: list[tuple[int, list[str]]], columns: int, markers: int) -> None:
+    """Refuse a text take (TRC, marker CSV) whose rows stop far short of its header's columns, before the
+    (rows x columns) table is filled in with NaN: a few MB of header and short rows would ask for GBs. Rows that
+    end early here and there (a truncated last row, trailing markers left out) stay readable."""
+    present = sum(min(len(r), columns) for _, r in rows)
+    if len(rows) * columns > SHORT_ROWS * present + columns:
+        raise RigInputError(f"{path}: its {len(rows)} rows hold {present} cells, not the {len(rows) * columns} "
+                            f"its header's {markers} markers need; the header or the rows are damaged.")
 
 
 _UNIT_WORDS = {"mm": ("millimeters", "millimetres"), "cm": ("centimeters", "centimetres"), "m": ("meters", "metres")}

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError, shown
-from .take_data import MarkerTake, unique_labels, units_from_text
+from .take_data import MarkerTake, check_row_cells, unique_labels, units_from_text
 
 
 def _cells(line: str) -> list[str]:
@@ -74,6 +74,7 @@ def read_trc(path: str | Path) -> MarkerTake:
     if not rows:
         raise RigInputError(f"{path}: holds no frames.")
     ncol = 2 + 3 * M
+    check_row_cells(path, rows, ncol, M)
     table = np.full((len(rows), ncol), np.nan)
     for i, (line_no, r) in enumerate(rows):
         if len(r) > ncol and any(r[ncol:]):
