@@ -31,7 +31,7 @@ import numpy as np
 from .errors import RigInputError, shown
 from .input_files import read_input_bytes, regular_file
 from .json_file import parse_json_text
-from .pages import small_pages_for
+from .pages import memory_shortfall, small_pages_for
 from .rig import CornerAttributes, Rig
 
 from .export_gltf import CHUNK_BIN as _CHUNK_BIN, CHUNK_JSON as _CHUNK_JSON, GLB_MAGIC as _GLB_MAGIC
@@ -458,6 +458,9 @@ def _load(path: Path, units: str, mesh: str | None) -> Rig:
     mesh_index = _choose_mesh(doc, mesh)
     mesh = doc.gltf["meshes"][mesh_index]
     n_targets, n_vertices = _mesh_sizes(doc, mesh)
+    short = memory_shortfall(3 * n_targets * n_vertices * 24)   # the deltas as read, joined and transformed (float64)
+    if short:
+        raise doc.fail(f"its {n_targets:,} morph targets on {n_vertices:,} vertices need {short}.")
     with small_pages_for(n_targets * n_vertices * 24):   # a studio-scale rig's deltas (model.pages)
         return _load_mesh(doc, path, units, mesh_index, mesh)
 

@@ -70,3 +70,32 @@ def active() -> int:
     """How many ``small_pages`` blocks are running now, in all threads (numpy's setting comes back when none is)."""
     with _LOCK:
         return _STATE[0]
+
+
+def available_memory() -> int | None:
+    """Bytes of memory the system can give now without swapping (Linux's ``MemAvailable``), None where unknown."""
+    try:
+        with open("/proc/meminfo", "rb") as f:
+            for line in f:
+                if line.startswith(b"MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def memory_shortfall(nbytes: int) -> str | None:
+    """Why ``nbytes`` cannot be allocated now (the words after "needs"/"need": "5.7 GB of memory, more than the
+    3.1 GB available"), or None when it can or the memory available is unknown. For a reader to refuse, in one
+    sentence and before allocating, a small file that unfolds into arrays larger than the machine holds (a glTF
+    whose morph targets all share one accessor, a project member that deflates to gigabytes): allocated, Linux
+    hands out the pages lazily and kills the process as they fill (the window, and what the user had open, with it),
+    or numpy raises MemoryError part way."""
+    free = available_memory()
+    if free is None or nbytes <= free:
+        return None
+    return f"{_amount(nbytes)} of memory, more than the {_amount(free)} available"
+
+
+def _amount(nbytes: int) -> str:
+    return f"{nbytes / 1e9:.1f} GB" if nbytes >= 1e9 else f"{nbytes / 1e6:.0f} MB"

@@ -25,7 +25,7 @@ from .atomic import atomic_write_with
 from .errors import RigInputError, shown
 from .input_files import regular_file
 from .json_file import MAX_JSON_BYTES, parse_json_text
-from .pages import small_pages_for
+from .pages import memory_shortfall, small_pages_for
 from .rig import MAX_WEIGHT, Rig, finite_range
 
 FORMAT = "blendshape-studio-project"
@@ -200,6 +200,9 @@ def read_npy_member(z: zipfile.ZipFile, name: str, path: Path, key: str) -> np.n
             if header + nbytes != info.file_size:
                 raise RigInputError(f"{path}: the array '{key}' declares {count} values but holds "
                                     f"{max(info.file_size - header, 0) // max(dtype.itemsize, 1)}; it is damaged.")
+            short = memory_shortfall(nbytes)     # a member that deflates to more than the machine holds
+            if short:
+                raise RigInputError(f"{path}: the array '{key}' needs {short}.")
             a = np.empty(shape, dtype=dtype, order="F" if fortran else "C")   # read straight into it: one copy
             got = _read_into(f, memoryview(a.reshape(-1, order="A")).cast("B")) if nbytes else 0
             extra = f.read(1)

@@ -215,3 +215,30 @@ def test_a_header_naming_20000_markers_over_short_rows_is_refused(tmp_path, take
     proc = run_cli("take-info", out, check=False, timeout=120)
     assert proc.returncode == 2 and len(proc.stderr.strip().splitlines()) == 1, proc.stderr
     assert f"wide.{kind}" in proc.stderr and "20060 markers" in proc.stderr, proc.stderr
+
+
+def test_a_file_that_unfolds_into_more_than_the_memory_available_is_refused_before_allocating(tmp_path, sample_rig,
+                                                                                             monkeypatch):
+    """Found by the fuzz: the sample's glTF with 20,000 morph targets that all share one accessor (2 MB) unfolds into
+    6 GB of deltas, 18 GB at the read's peak; where the machine holds less, Linux hands the pages out lazily and kills
+    the process as they fill (the window, and the rig the user had open, with it). Such a file, and a project whose
+    arrays deflate to more than the memory available, are refused in one sentence before anything is allocated
+    (here against 200 MB, faked; with the memory there the same files open)."""
+    import model.pages
+    from model.gltf import write_gltf
+    from model.project import Project, load_project, save_project
+    write_gltf(sample_rig, tmp_path / "sample.gltf")
+    doc = json.loads((tmp_path / "sample.gltf").read_text())
+    prim = doc["meshes"][0]["primitives"][0]
+    prim["targets"] = prim["targets"][:1] * 2000
+    doc["meshes"][0]["extras"] = {"targetNames": [f"t{k}" for k in range(2000)]}
+    doc["meshes"][0].pop("weights", None)
+    (tmp_path / "shared.gltf").write_text(json.dumps(doc))
+    save_project(Project(rig=sample_rig.copy()), tmp_path / "sample.bsproj")
+    assert load_rig(tmp_path / "shared.gltf").n_shapes == 2000             # 1.8 GB at its peak: the memory is there
+    monkeypatch.setattr(model.pages, "available_memory", lambda: 200_000_000)
+    refused(load_rig, tmp_path / "shared.gltf", "its 2,000 morph targets on 12,651 vertices need 1.8 GB of memory, "
+                                                "more than the 200 MB available.")
+    assert load_project(tmp_path / "sample.bsproj").rig.n_shapes == sample_rig.n_shapes   # its 10 MB of deltas fit
+    monkeypatch.setattr(model.pages, "available_memory", lambda: 2_000_000)
+    refused(load_project, tmp_path / "sample.bsproj", "the array 'rig/deltas' needs ", "more than the 2 MB available.")
