@@ -311,7 +311,8 @@ def solve_pose_weights(neutral: np.ndarray, deltas: np.ndarray, poses: np.ndarra
                        weights0: np.ndarray | None = None, head0: tuple | None = None):
     """Step (a): per pose the weights in [0, 1] (Ma Eq. 3 with its sparsity term, λ_s relative to a shape's
     mean squared norm) and, with ``rigid``, R_i, t_i by Kabsch (Umeyama 1991, Eq. 40–41) between the
-    model and the scan (over the vertices no shape moves where they are enough: module docstring), alternated with the weights until the head pose settles (at most ``iterations``
+    model and the scan (over the vertices no shape moves where they are enough: module docstring), alternated
+    with the weights until the head pose settles (at most ``iterations``
     times; Ma §3.1), started from ``weights0`` and ``head0`` = (R, t) if given. Returns (W (N, K),
     R (N, 3, 3), t (N, 3)) with ``P_i ≈ R_i x(w_i) + t_i``."""
     K, V = deltas.shape[0], neutral.shape[0]
