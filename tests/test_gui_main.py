@@ -325,8 +325,8 @@ def test_save_viewport_image(qtbot, tmp_path, monkeypatch):
 
 def test_export_image_encodes_and_writes_the_png_off_the_gui_thread(qtbot, tmp_path, monkeypatch):
     """File ▸ Export Image at 3840x2160: the picture is drawn on the GUI thread (VTK's), then encoded and written in
-    the background (a 4K PNG is ~1.6 s of zlib; with the render the window froze 2.2 s); the status says so, and then that
-    it is saved with its size."""
+    the background (a 4K PNG is ~1.6 s of zlib; with the render the window froze 2.2 s); the status says so, and
+    then that it is saved with its size."""
     import model.atomic
     from PIL import Image
     from tests.gui_helpers import calls_on_gui_thread
