@@ -458,9 +458,6 @@ def _load(path: Path, units: str, mesh: str | None) -> Rig:
     mesh_index = _choose_mesh(doc, mesh)
     mesh = doc.gltf["meshes"][mesh_index]
     n_targets, n_vertices = _mesh_sizes(doc, mesh)
-    short = memory_shortfall(3 * n_targets * n_vertices * 24)   # the deltas as read, joined and transformed (float64)
-    if short:
-        raise doc.fail(f"its {n_targets:,} morph targets on {n_vertices:,} vertices need {short}.")
     with small_pages_for(n_targets * n_vertices * 24):   # a studio-scale rig's deltas (model.pages)
         return _load_mesh(doc, path, units, mesh_index, mesh)
 
@@ -475,12 +472,16 @@ def _load_mesh(doc: _Doc, path: Path, units: str, mesh_index: int, mesh: dict) -
         raise doc.fail(f"the primitives of its mesh '{label}' have different numbers of morph targets.")
     if K == 0:
         raise doc.fail(f"has no morph targets (blendshapes) on its mesh '{label}'.")
-    positions, deltas, tris, offset = [], [], [], 0
+    positions = [doc.accessor(p["attributes"]["POSITION"]) for p in prims]   # each checked against its buffers
+    if any(pos.shape[1] != 3 for pos in positions):
+        raise doc.fail("a POSITION accessor is not VEC3.")
+    vertices = sum(pos.shape[0] for pos in positions)
+    short = memory_shortfall(3 * K * vertices * 24)    # the deltas as read, joined and transformed (float64)
+    if short:
+        raise doc.fail(f"its {K:,} morph targets on {vertices:,} vertices need {short}.")
+    deltas, tris, offset = [], [], 0
     uvs: list | None = []
-    for p in prims:
-        pos = doc.accessor(p["attributes"]["POSITION"])
-        if pos.shape[1] != 3:
-            raise doc.fail("a POSITION accessor is not VEC3.")
+    for p, pos in zip(prims, positions):
         n = pos.shape[0]
         uvs = _texcoords(doc, p, n, uvs)
         d = np.zeros((K, n, 3))
@@ -490,7 +491,6 @@ def _load_mesh(doc: _Doc, path: Path, units: str, mesh_index: int, mesh: dict) -
                 if dk.shape != (n, 3):
                     raise doc.fail(f"morph target {k} has {dk.shape[0]} vertices but its primitive has {n}.")
                 d[k] = dk
-        positions.append(pos)
         deltas.append(d)
         tris.append(_primitive_triangles(doc, p, n) + offset)
         offset += n
