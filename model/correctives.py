@@ -33,14 +33,13 @@ order by ``set_correctives`` / ``add_corrective``.
 """
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass
 from functools import lru_cache
 from math import comb
 
 import numpy as np
 
-from .errors import RigInputError
+from .errors import RigInputError, repeated
 
 RULES = ("product", "hierarchical", "min", "smooth-min")
 SMOOTH_MIN_POWER = 4.0
@@ -76,7 +75,7 @@ class Corrective:
         if len(self.drivers) < 2:
             raise RigInputError(f"Corrective '{self.name}': needs two or more driver shapes, "
                                 f"got {len(self.drivers)}.")
-        dup = sorted(d for d, n in Counter(self.drivers).items() if n > 1)   # not list.count: n² on 10⁵ drivers
+        dup = repeated(self.drivers)
         if dup:
             raise RigInputError(f"Corrective '{self.name}': driver listed more than once: {', '.join(dup)}.")
 

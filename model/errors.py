@@ -2,6 +2,6 @@
 
 The type itself is defined in ``solvers.errors`` (solvers import nothing from model); this is its name for
 model/ and app/."""
-from solvers.errors import RigInputError, shown
+from solvers.errors import RigInputError, repeated, shown
 
-__all__ = ["RigInputError", "shown"]
+__all__ = ["RigInputError", "repeated", "shown"]

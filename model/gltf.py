@@ -22,13 +22,12 @@ from __future__ import annotations
 import base64
 import re
 import struct
-from collections import Counter
 from pathlib import Path
 from urllib.parse import unquote
 
 import numpy as np
 
-from .errors import RigInputError, shown
+from .errors import RigInputError, repeated, shown
 from .input_files import read_input_bytes, regular_file
 from .json_file import parse_json_text
 from .pages import memory_shortfall, small_pages_for
@@ -508,7 +507,7 @@ def _load_mesh(doc: _Doc, path: Path, units: str, mesh_index: int, mesh: dict) -
     names = [str(n) for n in names]
     if len(names) != K:
         raise doc.fail(f"lists {len(names)} target names for {K} morph targets.")
-    dup = sorted(n for n, c in Counter(names).items() if c > 1)
+    dup = repeated(names)
     if dup:
         raise doc.fail(f"has duplicate morph target names: {', '.join(dup)}.")
     rig = Rig(neutral=neutral, face_counts=np.full(T.shape[0], 3, np.int32), face_indices=T.reshape(-1),

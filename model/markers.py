@@ -15,14 +15,13 @@ triangle form used here, so both readers give every marker the same surface poin
 from __future__ import annotations
 
 import json
-from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 
-from .errors import RigInputError
+from .errors import RigInputError, repeated
 from .rig import UNITS, Rig
 
 BARY_TOL = 1e-3
@@ -90,7 +89,7 @@ class MarkerSet:
         self.moving = None if moving is None else np.asarray(moving, dtype=np.int64)
         where = f"{source}: " if source else ""
         names = [m.name for m in self.markers]
-        dup = sorted(n for n, c in Counter(names).items() if c > 1)
+        dup = repeated(names)
         if dup:
             raise RigInputError(f"{where}duplicate marker names: {', '.join(dup)}.")
         rows, cols, vals = [], [], []

@@ -5,14 +5,13 @@ every shape has exactly the neutral's vertex count and order.
 """
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from solvers.mesh import fan_triangulate
 
-from .errors import RigInputError, shown
+from .errors import RigInputError, repeated, shown
 from .units import UNIT_IN_METRES, UNITS, unit_scale  # noqa: F401  (the units of a rig; re-exported)
 
 MAX_COORDINATE = 1e9   # in any unit: no face is a thousand kilometres across; beyond it a file is damaged
@@ -203,7 +202,7 @@ class Rig:
             raise RigInputError(f"{where}: a face refers to a vertex that does not exist.")
         if not all(isinstance(n, str) and n for n in self.shape_names):
             raise RigInputError(f"{where}: every shape needs a name (a non-empty text).")
-        dup = sorted(n for n, c in Counter(self.shape_names).items() if c > 1)
+        dup = repeated(self.shape_names)
         if dup:
             raise RigInputError(f"{where}: duplicate shape names: {shown(', '.join(dup), 200)}.")
         if not isinstance(self.units, str) or self.units not in UNITS:

@@ -5,12 +5,11 @@ reader.
 """
 from __future__ import annotations
 
-from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import RigInputError, shown
+from .errors import RigInputError, repeated, shown
 from .rig import MAX_COORDINATE, MAX_WEIGHT, UNIT_IN_METRES, unit_scale
 
 MAX_RATE = 100_000.0   # frames per second: no capture system records faster
@@ -37,7 +36,7 @@ class MarkerTake:
             raise RigInputError(f"{where}: marker positions must be frames x markers x 3.")
         if self.positions.shape[1] != len(self.labels):
             raise RigInputError(f"{where}: {len(self.labels)} labels but {self.positions.shape[1]} markers.")
-        dup = sorted(s for s, n in Counter(self.labels).items() if n > 1)
+        dup = repeated(self.labels)
         if dup:
             raise RigInputError(f"{where}: duplicate marker labels: {', '.join(dup)}.")
         if self.units not in UNIT_IN_METRES:
