@@ -327,16 +327,17 @@ def solve_pose_weights(neutral: np.ndarray, deltas: np.ndarray, poses: np.ndarra
     oi = np.flatnonzero(obs)
     size = max(float(np.ptp(neutral[oi], axis=0).max()), 1e-300) if oi.size else 1.0
     still = np.setdiff1d(oi, moving)
-    if still.size >= max(30, STILL_SHARE * oi.size):
-        oi = still             # the head's pose from where no shape acts (module docstring)
+    fixed = bool(still.size >= max(30, STILL_SHARE * oi.size))
+    if fixed:       # the head's pose from where no shape acts (module docstring): the weights do not move it
+        oi = still
     if rigid:
         rest_o = neutral[oi]
-        flat_o = deltas[:, oi].reshape(K, -1)
+        flat_o = None if fixed else deltas[:, oi].reshape(K, -1)
     for i in range(N):
         P = poses[i]
-        for _ in range(iterations if rigid else 1):
+        for _ in range(iterations if rigid and not fixed else 1):   # fixed: one pose, one weight solve
             if rigid:
-                x = rest_o + (W[i] @ flat_o).reshape(-1, 3)
+                x = rest_o if fixed else rest_o + (W[i] @ flat_o).reshape(-1, 3)
                 R_new, t_new = kabsch(x, P[oi])
                 settled = np.abs(R_new - R[i]).max() < 1e-7 and np.abs(t_new - t[i]).max() < 1e-7 * size
                 R[i], t[i] = R_new, t_new
