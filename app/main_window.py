@@ -773,15 +773,13 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         if path.suffix.lower() != ".png":
             path = path.with_suffix(path.suffix + ".png") if path.suffix else path.with_suffix(".png")
 
-        def refused(exc: Exception) -> bool:
-            message = str(exc) if isinstance(exc, RigInputError) else \
-                f"{path}: could not be written ({getattr(exc, 'strerror', None) or exc})."
-            self.show_error("Could not save the image", message)
-            return False
+        def unwritable(exc: OSError) -> str:
+            return f"{path}: could not be written ({exc.strerror or exc})."
         try:
             check_output_file(path).parent.mkdir(parents=True, exist_ok=True)
-        except (OSError, RigInputError) as exc:
-            return refused(exc)
+        except (OSError, RigInputError) as exc:   # OutputPathError is both: its own sentence
+            self.show_error("Could not save the image", str(exc) if isinstance(exc, RigInputError) else unwritable(exc))
+            return False
         self.show_status(f"Drawing {path.name}…", 0)
         self.statusBar().repaint()     # shown now: the render holds this thread until it is done
         QtWidgets.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
@@ -796,7 +794,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
             try:
                 write_png(path, pixels)
             except OSError as exc:
-                raise RigInputError(f"{path}: could not be written ({exc.strerror or exc}).") from None
+                raise RigInputError(unwritable(exc)) from None
         self.run_in_background(f"Writing {path.name}…", job,
                                lambda _: self.show_status(f"Saved {path} ({w}x{h} pixels)"),
                                lambda message: self.show_error("Could not save the image", message))

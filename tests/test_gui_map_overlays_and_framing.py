@@ -82,8 +82,8 @@ def test_legend_and_colour_bar_beside_the_face_and_readable_in_exports(qtbot, tm
 
     n_rows = legend.GetNumberOfEntries()
     small, big = tmp_path / "small.png", tmp_path / "big.png"
-    w.viewport.write_image(small, (600, 300))
-    w.viewport.write_image(big, (2400, 1600))
+    assert w.save_image(small, (600, 300)) and w.save_image(big, (2400, 1600))   # File ▸ Export Image
+    w.jobs.wait()
     assert 14 <= _legend_rows(load_png(small), n_rows) <= 30    # was 7 px a row at 600x300
     assert 14 <= _legend_rows(load_png(big), n_rows) <= 30      # and 36 at 2400x1600
 

@@ -423,7 +423,7 @@ def overlay_room(plotter, size=None) -> tuple[float, float]:
 def fit_overlays(plotter, size=None) -> None:
     """Place and size the legend, colour bar and titles of the plotter's active renderer, ``size`` (w, h) pixels
     (default: as it is now), as ``overlay_layout`` says: when a colour map is drawn and before a picture is taken at
-    another size (``Viewport.write_image``). Nothing here runs per frame."""
+    another size (``Viewport.picture``). Nothing here runs per frame."""
     if getattr(plotter, "_closed", False):      # its window is gone (a colour map set as the window closes)
         return
     w, h = renderer_size(plotter, size)
@@ -699,12 +699,10 @@ def render_png(points, face_counts, face_indices, out_path, *, focus=None, color
         plotter.close()
 
 
-def write_image_atomically(plotter, out_path, size: tuple[int, int] | None = None, *,
-                           compress_level: int | None = None) -> None:
-    """``plotter.screenshot`` (at ``size`` (w, h) pixels if given) to a temporary of the same extension beside
-    ``out_path``, then ``os.replace``. The ``render`` command and the GUI's File ▸ Export Image write through it.
-    ``compress_level`` (a PNG's zlib level, 0-9; Pillow's default 6 if None): 1 encodes a 480x360 picture ~4x
-    faster (10 ms against 41) into a file ~20% larger."""
+def write_image_atomically(plotter, out_path) -> None:
+    """``plotter.screenshot`` to a temporary of the same extension beside ``out_path``, then ``os.replace``: the
+    ``render`` command's picture (the window's File ▸ Export Image takes ``Viewport.picture`` and writes it with
+    ``model.atomic.write_png`` off the GUI thread)."""
     import os
 
     from model.atomic import check_output_file, remove_stale_temporaries, temp_path
@@ -713,13 +711,7 @@ def write_image_atomically(plotter, out_path, size: tuple[int, int] | None = Non
     remove_stale_temporaries(out.parent)
     tmp = temp_path(out, suffix=out.suffix or ".png")
     try:
-        window_size = list(size) if size else None
-        if compress_level is None:
-            plotter.screenshot(str(tmp), window_size=window_size)
-        else:
-            from PIL import Image
-            Image.fromarray(plotter.screenshot(None, return_img=True, window_size=window_size)).save(
-                tmp, format="PNG", compress_level=compress_level)
+        plotter.screenshot(str(tmp))
         os.replace(tmp, out)
     finally:
         tmp.unlink(missing_ok=True)

@@ -524,10 +524,10 @@ class Viewport(QtWidgets.QWidget):
     def picture(self, size: tuple[int, int] | None = None) -> np.ndarray:
         """The view as shown (camera, colour map and bar, wireframe) as (h, w, 3) uint8 pixels at ``size`` (w, h)
         (default: the view's), drawn by VTK on this thread: File ▸ Export Image's picture, which its caller encodes
-        and writes off the GUI thread (``write_image``: at once). The legend, bar and titles are laid out for the
-        picture's size (``scene.overlay_layout``), and a framing the user has not moved since is made again for it,
-        beside them; a camera the user moved is kept, and a size narrower than the view widens the view angle so that
-        what is seen across stays in the picture."""
+        and writes off the GUI thread. The legend, bar and titles are laid out for the picture's size
+        (``scene.overlay_layout``), and a framing the user has not moved since is made again for it, beside them; a
+        camera the user moved is kept, and a size narrower than the view widens the view angle so that what is seen
+        across stays in the picture."""
         w, h = size or tuple(self.plotter.window_size)
         vw, vh = self.plotter.window_size
         cam = self.plotter.camera
@@ -547,13 +547,6 @@ class Viewport(QtWidgets.QWidget):
             cam.view_angle = angle
             self.plotter.camera_position = saved
             self.render()
-
-    def write_image(self, path, size: tuple[int, int] | None = None) -> tuple[int, int]:
-        """``picture(size)`` written as a PNG at ``path`` now (``model.atomic.write_png``); its (w, h)."""
-        from model.atomic import write_png
-        pixels = self.picture(size)
-        write_png(path, pixels)
-        return pixels.shape[1], pixels.shape[0]
 
     def _fit_to_size(self) -> None:
         """The render window took a new size (``NativePlotter.resized``): the legend and bar laid out for it, and an
