@@ -127,3 +127,13 @@ def assert_wrong_picture_fails(wrong: np.ndarray, name: str, tolerance: float = 
     problems, _ = compare_to_reference(wrong, name, tolerance, unlike, agree)
     assert problems, f"a wrong picture passed as the screenshot '{name}' (unlike {list(unlike)})"
     return problems
+
+
+def assert_large_and_whole(img: np.ndarray) -> None:
+    """The shaded surface (warm skin tone: red well above blue, not the grey-blue backdrop) covers more than 15% of
+    ``img`` and touches none of its edges: the model framed whole, nothing cut at the picture's sides."""
+    i = np.asarray(img).astype(int)
+    skin = i[..., 0] - i[..., 2] > 25
+    assert skin.mean() > 0.15
+    rows, cols = np.flatnonzero(skin.any(axis=1)), np.flatnonzero(skin.any(axis=0))
+    assert rows.min() > 2 and rows.max() < skin.shape[0] - 3 and cols.min() > 2 and cols.max() < skin.shape[1] - 3
