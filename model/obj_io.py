@@ -106,6 +106,14 @@ def _parse_vertex_block(block: bytes) -> np.ndarray | None:
         return None  # ragged lines (colours on some, w on others): take the careful path
 
 
+def _decimal(token: bytes) -> float:
+    """``float`` of one OBJ number, without Python's digit separators: '1_000' is no number to the C and C++
+    readers of other tools (numpy's text reader, Blender's), so it is none here either (ValueError)."""
+    if b"_" in token:
+        raise ValueError(token)
+    return float(token)
+
+
 def _compiled_vertex_block(block: bytes, rows: int | None = None) -> np.ndarray | None:
     """``solvers.decimal_kernel_jit.parse_vertex_lines`` over ``block``, the numbers outside its fast path
     converted by ``float``; None when the kernel is not built here, a line is not a plain one, or (given ``rows``)
@@ -124,7 +132,7 @@ def _compiled_vertex_block(block: bytes, rows: int | None = None) -> np.ndarray 
     flat = out.reshape(-1)
     for index, start, end in slow[:n_slow[0]].tolist():
         try:
-            flat[index] = float(block[start:end])
+            flat[index] = _decimal(block[start:end])
         except ValueError:
             return None
     return out
@@ -145,7 +153,7 @@ def _parse_vertices(path: Path, data: bytes, span: tuple[int, int] | None | bool
                 raise RigInputError(f"{path}: vertex record {i + 1} has fewer than 3 coordinates "
                                     "(the file may be truncated).")
             try:
-                rows.append([float(parts[0]), float(parts[1]), float(parts[2])])
+                rows.append([_decimal(parts[0]), _decimal(parts[1]), _decimal(parts[2])])
             except ValueError:
                 raise RigInputError(f"{path}: vertex record {i + 1} is not a number: "
                                     f"{line[:40].decode(errors='replace')!r}.") from None

@@ -22,6 +22,7 @@ rather than ezc3d: it also reads SGI/MIPS files, which ezc3d 1.7 refuses.
 from __future__ import annotations
 
 import itertools
+import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -94,7 +95,7 @@ class _Params:
             elif body + 2 <= end:
                 dtype, ndim = struct.unpack_from("b", data, body)[0], data[body + 1]
                 dims = tuple(data[body + 2:body + 2 + ndim])
-                size = _TYPES.get(dtype, 0) * (int(np.prod(dims, dtype=np.int64)) if ndim else 1)
+                size = _TYPES.get(dtype, 0) * math.prod(dims)   # exact: 8 dims of 255 wrap int64 (to 0 for 10 of 128)
                 vstart = body + 2 + ndim
                 if dtype in _TYPES and len(dims) == ndim and vstart + size <= end:
                     raw.setdefault((gid, name), (dtype, dims, data[vstart:vstart + size]))

@@ -242,3 +242,23 @@ def test_a_file_that_unfolds_into_more_than_the_memory_available_is_refused_befo
     assert load_project(tmp_path / "sample.bsproj").rig.n_shapes == sample_rig.n_shapes   # its 10 MB of deltas fit
     monkeypatch.setattr(model.pages, "available_memory", lambda: 2_000_000)
     refused(load_project, tmp_path / "sample.bsproj", "the array 'rig/deltas' needs ", "more than the 2 MB available.")
+
+
+def test_an_obj_number_with_digit_separators_is_no_number(ict_two):
+    """Was: 'v 1_000 0 0' read as x = 1000 (Python's float takes '_' between digits; numpy's text reader, Blender's
+    and every C reader stop at it), a face moved 10 m with no word."""
+    _edit_lines(ict_two / "jawOpen.obj", b"v ", 7, lambda line: b"v 1_000 0 0")
+    _refused(ict_two, "jawOpen.obj: vertex record 8 is not a number", "1_000")
+
+
+def test_a_c3d_parameter_whose_dimensions_overflow_64_bits_is_skipped(tmp_path):
+    """Was: a parameter's size as numpy's int64 product of its dimensions, which ten dimensions of 128 wrap to 0 (and
+    eight of 255 to a negative number): the parameter was read as holding no bytes instead of as running past the
+    file, which the section's reader skips."""
+    from model.take_c3d import _Params, _group, _param
+    body = _group(1, "POINT") + _param(1, "LABELS", -1, (128,) * 10, b"") + _param(1, "USED", 2, (), b"\x01\x00")
+    section = bytes([1, 80, 1, 84]) + body + b"\x00\x00"
+    data = b"\x00" * 512 + section.ljust(512, b"\x00")
+    params = _Params(data, 512, tmp_path / "take.c3d", [])
+    assert params.number("POINT", "USED") == 1.0          # the parameters around it are read
+    assert params.strings("POINT", "LABELS") is None      # it holds 128^10 bytes: not in a 1 kB file
