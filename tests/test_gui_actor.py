@@ -262,7 +262,7 @@ def _heat_map_shot(qtbot, tmp_path, shape):
     else:
         w.actor.heat_action.setChecked(False)
     w.redraw_now()
-    img = w.viewport.grab_image(size=(640, 480))
+    img = w.viewport.picture((640, 480))
     return w, img
 
 

@@ -270,7 +270,7 @@ def _assert_heat_picture(w, heat_img, heat, heat_pixels):
     again after it, framed again without the heat map's bar) and are coloured far from those where the pair does
     not interfere."""
     from tests.image_compare import LEVELS
-    shaded_img = w.viewport.grab_image()
+    shaded_img = w.viewport.picture()
     mesh = w.viewport.mesh.compute_normals(point_normals=True, cell_normals=False, auto_orient_normals=False)
     front = np.asarray(mesh.point_data["Normals"])[:, 2] > 0.7
     h, wd = heat_img.shape[:2]
@@ -342,7 +342,7 @@ def test_interference_heat_map_and_pair_authoring(qtbot, win, tmp_path):
     with qtbot.waitSignal(w.segmentation.segmentation_ready, timeout=30000):
         w.segmentation.recompute(w.segmentation.settings())   # a finished segmentation repaints the face...
     assert w.viewport.colormap is heat                       # ...but the heat map stays on top
-    heat_img = w.viewport.grab_image()
+    heat_img = w.viewport.picture()
     heat_pixels = _pixels_of_vertices(w, *heat_img.shape[:2])
     ctrl.panel.tabs.setCurrentIndex(0)                     # leaving restores the previous (shaded) view
     assert w.viewport.colormap is None

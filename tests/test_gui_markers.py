@@ -47,7 +47,7 @@ def _assert_picture_changed_at_the_corner(w, before, P0, corner, nose):
     """The viewport's picture during the drag differs from the one before it at the mouth, around the dragged
     corner, and not at the pinned nose tip: the pixels a user sees change are where the edit is."""
     from tests.image_compare import LEVELS, pixel_difference
-    changed = pixel_difference(w.viewport.grab_image(), before) > LEVELS
+    changed = pixel_difference(w.viewport.picture(), before) > LEVELS
     rows, cols = np.nonzero(changed)
     d = w.viewport.world_to_display(P0)
     x, row = d[:, 0], changed.shape[0] - 1 - d[:, 1]             # image column and row of each marker
@@ -81,7 +81,7 @@ def test_real_mouse_drag_moves_the_marker_and_one_undo_restores_the_pose(qtbot, 
     q_cm = _screen(w, P0[corner:corner + 1] + np.array([[1.0, 0.0, 0.0]]))[0]
     px_per_cm = np.hypot(q_cm.x() - q.x(), q_cm.y() - q.y())
     drag = QtCore.QPoint(-round(1.5 * px_per_cm), -round(1.0 * px_per_cm))
-    before_img = w.viewport.grab_image()
+    before_img = w.viewport.picture()
     mouse(widget, "press", start)
     assert c.drag is not None and c.drag.index == corner
     cam_before = w.viewport.camera_frame().position

@@ -51,7 +51,7 @@ def test_a_hidden_part_is_neither_drawn_nor_clicked(qtbot, ict_window):
     starts = np.concatenate(([0], np.cumsum(rig.face_counts)[:-1]))
     assert hit.face in set(parts.faces("M_EyeLashes"))
     assert hit.vertex in rig.face_indices[starts[hit.face]:starts[hit.face] + rig.face_counts[hit.face]]
-    before = vp.grab_image(size=(640, 480))
+    before = vp.picture((640, 480))
     action.trigger()                                      # View ▸ Parts ▸ M_EyeLashes off
     assert not action.isChecked() and "M_EyeLashes" in w.parts.hidden
     assert not np.isin(parts.faces("M_EyeLashes"), vp.shown_faces).any()
@@ -60,7 +60,7 @@ def test_a_hidden_part_is_neither_drawn_nor_clicked(qtbot, ict_window):
     # the face picked is numbered as the rig numbers its faces (the parts drawn are a subset of them)
     hit = vp.pick(*vp.world_to_display(rig.neutral[target])[0, :2].round().astype(int))
     assert hit.vertex in rig.face_indices[starts[hit.face]:starts[hit.face] + rig.face_counts[hit.face]]
-    after = vp.grab_image(size=(640, 480))
+    after = vp.picture((640, 480))
     assert (np.abs(before.astype(int) - after.astype(int)).sum(axis=2) > 30).sum() > 100
     # the vertices stay and still move with the pose: the surface keeps every vertex
     assert vp.points().shape == rig.neutral.shape
@@ -82,7 +82,7 @@ def test_material_colours_replace_the_skin_tone_and_both_choices_are_remembered(
     def colour_at_nose():
         w.redraw_now()
         x, y, _ = vp.world_to_display(rig.neutral[nose])[0]
-        img = vp.grab_image()
+        img = vp.picture()
         h = img.shape[0]
         r, c = int(round(h - 1 - y)), int(round(x))
         return img[r - 2:r + 3, c - 2:c + 3].reshape(-1, 3).mean(axis=0)

@@ -336,7 +336,7 @@ def test_export_image_at_a_chosen_size_keeps_the_view(qtbot, tmp_path, monkeypat
     from PIL import Image
     w = make_window(qtbot, tmp_path)
     vw, vh = w.viewport.plotter.window_size
-    shown = w.viewport.grab_image()
+    shown = w.viewport.picture()
     out = tmp_path / "tall"
     monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", lambda *a, **k: (str(out), ""))
     _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_E, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)

@@ -81,10 +81,10 @@ def test_culled_surface_draws_and_picks_the_back_of_two_sided_parts(qtbot, tmp_p
     def covered(img):
         return (np.abs(img.astype(int) - img[2, img.shape[1] // 2].astype(int)).max(axis=2) > 30).mean()
 
-    front = covered(vp.grab_image())
+    front = covered(vp.picture())
     vp.plotter.camera.Azimuth(180)                    # look at the back of the face
     vp.plotter.reset_camera_clipping_range()
-    assert covered(vp.grab_image()) > 0.5 * front > 0.05
+    assert covered(vp.picture()) > 0.5 * front > 0.05
     # a closed box (culled, no back copies) before an open square (two-sided): the square is face 6 of the
     # surface and face 0 of the backs' actor
     box = np.array([[x, y, z] for x in (3.0, 4.0) for y in (0.0, 1.0) for z in (0.0, 1.0)])
@@ -124,7 +124,7 @@ def test_blending_is_off_only_when_nothing_drawn_needs_it_and_the_picture_is_unc
         if blending is not None:
             monkeypatch.setattr(scene, "needs_blending", lambda _ren: blending)
         try:
-            return vp.grab_image(), state.GetEnumState(GL_BLEND)
+            return vp.picture(), state.GetEnumState(GL_BLEND)
         finally:
             monkeypatch.undo()
 

@@ -149,7 +149,7 @@ def _viewport_shot(qtbot, tmp_path, preset=None):
     if preset:
         w.apply_preset(preset)
     w.redraw_now()
-    img = w.viewport.grab_image(size=(640, 480))
+    img = w.viewport.picture((640, 480))
     assert img.shape == (480, 640, 3)
     return w, img
 
@@ -174,6 +174,6 @@ def test_comparison_catches_an_empty_viewport(qtbot, tmp_path):
     w, _ = _viewport_shot(qtbot, tmp_path, "happy")
     for name in ("surface", "surface_backs"):   # the surface, and the back sides of its two-sided parts
         w.viewport.plotter.remove_actor(name)
-    img = w.viewport.grab_image(size=(640, 480))
+    img = w.viewport.picture((640, 480))
     assert _face_fraction(img) < 0.01
     assert_wrong_picture_fails(img, "window_viewport_happy", tolerance=0.03, unlike=WINDOW_UNLIKE["window_viewport_happy"])

@@ -33,10 +33,10 @@ def test_band_pass_texture_follows_a_slider_drag_and_undo(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path)
     rig = w.document.rig
     assert w.textures.panel.current_mode() == "none" and not w.viewport.textured   # off until chosen
-    plain = w.viewport.grab_image(size=(480, 360))
+    plain = w.viewport.picture((480, 360))
     _choose(qtbot, w, "band-pass")
     assert w.viewport.textured and w.textures.problems == []
-    textured = w.viewport.grab_image(size=(480, 360))
+    textured = w.viewport.picture((480, 360))
     assert (pixel_difference(plain, textured) > 32).sum() > 2000     # the skin texture, eyes, hair are drawn
     neutral, shapes, keep = sample_textures()
     k = rig.shape_index("browInnerUp_L")
@@ -62,19 +62,19 @@ def test_linear_differs_from_band_pass_on_the_face_and_none_is_plain(qtbot, tmp_
     w.set_pose(w.document.rig.weights_from_dict({"browInnerUp_L": 0.5, "browInnerUp_R": 0.5,
                                                   "mouthSmile_L": 0.5, "mouthSmile_R": 0.5}), "pose")
     qtbot.waitUntil(lambda: not w.redraw_pending)
-    plain = w.viewport.grab_image(size=(640, 480))           # the same pose, untextured
+    plain = w.viewport.picture((640, 480))           # the same pose, untextured
     _choose(qtbot, w, "band-pass")
     qtbot.waitUntil(lambda: not w.redraw_pending)
-    band = w.viewport.grab_image(size=(640, 480))
+    band = w.viewport.picture((640, 480))
     detail_band = w.textures.blender.bands()[1]
     _choose(qtbot, w, "linear")
-    linear = w.viewport.grab_image(size=(640, 480))
+    linear = w.viewport.picture((640, 480))
     # the blend's detail band holds less in linear mode (the wrinkles averaged away)
     assert np.abs(w.textures.blender.bands()[1]).mean() < np.abs(detail_band).mean()
     assert (pixel_difference(band, linear) > 24).sum() > 100
     _choose(qtbot, w, "none")
     assert not w.viewport.textured
-    assert (pixel_difference(w.viewport.grab_image(size=(640, 480)), plain) > 32).sum() < 0.01 * plain[..., 0].size
+    assert (pixel_difference(w.viewport.picture((640, 480)), plain) > 32).sum() < 0.01 * plain[..., 0].size
 
 
 def test_panel_shows_the_bands_and_the_source(qtbot, tmp_path):

@@ -503,24 +503,6 @@ class Viewport(QtWidgets.QWidget):
     def render(self) -> None:
         self.plotter.render()
 
-    def grab_image(self, size: tuple[int, int] | None = None) -> np.ndarray:
-        """The rendered image as an (H, W, 3) uint8 array; ``size`` renders it at (w, h) pixels, framed
-        by the current camera preset as a viewport of that size would be."""
-        self.render()
-        if not size:
-            return np.asarray(self.plotter.screenshot(return_img=True))[:, :, :3]
-        saved = self.plotter.camera_position
-        focus = self.focus_points()
-        fit_overlays(self.plotter, size)
-        if focus is not None:
-            set_camera(self.plotter, self._camera, focus, size=size)
-        try:
-            return np.asarray(self.plotter.screenshot(return_img=True, window_size=list(size)))[:, :, :3]
-        finally:
-            fit_overlays(self.plotter)
-            self.plotter.camera_position = saved
-            self.render()
-
     def picture(self, size: tuple[int, int] | None = None) -> np.ndarray:
         """The view as shown (camera, colour map and bar, wireframe) as (h, w, 3) uint8 pixels at ``size`` (w, h)
         (default: the view's), drawn by VTK on this thread: File ▸ Export Image's picture, which its caller encodes
