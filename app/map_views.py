@@ -73,7 +73,9 @@ def segmentation_colormap(seg: Segmentation, level: int, highlight: int | None =
     legend.append((f"background: {lvl.background.size} vertices", tuple(BACKGROUND_GREY)))
     title = (f"level {level} of {len(seg.levels) - 1}: {count(lvl.n_regions, 'region')}"
              + (f", t = {seg.threshold_t:g}" if seg.method == "threshold" else ", region growing"))
-    return ColorMap(scalars=segmentation_colors(seg, level, highlight), rgb=True, title=title, legend=legend)
+    marked = np.flatnonzero(lvl.core_labels() >= 0)
+    return ColorMap(scalars=segmentation_colors(seg, level, highlight), rgb=True, title=title, legend=legend,
+                    marked=marked)
 
 
 def map_colormap(rig: Rig, view: str, *, threshold: float | None = None, level: int = 0,

@@ -11,7 +11,7 @@ import numpy as np
 from model.errors import RigInputError
 from model.pose import PoseEvaluator
 from model.rig import Rig
-from model.rig_prep import focus_vertices, shape_reach
+from model.rig_prep import focus_vertices, framed_points, shape_reach
 from widgets.scene import ColorMap
 
 VIEWS = ("shaded", "deformation", "deformation-rgb", "segmentation")
@@ -34,4 +34,6 @@ def build_view(rig: Rig, weights: np.ndarray, view: str = "shaded", *, threshold
     if view == "shaded":
         return View(points, focus, None, "shaded")
     from app.map_views import map_colormap
-    return View(points, focus, map_colormap(rig, view, threshold=threshold, level=level), view)
+    colormap = map_colormap(rig, view, threshold=threshold, level=level)
+    return View(points, framed_points(focus, points, colormap.marked), colormap, view)
+

@@ -95,6 +95,17 @@ def focus_vertices(neutral: np.ndarray, reach: np.ndarray) -> np.ndarray | None:
     return None
 
 
+def framed_points(focus: np.ndarray | None, points: np.ndarray, marked: np.ndarray | None) -> np.ndarray | None:
+    """What a camera frames in a map view: the face (``focus``, from ``focus_vertices``; None: the whole surface) and
+    the vertices the map paints (``marked``: indices into ``points``, the surface as drawn), so that a segmentation's
+    regions reaching past where the shapes act most are not cut off at the picture's edge (ICT FaceKit's forehead
+    regions reach 2.4 cm above that box). The window's camera presets and ``render`` frame alike."""
+    if focus is None or marked is None or not len(marked):
+        return focus
+    return np.concatenate([np.asarray(focus, dtype=np.float64).reshape(-1, 3),
+                           np.asarray(points, dtype=np.float64).reshape(-1, 3)[np.asarray(marked)]])
+
+
 def default_view(rig: Rig) -> DefaultView:
     """The default view's faces, their hidden back sides, their display normals' triangulation and their cells."""
     faces, counts, indices = drawn_faces(rig)

@@ -131,3 +131,52 @@ def test_render_shows_the_whole_sparse_cube(tmp_path, args):
     run_cli("render", cube, "-o", out, "--size", "400,300", *args)
     # the cube, large in the picture, nothing cut at its edges (before, the left half of the cube was out of it)
     assert_large_and_whole(load_png(out))
+
+
+def _region_vertices(w):
+    seg = w.segmentation.segmentation
+    return np.flatnonzero(seg.levels[w.segmentation.level].core_labels(w.document.rig.n_vertices) >= 0)
+
+
+def test_a_segmentation_view_frames_its_regions_whole(qtbot, tmp_path, ict_dir):
+    """ICT's forehead regions reach 2.4 cm above the box of the vertices the shapes move most, which the camera
+    framed alone: in File > Export Image's 4:3 pictures (as in ``render``'s) the regions' tops were cut off."""
+    w = make_window(qtbot, tmp_path, (1400, 900), sample=False)     # the window's default size
+    open_and_wait(qtbot, w, ict_dir)
+    _settle(qtbot, w)
+    _set_view(qtbot, w, "segmentation")
+    size = w.viewport.plotter.window_size
+    regions = w.viewport.points()[_region_vertices(w)]
+    actions = {a.text().replace("&", ""): a for a in w.findChildren(type(w.frame_all_action))}
+    actions["Front Camera"].trigger()
+    _settle(qtbot, w)
+    assert _inside(w.viewport.world_to_display(regions), size)       # on screen
+    face = _face_box(w)
+    assert face[3] - face[1] > 0.6 * size[1]       # still the face, beside the legend, not the head and shoulders
+    out = tmp_path / "seg.png"
+    assert w.save_image(out, (640, 480))                              # File > Export Image
+    w.jobs.wait()
+    _assert_regions_whole(load_png(out))
+    _set_view(qtbot, w, "shaded")                  # the shaded view frames the face alone, as before
+    assert w.viewport.focus_points().shape[0] < regions.shape[0]
+
+
+def _saturated(img) -> np.ndarray:
+    """Pixels of a region's colour: the head is grey, the background grey-blue, the legend's text white."""
+    rgb = img.astype(int)
+    return rgb.max(axis=2) - rgb.min(axis=2) > 60
+
+
+@pytest.mark.parametrize("size", [(640, 480), (800, 600)])
+def test_render_of_a_segmentation_shows_every_region_whole(tmp_path, ict_dir, size):
+    out = tmp_path / "seg.png"
+    run_cli("render", ict_dir, "-o", out, "--view", "segmentation", "--size", f"{size[0]},{size[1]}")
+    _assert_regions_whole(load_png(out))
+
+
+def _assert_regions_whole(img):
+    coloured = _saturated(img)
+    coloured[: img.shape[0] // 2, : int(0.45 * img.shape[1]) + 20] = False    # the legend's swatches
+    assert coloured.sum() > 0.1 * coloured.size                             # the regions are there, large
+    edges = np.concatenate([coloured[:2].ravel(), coloured[-2:].ravel(), coloured[:, -2:].ravel()])
+    assert not edges.any(), f"{edges.sum()} region pixels on the picture's edges"   # was: the forehead's cut

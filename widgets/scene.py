@@ -118,6 +118,7 @@ class ColorMap:
     rgb: bool = False
     categorical: bool = False
     legend: list[tuple[str, tuple[float, float, float]]] | None = None  # swatches for categorical/RGB views
+    marked: np.ndarray | None = None   # the vertices it paints (a segmentation's regions): framed with the face
 
 
 def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: bool = False, name="surface",
@@ -141,6 +142,7 @@ def add_surface(plotter, mesh, colormap: ColorMap | None = None, *, wireframe: b
     if colormap.legend:
         entries = colormap.legend if len(colormap.legend) <= 10 else \
             colormap.legend[:9] + [(f"… {len(colormap.legend) - 9} more", (0.7, 0.7, 0.7))]
+        entries = [(f" {text}", color) for text, color in entries]   # a space between the swatch and its text
         legend = plotter.add_legend(entries, bcolor=(0.1, 0.1, 0.12), border=False, face="rectangle", name="legend",
                                     loc="upper left")
         _legend_white_text(legend, entries)

@@ -24,6 +24,7 @@ import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from model.parts import subset_faces
+from model.rig_prep import framed_points
 
 from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, drop_cached_background, fit_overlays, \
     overlay_room, rig_mesh, set_camera, style_plotter, surface_face
@@ -127,7 +128,8 @@ class Viewport(QtWidgets.QWidget):
         self._arrays: SurfaceArrays | None = None
         self._given_normals: tuple[np.ndarray, np.ndarray] | None = None   # use_normals
         self._focus = None
-        self._framed = None   # the last framing: (points, direction or None: the preset's, camera position, room)
+        self._framed = None   # the last framing: (points or None: the focus, direction or None: the preset's,
+        #                       camera position, room)
         self._colormap: ColorMap | None = None
         self._wireframe = False
         self._textured = None   # widgets.texture_view.TexturedSurface while a texture is shown
@@ -461,9 +463,8 @@ class Viewport(QtWidgets.QWidget):
         """Look at the face (or the whole surface as posed, ``focus_points``) from camera preset ``name``;
         ``render=False``: the caller renders (once) after."""
         self._camera = name
-        focus = self.focus_points()
-        if focus is not None:
-            self._frame(focus, None)
+        if self.focus_points() is not None:
+            self._frame(None, None)
             if render:
                 self.render()
 
@@ -472,8 +473,12 @@ class Viewport(QtWidgets.QWidget):
 
     def focus_points(self) -> np.ndarray | None:
         """The points the camera presets frame: the face (the vertices the shapes move, as ``set_surface`` was given
-        them), else the whole surface as drawn now; None without a surface."""
-        return self._focus if self._focus is not None else self.points()
+        them) with the vertices a colour map paints (``model.rig_prep.framed_points``), else the whole surface as
+        drawn now; None without a surface."""
+        marked = None if self._colormap is None else self._colormap.marked
+        if self._focus is None or marked is None or self.mesh is None:
+            return self._focus if self._focus is not None else self.points()
+        return framed_points(self._focus, self.mesh.points, marked)   # and the regions a segmentation view paints
 
     def frame_points(self, points: np.ndarray | None = None) -> None:
         """Frame ``points`` (default: ``focus_points``) from where the camera looks now (Maya's F and A)."""
@@ -481,13 +486,16 @@ class Viewport(QtWidgets.QWidget):
         if pts is None or not len(pts):
             return
         cam = self.camera_frame()
-        self._frame(pts, (-cam.forward, cam.up))
+        self._frame(None if points is None else pts, (-cam.forward, cam.up))
         self.render()
 
-    def _frame(self, points: np.ndarray, direction: tuple | None, size: tuple[int, int] | None = None) -> None:
-        """Frame ``points`` from the preset's direction (None) or ``direction`` (``scene.set_camera``), beside the
-        legend and bar, and remember it (``_reframe_if_untouched``) unless it is for a picture of another ``size``."""
-        set_camera(self.plotter, self._camera, points, size=size, direction=direction)
+    def _frame(self, points: np.ndarray | None, direction: tuple | None, size: tuple[int, int] | None = None) -> None:
+        """Frame ``points`` (None: ``focus_points``, as they are whenever the framing is made again: a segmentation
+        view's regions come into a preset's framing with its legend) from the preset's direction (None) or
+        ``direction`` (``scene.set_camera``), beside the legend and bar, and remember it (``_reframe_if_untouched``)
+        unless it is for a picture of another ``size``."""
+        set_camera(self.plotter, self._camera, self.focus_points() if points is None else points, size=size,
+                   direction=direction)
         if size is None:
             self._framed = (points, direction, self.plotter.camera_position, overlay_room(self.plotter))
 
