@@ -22,6 +22,7 @@ from app.document import PoseState
 from app.marker_commands import SetMarkersCommand, SetPoseCommand
 from model.correctives import solver_correctives
 from model.errors import RigInputError
+from model.antagonists import pair_indices
 from model.markers import DRAG_LAM_REG, Marker, MarkerSet
 from model.wording import count
 from solvers.correctives import linearised_correctives
@@ -149,6 +150,7 @@ class MarkerController(QtCore.QObject):
         self._gains: np.ndarray | None = None
         self._region_max: dict[int, tuple] = {}   # id(blend) -> (blend, (R, K) array or its Future)
         self._warmer: ThreadPoolExecutor | None = None
+        self._parts_ahead: tuple | None = None    # (display evaluator, blend, Future of its ``blend_parts``)
         self._tri_of_vertex: sp.csr_matrix | None = None
         self._triangles: np.ndarray | None = None
         self._slider_old: PoseState | None = None
@@ -412,27 +414,47 @@ class MarkerController(QtCore.QObject):
         return hit[1]
 
     def _warm_region_max(self) -> None:
-        """While marker mode is on, find the chosen level's shapes per region (``shape_region_max``: 0.1 s on ICT,
-        a pass over every shape's deltas) on a worker thread, so that the first press on a marker does not: it
-        froze the window 0.23 s. A shape edit or a new rig drops it with the cache."""
+        """While marker mode is on, find the chosen level's shapes per region (``shape_region_max``: 15 ms on ICT,
+        0.2 s on the 106k-vertex, 228-shape studio rig, a pass over every shape's deltas), the project's antagonist
+        pairs (0.3 s on that rig) and the display evaluator's set-up of the level's regional poses (0.1-0.4 s there)
+        on a worker thread, so that the first press on a marker does not: it froze the window 0.23 s on ICT and
+        2-5 s on that rig. A shape edit or a new rig drops them with the caches (a new evaluator: not adopted)."""
         lvl = self._level_obj(self.level)
-        if not self.mode or lvl is None or id(lvl.blend) in self._region_max:
+        if not self.mode or lvl is None:
             return
         if self._warmer is None:
             self._warmer = ThreadPoolExecutor(max_workers=1, thread_name_prefix="marker-regions")
-        job = self._warmer.submit(shape_region_max, self.document.rig.deltas, [r.vertices for r in lvl.regions])
-        self._region_max[id(lvl.blend)] = (lvl.blend, job)
+        if id(lvl.blend) not in self._region_max:
+            job = self._warmer.submit(shape_region_max, self.document.rig.deltas, [r.vertices for r in lvl.regions])
+            self._region_max[id(lvl.blend)] = (lvl.blend, job)
+        if self._antagonist_key() != (self._antagonist_cache or ())[:2]:
+            rig, pairs = self.document.rig, self.document.project.antagonist_pairs
+            self._antagonist_cache = (*self._antagonist_key(), self._warmer.submit(lambda: pair_indices(rig, pairs())))
+        ev, ahead = self.document.evaluator, self._parts_ahead
+        fresh = ahead is None or ahead[0] is not ev or ahead[1] is not lvl.blend
+        if ev is not None and fresh and not ev.live().any():   # live correctives: a level is posed per vertex
+            self._parts_ahead = (ev, lvl.blend, self._warmer.submit(ev.blend_parts, lvl.blend))
+
+    def _adopt_parts_ahead(self, blend) -> None:
+        """Give the display evaluator the regional set-up of ``blend`` made ahead (``_warm_region_max``), waiting
+        for it if it is not done yet, before the press's first regional pose would make it on this thread."""
+        ahead, self._parts_ahead = self._parts_ahead, None
+        if ahead is not None and ahead[0] is self.document.evaluator and ahead[1] is blend:
+            ahead[0].adopt_blend_parts(blend, ahead[2].result())
+
+    def _antagonist_key(self) -> tuple:
+        project = self.document.project
+        return self.document.rig_version, None if project.antagonists is None else list(project.antagonists)
 
     def _antagonists(self, rig) -> list[tuple[int, int]]:
         """The project's antagonist pairs (``Project.antagonist_pairs``: the user's, else those found from the rig,
-        found once per rig): a drag never leaves both on."""
-        from model.antagonists import pair_indices
-        project = self.document.project
+        found once per rig, ahead by ``_warm_region_max`` in marker mode): a drag never leaves both on."""
         hit = self._antagonist_cache
-        if hit is None or hit[0] != self.document.rig_version or hit[1] != project.antagonists:
-            edited = None if project.antagonists is None else list(project.antagonists)
-            hit = self._antagonist_cache = (self.document.rig_version, edited,
-                                            pair_indices(rig, project.antagonist_pairs()))
+        if hit is None or hit[:2] != self._antagonist_key():
+            hit = self._antagonist_cache = (*self._antagonist_key(),
+                                            pair_indices(rig, self.document.project.antagonist_pairs()))
+        if isinstance(hit[2], Future):
+            hit = self._antagonist_cache = (*hit[:2], hit[2].result())
         return hit[2]
 
     def begin_drag(self, index: int) -> DragState:
@@ -454,6 +476,8 @@ class MarkerController(QtCore.QObject):
         ms = self.markers
         solver = ms.drag_solver(rig, regions, region_max, lam_reg=self.lam_reg, antagonists=self._antagonists(rig),
                                 background=background)
+        if blend is not None:
+            self._adopt_parts_ahead(blend)
         if blend is not None and not (old.is_regional and same_blend(old.blend, blend)):
             doc.set_pose_state(PoseState(old.weights, W0, blend, level))  # same pose, now per region
         start = self.marker_positions()

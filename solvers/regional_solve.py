@@ -24,20 +24,27 @@ from .weight_solve import WeightSolver, weight_objective
 
 
 def shape_region_max(deltas: np.ndarray, regions: list[np.ndarray]) -> np.ndarray:
-    """(R, K) the largest displacement ‖d_k(v)‖ of each shape k over each region's vertices (Joshi §2 maps)."""
+    """(R, K) the largest displacement ‖d_k(v)‖ of each shape k over each region's vertices (Joshi §2 maps).
+
+    A shape at a time: its displacement lengths over the regions' vertices, laid end to end region after region,
+    and one ``maximum.reduceat`` over them. Over the whole (K, V, 3) array at once (``D[:, union]``, twice, in an
+    einsum) it took 2.8 s and a transposed copy of the deltas on a 106k-vertex, 228-shape rig, where a marker drag
+    waits for it."""
     D = np.asarray(deltas)
     K = D.shape[0]
     out = np.zeros((len(regions), K))
-    if not regions:
+    idx = [np.asarray(r, dtype=np.int64).reshape(-1) for r in regions]
+    sizes = np.array([i.size for i in idx], dtype=np.int64)
+    if not sizes.any():
         return out
-    union = np.unique(np.concatenate([np.asarray(r, dtype=np.int64) for r in regions]))
-    pos = np.full(D.shape[1], -1, dtype=np.int64)
-    pos[union] = np.arange(union.size)
-    norms = np.sqrt(np.einsum("kvc,kvc->kv", D[:, union], D[:, union]))  # (K, U)
-    for r, verts in enumerate(regions):
-        idx = pos[np.asarray(verts, dtype=np.int64)]
-        if idx.size:
-            out[r] = norms[:, idx].max(axis=1)
+    order = np.concatenate(idx)
+    union, where = np.unique(order, return_inverse=True)     # each vertex's length once, read where regions share it
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    filled = sizes > 0
+    for k in range(K):
+        d = D[k][union]
+        lengths = np.sqrt(np.einsum("vc,vc->v", d, d))
+        out[filled, k] = np.maximum.reduceat(lengths[where], starts[filled])
     return out
 
 

@@ -243,3 +243,12 @@ def test_a_regional_pose_of_a_few_shapes_is_joshis_blend_of_each_regions_pose(ic
     np.testing.assert_allclose(PoseEvaluator(rig, dtype=np.float64).evaluate_regional(W, blend), expected,
                                rtol=0, atol=1e-10)
     np.testing.assert_allclose(PoseEvaluator(rig).evaluate_regional(W, blend), expected, rtol=0, atol=2e-5)
+    # the set-up made ahead on another thread (a marker drag's level while Marker Mode waits for a press), then
+    # adopted by the display evaluator, poses the same, bit for bit
+    ev = PoseEvaluator(rig)
+    from concurrent.futures import ThreadPoolExecutor
+    with ThreadPoolExecutor(1) as pool:
+        parts = pool.submit(ev.blend_parts, blend).result()
+    ev.adopt_blend_parts(blend, parts)
+    assert ev._blend_entry(blend).parts is parts
+    assert np.array_equal(ev.evaluate_regional(W, blend), PoseEvaluator(rig).evaluate_regional(W, blend))
