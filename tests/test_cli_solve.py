@@ -340,6 +340,20 @@ def test_a_weights_csv_as_a_take_keeps_time_or_says_why_not(ict_rig, tmp_path):
         assert name in str(err.value) and words in str(err.value), str(err.value)
 
 
+def test_a_weights_csv_whose_times_are_rounded_keeps_its_rate(ict_rig, tmp_path):
+    """Times written with printf's %f (6 decimals) or in milliseconds, as other tools write them: the take keeps its
+    frame rate (one rounded step made 1/60 s 60.0012 fps, and the 358-frame take was refused as uneven; 1/24 s was
+    23.9998 fps, the glTF's last key a third of a millisecond late)."""
+    from model.weights_csv import read_weights_take
+    names = ict_rig.shape_names
+    for rate, frames, decimals in ((60, 358, 6), (60, 358, 3), (24, 48, 6), (30 / 1.001, 500, 6)):
+        path = tmp_path / f"w_{rate:g}_{decimals}.csv"
+        path.write_text("frame,time,jawOpen\n" + "".join(f"{k},{k / rate:.{decimals}f},0.5\n" for k in range(frames)))
+        take = read_weights_take(path, names)
+        assert take.rate == pytest.approx(rate, rel=1e-12), (path.name, take.rate)
+        assert take.n_frames == frames
+
+
 def test_a_command_asks_for_ordinary_pages_and_the_window_keeps_huge_pages():
     """A command's large arrays are written once and dropped, so ``blendshape-studio COMMAND`` turns off numpy's
     request for transparent huge pages before numpy loads (the kernel's compaction on first touch cost the CLI solve
