@@ -170,7 +170,7 @@ def read_weights_take(path: str | Path, shape_names: list[str] | None):
     unknown = [n for n in names if n not in shape_names]
     if unknown:
         raise RigInputError(f"{path}: names shapes the rig does not have: {', '.join(unknown[:5])}"
-                            f"{' ...' if len(unknown) > 5 else ''}.")
+                            f"{f' and {len(unknown) - 5} more' if len(unknown) > 5 else ''}.")
     warnings = []
     if frames.size > 1:
         steps = np.diff(frames)

@@ -10,6 +10,7 @@ import pytest
 from model.pc2 import read_pc2
 from model.weights_csv import read_weights_csv
 from tests.cli_runner import run_cli
+from tests.conftest import DATA, require_data
 
 
 def dense_rms_mm(frames: np.ndarray, truth) -> float:
@@ -352,6 +353,23 @@ def test_a_weights_csv_whose_times_are_rounded_keeps_its_rate(ict_rig, tmp_path)
         take = read_weights_take(path, names)
         assert take.rate == pytest.approx(rate, rel=1e-12), (path.name, take.rate)
         assert take.n_frames == frames
+
+
+def test_a_weights_csv_for_another_rig_names_what_it_lacks_in_one_sentence(ict_rig, tmp_path):
+    """The solve's weights of ICT given to the third-party glTF MorphStressTest: one sentence that counts the names
+    it leaves out (it ended '..., browInnerUp_L ....'), read as a take and as an export's animation alike."""
+    from model.errors import RigInputError
+    from model.export import load_animation
+    from model.readers import load_rig
+    from model.weights_csv import read_weights_take, write_weights_csv
+    rig = load_rig(require_data(DATA / "thirdparty" / "gltf" / "MorphStressTest.gltf"))
+    path = tmp_path / "ict.csv"
+    write_weights_csv(path, np.zeros((3, ict_rig.n_shapes)), ict_rig.shape_names, rate=60)
+    for read in (lambda: read_weights_take(path, rig.shape_names), lambda: load_animation(path, rig)):
+        with pytest.raises(RigInputError) as refused:
+            read()
+        assert str(refused.value) == (f"{path}: names shapes the rig does not have: "
+                                      f"{', '.join(ict_rig.shape_names[:5])} and {ict_rig.n_shapes - 5} more.")
 
 
 def test_a_command_asks_for_ordinary_pages_and_the_window_keeps_huge_pages():
