@@ -372,6 +372,22 @@ def test_a_weights_csv_for_another_rig_names_what_it_lacks_in_one_sentence(ict_r
                                       f"{', '.join(ict_rig.shape_names[:5])} and {ict_rig.n_shapes - 5} more.")
 
 
+def test_the_solve_options_help_says_the_default_the_solve_uses():
+    """``solve --help`` (and ``batch --help``, the same options) said --global's default was 'per region of a
+    hierarchy level' while a solve without options is global (the report's "mode"; README: it measured best)."""
+    import argparse
+    from app.cli_solve import add_solve_options
+    from model.segmentation import SegmentationSettings
+    from model.take_workspace import SOLVE_DEFAULTS
+    parser = argparse.ArgumentParser()
+    add_solve_options(parser)
+    helps = {a.dest: a.help for a in parser._actions}
+    assert not SOLVE_DEFAULTS["regional"] and "(the default;" in helps["global_solve"], helps["global_solve"]
+    assert "default: per region" not in helps["global_solve"]
+    assert f"(default {SegmentationSettings().t:g})" in helps["threshold"]
+    assert f"(default {SOLVE_DEFAULTS['level']})" in helps["level"]
+
+
 def test_a_command_asks_for_ordinary_pages_and_the_window_keeps_huge_pages():
     """A command's large arrays are written once and dropped, so ``blendshape-studio COMMAND`` turns off numpy's
     request for transparent huge pages before numpy loads (the kernel's compaction on first touch cost the CLI solve
