@@ -34,10 +34,13 @@ def add_solve_options(sp) -> None:
     dialog: an option means the same thing everywhere (``solve_settings`` reads them)."""
     sp.add_argument("--map", help="marker map JSON (default: map markers automatically from the calibration frames)")
     sp.add_argument("--rig-units", choices=["cm", "mm", "m"], help="units of the rig (default: the rig's own)")
+    # as model.take_workspace.SOLVE_DEFAULTS says (tests/test_cli_solve.py holds the two together)
     sp.add_argument("--global", dest="global_solve", action="store_true",
-                    help="one weight vector for the whole face (default: per region of a hierarchy level)")
-    sp.add_argument("--threshold", type=float, default=None, help="segmentation quantile t for the regions")
-    sp.add_argument("--level", type=int, default=None, help="hierarchy level whose regions are solved")
+                    help="one weight vector for the whole face (the default; --threshold or --level solve per region)")
+    sp.add_argument("--threshold", type=float, default=None,
+                    help="segmentation quantile t for the regions of a per-region solve (default 0.5)")
+    sp.add_argument("--level", type=int, default=None,
+                    help="hierarchy level whose regions are solved, one weight vector each (default 2)")
     sp.add_argument("--residual", choices=["none", "joshi", "gaussian", "multiquadric"], default=None,
                     help="RBF residual kernel added to the blendshape fit (default: the best measured)")
     sp.add_argument("--calibration-frames", type=int, default=30,

@@ -57,7 +57,7 @@ def animation_for_rig(rig: Rig, names: list[str], weights: np.ndarray, times: np
     unknown = [n for n in names if n not in rig.shape_names]
     if unknown:
         raise RigInputError(f"{source or 'the animation'}: names shapes the rig does not have: "
-                            f"{', '.join(unknown[:5])}{' ...' if len(unknown) > 5 else ''}.")
+                            f"{', '.join(unknown[:5])}{f' and {len(unknown) - 5} more' if len(unknown) > 5 else ''}.")
     W = np.zeros((np.asarray(weights).shape[0], rig.n_shapes))
     W[:, [rig.shape_index(n) for n in names]] = weights
     return WeightAnimation(times=times, weights=W, source=source)

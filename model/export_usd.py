@@ -52,13 +52,19 @@ def usd_names(names: list[str]) -> list[str]:
     return out
 
 
-def frame_rate(times: np.ndarray) -> float:
-    """Frames per second of per-frame times (the median frame interval); 24 for one frame."""
-    steps = np.diff(np.asarray(times, dtype=np.float64))
-    if not steps.size:
-        return 24.0
-    rate = float(1.0 / np.median(steps))
-    return float(round(rate)) if abs(rate - round(rate)) < 1e-6 * rate else rate
+def frame_rate(times: np.ndarray) -> tuple[float, bool]:
+    """(frames per second, evenly spaced) of per-frame times; (24, True) for one frame. Evenly spaced times (to a
+    tenth of a frame: times rounded to milliseconds or printf's 6 decimals) have the weights CSV take's rate
+    (``model.weights_csv.times_rate``: 1/24 s written 0.041667 is 24 fps, not 23.9998); others the median step."""
+    from .weights_csv import times_rate
+    times = np.asarray(times, dtype=np.float64)
+    if times.size < 2:
+        return 24.0, True
+    rate = times_rate(times)
+    if rate is not None:
+        return rate, True
+    rate = float(1.0 / np.median(np.diff(times)))
+    return (float(round(rate)) if abs(rate - round(rate)) < 1e-6 * rate else rate), False
 
 
 def usd_stage(content, corners=None):
@@ -122,8 +128,10 @@ def usd_stage(content, corners=None):
     weights = anim.CreateBlendShapeWeightsAttr()
     weights.Set(Vt.FloatArray.FromNumpy(np.asarray(content.pose, dtype=np.float32)))
     if content.times is not None:
-        rate = frame_rate(content.times)
-        codes = content.times * rate
+        rate, even = frame_rate(content.times)
+        # evenly spaced: one frame apart from the first (not 1.000008 for a time written 0.041667); uneven times
+        # keep their own
+        codes = content.times[0] * rate + np.arange(content.times.size) if even else content.times * rate
         whole = np.round(codes)
         codes = np.where(np.abs(codes - whole) < 1e-6, whole, codes)  # frame numbers, not 1.0000000000000036
         stage.SetTimeCodesPerSecond(rate)

@@ -7,7 +7,8 @@ indices as faces, each morph target's POSITION as a shape delta (zero on primiti
 Target names come from ``mesh.extras.targetNames`` (else ``target_0``, ...). TEXCOORD_0, when every
 primitive has it, becomes the rig's UVs (one per vertex, ``Rig.corners``; v flipped to OBJ's upward v).
 
-The node hierarchy's world matrix of the first node (in scene order) that instances the mesh is applied:
+The node hierarchy's world matrix of the first node (in scene order) that instances the mesh is applied (for a
+skinned mesh, its joints' bind placement instead, as glTF 2.0 §3.7.3 says: see ``_world_matrix``):
 ``M p`` to positions and its linear part (no translation) to morph deltas, which is exact because a
 morph target moves the mesh before the node transform does; a mirroring transform flips the winding so
 faces keep facing out. Buffers may be embedded (base64 data URIs), external files inside the glTF's folder,
@@ -206,7 +207,7 @@ def _is_num(v) -> bool:
 
 # What this reader uses of a glTF document and the JSON type each must have (glTF 2.0 §5): anything else there
 # is refused in one sentence before it is used, never met as a Python error half-way through reading.
-_ARRAY_FIELDS = ("accessors", "bufferViews", "buffers", "meshes", "nodes", "scenes")
+_ARRAY_FIELDS = ("accessors", "bufferViews", "buffers", "meshes", "nodes", "scenes", "skins")
 _FIELD_TYPES = {
     "accessors": {"bufferView": _is_int, "byteOffset": _is_int, "componentType": _is_int, "count": _is_int,
                   "type": lambda v: isinstance(v, str), "normalized": lambda v: isinstance(v, bool),
@@ -215,12 +216,15 @@ _FIELD_TYPES = {
     "buffers": {"byteLength": _is_int, "uri": lambda v: isinstance(v, str)},
     "meshes": {"primitives": lambda v: isinstance(v, list) and all(isinstance(p, dict) for p in v),
                "extras": lambda v: isinstance(v, dict), "name": lambda v: isinstance(v, str)},
-    "nodes": {"mesh": _is_int, "children": lambda v: isinstance(v, list) and all(_is_int(c) for c in v),
+    "nodes": {"mesh": _is_int, "skin": _is_int,
+              "children": lambda v: isinstance(v, list) and all(_is_int(c) for c in v),
               "matrix": lambda v: isinstance(v, list) and len(v) == 16 and all(_is_num(c) for c in v),
               "translation": lambda v: isinstance(v, list) and len(v) == 3 and all(_is_num(c) for c in v),
               "rotation": lambda v: isinstance(v, list) and len(v) == 4 and all(_is_num(c) for c in v),
               "scale": lambda v: isinstance(v, list) and len(v) == 3 and all(_is_num(c) for c in v)},
     "scenes": {"nodes": lambda v: isinstance(v, list) and all(_is_int(c) for c in v)},
+    "skins": {"joints": lambda v: isinstance(v, list) and len(v) > 0 and all(_is_int(c) for c in v),
+              "inverseBindMatrices": _is_int},
 }
 
 
@@ -401,7 +405,9 @@ def node_matrix(node: dict) -> np.ndarray:
 
 
 def _world_matrix(doc: _Doc, mesh_index: int) -> np.ndarray:
-    """World matrix of the first node (depth first from the scene's roots) that instances the mesh."""
+    """World matrix of the first node (depth first from the scene's roots) that instances the mesh, or for a skinned
+    mesh (whose node transform is ignored, glTF 2.0 §3.7.3: only its joints place it) the joints' placements
+    (``_skin_matrices``): one matrix when they agree (the file's bind pose), else (J, 4, 4) per joint."""
     nodes = doc.gltf.get("nodes", [])
     parent: dict[int, int] = {}
     for i, n in enumerate(nodes):
@@ -421,20 +427,77 @@ def _world_matrix(doc: _Doc, mesh_index: int) -> np.ndarray:
         order.append(i)
         stack.extend(reversed(nodes[i].get("children", []) or []))
     hit = next((i for i in order if nodes[i].get("mesh") == mesh_index), None)
-    M = np.eye(4)
-    chain = set()
-    while hit is not None:
-        if hit in chain:
-            raise doc.fail("its node hierarchy has a cycle.")
-        chain.add(hit)
-        try:
-            M = node_matrix(nodes[hit]) @ M
-        except (ValueError, TypeError):
-            raise doc.fail(f"node {hit} has an invalid transform.") from None
-        hit = parent.get(hit)
+
+    def world(node: int | None) -> np.ndarray:
+        M = np.eye(4)
+        chain = set()
+        while node is not None:
+            if node in chain:
+                raise doc.fail("its node hierarchy has a cycle.")
+            chain.add(node)
+            try:
+                M = node_matrix(nodes[node]) @ M
+            except (ValueError, TypeError):
+                raise doc.fail(f"node {node} has an invalid transform.") from None
+            node = parent.get(node)
+        return M
+
+    skin = nodes[hit].get("skin") if hit is not None else None
+    M = world(hit) if skin is None else _skin_matrices(doc, skin, world)
     if not np.isfinite(M).all():
         raise doc.fail("a node transform has NaN or infinite values.")
     return M
+
+
+def _skin_matrices(doc: _Doc, skin: int, world) -> np.ndarray:
+    """How skin ``skin``'s joints place its mesh as the file poses them: each joint's world matrix times its inverse
+    bind matrix, (4, 4) when they are all the same (the bind pose), else (J, 4, 4) for ``_skinned``."""
+    nodes, skins = doc.gltf.get("nodes", []), doc.gltf.get("skins", [])
+    if not 0 <= skin < len(skins):
+        raise doc.fail(f"a node refers to skin {skin}, which does not exist.")
+    joints = skins[skin].get("joints", [])
+    if not joints or any(not 0 <= j < len(nodes) for j in joints):
+        raise doc.fail(f"skin {skin} has no joints or a joint that is not a node.")
+    if "inverseBindMatrices" in skins[skin]:
+        ibm = doc.accessor(skins[skin]["inverseBindMatrices"])
+        if ibm.shape[1] != 16 or ibm.shape[0] < len(joints):
+            raise doc.fail(f"skin {skin}'s inverse bind matrices are not one 4x4 matrix per joint.")
+        ibm = ibm[:len(joints)].reshape(-1, 4, 4).transpose(0, 2, 1)     # column-major, as node matrices
+    else:
+        ibm = np.broadcast_to(np.eye(4), (len(joints), 4, 4))
+    placed = np.stack([world(j) @ b for j, b in zip(joints, ibm)])
+    if not np.isfinite(placed).all():
+        raise doc.fail(f"skin {skin} has NaN or infinite joint transforms.")
+    size = max(1.0, float(np.abs(placed[0]).max()))
+    return placed[0] if np.abs(placed - placed[0]).max() <= 1e-6 * size else placed
+
+
+def _skinned(doc: _Doc, prims: list[dict], sizes: list[int], placed: np.ndarray) -> np.ndarray:
+    """(V, 4, 4) per-vertex matrices of linear blend skinning: each vertex's JOINTS_n/WEIGHTS_n blend of the joints'
+    placements ``placed`` (J, 4, 4), the weights normalised; a primitive without them stays as bound."""
+    out = []
+    for p, n in zip(prims, sizes):
+        attrs = p.get("attributes") or {}
+        sets = [(attrs[f"JOINTS_{i}"], attrs[f"WEIGHTS_{i}"]) for i in range(8)
+                if f"JOINTS_{i}" in attrs and f"WEIGHTS_{i}" in attrs]
+        if not sets:
+            out.append(np.broadcast_to(np.eye(4), (n, 4, 4)))
+            continue
+        M, total = np.zeros((n, 4, 4)), np.zeros(n)
+        for j_acc, w_acc in sets:
+            J, W = doc.accessor(j_acc), doc.accessor(w_acc)
+            if J.shape != (n, 4) or W.shape != (n, 4):
+                raise doc.fail("a primitive's JOINTS/WEIGHTS are not four per vertex.")
+            if not np.isfinite(W).all() or J.min() < 0 or J.max() >= len(placed) or (J != np.round(J)).any():
+                raise doc.fail("a primitive's skin weights are not numbers or name a joint its skin does not have.")
+            J = J.astype(np.int64)
+            for c in range(4):
+                M += W[:, c, None, None] * placed[J[:, c]]
+            total += W.sum(axis=1)
+        if not (total > 0).all():
+            raise doc.fail("a vertex of its skinned mesh has no skin weight.")
+        out.append(M / total[:, None, None])
+    return np.concatenate(out)
 
 
 def load_gltf(path: str | Path, units: str = "m", mesh: str | None = None) -> Rig:
@@ -494,10 +557,16 @@ def _load_mesh(doc: _Doc, path: Path, units: str, mesh_index: int, mesh: dict) -
         tris.append(_primitive_triangles(doc, p, n) + offset)
         offset += n
     M = _world_matrix(doc, mesh_index)
-    A = M[:3, :3]
     with np.errstate(invalid="ignore", over="ignore"):   # a NaN or infinity in the file: the Rig refuses it below
-        neutral = np.concatenate(positions) @ A.T + M[:3, 3]
-        D = np.concatenate(deltas, axis=1) @ A.T
+        if M.ndim == 2:
+            A = M[:3, :3]
+            neutral = np.concatenate(positions) @ A.T + M[:3, 3]
+            D = np.concatenate(deltas, axis=1) @ A.T
+        else:   # a skin posed away from its bind pose: each vertex placed by its joints
+            Mv = _skinned(doc, prims, [pos.shape[0] for pos in positions], M)
+            A = np.median(Mv[:, :3, :3], axis=0)
+            neutral = np.einsum("vij,vj->vi", Mv[:, :3, :3], np.concatenate(positions)) + Mv[:, :3, 3]
+            D = np.einsum("vij,kvj->kvi", Mv[:, :3, :3], np.concatenate(deltas, axis=1))
     T = np.concatenate(tris).astype(np.int32)
     if np.linalg.det(A) < 0:  # a mirroring node: keep the faces facing out
         T = T[:, [0, 2, 1]]

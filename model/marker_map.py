@@ -200,6 +200,9 @@ OFF_FACE_CM = 1.0
 # median 0.6-4.8 cm off the face at their own size; the shared face takes (the rig's own face and another actor's)
 # at 0.99-1.0 and 0.01-0.14 cm.
 FACE_SCALE_RANGE = (0.4, 2.5)
+# A registration whose scale fell below this shrank the markers onto one point of the rig (ICP on a rig with a few
+# small moving parts: MorphStressTest's bars took the actor take at 4.5e-30): its scale and distances mean nothing.
+COLLAPSED_SCALE = 1e-3
 # Markers whose calibration positions all lie within this of their centroid (cm, RMS) do not span a face (a take
 # whose points are all written at the origin).
 MIN_SPREAD_CM = 0.1
@@ -298,10 +301,11 @@ def auto_marker_map(rig: Rig, take: MarkerTake, *, calibration_frames: int | sli
     rms, s, R, t, d, nn, moved = best
     off = float(np.median(d)) / s if s > 0 else float("inf")     # at the take's own size, rig units
     if not (FACE_SCALE_RANGE[0] <= s <= FACE_SCALE_RANGE[1] and off <= length(OFF_FACE_CM, rig.units)):
+        fit = f"needs a scale of {s:.2g} and leaves half of them more than {off:.2g} {rig.units} off its surface at " \
+            "their own size" if s >= COLLAPSED_SCALE else "shrinks them to one point of its surface"
         raise RigInputError(f"{take.source or 'take'}: its markers do not look like a face on this rig (fitting them "
-                            f"to it needs a scale of {s:.2g} and leaves half of them more than {off:.2g} {rig.units} "
-                            "off its surface at their own size), so they are not mapped automatically; give a marker "
-                            "map if they are on a face, or check the take's units.")
+                            f"to it {fit}), so they are not mapped automatically; give a marker map if they are on a "
+                            "face, or check the take's units.")
     on_face = d <= np.quantile(d, 0.9) if d.size > 10 else np.ones(d.size, bool)
     surface = pts
     if warp and on_face.sum() >= 4:

@@ -130,6 +130,33 @@ def is_weights_csv(path: str | Path) -> bool:
     return weights_header(header) is not None
 
 
+# How far (in frames) a row's time may be from its place on the even grid: the rounding of times written with few
+# decimals (printf's %f: 6; milliseconds: 3, 0.03 of a frame at 60 fps); a frame dropped or repeated is 0.5-1.
+TIME_JITTER_FRAMES = 0.1
+
+
+def times_rate(times: np.ndarray) -> float | None:
+    """The frame rate of evenly spaced ``times`` (seconds, two or more), or None if they are not. The rate is the
+    whole span's (one rounded step, 0.016667 for 1/60, would be 60.0012 fps and drift a frame in 14 minutes); a
+    whole or NTSC rate (n * 1000/1001) that places every row as well as it does is preferred."""
+    times = np.asarray(times, dtype=np.float64)
+    k = np.arange(times.size)
+    span = float(times[-1] - times[0])
+    if not (np.isfinite(span) and span > 0):
+        return None
+    rate = (times.size - 1) / span
+
+    def off(r: float) -> float:            # the largest distance of a row from its place at rate r (seconds)
+        return float(np.abs(times - times[0] - k / r).max())
+
+    if off(rate) > TIME_JITTER_FRAMES / rate:
+        return None
+    for nice in (float(np.round(rate)), float(np.round(rate * 1.001)) / 1.001):
+        if nice > 0 and off(nice) <= 2 * off(rate) + 1e-6:
+            return nice
+    return float(np.round(rate, 6))
+
+
 def read_weights_take(path: str | Path, shape_names: list[str] | None):
     """A weights CSV as a weight take (``model.take_data.WeightTake``) on a rig's ``shape_names``: each column in
     its shape's place, shapes without a column at 0 (None: the file's own columns, for ``take-info``). The rate
@@ -143,7 +170,7 @@ def read_weights_take(path: str | Path, shape_names: list[str] | None):
     unknown = [n for n in names if n not in shape_names]
     if unknown:
         raise RigInputError(f"{path}: names shapes the rig does not have: {', '.join(unknown[:5])}"
-                            f"{' ...' if len(unknown) > 5 else ''}.")
+                            f"{f' and {len(unknown) - 5} more' if len(unknown) > 5 else ''}.")
     warnings = []
     if frames.size > 1:
         steps = np.diff(frames)
@@ -154,11 +181,9 @@ def read_weights_take(path: str | Path, shape_names: list[str] | None):
         rate = UNTIMED_RATE
         warnings.append(f"{path}: has no time column; {UNTIMED_RATE:g} frames a second assumed.")
     elif frames.size > 1:
-        rate = 1.0 / float(np.median(np.diff(times)))
-        if not np.isfinite(rate) or rate <= 0 or np.abs(times - times[0] - np.arange(frames.size) / rate).max() \
-                > 1e-3 / rate:
+        rate = times_rate(times)
+        if rate is None:
             raise RigInputError(f"{path}: its times are not evenly spaced frames (a frame every 1/rate seconds).")
-        rate = float(np.round(rate, 6))
     else:
         rate = 30.0
         warnings.append(f"{path}: one frame has no frame rate; 30 frames a second assumed.")

@@ -6,6 +6,7 @@ The shared face takes (the rig's own face, and an actor who is not the rig) are 
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -70,3 +71,18 @@ def test_solve_and_batch_refuse_a_body_take_in_one_sentence(ict_dir, take_dir, t
     assert sorted(statuses.values()) == ["failed", "solved"], statuses
     failed = next(t for t in takes.values() if t["status"] == "failed")
     assert "do not look like a face" in failed["error"] and proc.returncode == 2
+
+
+def test_a_face_take_on_a_rig_that_is_no_face_is_refused_without_meaningless_numbers():
+    """The actor's face take on the third-party glTF MorphStressTest (bars on a plinth): the registration shrinks
+    the markers onto one point, and the sentence said so with a 'scale of 4.5e-30' and markers '1.5e+14 m' off."""
+    from model.readers import load_rig
+    rig = load_rig(require_data(THIRDPARTY / "gltf" / "MorphStressTest.gltf"))
+    path = require_data(DATA / "mocap" / "actor_take" / "take.c3d")
+    take = read_take(path, rig)
+    with pytest.raises(RigInputError) as refused:
+        auto_marker_map(rig, take, calibration_frames=30, refine=0)
+    message = str(refused.value)
+    _one_sentence_naming(message, path)
+    assert "do not look like a face" in message and "shrinks them to one point" in message
+    assert not re.search(r"\de[+-]\d", message), message      # no 4.5e-30, no 1.5e+14

@@ -10,6 +10,7 @@ import pytest
 from model.pc2 import read_pc2
 from model.weights_csv import read_weights_csv
 from tests.cli_runner import run_cli
+from tests.conftest import DATA, require_data
 
 
 def dense_rms_mm(frames: np.ndarray, truth) -> float:
@@ -338,6 +339,53 @@ def test_a_weights_csv_as_a_take_keeps_time_or_says_why_not(ict_rig, tmp_path):
         with pytest.raises(RigInputError) as err:
             read_weights_take(tmp_path / name, names)
         assert name in str(err.value) and words in str(err.value), str(err.value)
+
+
+def test_a_weights_csv_whose_times_are_rounded_keeps_its_rate(ict_rig, tmp_path):
+    """Times written with printf's %f (6 decimals) or in milliseconds, as other tools write them: the take keeps its
+    frame rate (one rounded step made 1/60 s 60.0012 fps, and the 358-frame take was refused as uneven; 1/24 s was
+    23.9998 fps, the glTF's last key a third of a millisecond late)."""
+    from model.weights_csv import read_weights_take
+    names = ict_rig.shape_names
+    for rate, frames, decimals in ((60, 358, 6), (60, 358, 3), (24, 48, 6), (30 / 1.001, 500, 6)):
+        path = tmp_path / f"w_{rate:g}_{decimals}.csv"
+        path.write_text("frame,time,jawOpen\n" + "".join(f"{k},{k / rate:.{decimals}f},0.5\n" for k in range(frames)))
+        take = read_weights_take(path, names)
+        assert take.rate == pytest.approx(rate, rel=1e-12), (path.name, take.rate)
+        assert take.n_frames == frames
+
+
+def test_a_weights_csv_for_another_rig_names_what_it_lacks_in_one_sentence(ict_rig, tmp_path):
+    """The solve's weights of ICT given to the third-party glTF MorphStressTest: one sentence that counts the names
+    it leaves out (it ended '..., browInnerUp_L ....'), read as a take and as an export's animation alike."""
+    from model.errors import RigInputError
+    from model.export import load_animation
+    from model.readers import load_rig
+    from model.weights_csv import read_weights_take, write_weights_csv
+    rig = load_rig(require_data(DATA / "thirdparty" / "gltf" / "MorphStressTest.gltf"))
+    path = tmp_path / "ict.csv"
+    write_weights_csv(path, np.zeros((3, ict_rig.n_shapes)), ict_rig.shape_names, rate=60)
+    for read in (lambda: read_weights_take(path, rig.shape_names), lambda: load_animation(path, rig)):
+        with pytest.raises(RigInputError) as refused:
+            read()
+        assert str(refused.value) == (f"{path}: names shapes the rig does not have: "
+                                      f"{', '.join(ict_rig.shape_names[:5])} and {ict_rig.n_shapes - 5} more.")
+
+
+def test_the_solve_options_help_says_the_default_the_solve_uses():
+    """``solve --help`` (and ``batch --help``, the same options) said --global's default was 'per region of a
+    hierarchy level' while a solve without options is global (the report's "mode"; README: it measured best)."""
+    import argparse
+    from app.cli_solve import add_solve_options
+    from model.segmentation import SegmentationSettings
+    from model.take_workspace import SOLVE_DEFAULTS
+    parser = argparse.ArgumentParser()
+    add_solve_options(parser)
+    helps = {a.dest: a.help for a in parser._actions}
+    assert not SOLVE_DEFAULTS["regional"] and "(the default;" in helps["global_solve"], helps["global_solve"]
+    assert "default: per region" not in helps["global_solve"]
+    assert f"(default {SegmentationSettings().t:g})" in helps["threshold"]
+    assert f"(default {SOLVE_DEFAULTS['level']})" in helps["level"]
 
 
 def test_a_command_asks_for_ordinary_pages_and_the_window_keeps_huge_pages():

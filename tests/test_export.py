@@ -347,6 +347,24 @@ def test_usd_units_and_up_axis_options(tmp_path, rig_with_corrective):
     assert np.allclose(rest, np.stack([n[:, 0], -n[:, 2], n[:, 1]], axis=1), atol=1e-4)  # Y-up turned Z-up
 
 
+def test_usd_keys_a_weights_csv_with_rounded_times_on_whole_frames_at_its_rate(tmp_path, sample_rig):
+    """``export --animation`` of a weights CSV whose times another tool rounded (printf's %f): the USD plays at the
+    take's rate, one time code per frame (it was 23.9998 fps with time codes 1.000008, ..., 46.9996 for 24 fps)."""
+    from pxr import Usd
+    name = sample_rig.shape_names[0]
+    for rate, frames in ((24, 48), (60, 358)):
+        csv = tmp_path / f"w{rate}.csv"
+        csv.write_text(f"frame,time,{name}\n" + "".join(f"{k},{k / rate:.6f},{k / frames:.6f}\n"
+                                                       for k in range(frames)))
+        export_rig(sample_rig, tmp_path / f"w{rate}.usda", animation=load_animation(csv, sample_rig))
+        stage = Usd.Stage.Open(str(tmp_path / f"w{rate}.usda"))
+        assert stage.GetTimeCodesPerSecond() == rate and stage.GetFramesPerSecond() == rate
+        assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0, frames - 1)
+        attr = stage.GetPrimAtPath("/Root/Skeleton/Animation").GetAttribute("blendShapeWeights")
+        assert attr.GetTimeSamples() == list(range(frames))
+        assert attr.Get(frames - 1)[0] == pytest.approx((frames - 1) / frames, abs=1e-6)
+
+
 # --- glTF options and the command line --------------------------------------------------------------
 def test_gltf_units_and_up_options(tmp_path, sample_rig):
     export_rig(sample_rig, tmp_path / "mm_z.glb", units="mm", up="z")

@@ -435,3 +435,108 @@ def test_nan_or_infinite_coordinates_are_refused_naming_the_file(tmp_path, cube,
                 load_gltf(path)
             assert str(path) in str(e.value)
     assert_same(load_gltf(_write(tmp_path, doc, "good.gltf")), cube)
+
+
+# --- skinned meshes: the joints place them, not their node (glTF 2.0 §3.7.3) --------------------------------
+def _skinned(tmp_path, name: str, mesh_node: dict, joints: list[dict], ibms: list[np.ndarray] | None,
+             halves: bool = False):
+    """The third-party SimpleMorph.gltf (its animation and default weights dropped) with its mesh skinned to
+    ``joints`` (nodes at the scene's root; every vertex on the first, or with ``halves`` half on each of the first
+    two) and ``mesh_node``'s transform on its node."""
+    from tests.conftest import DATA, require_data
+    doc = json.loads(require_data(DATA / "thirdparty" / "gltf" / "SimpleMorph.gltf").read_text())
+    doc.pop("animations", None)
+    doc["meshes"][0].pop("weights", None)
+    n = doc["accessors"][doc["meshes"][0]["primitives"][0]["attributes"]["POSITION"]]["count"]
+    blob = bytes([0, 1 if halves else 0, 0, 0] * n) + struct.pack(f"<{4 * n}f", *([0.5, 0.5, 0.0, 0.0] if halves
+                                                                                 else [1.0, 0.0, 0.0, 0.0]) * n)
+    views = [(0, 4 * n), (4 * n, 16 * n)]
+    if ibms is not None:
+        views.append((len(blob), 64 * len(ibms)))
+        blob += b"".join(struct.pack("<16f", *np.asarray(m, dtype=float).T.reshape(-1)) for m in ibms)
+    doc["buffers"].append({"byteLength": len(blob),
+                           "uri": "data:application/octet-stream;base64," + base64.b64encode(blob).decode()})
+    b, v, a = len(doc["buffers"]) - 1, len(doc["bufferViews"]), len(doc["accessors"])
+    doc["bufferViews"] += [{"buffer": b, "byteOffset": o, "byteLength": size} for o, size in views]
+    doc["accessors"] += [{"bufferView": v, "componentType": 5121, "count": n, "type": "VEC4"},
+                         {"bufferView": v + 1, "componentType": 5126, "count": n, "type": "VEC4"}]
+    prim = doc["meshes"][0]["primitives"][0]
+    prim["attributes"].update({"JOINTS_0": a, "WEIGHTS_0": a + 1})
+    node = next(i for i, nd in enumerate(doc["nodes"]) if "mesh" in nd)
+    doc["nodes"][node].update(mesh_node, skin=0)
+    first = len(doc["nodes"])
+    doc["nodes"] += joints
+    doc["scenes"][0]["nodes"] += list(range(first, first + len(joints)))
+    doc["skins"] = [{"joints": list(range(first, first + len(joints)))}]
+    if ibms is not None:
+        doc["accessors"].append({"bufferView": v + 2, "componentType": 5126, "count": len(ibms), "type": "MAT4"})
+        doc["skins"][0]["inverseBindMatrices"] = a + 2
+    path = tmp_path / name
+    path.write_text(json.dumps(doc))
+    return path
+
+
+def _shift(x, y, z) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = x, y, z
+    return m
+
+
+# (mesh node, joints, inverse bind matrices, half on each of two joints, the matrix that places the mesh)
+SKINNED = {
+    "node_ignored": ({"translation": [0, 0, 5]}, [{"name": "root"}], None, False, np.eye(4)),
+    "joint_scales": ({"translation": [0, 0, 5]}, [{"scale": [2, 2, 2]}], None, False, np.diag([2, 2, 2, 1.0])),
+    "bound_where_it_is": ({"scale": [0.01, 0.01, 0.01]}, [{"translation": [0, 2, 0]}, {"translation": [3, 0, 0]}],
+                          [_shift(0, -2, 0), _shift(-3, 0, 0)], True, np.eye(4)),
+    "joints_shift_it": ({}, [{"translation": [0, 2, 0]}, {"translation": [0, 2, 0]}], None, True, _shift(0, 2, 0)),
+    # the joints disagree (a file posed away from its bind pose): each vertex placed by its joints' blend
+    "posed_off_its_bind": ({"translation": [0, 0, 5]}, [{"translation": [0, 2, 0]}, {"translation": [3, 0, 0]}],
+                           None, False, _shift(0, 2, 0)),
+    "posed_and_blended": ({}, [{"translation": [0, 2, 0]}, {"translation": [3, 0, 0]}], None, True,
+                          _shift(1.5, 1, 0)),
+}
+
+
+@pytest.mark.parametrize("case", list(SKINNED))
+def test_a_skinned_mesh_is_placed_by_its_joints_not_by_its_node(tmp_path, case):
+    """glTF 2.0 §3.7.3: a skinned mesh's node transform is ignored, its joints place it (a joint's world matrix
+    times its inverse bind matrix). The reader applied the mesh node's transform: 5 m off, or 100 times too small
+    under a centimetre-scaled node, where Blender and every viewer show the mesh where the joints put it."""
+    from tests.conftest import DATA
+    node, joints, ibms, halves, M = SKINNED[case]
+    plain = load_gltf(DATA / "thirdparty" / "gltf" / "SimpleMorph.gltf")
+    rig = load_gltf(_skinned(tmp_path, f"{case}.gltf", node, joints, ibms, halves))
+    assert np.allclose(rig.neutral, plain.neutral @ M[:3, :3].T + M[:3, 3], atol=1e-9)
+    assert np.allclose(rig.deltas, plain.deltas @ M[:3, :3].T, atol=1e-9)
+
+
+def test_blender_shows_a_skinned_mesh_where_the_reader_puts_it(tmp_path):
+    """The skinned files above imported by Blender's glTF importer: its evaluated mesh (the armature applied), in
+    glTF's axes, is the rig's neutral."""
+    import shutil
+    import subprocess
+    blender = shutil.which("blender")
+    if not blender:
+        pytest.skip("blender is not installed")
+    paths = [_skinned(tmp_path, f"{case}.gltf", *SKINNED[case][:4]) for case in SKINNED]
+    script = tmp_path / "evaluated.py"
+    script.write_text(
+        "import bpy, json, sys\n"
+        "out, paths = sys.argv[-1], sys.argv[sys.argv.index('--') + 1:-1]\n"
+        "seen = {}\n"
+        "for path in paths:\n"
+        "    bpy.ops.wm.read_factory_settings(use_empty=True)\n"
+        "    bpy.ops.import_scene.gltf(filepath=path)\n"
+        "    o = next(o for o in bpy.data.objects if o.type == 'MESH')\n"
+        "    ev = o.evaluated_get(bpy.context.evaluated_depsgraph_get())\n"
+        "    seen[path] = [list(ev.matrix_world @ v.co) for v in ev.to_mesh().vertices]\n"
+        "json.dump(seen, open(out, 'w'))\n")
+    out = tmp_path / "seen.json"
+    proc = subprocess.run([blender, "-b", "--factory-startup", "--python", str(script), "--", *map(str, paths),
+                           str(out)], capture_output=True, text=True, timeout=600)
+    assert out.exists(), proc.stdout[-2000:] + proc.stderr[-2000:]
+    seen = json.loads(out.read_text())
+    for path in paths:
+        b = np.array(seen[str(path)])
+        in_gltf_axes = np.c_[b[:, 0], b[:, 2], -b[:, 1]]     # Blender's Z-up back to glTF's Y-up
+        assert np.allclose(in_gltf_axes, load_gltf(path).neutral, atol=1e-5), (path.name, in_gltf_axes)
