@@ -490,6 +490,31 @@ def test_a_pose_change_draws_one_frame(qtbot, tmp_path):
     fresh.close()
 
 
+def test_a_view_change_draws_one_frame(qtbot, tmp_path):
+    """Issue 20: never render twice for one change. Choosing a view whose colour map has a legend (segmentation, the
+    deformation's direction colours) or leaves one with a colour bar rendered the picture up to four times: pyvista's
+    remove_scalar_bar, add_legend and add_text each render it (0.11 s a render at 422k vertices)."""
+    import vtk
+    w = make_window(qtbot, tmp_path)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=60000)
+    w.segmentation.wait()
+    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=5000)
+    renders = [0]
+    w.viewport.plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent,
+                                           lambda *_: renders.__setitem__(0, renders[0] + 1))
+    sp = w.segmentation_panel
+    for view in ("deformation", "deformation-rgb", "segmentation", "deformation", "shaded", "segmentation"):
+        qtbot.wait(30)
+        renders[0] = 0
+        sp.view.setCurrentIndex(sp.view.findData(view))
+        w.segmentation.wait()
+        qtbot.waitUntil(lambda: not w.redraw_pending, timeout=5000)
+        qtbot.wait(30)
+        assert renders[0] == 1, f"{view}: {renders[0]} renders"
+        colormap = w.viewport.colormap
+        assert (colormap is None) == (view == "shaded")
+
+
 def test_an_expose_shows_the_last_render_again_unless_something_changed(qtbot, tmp_path):
     """A window closing over the viewport (a menu, a tooltip, a dialog; no compositor) exposes it: the picture VTK
     keeps is shown again without a render when nothing changed since the last one (a render is 0.1-0.16 s at 422k

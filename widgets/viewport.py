@@ -285,7 +285,7 @@ class Viewport(QtWidgets.QWidget):
         return self._wireframe
 
     def _redraw_surface(self) -> None:
-        self.plotter.remove_scalar_bar() if self.plotter.scalar_bars else None
+        self.plotter.remove_scalar_bar(render=False) if self.plotter.scalar_bars else None   # (pyvista renders)
         # the previous colour map's legend and its title go with it (they stayed up in Shaded view)
         self.plotter.remove_legend(render=False)
         self.plotter.remove_actor("legend_title", render=False)
