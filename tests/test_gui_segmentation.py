@@ -163,3 +163,57 @@ def test_a_failed_segmentation_wraps_its_message_inside_the_dock(qtbot, tmp_path
     qtbot.waitUntil(lambda: panel.status.text().startswith("No segmentation: "), timeout=10000)
     _fits_its_dock(qtbot, w)
     _whole_sentence_shown(panel.status, panel.status.text())
+
+
+def test_the_map_shown_is_the_shape_the_shape_choice_names(qtbot, tmp_path):
+    """Deformation map of one shape: the map shown stays the one the Shape choice names through the Shapes list's
+    edits and a new rig. A rename (F2) set the choice to "All shapes (max)" while jawOpen's map stayed on the face, a
+    delete above it showed the next shape's map under that name, and a rig with fewer shapes than the index failed
+    ("Something went wrong", IndexError) instead of showing its combined map."""
+    from PySide6 import QtCore
+    from PySide6.QtTest import QTest
+    from tests.conftest import DATA, require_data
+
+    w = make_window(qtbot, tmp_path)
+    w.activateWindow()
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=5000)
+    _ready(qtbot, w)
+    panel, shapes = w.segmentation_panel, w.shapes_panel
+    panel.set_view("deformation")
+    panel.shape.setCurrentIndex(panel.shape.findText("jawOpen"))
+
+    def shown():
+        return panel.shape.currentText(), w.viewport.colormap.title.split("\n")[0]
+
+    def on_name(name, key, text=None):
+        row = shapes.row(name)
+        shapes.scroll.ensureWidgetVisible(row)
+        QTest.mouseClick(row.label, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier, row.label.rect().center())
+        qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is shapes._rows_host, timeout=5000)
+        QTest.keyClick(QtWidgets.QApplication.focusWidget(), key)
+        if text is not None:
+            editor = QtWidgets.QApplication.focusWidget()
+            editor.selectAll()
+            QTest.keyClicks(editor, text)
+            QTest.keyClick(editor, QtCore.Qt.Key_Return)
+        _ready(qtbot, w)
+
+    assert shown() == ("jawOpen", "Laplacian of jawOpen")
+    first = w.document.rig.shape_names[0]
+    assert first != "jawOpen"
+    on_name(first, QtCore.Qt.Key_F2, "renamed")
+    assert shown() == ("jawOpen", "Laplacian of jawOpen")
+    on_name("jawOpen", QtCore.Qt.Key_F2, "jawDrop")
+    assert shown() == ("jawDrop", "Laplacian of jawDrop")
+    on_name("renamed", QtCore.Qt.Key_Delete)
+    assert "renamed" not in w.document.rig.shape_names
+    assert shown() == ("jawDrop", "Laplacian of jawDrop")
+    w.undo_action.trigger()
+    _ready(qtbot, w)
+    assert shown() == ("jawDrop", "Laplacian of jawDrop")
+
+    w.last_error = None
+    open_and_wait(qtbot, w, require_data(DATA / "thirdparty" / "gltf" / "MorphStressTest.gltf"))   # 8 shapes
+    _ready(qtbot, w)
+    assert w.last_error is None
+    assert shown() == ("All shapes (max)", "max Laplacian")
