@@ -217,3 +217,18 @@ def test_the_map_shown_is_the_shape_the_shape_choice_names(qtbot, tmp_path):
     _ready(qtbot, w)
     assert w.last_error is None
     assert shown() == ("All shapes (max)", "max Laplacian")
+
+
+def test_the_panels_choices_are_shown_whole_at_the_default_window_size(qtbot, tmp_path):
+    """At 1400x900 the Segmentation panel's drop-down lists show their current choice whole: the Map choice read
+    'Bends or moves, each shape (defau' (its '(default)' is said by being the first choice)."""
+    w = make_window(qtbot, tmp_path, (1400, 900))
+    _ready(qtbot, w)
+    qtbot.wait(100)
+    panel = w.segmentation_panel
+    for combo in (panel.view, panel.map_kind, panel.shape, panel.method, panel.separate):
+        opt = QtWidgets.QStyleOptionComboBox()
+        combo.initStyleOption(opt)
+        field = combo.style().subControlRect(QtWidgets.QStyle.CC_ComboBox, opt,
+                                             QtWidgets.QStyle.SC_ComboBoxEditField, combo)
+        assert combo.fontMetrics().horizontalAdvance(combo.currentText()) <= field.width(), combo.currentText()

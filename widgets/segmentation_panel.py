@@ -10,7 +10,7 @@ from widgets.length_box import show_length_in
 VIEW_LABELS = [("shaded", "Shaded"), ("deformation", "Deformation map"),
                ("deformation-rgb", "Deformation vector (RGB)"), ("segmentation", "Segmentation")]
 # (map kind, per-shape normalisation, label) of the map choice
-MAP_CHOICES = [("laplacian+displacement", True, "Bends or moves, each shape (default)"),
+MAP_CHOICES = [("laplacian+displacement", True, "Bends or moves, each shape"),   # the default
                ("laplacian", True, "Laplacian ‖L d‖, each shape"),
                ("laplacian", False, "Laplacian ‖L d‖, raw maximum (Joshi)"),
                ("displacement", True, "Displacement ‖d‖, each shape"),
