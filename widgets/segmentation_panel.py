@@ -59,7 +59,7 @@ class SegmentationPanel(QtWidgets.QWidget):
         self.method.currentIndexChanged.connect(self._commit)
         form.addRow("Method", self.method)
         self.separate = QtWidgets.QComboBox()
-        self.separate.addItem("Follow the region that moves them", "follow")
+        self.separate.addItem("Follow the region moving them", "follow")
         self.separate.addItem("Stay in the background", "background")
         self.separate.setToolTip("Separate meshes of the rig (eyeballs, teeth, tongue, eyelashes): join the skin "
                                  "region whose shapes move them, or stay out of every region")
