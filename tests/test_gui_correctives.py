@@ -643,3 +643,24 @@ def test_the_pairs_listed_stay_the_shapes_they_name_after_shape_list_edits(qtbot
     assert panel.selected_pair_row() == 0 and "×" in panel.pair_info.text()
     a, b = listed()[0]
     assert panel.pair_info.text().startswith(f"{a} × {b}")
+
+
+def test_the_sculpt_menu_actions_are_enabled_only_when_they_can_act(qtbot, win):
+    """Correctives ▸ Discard Sculpt and Stop Sculpting are enabled as the panel's Discard sculpt and Stop buttons
+    are: they were enabled with nothing to discard and no sculpt to stop, and then did nothing and said nothing."""
+    w, ctrl = win
+    doc = w.document
+    actions = {a.text().replace("&", ""): a for a in w.actions()}
+    discard, stop = actions["Discard Sculpt"], actions["Stop Sculpting"]
+    assert not discard.isEnabled() and not stop.isEnabled()
+    ctrl.panel.set_ticked(PAIR)
+    qtbot.mouseClick(ctrl.panel.new_button, QtCore.Qt.LeftButton)
+    _settle(qtbot, w)
+    assert stop.isEnabled() and not discard.isEnabled() and ctrl.panel.cancel_button.isEnabled()
+    from app.commands import SetEditOffsetCommand      # what a brush stroke pushes
+    doc.undo_stack.push(SetEditOffsetCommand(doc, None, np.full((doc.rig.n_vertices, 3), 0.01), "stroke"))
+    assert discard.isEnabled() == ctrl.panel.discard_button.isEnabled() is True
+    discard.trigger()
+    assert doc.edit_offset is None and not discard.isEnabled() and stop.isEnabled()
+    stop.trigger()
+    assert not ctrl.sculpting and not stop.isEnabled() and not discard.isEnabled()
