@@ -98,8 +98,15 @@ class SegmentationController(QtCore.QObject):
             return
         if (rig is not None and seen is not None and self.segmentation is not None and rig.neutral is seen[0]
                 and rig.deltas is seen[1] and len(rig.shape_names) == len(seen[2])):
-            # shapes renamed (the Shapes list): the same arrays, so the same regions and maps
+            # shapes renamed (the Shapes list): the same arrays, so the same regions and maps; the region list names
+            # each region's most active shapes by their new names (it kept the old ones)
+            renamed = dict(zip(seen[2], rig.shape_names))
             self._segmented = (rig.neutral, rig.deltas, list(rig.shape_names))
+            self.stats = [[dict(row, shapes=[(renamed.get(n, n), share) for n, share in row["shapes"]]) for row in rows]
+                          for rows in self.stats]
+            self._show_regions()
+            if self.highlight is not None:
+                self.panel.select_region(self.highlight)
             self._follow_shape_choice(rig.shape_names)
             return
         if rig is not None and seen is not None and self.segmentation is not None and _appended(rig, seen):

@@ -239,3 +239,36 @@ def test_the_panels_choices_are_shown_whole_at_the_default_window_size(qtbot, tm
     w.keyframes.show_graph_editor()      # Ctrl+G: the panel's dock is shorter and shows its vertical scroll bar
     qtbot.waitUntil(lambda: w.segmentation_dock.widget().verticalScrollBar().isVisible(), timeout=5000)
     whole()
+
+
+def test_the_region_list_names_a_renamed_shape_by_its_new_name(qtbot, tmp_path):
+    """The region list's 'Most active shapes' after a rename (F2 on the Shapes list): the regions are kept (the same
+    shapes), and they named the renamed shape by its old name, in the list and its tooltips."""
+    from PySide6 import QtCore
+    from PySide6.QtTest import QTest
+    w = make_window(qtbot, tmp_path)
+    w.activateWindow()
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=5000)
+    _ready(qtbot, w)
+    panel, shapes = w.segmentation_panel, w.shapes_panel
+    item = panel.regions.topLevelItem(0)
+    top = item.text(2).split(" ")[0]            # region 0's most active shape
+    panel.regions.setCurrentItem(item)
+    assert w.segmentation.highlight == 0
+    seg = w.segmentation.segmentation
+    row = shapes.row(top)
+    shapes.scroll.ensureWidgetVisible(row)
+    QTest.mouseClick(row.label, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier, row.label.rect().center())
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is shapes._rows_host, timeout=5000)
+    QTest.keyClick(QtWidgets.QApplication.focusWidget(), QtCore.Qt.Key_F2)
+    editor = QtWidgets.QApplication.focusWidget()
+    editor.selectAll()
+    QTest.keyClicks(editor, "renamedTop")
+    QTest.keyClick(editor, QtCore.Qt.Key_Return)
+    QtWidgets.QApplication.processEvents()
+    assert w.segmentation.segmentation is seg                 # not segmented again
+    texts = [panel.regions.topLevelItem(i).text(2) + panel.regions.topLevelItem(i).toolTip(2)
+             for i in range(panel.regions.topLevelItemCount())]
+    assert texts[0].startswith("renamedTop ")
+    assert not any(f"{top} " in t or f"{top}:" in t for t in texts)
+    assert panel.selected_region() == 0 and w.segmentation.highlight == 0
