@@ -3,7 +3,7 @@ as a new shape, all undoable; settings saved in the project."""
 from __future__ import annotations
 
 import numpy as np
-from PySide6 import QtWidgets
+from PySide6 import QtCore, QtWidgets
 
 from tests.gui_helpers import make_window, open_and_wait
 
@@ -272,3 +272,34 @@ def test_the_region_list_names_a_renamed_shape_by_its_new_name(qtbot, tmp_path):
     assert texts[0].startswith("renamedTop ")
     assert not any(f"{top} " in t or f"{top}:" in t for t in texts)
     assert panel.selected_region() == 0 and w.segmentation.highlight == 0
+
+
+def test_a_shape_saved_from_a_nudge_shows_its_own_deformation_map(qtbot, tmp_path):
+    """Save as new shape keeps the segmentation and its maps; choosing the new shape in the Shape list of the
+    Deformation map then failed ('Something went wrong', IndexError: the maps had one shape fewer). It shows the
+    new shape's own map (the Laplacian of its displacement, as every shape's)."""
+    w = make_window(qtbot, tmp_path)
+    _ready(qtbot, w)
+    panel, ctrl = w.segmentation_panel, w.segmentation
+    panel.set_view("segmentation")
+    lvl = ctrl.segmentation.levels[0]
+    region = max(range(lvl.n_regions), key=lambda r: lvl.regions[r].core.size)
+    panel.regions.setCurrentItem(panel.regions.topLevelItem(region))
+    qtbot.mouseClick(panel.nudge_buttons["out"], QtCore.Qt.LeftButton)
+    seg = ctrl.segmentation
+    ctrl.save_nudge_as_shape("nudged")
+    w.jobs.wait()
+    assert ctrl.segmentation is seg and w.document.rig.shape_names[-1] == "nudged"
+    panel.set_view("deformation")
+    w.last_error = None
+    panel.shape.setCurrentIndex(panel.shape.findText("nudged"))
+    QtWidgets.QApplication.processEvents()
+    assert w.last_error is None
+    cmap = w.viewport.colormap
+    assert cmap.title.startswith("Laplacian of nudged")
+    rig = w.document.rig
+    from solvers.deformation_maps import deformation_maps
+    mine = deformation_maps(ctrl.cache.laplacian(), rig.deltas[[-1]]).per_shape[:, 0]
+    np.testing.assert_allclose(cmap.scalars, mine)
+    moved = np.linalg.norm(rig.deltas[-1], axis=1) > 0
+    assert cmap.scalars[moved].max() > 0 and (cmap.scalars[~moved] == 0).mean() > 0.9   # where the nudge bends
