@@ -39,6 +39,7 @@ class CorrectiveController(QtCore.QObject):
         self.document, self.viewport = window.document, window.viewport
         self.authoring: list[str] | None = None   # drivers being sculpted (sculpt mode on when not None)
         self.new_rule = "product"
+        self.sculpt_actions: dict = {}            # the Correctives menu's Discard Sculpt and Stop Sculpting
         self.sculpt = SculptTool(window.viewport, window.document, panel, lambda: self.authoring is not None)
         self.finder = InterferenceFinder(window, panel, self.start_authoring)
         d = self.document
@@ -94,7 +95,16 @@ class CorrectiveController(QtCore.QObject):
         self.panel.set_activations(self.activations())
 
     def _on_offset_change(self) -> None:
-        self.panel.set_sculpting(self.authoring, self.document.edit_offset is not None)
+        self._show_sculpting()
+
+    def _show_sculpting(self) -> None:
+        """The panel's sculpt state and buttons, and the menu's Discard Sculpt (a sculpt pending) and Stop Sculpting
+        (sculpting) enabled as the panel's buttons are: enabled, they did nothing and said nothing."""
+        has_offset = self.document.edit_offset is not None
+        self.panel.set_sculpting(self.authoring, has_offset)
+        for key, on in (("discard", has_offset), ("stop", self.authoring is not None)):
+            if key in self.sculpt_actions:
+                self.sculpt_actions[key].setEnabled(on)
 
     def activations(self) -> np.ndarray:
         rig = self.document.rig
@@ -187,7 +197,7 @@ class CorrectiveController(QtCore.QObject):
             self.dock.show()
             self.dock.raise_()
         self.panel.tabs.setCurrentIndex(CORRECTIVES_TAB)
-        self.panel.set_sculpting(drivers, self.document.edit_offset is not None)
+        self._show_sculpting()
         self.panel.reveal_sculpt()
         self.window.statusBar().showMessage(
             f"Sculpt the corrective for {' + '.join(drivers)}: drag on the face, then Save corrective "
@@ -204,7 +214,7 @@ class CorrectiveController(QtCore.QObject):
         was = self.authoring is not None
         self.authoring = None
         self.sculpt.disable()
-        self.panel.set_sculpting(None, self.document.edit_offset is not None)
+        self._show_sculpting()
         if was:
             self.sculpting_changed.emit(False)
 
@@ -482,8 +492,10 @@ def install(window) -> CorrectiveController:
     act("Corrective from &Scan…", ctrl.from_scan, "Ctrl+Shift+I",
         "Make the corrective of the ticked drivers from an OBJ of the desired combination")
     act("&Save Corrective", ctrl.save, "Ctrl+Return", "Store the sculpt as the corrective: e = (x_des − x_cur) / a")
-    act("&Discard Sculpt", ctrl.discard_sculpt, None, "Drop the pending sculpt (undoable)")
-    act("S&top Sculpting", ctrl.stop_sculpting, None, "Leave sculpt mode")
+    ctrl.sculpt_actions = {
+        "discard": act("&Discard Sculpt", ctrl.discard_sculpt, None, "Drop the pending sculpt (undoable)"),
+        "stop": act("S&top Sculpting", ctrl.stop_sculpting, None, "Leave sculpt mode")}
+    ctrl._show_sculpting()
     act("&Mirror Corrective", ctrl.mirror, "Ctrl+Shift+M",
         "Add the other side's version of the selected corrective (drivers _L↔_R, reflected across x = 0)")
     act("Mirror &All Correctives", ctrl.mirror_all, None,

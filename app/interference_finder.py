@@ -58,8 +58,19 @@ class InterferenceFinder:
         never write into it), the scores are recomputed on the next search."""
         if self.document.rig is None or self.document.rig.deltas is not self._scored_deltas:
             self._overlap.clear()
-        elif self.rows:       # a corrective saved, mirrored or deleted: the listed rows say so
+            if self.rows:
+                # the rows name shapes by their place in the list before the edit: after a shape deleted, moved or
+                # duplicated they were other pairs (the heat map and Create corrective took the wrong shapes, a
+                # mirrored row failed with KeyError), and their scores are the old shapes'
+                self.leave_heat_map()
+                self.rows = []
+                self.panel.set_pairs([])
+                self.panel.pair_info.setText("The shapes changed: Find Pairs to rank them again.")
+        elif self.rows:       # a corrective saved, mirrored or deleted, a shape renamed: the listed rows say so
             rig = self.document.rig
+            names = rig.shape_names
+            self.panel.set_pair_names([(names[r.i], names[r.j], "" if r.mirror is None else
+                                        f"{names[r.mirror[0]]} × {names[r.mirror[1]]}") for r in self.rows])
             self.panel.set_pair_correctives([corrective_status(rig, r) for r in self.rows])
             row = self.panel.selected_pair_row()
             if 0 <= row < len(self.rows):

@@ -455,8 +455,14 @@ class KeyframeController(QtCore.QObject):
             self.window.run_in_background(f"{title}…", job,
                                           lambda n: self.window.show_status(f"Exported {n} frames to {path}", 5000),
                                           lambda message: self.window.show_error("Could not export", message))
-        if self.document.project is not None:
-            self.window.save_dialog(title, f"{self.document.rig.name}_keys{suffix}", filt, write)
+        if self.document.project is None:
+            return
+        try:   # nothing to export is said at once, not after a file name was chosen
+            self._require_keys()
+        except RigInputError as exc:
+            self.window.show_error("Could not export", str(exc))
+            return
+        self.window.save_dialog(title, f"{self.document.rig.name}_keys{suffix}", filt, write)
 
     def export_csv_dialog(self, per_region: bool = False) -> None:
         self._export_dialog("Export Keyed Weights per Region as CSV" if per_region else "Export Keyed Weights as CSV",

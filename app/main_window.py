@@ -94,6 +94,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         self.setCentralWidget(self.viewport)
         self._build_menus()
         self.shapes_panel = ShapesPanel(self)
+        app_settings.remember(self.shapes_panel.grouping, "shapes/grouping")   # by face part or side, next session too
         self.shapes_dock = self.add_dock("Shapes", self.shapes_panel, QtCore.Qt.RightDockWidgetArea)
         self.segmentation_panel = SegmentationPanel(self)
         self.segmentation_dock = self.add_dock("Segmentation", self.segmentation_panel, QtCore.Qt.LeftDockWidgetArea,

@@ -10,7 +10,7 @@ from model.errors import RigInputError
 from model.rig import Rig
 from model.segmentation import Segmentation, SegmentationCache, SegmentationSettings, segment_rig
 from model.wording import count
-from solvers.deformation_maps import vector_colors
+from solvers.deformation_maps import deformation_maps, vector_colors
 from widgets.scene import ColorMap
 
 BACKGROUND_GREY = np.array([0.55, 0.55, 0.57])
@@ -59,7 +59,11 @@ def deformation_colormap(cache: SegmentationCache, rig: Rig, kind: str, shape: i
         values = np.linalg.norm(rig.deltas[shape], axis=1) if shape is not None else maps.displacement
         title = f"{'displacement of ' + rig.shape_names[shape] if shape is not None else 'max displacement'}\n({rig.units})"
     else:
-        values = maps.per_shape[:, shape] if shape is not None else maps.combined
+        if shape is not None and shape >= maps.per_shape.shape[1]:
+            # a shape added after the maps were made (Save as new shape keeps the segmentation and its maps): its map
+            values = deformation_maps(cache.laplacian(), rig.deltas[shape:shape + 1]).per_shape[:, 0]
+        else:
+            values = maps.per_shape[:, shape] if shape is not None else maps.combined
         title = f"{'Laplacian of ' + rig.shape_names[shape] if shape is not None else 'max Laplacian'}\n({rig.units})"
     # Saturate the top few percent so the structure of the map is visible, not only its peaks.
     top = float(np.percentile(values[values > 0], 97)) if (values > 0).any() else 1.0

@@ -9,6 +9,7 @@ project atomically, so a cancelled job leaves the previous file, or none) and se
 from __future__ import annotations
 
 import multiprocessing as mp
+import threading
 import traceback
 
 
@@ -38,13 +39,32 @@ class PersonalizeJob:
         self._conn, child = ctx.Pipe(duplex=False)
         self.process = ctx.Process(target=_run, args=(child, template, state, request), daemon=True,
                                    name="blendshape-studio personalize")
-        self.process.start()
-        child.close()
         self.result: tuple | None = None
+        self._start_error: OSError | None = None
+        # Started on a thread of its own: ``start`` pickles the rig (tens of MB on ICT FaceKit) into a pipe the new
+        # interpreter reads only once it is up, which held the window 0.3-0.45 s when the job was started from it
+        self._starter = threading.Thread(target=self._start, args=(child,), daemon=True,
+                                         name="blendshape-studio personalize start")
+        self._starter.start()
+
+    def _start(self, child) -> None:
+        try:
+            self.process.start()
+        except OSError as exc:
+            self._start_error = exc
+        finally:
+            child.close()
 
     def poll(self) -> tuple | None:
         """("done", result) or ("failed", message) once the child has finished, else None."""
         if self.result is not None:
+            return self.result
+        if self._starter.is_alive():
+            return None
+        if self._start_error is not None:
+            exc = self._start_error
+            self.result = ("failed", f"The personalisation could not start ({exc.strerror or exc}).")
+            self._conn.close()
             return self.result
         try:
             if self._conn.poll():
@@ -66,16 +86,18 @@ class PersonalizeJob:
 
     @property
     def running(self) -> bool:
-        return self.result is None and self.process.is_alive()
+        return self.result is None and (self._starter.is_alive() or self.process.is_alive())
 
     def cancel(self) -> None:
         """Stop the child now (nothing is written: the project is saved atomically at the very end)."""
-        if self.process.is_alive():
-            self.process.terminate()
-        self.process.join(10)
-        if self.process.is_alive():
-            self.process.kill()
-            self.process.join(5)
+        self._starter.join()            # a child being started is stopped once it is
+        if self._start_error is None:
+            if self.process.is_alive():
+                self.process.terminate()
+            self.process.join(10)
+            if self.process.is_alive():
+                self.process.kill()
+                self.process.join(5)
         self._conn.close()
         if self.result is None:
             self.result = ("cancelled", None)

@@ -98,17 +98,34 @@ class SegmentationController(QtCore.QObject):
             return
         if (rig is not None and seen is not None and self.segmentation is not None and rig.neutral is seen[0]
                 and rig.deltas is seen[1] and len(rig.shape_names) == len(seen[2])):
-            # shapes renamed (the Shapes list): the same arrays, so the same regions and maps
+            # shapes renamed (the Shapes list): the same arrays, so the same regions and maps; the region list names
+            # each region's most active shapes by their new names (it kept the old ones)
+            renamed = dict(zip(seen[2], rig.shape_names))
             self._segmented = (rig.neutral, rig.deltas, list(rig.shape_names))
-            self.panel.set_shapes(rig.shape_names)
+            self.stats = [[dict(row, shapes=[(renamed.get(n, n), share) for n, share in row["shapes"]]) for row in rows]
+                          for rows in self.stats]
+            self._show_regions()
+            if self.highlight is not None:
+                self.panel.select_region(self.highlight)
+            self._follow_shape_choice(rig.shape_names)
             return
         if rig is not None and seen is not None and self.segmentation is not None and _appended(rig, seen):
             # a shape added at the end (Save as new shape, Mirror to a new side) or its undo: the regions stay,
             # with the selection (re-segmenting changed 39 regions to 29 and dropped the region being nudged)
             self._segmented = (rig.neutral, rig.deltas, list(rig.shape_names))
-            self.panel.set_shapes(rig.shape_names)
+            self._follow_shape_choice(rig.shape_names)
             return
         self._on_rig_change()
+
+    def _follow_shape_choice(self, names: list[str]) -> None:
+        """The same shapes renamed, or one added or taken off at the end: the map shown stays the chosen shape's
+        (its place, its colour bar under its new name), or, when that shape is gone, the combined map, as the Shape
+        choice says."""
+        self.panel.set_shapes(names, keep_place=True)
+        k = self.panel.shape_choice()
+        if k != self.shape_map or (k >= 0 and self.view == "deformation"):
+            self.shape_map = k
+            self.refresh_view()
 
     def _on_rig_change(self) -> None:
         rig = self.document.rig
@@ -119,6 +136,9 @@ class SegmentationController(QtCore.QObject):
         self.maps = None
         self.highlight = None
         self.panel.set_shapes(self.document.rig.shape_names)
+        # the shape whose map is shown is the one the Shape choice names (kept by its name, else the combined
+        # map): its index was kept, and showed another shape's map, or failed on a rig with fewer shapes
+        self.shape_map = self.panel.shape_choice()
         self.panel.set_units(self.document.rig.units)
         self.panel.set_settings(self.settings())
         self.panel.set_levels([], 0)          # the last rig's regions are not this one's

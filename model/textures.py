@@ -200,7 +200,11 @@ def section_from_files(files: TextureFiles, base: str | Path | None = None) -> d
 
 def load_texture_set(rig: Rig, files: TextureFiles) -> tuple[TextureSet | None, list[str]]:
     """Read the textures ``files`` names for ``rig``: (the set, or None when there is no usable neutral
-    texture; one sentence per problem). Shape textures of another size than the neutral's are left out."""
+    texture; one sentence per problem). Shape textures of another size than the neutral's are left out. Without
+    any texture there is nothing to show and nothing to say (the UVs' problems are about showing one: ICT FaceKit's
+    UV tiles were called 'tiles or a damaged file' where no texture repeats)."""
+    if files.neutral is None and not files.shapes:
+        return None, []
     problems = uv_problems(rig)
     c = rig.corners
     if c is None or c.uvs is None or c.corner_uv is None:

@@ -587,3 +587,80 @@ def test_find_pairs_ranks_the_shapes_off_the_gui_thread(qtbot, win, monkeypatch)
     assert listed == [w.document.rig.shape_names[i] for i, _, _ in ctrl.finder.pairs]
     qtbot.mouseClick(panel.find_button, QtCore.Qt.LeftButton)
     assert threads == [False] and panel.pairs.topLevelItemCount() == len(listed)
+
+
+def test_the_pairs_listed_stay_the_shapes_they_name_after_shape_list_edits(qtbot, win):
+    """The Interference list names pairs by their shapes' places in the list. After a shape was deleted (Delete on
+    its name) the rows stayed, naming the old shapes: selecting one showed another pair's heat map, or failed
+    (KeyError) for a row standing for both sides, and Create corrective took the wrong drivers. The list is now
+    emptied with a sentence to find the pairs again; a rename relabels the rows in place."""
+    from PySide6.QtTest import QTest
+    w, ctrl = win
+    panel, shapes = ctrl.panel, w.shapes_panel
+    w.activateWindow()
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=5000)
+    panel.tabs.setCurrentIndex(1)
+
+    def find():
+        qtbot.mouseClick(panel.find_button, QtCore.Qt.LeftButton)
+        qtbot.waitUntil(lambda: panel.pairs.topLevelItemCount() > 0, timeout=30000)
+
+    def listed():
+        return [(panel.pairs.topLevelItem(i).text(2), panel.pairs.topLevelItem(i).text(3))
+                for i in range(panel.pairs.topLevelItemCount())]
+
+    def rows_named():
+        names = w.document.rig.shape_names
+        return [(names[i], names[j]) for i, j, _ in ctrl.finder.pairs]
+
+    def on_name(name, key, text=None):
+        row = shapes.row(name)
+        shapes.scroll.ensureWidgetVisible(row)
+        QTest.mouseClick(row.label, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier, row.label.rect().center())
+        qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is shapes._rows_host, timeout=5000)
+        QTest.keyClick(QtWidgets.QApplication.focusWidget(), key)
+        if text is not None:
+            editor = QtWidgets.QApplication.focusWidget()
+            editor.selectAll()
+            QTest.keyClicks(editor, text)
+            QTest.keyClick(editor, QtCore.Qt.Key_Return)
+        QtCore.QCoreApplication.processEvents()
+
+    find()
+    assert listed() == rows_named()
+    a, b = listed()[0]
+    on_name(a, QtCore.Qt.Key_F2, "renamedShape")
+    assert listed()[0] == ("renamedShape", b) and listed() == rows_named()
+    first = w.document.rig.shape_names[0]
+    on_name(first, QtCore.Qt.Key_Delete)
+    assert first not in w.document.rig.shape_names
+    assert listed() == rows_named()
+    assert panel.pairs.topLevelItemCount() == 0 and "Find Pairs" in panel.pair_info.text()
+    find()
+    assert listed() == rows_named()
+    item = panel.pairs.topLevelItem(0)
+    qtbot.mouseClick(panel.pairs.viewport(), QtCore.Qt.LeftButton, pos=panel.pairs.visualItemRect(item).center())
+    assert panel.selected_pair_row() == 0 and "×" in panel.pair_info.text()
+    a, b = listed()[0]
+    assert panel.pair_info.text().startswith(f"{a} × {b}")
+
+
+def test_the_sculpt_menu_actions_are_enabled_only_when_they_can_act(qtbot, win):
+    """Correctives ▸ Discard Sculpt and Stop Sculpting are enabled as the panel's Discard sculpt and Stop buttons
+    are: they were enabled with nothing to discard and no sculpt to stop, and then did nothing and said nothing."""
+    w, ctrl = win
+    doc = w.document
+    actions = {a.text().replace("&", ""): a for a in w.actions()}
+    discard, stop = actions["Discard Sculpt"], actions["Stop Sculpting"]
+    assert not discard.isEnabled() and not stop.isEnabled()
+    ctrl.panel.set_ticked(PAIR)
+    qtbot.mouseClick(ctrl.panel.new_button, QtCore.Qt.LeftButton)
+    _settle(qtbot, w)
+    assert stop.isEnabled() and not discard.isEnabled() and ctrl.panel.cancel_button.isEnabled()
+    from app.commands import SetEditOffsetCommand      # what a brush stroke pushes
+    doc.undo_stack.push(SetEditOffsetCommand(doc, None, np.full((doc.rig.n_vertices, 3), 0.01), "stroke"))
+    assert discard.isEnabled() == ctrl.panel.discard_button.isEnabled() is True
+    discard.trigger()
+    assert doc.edit_offset is None and not discard.isEnabled() and stop.isEnabled()
+    stop.trigger()
+    assert not ctrl.sculpting and not stop.isEnabled() and not discard.isEnabled()

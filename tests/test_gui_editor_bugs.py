@@ -504,3 +504,24 @@ def test_marker_drag_release_returns_at_once_on_ict(qtbot, tmp_path, ict_dir):
         mouse(canvas, "move", at + QtCore.QPoint(3 * k, -4 * k))
     _returns_fast(lambda: mouse(canvas, "release", at + QtCore.QPoint(15, -20)))
     assert c.drag is None and w.document.undo_stack.count() == steps + 1
+
+
+def test_a_keyed_export_without_keys_says_so_before_asking_for_a_file(qtbot, tmp_path, monkeypatch):
+    """File ▸ Export Keyed Weights as CSV…, … per Region …, … Animation as PC2… and the timeline's CSV… and PC2…
+    buttons with no key set: one sentence at once. They asked for a file name first (the save dialog), and only
+    after Save said there was nothing to export."""
+    w = make_window(qtbot, tmp_path)
+    asked = []
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName",
+                        staticmethod(lambda *a, **k: (asked.append(a), (str(tmp_path / "x"), ""))[1]))
+    assert not w.keyframes.timeline.keys
+    for text in ("Export Keyed Weights as CSV…", "Export Keyed Weights per Region as CSV…",
+                 "Export Keyed Animation as PC2…"):
+        w.last_error = None
+        _menu_action(w, text).trigger()
+        assert asked == [] and w.last_error == "There are no keys to export: set a key first (S).", text
+    for button in [b for b in w.keyframes.panel.findChildren(QtWidgets.QPushButton) if b.text() in ("CSV…", "PC2…")]:
+        w.last_error = None
+        qtbot.mouseClick(button, QtCore.Qt.LeftButton)
+        assert asked == [] and w.last_error == "There are no keys to export: set a key first (S).", button.text()
+    assert not list(tmp_path.glob("x*"))

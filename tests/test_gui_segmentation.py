@@ -3,7 +3,7 @@ as a new shape, all undoable; settings saved in the project."""
 from __future__ import annotations
 
 import numpy as np
-from PySide6 import QtWidgets
+from PySide6 import QtCore, QtWidgets
 
 from tests.gui_helpers import make_window, open_and_wait
 
@@ -163,3 +163,143 @@ def test_a_failed_segmentation_wraps_its_message_inside_the_dock(qtbot, tmp_path
     qtbot.waitUntil(lambda: panel.status.text().startswith("No segmentation: "), timeout=10000)
     _fits_its_dock(qtbot, w)
     _whole_sentence_shown(panel.status, panel.status.text())
+
+
+def test_the_map_shown_is_the_shape_the_shape_choice_names(qtbot, tmp_path):
+    """Deformation map of one shape: the map shown stays the one the Shape choice names through the Shapes list's
+    edits and a new rig. A rename (F2) set the choice to "All shapes (max)" while jawOpen's map stayed on the face, a
+    delete above it showed the next shape's map under that name, and a rig with fewer shapes than the index failed
+    ("Something went wrong", IndexError) instead of showing its combined map."""
+    from PySide6 import QtCore
+    from PySide6.QtTest import QTest
+    from tests.conftest import DATA, require_data
+
+    w = make_window(qtbot, tmp_path)
+    w.activateWindow()
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=5000)
+    _ready(qtbot, w)
+    panel, shapes = w.segmentation_panel, w.shapes_panel
+    panel.set_view("deformation")
+    panel.shape.setCurrentIndex(panel.shape.findText("jawOpen"))
+
+    def shown():
+        return panel.shape.currentText(), w.viewport.colormap.title.split("\n")[0]
+
+    def on_name(name, key, text=None):
+        row = shapes.row(name)
+        shapes.scroll.ensureWidgetVisible(row)
+        QTest.mouseClick(row.label, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier, row.label.rect().center())
+        qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is shapes._rows_host, timeout=5000)
+        QTest.keyClick(QtWidgets.QApplication.focusWidget(), key)
+        if text is not None:
+            editor = QtWidgets.QApplication.focusWidget()
+            editor.selectAll()
+            QTest.keyClicks(editor, text)
+            QTest.keyClick(editor, QtCore.Qt.Key_Return)
+        _ready(qtbot, w)
+
+    assert shown() == ("jawOpen", "Laplacian of jawOpen")
+    first = w.document.rig.shape_names[0]
+    assert first != "jawOpen"
+    on_name(first, QtCore.Qt.Key_F2, "renamed")
+    assert shown() == ("jawOpen", "Laplacian of jawOpen")
+    on_name("jawOpen", QtCore.Qt.Key_F2, "jawDrop")
+    assert shown() == ("jawDrop", "Laplacian of jawDrop")
+    on_name("renamed", QtCore.Qt.Key_Delete)
+    assert "renamed" not in w.document.rig.shape_names
+    assert shown() == ("jawDrop", "Laplacian of jawDrop")
+    w.undo_action.trigger()
+    _ready(qtbot, w)
+    assert shown() == ("jawDrop", "Laplacian of jawDrop")
+
+    w.last_error = None
+    open_and_wait(qtbot, w, require_data(DATA / "thirdparty" / "gltf" / "MorphStressTest.gltf"))   # 8 shapes
+    _ready(qtbot, w)
+    assert w.last_error is None
+    assert shown() == ("All shapes (max)", "max Laplacian")
+
+
+def test_the_panels_choices_are_shown_whole_at_the_default_window_size(qtbot, tmp_path):
+    """At 1400x900 the Segmentation panel's drop-down lists show their current choice whole, also when the Graph
+    Editor makes the panel scroll: the Map choice read 'Bends or moves, each shape (defau' (its '(default)' is said
+    by being the first choice), and Separate meshes 'Follow the region that moves ther'."""
+    w = make_window(qtbot, tmp_path, (1400, 900))
+    _ready(qtbot, w)
+    panel = w.segmentation_panel
+
+    def whole():
+        qtbot.wait(100)    # the scroll area lays out again on a posted event
+        for combo in (panel.view, panel.map_kind, panel.shape, panel.method, panel.separate):
+            opt = QtWidgets.QStyleOptionComboBox()
+            combo.initStyleOption(opt)
+            field = combo.style().subControlRect(QtWidgets.QStyle.CC_ComboBox, opt,
+                                                 QtWidgets.QStyle.SC_ComboBoxEditField, combo)
+            assert combo.fontMetrics().horizontalAdvance(combo.currentText()) <= field.width(), combo.currentText()
+    whole()
+    w.keyframes.show_graph_editor()      # Ctrl+G: the panel's dock is shorter and shows its vertical scroll bar
+    qtbot.waitUntil(lambda: w.segmentation_dock.widget().verticalScrollBar().isVisible(), timeout=5000)
+    whole()
+
+
+def test_the_region_list_names_a_renamed_shape_by_its_new_name(qtbot, tmp_path):
+    """The region list's 'Most active shapes' after a rename (F2 on the Shapes list): the regions are kept (the same
+    shapes), and they named the renamed shape by its old name, in the list and its tooltips."""
+    from PySide6 import QtCore
+    from PySide6.QtTest import QTest
+    w = make_window(qtbot, tmp_path)
+    w.activateWindow()
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=5000)
+    _ready(qtbot, w)
+    panel, shapes = w.segmentation_panel, w.shapes_panel
+    item = panel.regions.topLevelItem(0)
+    top = item.text(2).split(" ")[0]            # region 0's most active shape
+    panel.regions.setCurrentItem(item)
+    assert w.segmentation.highlight == 0
+    seg = w.segmentation.segmentation
+    row = shapes.row(top)
+    shapes.scroll.ensureWidgetVisible(row)
+    QTest.mouseClick(row.label, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier, row.label.rect().center())
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is shapes._rows_host, timeout=5000)
+    QTest.keyClick(QtWidgets.QApplication.focusWidget(), QtCore.Qt.Key_F2)
+    editor = QtWidgets.QApplication.focusWidget()
+    editor.selectAll()
+    QTest.keyClicks(editor, "renamedTop")
+    QTest.keyClick(editor, QtCore.Qt.Key_Return)
+    QtWidgets.QApplication.processEvents()
+    assert w.segmentation.segmentation is seg                 # not segmented again
+    texts = [panel.regions.topLevelItem(i).text(2) + panel.regions.topLevelItem(i).toolTip(2)
+             for i in range(panel.regions.topLevelItemCount())]
+    assert texts[0].startswith("renamedTop ")
+    assert not any(f"{top} " in t or f"{top}:" in t for t in texts)
+    assert panel.selected_region() == 0 and w.segmentation.highlight == 0
+
+
+def test_a_shape_saved_from_a_nudge_shows_its_own_deformation_map(qtbot, tmp_path):
+    """Save as new shape keeps the segmentation and its maps; choosing the new shape in the Shape list of the
+    Deformation map then failed ('Something went wrong', IndexError: the maps had one shape fewer). It shows the
+    new shape's own map (the Laplacian of its displacement, as every shape's)."""
+    w = make_window(qtbot, tmp_path)
+    _ready(qtbot, w)
+    panel, ctrl = w.segmentation_panel, w.segmentation
+    panel.set_view("segmentation")
+    lvl = ctrl.segmentation.levels[0]
+    region = max(range(lvl.n_regions), key=lambda r: lvl.regions[r].core.size)
+    panel.regions.setCurrentItem(panel.regions.topLevelItem(region))
+    qtbot.mouseClick(panel.nudge_buttons["out"], QtCore.Qt.LeftButton)
+    seg = ctrl.segmentation
+    ctrl.save_nudge_as_shape("nudged")
+    w.jobs.wait()
+    assert ctrl.segmentation is seg and w.document.rig.shape_names[-1] == "nudged"
+    panel.set_view("deformation")
+    w.last_error = None
+    panel.shape.setCurrentIndex(panel.shape.findText("nudged"))
+    QtWidgets.QApplication.processEvents()
+    assert w.last_error is None
+    cmap = w.viewport.colormap
+    assert cmap.title.startswith("Laplacian of nudged")
+    rig = w.document.rig
+    from solvers.deformation_maps import deformation_maps
+    mine = deformation_maps(ctrl.cache.laplacian(), rig.deltas[[-1]]).per_shape[:, 0]
+    np.testing.assert_allclose(cmap.scalars, mine)
+    moved = np.linalg.norm(rig.deltas[-1], axis=1) > 0
+    assert cmap.scalars[moved].max() > 0 and (cmap.scalars[~moved] == 0).mean() > 0.9   # where the nudge bends

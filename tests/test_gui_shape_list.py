@@ -523,3 +523,17 @@ def test_after_a_slow_edit_shows_its_busy_dialog_the_next_key_goes_to_the_shapes
     QTest.keyClick(QtWidgets.QApplication.focusWidget(), QtCore.Qt.Key_Up, QtCore.Qt.AltModifier)
     QtWidgets.QApplication.processEvents()
     assert doc.rig.shape_names[k:k + 2] == ["mouthSmile_L_copy", "mouthSmile_L"]
+
+
+def test_the_grouping_chosen_comes_back_in_the_next_session(qtbot, window, tmp_path):
+    """The Shapes list's grouping (By face part, By side) is a way of working, like the brush or the finder's
+    measure: it came back as No groups in every new window."""
+    panel = window.shapes_panel
+    panel.grouping.setCurrentIndex(panel.grouping.findData("side"))
+    QtWidgets.QApplication.processEvents()
+    assert panel.headers and not next(iter(panel.headers.values())).isHidden()
+    window.close()
+    w2 = make_window(qtbot, tmp_path)
+    panel2 = w2.shapes_panel
+    assert panel2.grouping.currentData() == "side"
+    assert set(panel2.headers) == set(panel.headers) and all(not h.isHidden() for h in panel2.headers.values())

@@ -163,3 +163,19 @@ def test_texture_weights_of_a_regional_pose_are_each_shapes_largest():
     np.testing.assert_array_equal(texture_weights(g), g)
     W = np.array([[0.9, 0.0, 0.1], [0.0, 0.4, 0.0], [0.1, 0.2, 0.0]])
     np.testing.assert_array_equal(texture_weights(g, W), [0.9, 0.4, 0.1])
+
+
+def test_a_rig_without_textures_says_so_and_nothing_about_its_uvs(qtbot, tmp_path, ict_dir):
+    """Band-pass chosen on ICT FaceKit, which has no textures beside its OBJs: the panel says none were found, and no
+    warning that 54,268 face corners have UVs outside 0–1 '(tiles or a damaged file); the texture repeats there' (in
+    the panel and the status bar) about a texture that is not there."""
+    from tests.gui_helpers import open_and_wait
+    w = make_window(qtbot, tmp_path, sample=False)
+    open_and_wait(qtbot, w, ict_dir)
+    with qtbot.waitSignal(w.textures.textures_ready, timeout=120000):
+        w.textures.panel.mode.setCurrentIndex(w.textures.panel.mode.findData("band-pass"))
+    QtWidgets.QApplication.processEvents()
+    texts = [label.text() for label in w.textures.panel.findChildren(QtWidgets.QLabel)]
+    assert "none found beside the rig" in texts
+    assert not any("UV" in t for t in texts) and "UV" not in w.statusBar().currentMessage()
+    assert w.textures.problems == [] and not w.viewport.textured

@@ -439,6 +439,16 @@ class CorrectivesPanel(QtWidgets.QWidget):
             self.pairs.resizeColumnToContents(c)
         self.create_pair_button.setEnabled(False)
 
+    def set_pair_names(self, rows) -> None:
+        """The listed rows' shape names, (shape, shape, the mirror pair as text or ""), after a rename."""
+        for i, (a, b, twin) in enumerate(rows):
+            item = self.pairs.topLevelItem(i)
+            if item is not None:
+                item.setText(2, a)
+                item.setText(3, b)
+                for c in range(5):
+                    item.setToolTip(c, f"{a} × {b}, and its mirror image {twin}" if twin else "")
+
     def set_pair_action(self, has_corrective: bool) -> None:
         """The pair button creates the selected pair's corrective, or edits the one it has."""
         self.create_pair_button.setText("Edit the corrective of this pair" if has_corrective

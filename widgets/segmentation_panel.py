@@ -10,7 +10,7 @@ from widgets.length_box import show_length_in
 VIEW_LABELS = [("shaded", "Shaded"), ("deformation", "Deformation map"),
                ("deformation-rgb", "Deformation vector (RGB)"), ("segmentation", "Segmentation")]
 # (map kind, per-shape normalisation, label) of the map choice
-MAP_CHOICES = [("laplacian+displacement", True, "Bends or moves, each shape (default)"),
+MAP_CHOICES = [("laplacian+displacement", True, "Bends or moves, each shape"),   # the default
                ("laplacian", True, "Laplacian ‖L d‖, each shape"),
                ("laplacian", False, "Laplacian ‖L d‖, raw maximum (Joshi)"),
                ("displacement", True, "Displacement ‖d‖, each shape"),
@@ -59,7 +59,7 @@ class SegmentationPanel(QtWidgets.QWidget):
         self.method.currentIndexChanged.connect(self._commit)
         form.addRow("Method", self.method)
         self.separate = QtWidgets.QComboBox()
-        self.separate.addItem("Follow the region that moves them", "follow")
+        self.separate.addItem("Follow the region moving them", "follow")
         self.separate.addItem("Stay in the background", "background")
         self.separate.setToolTip("Separate meshes of the rig (eyeballs, teeth, tongue, eyelashes): join the skin "
                                  "region whose shapes move them, or stay out of every region")
@@ -161,12 +161,22 @@ class SegmentationPanel(QtWidgets.QWidget):
         """Lengths (the nudge step) are in the rig's units: show them, the step kept the same physical length."""
         show_length_in(self.nudge_amount, units)
 
-    def set_shapes(self, names: list[str]) -> None:
+    def set_shapes(self, names: list[str], keep_place: bool = False) -> None:
+        """List ``names`` in the Shape choice, the shape chosen kept: at its place when ``keep_place`` (the same
+        shapes renamed, or one added at the end), else by its name; the combined map when it is gone."""
+        i, name = self.shape.currentIndex(), self.shape.currentText()
         self.shape.blockSignals(True)
         self.shape.clear()
         self.shape.addItem("All shapes (max)")
         self.shape.addItems(names)
+        if i > 0 and not (keep_place and i <= len(names)):
+            i = names.index(name) + 1 if name in names else 0
+        self.shape.setCurrentIndex(max(i, 0))
         self.shape.blockSignals(False)
+
+    def shape_choice(self) -> int:
+        """The shape whose map is chosen, -1 for the combined map (max over shapes)."""
+        return self.shape.currentIndex() - 1
 
     def set_settings(self, settings: dict) -> None:
         self._settings = dict(settings)
