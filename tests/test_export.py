@@ -231,7 +231,7 @@ def test_khronos_validator_reports_no_errors(exported, suffix, tmp_path):
 # --- USD ------------------------------------------------------------------------------------------
 def _usd_frames(path):
     """(names, rest points, {time code: deformed points}) as usd-core's UsdSkel evaluates the file."""
-    pxr = pytest.importorskip("pxr")
+    pytest.importorskip("pxr")
     from pxr import Usd, UsdGeom, UsdSkel
     stage = Usd.Stage.Open(str(path))
     assert stage is not None

@@ -487,7 +487,7 @@ def test_marker_drag_release_returns_at_once_on_ict(qtbot, tmp_path, ict_dir):
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)
     w.segmentation.wait()
-    c, rig = w.markers, w.document.rig
+    c = w.markers
     lvl = w.segmentation.segmentation.levels[0]
     for r in range(6):
         assert c.add_marker_at(int(lvl.regions[r].core[len(lvl.regions[r].core) // 2]))
