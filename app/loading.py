@@ -3,6 +3,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from PySide6 import QtCore
 
 from model.errors import RigInputError
@@ -12,11 +14,16 @@ from model.rig_prep import prepare_rig
 
 
 def open_project_or_rig(path: str | Path, progress=None) -> Project:
-    """A Project from a .bsproj, or a new Project around a rig read from a folder/glTF/OBJ."""
+    """A Project from a .bsproj, or a new Project around a rig read from a folder/glTF/OBJ (a glTF posed with its
+    mesh's default weights, as Blender and glTF viewers show it)."""
     path = Path(path)
     if path.suffix.lower() == ".bsproj":
         return load_project(path)
-    return Project(rig=load_rig(path, progress=progress))
+    rig = load_rig(path, progress=progress)
+    from model.gltf import DEFAULT_POSE
+    default = rig.presets.get(DEFAULT_POSE)   # a glTF's default weights: the pose its viewers show it in
+    weights = None if default is None else np.array([default.get(n, 0.0) for n in rig.shape_names])
+    return Project(rig=rig, weights=weights)
 
 
 RIG_SUFFIXES = (".bsproj", ".gltf", ".glb", ".obj")

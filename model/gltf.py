@@ -4,7 +4,8 @@ Reads the mesh the user means: the one named by ``mesh`` (``--mesh NAME``), else
 morph targets and then the most vertices (a Ready Player Me avatar opens its head, not an eyeball). All its
 primitives with POSITION are concatenated in primitive order (vertex order kept, no welding), triangle
 indices as faces, each morph target's POSITION as a shape delta (zero on primitives without targets).
-Target names come from ``mesh.extras.targetNames`` (else ``target_0``, ...). TEXCOORD_0, when every
+Target names come from ``mesh.extras.targetNames`` (else ``target_0``, ...). The mesh's default weights, when not
+all 0, become the preset ``DEFAULT_POSE`` (and the pose a file opens in: ``app.loading``). TEXCOORD_0, when every
 primitive has it, becomes the rig's UVs (one per vertex, ``Rig.corners``; v flipped to OBJ's upward v).
 
 The node hierarchy's world matrix of the first node (in scene order) that instances the mesh is applied (for a
@@ -207,6 +208,8 @@ def _is_num(v) -> bool:
 
 # What this reader uses of a glTF document and the JSON type each must have (glTF 2.0 §5): anything else there
 # is refused in one sentence before it is used, never met as a Python error half-way through reading.
+DEFAULT_POSE = "glTF default pose"   # the preset holding a mesh's default morph weights
+
 _ARRAY_FIELDS = ("accessors", "bufferViews", "buffers", "meshes", "nodes", "scenes", "skins")
 _FIELD_TYPES = {
     "accessors": {"bufferView": _is_int, "byteOffset": _is_int, "componentType": _is_int, "count": _is_int,
@@ -589,7 +592,22 @@ def _load_mesh(doc: _Doc, path: Path, units: str, mesh_index: int, mesh: dict) -
     if records:
         rig.corners = rig.corners or CornerAttributes()
         rig.corners.records = records
+    default = _default_weights(doc, mesh, K)
+    if default is not None and default.any():
+        rig.presets[DEFAULT_POSE] = {n: float(w) for n, w in zip(names, default) if w != 0}
     return rig
+
+
+def _default_weights(doc: _Doc, mesh: dict, K: int) -> np.ndarray | None:
+    """The mesh's default morph weights (glTF 2.0 §3.7.2.2: ``mesh.weights``, one per target, the pose a viewer
+    shows without an animation: Blender's shape key values), None where it gives none."""
+    if "weights" not in mesh:
+        return None
+    w = mesh["weights"]
+    if not isinstance(w, list) or len(w) != K or not all(_is_num(v) for v in w) or \
+            not np.isfinite(np.asarray(w, dtype=np.float64)).all():
+        raise doc.fail(f"its mesh's default weights are not {K} numbers, one per morph target.")
+    return np.asarray(w, dtype=np.float64)
 
 
 def _material_parts(doc: _Doc, prims: list[dict], n_tris: list[int]) -> tuple[list[tuple[int, str]], dict]:

@@ -540,3 +540,33 @@ def test_blender_shows_a_skinned_mesh_where_the_reader_puts_it(tmp_path):
         b = np.array(seen[str(path)])
         in_gltf_axes = np.c_[b[:, 0], b[:, 2], -b[:, 1]]     # Blender's Z-up back to glTF's Y-up
         assert np.allclose(in_gltf_axes, load_gltf(path).neutral, atol=1e-5), (path.name, in_gltf_axes)
+
+
+def test_a_mesh_opens_in_its_default_weights_and_keeps_them_as_a_preset(tmp_path, sample_rig):
+    """glTF 2.0 §3.7.2.2: a mesh's ``weights`` are the pose viewers show without an animation (Blender's shape key
+    values). SimpleMorph's [0.5, 0.5] opened at neutral, and a rig exported in a pose (Export Rig writes the pose
+    there) reopened at neutral."""
+    from app.loading import open_project_or_rig
+    from model.export import export_rig
+    from model.gltf import DEFAULT_POSE
+    from tests.conftest import DATA, require_data
+    project = open_project_or_rig(require_data(DATA / "thirdparty" / "gltf" / "SimpleMorph.gltf"))
+    np.testing.assert_array_equal(project.weights, [0.5, 0.5])
+    assert project.rig.presets[DEFAULT_POSE] == {"target_0": 0.5, "target_1": 0.5}
+    stress = open_project_or_rig(DATA / "thirdparty" / "gltf" / "MorphStressTest.gltf")   # all 0: neutral, no preset
+    assert not stress.weights.any() and DEFAULT_POSE not in stress.rig.presets
+    pose = np.zeros(sample_rig.n_shapes)
+    pose[[1, 4]] = [0.75, 0.25]
+    export_rig(sample_rig, tmp_path / "posed.glb", weights=pose)
+    np.testing.assert_allclose(open_project_or_rig(tmp_path / "posed.glb").weights, pose, atol=1e-7)
+
+
+def test_default_weights_that_are_not_one_number_per_target_are_refused(tmp_path, cube):
+    path = tmp_path / "cube.gltf"
+    write_gltf(cube, path)
+    doc = json.loads(path.read_text())
+    for bad in ([0.5] * (cube.n_shapes + 1), ["a"] * cube.n_shapes, 7):
+        doc["meshes"][0]["weights"] = bad
+        path.write_text(json.dumps(doc))
+        with pytest.raises(RigInputError, match="default weights are not"):
+            load_gltf(path)
