@@ -33,6 +33,7 @@ from .errors import RigInputError, repeated, shown
 from .input_files import read_input_bytes, regular_file
 from .json_file import parse_json_text
 from .pages import memory_shortfall, small_pages_for
+from .presets import fitting_presets
 from .rig import CornerAttributes, Rig
 
 from .export_gltf import CHUNK_BIN as _CHUNK_BIN, CHUNK_JSON as _CHUNK_JSON, GLB_MAGIC as _GLB_MAGIC
@@ -592,6 +593,7 @@ def _load_mesh(doc: _Doc, path: Path, units: str, mesh_index: int, mesh: dict) -
     if records:
         rig.corners = rig.corners or CornerAttributes()
         rig.corners.records = records
+    rig.presets = fitting_presets(names)      # the emotion presets, where the targets have ARKit's names
     default = _default_weights(doc, mesh, K)
     if default is not None and default.any():
         rig.presets[DEFAULT_POSE] = {n: float(w) for n, w in zip(names, default) if w != 0}

@@ -11,6 +11,7 @@ from solvers.parallel import ordered_map
 from .errors import RigInputError
 from .obj_io import read_obj, read_obj_target
 from .pages import small_pages_for
+from .presets import fitting_presets
 from .rig import Rig, checked_presets
 
 Progress = Optional[Callable[[int, int, str], None]]  # (done, total, what) -> None
@@ -68,7 +69,8 @@ def load_obj_folder(folder: str | Path, neutral: str | None = None, units: str =
     rig = Rig(neutral=base.vertices, face_counts=base.face_counts, face_indices=base.face_indices,
               shape_names=stems, deltas=deltas, units=units, name=folder.name, source=str(folder),
               corners=base.corners)
-    rig.presets = read_presets(folder / PRESETS_FILE, stems)
+    own = folder / PRESETS_FILE
+    rig.presets = read_presets(own, stems) if own.is_file() else fitting_presets(stems)
     if base.corners is not None:
         from .parts import obj_materials
         rig.materials, notes = obj_materials(neutral_path, base.corners.records)

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from model.obj_io import write_obj
+from model.presets import EMOTIONS
 from model.rig import CornerAttributes, Rig
 
 from .sample_face_geometry import (EYE_SIDES, FaceGeometry, build_face_geometry, compact, ellipse_d2,
@@ -23,23 +24,7 @@ from .sample_face_geometry import (EYE_SIDES, FaceGeometry, build_face_geometry,
 
 SIDES = EYE_SIDES  # "L" -> +1 (x > 0), "R" -> -1
 
-PRESETS = {
-    "happy": {"mouthSmile_L": 1.0, "mouthSmile_R": 1.0, "cheekSquint_L": 0.6, "cheekSquint_R": 0.6,
-              "eyeSquint_L": 0.3, "eyeSquint_R": 0.3},
-    "sad": {"browInnerUp_L": 0.9, "browInnerUp_R": 0.9, "mouthFrown_L": 0.8, "mouthFrown_R": 0.8,
-            "eyeBlink_L": 0.2, "eyeBlink_R": 0.2, "mouthLowerDown_L": 0.2, "mouthLowerDown_R": 0.2},
-    "angry": {"browDown_L": 1.0, "browDown_R": 1.0, "eyeSquint_L": 0.5, "eyeSquint_R": 0.5,
-              "noseSneer_L": 0.4, "noseSneer_R": 0.4, "mouthFrown_L": 0.4, "mouthFrown_R": 0.4,
-              "mouthClose": 0.2},
-    "surprised": {"browInnerUp_L": 1.0, "browInnerUp_R": 1.0, "browOuterUp_L": 1.0, "browOuterUp_R": 1.0,
-                  "eyeWide_L": 1.0, "eyeWide_R": 1.0, "jawOpen": 0.55, "mouthFunnel": 0.25},
-    "disgusted": {"noseSneer_L": 1.0, "noseSneer_R": 1.0, "mouthUpperUp_L": 0.8, "mouthUpperUp_R": 0.8,
-                  "browDown_L": 0.5, "browDown_R": 0.5, "eyeSquint_L": 0.4, "eyeSquint_R": 0.4,
-                  "cheekSquint_L": 0.4, "cheekSquint_R": 0.4, "mouthFrown_L": 0.3, "mouthFrown_R": 0.3},
-    "afraid": {"browInnerUp_L": 1.0, "browInnerUp_R": 1.0, "browOuterUp_L": 0.4, "browOuterUp_R": 0.4,
-               "eyeWide_L": 1.0, "eyeWide_R": 1.0, "mouthStretch_L": 0.8, "mouthStretch_R": 0.8,
-               "jawOpen": 0.2},
-}
+PRESETS = EMOTIONS   # the sample face's presets: the emotion presets, in its ARKit-named shapes
 
 JAW_ANGLE = np.radians(19.0)
 JAW_REACH, JAW_FADE = 14.0, 8.0

@@ -199,6 +199,38 @@ def test_the_preset_list_and_apply_are_enabled_only_with_presets(qtbot, tmp_path
     assert not panel.presets.isEnabled() and not panel.apply_preset.isEnabled()
 
 
+def test_an_arkit_named_rig_offers_the_emotion_presets(qtbot, tmp_path, ict_dir):
+    """ICT FaceKit (ARKit's shape names with _L/_R, no presets.json) opened with an empty, disabled preset list,
+    though the README promises the emotion presets: a rig gets those whose every shape it has (model.presets)."""
+    from model.presets import EMOTIONS
+    from tests.gui_helpers import open_and_wait
+    w = make_window(qtbot, tmp_path, size=(1400, 900), sample=False)
+    open_and_wait(qtbot, w, ict_dir)
+    panel = w.shapes_panel
+    assert [panel.presets.itemText(i) for i in range(panel.presets.count())] == sorted(EMOTIONS)
+    assert panel.presets.isEnabled() and panel.apply_preset.isEnabled()
+    panel.presets.setCurrentIndex(panel.presets.findText("surprised"))
+    qtbot.mouseClick(panel.apply_preset, QtCore.Qt.LeftButton)
+    rig = w.document.rig
+    expected = np.zeros(rig.n_shapes)
+    for name, value in EMOTIONS["surprised"].items():
+        expected[rig.shape_index(name)] = value
+    np.testing.assert_allclose(w.document.weights, expected)
+
+
+def test_a_rigs_own_presets_are_its_whole_list_and_other_names_get_none(tmp_path, ict_dir):
+    import json
+    import shutil
+    from model.readers import load_rig
+    folder = tmp_path / "rig"
+    folder.mkdir()
+    for name in ("generic_neutral_mesh.obj", "jawOpen.obj", "mouthSmile_L.obj"):
+        shutil.copy(ict_dir / name, folder / name)
+    assert load_rig(folder).presets == {}          # no emotion preset has only these shapes
+    (folder / "presets.json").write_text(json.dumps({"gape": {"jawOpen": 1.0}}))
+    assert load_rig(folder).presets == {"gape": {"jawOpen": 1.0}}
+
+
 def test_the_shapes_panels_controls_are_whole_at_its_narrowest(qtbot, tmp_path):
     """At the Shapes panel's minimum width (400 px, its dock's default) every control above the list gets at least
     its size hint: the grouping box sat at the end of the edit buttons' row and was cut to "No grc"."""
