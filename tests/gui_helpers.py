@@ -57,6 +57,32 @@ def calls_on_gui_thread(monkeypatch, module, name: str) -> list[bool]:
     return calls
 
 
+def click_shape_name(qtbot, window, name, modifier=QtCore.Qt.NoModifier) -> None:
+    """Click shape ``name``'s label in the Shapes list (scrolled into view), as a user selects it; the list then
+    has the keyboard focus."""
+    from PySide6.QtTest import QTest
+    panel = window.shapes_panel
+    row = panel.row(name)
+    panel.scroll.ensureWidgetVisible(row)
+    QtWidgets.QApplication.processEvents()
+    QTest.mouseClick(row.label, QtCore.Qt.LeftButton, modifier, row.label.rect().center())
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is panel._rows_host, timeout=5000)
+
+
+def key_on_shape_name(qtbot, window, name, key, text: str | None = None) -> None:
+    """Select shape ``name`` in the Shapes list and press ``key`` (F2, Delete, ...); with ``text``, type it into the
+    in-place editor the key opened (F2: a rename) and press Return."""
+    from PySide6.QtTest import QTest
+    click_shape_name(qtbot, window, name)
+    QTest.keyClick(QtWidgets.QApplication.focusWidget(), key)
+    if text is not None:
+        editor = QtWidgets.QApplication.focusWidget()
+        editor.selectAll()
+        QTest.keyClicks(editor, text)
+        QTest.keyClick(editor, QtCore.Qt.Key_Return)
+    QtWidgets.QApplication.processEvents()
+
+
 def mouse(widget, kind, pos, buttons=QtCore.Qt.LeftButton, button=QtCore.Qt.LeftButton):
     """Send a real mouse event (press/move/release) at widget-local ``pos`` with buttons held."""
     types = {"press": QtCore.QEvent.MouseButtonPress, "move": QtCore.QEvent.MouseMove,

@@ -8,7 +8,7 @@ from PySide6 import QtCore, QtWidgets
 
 from model.obj_io import write_obj
 from model.pose import PoseEvaluator
-from tests.gui_helpers import make_window, mouse
+from tests.gui_helpers import key_on_shape_name, make_window, mouse
 
 PAIR = ["browInnerUp_L", "browInnerUp_R"]
 
@@ -594,9 +594,8 @@ def test_the_pairs_listed_stay_the_shapes_they_name_after_shape_list_edits(qtbot
     its name) the rows stayed, naming the old shapes: selecting one showed another pair's heat map, or failed
     (KeyError) for a row standing for both sides, and Create corrective took the wrong drivers. The list is now
     emptied with a sentence to find the pairs again; a rename relabels the rows in place."""
-    from PySide6.QtTest import QTest
     w, ctrl = win
-    panel, shapes = ctrl.panel, w.shapes_panel
+    panel = ctrl.panel
     w.activateWindow()
     qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=5000)
     panel.tabs.setCurrentIndex(1)
@@ -613,26 +612,13 @@ def test_the_pairs_listed_stay_the_shapes_they_name_after_shape_list_edits(qtbot
         names = w.document.rig.shape_names
         return [(names[i], names[j]) for i, j, _ in ctrl.finder.pairs]
 
-    def on_name(name, key, text=None):
-        row = shapes.row(name)
-        shapes.scroll.ensureWidgetVisible(row)
-        QTest.mouseClick(row.label, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier, row.label.rect().center())
-        qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is shapes._rows_host, timeout=5000)
-        QTest.keyClick(QtWidgets.QApplication.focusWidget(), key)
-        if text is not None:
-            editor = QtWidgets.QApplication.focusWidget()
-            editor.selectAll()
-            QTest.keyClicks(editor, text)
-            QTest.keyClick(editor, QtCore.Qt.Key_Return)
-        QtCore.QCoreApplication.processEvents()
-
     find()
     assert listed() == rows_named()
     a, b = listed()[0]
-    on_name(a, QtCore.Qt.Key_F2, "renamedShape")
+    key_on_shape_name(qtbot, w, a, QtCore.Qt.Key_F2, "renamedShape")
     assert listed()[0] == ("renamedShape", b) and listed() == rows_named()
     first = w.document.rig.shape_names[0]
-    on_name(first, QtCore.Qt.Key_Delete)
+    key_on_shape_name(qtbot, w, first, QtCore.Qt.Key_Delete)
     assert first not in w.document.rig.shape_names
     assert listed() == rows_named()
     assert panel.pairs.topLevelItemCount() == 0 and "Find Pairs" in panel.pair_info.text()

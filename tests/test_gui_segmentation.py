@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from tests.gui_helpers import make_window, open_and_wait
+from tests.gui_helpers import key_on_shape_name, make_window, open_and_wait
 
 
 def _ready(qtbot, w):
@@ -171,14 +171,13 @@ def test_the_map_shown_is_the_shape_the_shape_choice_names(qtbot, tmp_path):
     delete above it showed the next shape's map under that name, and a rig with fewer shapes than the index failed
     ("Something went wrong", IndexError) instead of showing its combined map."""
     from PySide6 import QtCore
-    from PySide6.QtTest import QTest
     from tests.conftest import DATA, require_data
 
     w = make_window(qtbot, tmp_path)
     w.activateWindow()
     qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=5000)
     _ready(qtbot, w)
-    panel, shapes = w.segmentation_panel, w.shapes_panel
+    panel = w.segmentation_panel
     panel.set_view("deformation")
     panel.shape.setCurrentIndex(panel.shape.findText("jawOpen"))
 
@@ -186,16 +185,7 @@ def test_the_map_shown_is_the_shape_the_shape_choice_names(qtbot, tmp_path):
         return panel.shape.currentText(), w.viewport.colormap.title.split("\n")[0]
 
     def on_name(name, key, text=None):
-        row = shapes.row(name)
-        shapes.scroll.ensureWidgetVisible(row)
-        QTest.mouseClick(row.label, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier, row.label.rect().center())
-        qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is shapes._rows_host, timeout=5000)
-        QTest.keyClick(QtWidgets.QApplication.focusWidget(), key)
-        if text is not None:
-            editor = QtWidgets.QApplication.focusWidget()
-            editor.selectAll()
-            QTest.keyClicks(editor, text)
-            QTest.keyClick(editor, QtCore.Qt.Key_Return)
+        key_on_shape_name(qtbot, w, name, key, text)
         _ready(qtbot, w)
 
     assert shown() == ("jawOpen", "Laplacian of jawOpen")
@@ -245,27 +235,17 @@ def test_the_region_list_names_a_renamed_shape_by_its_new_name(qtbot, tmp_path):
     """The region list's 'Most active shapes' after a rename (F2 on the Shapes list): the regions are kept (the same
     shapes), and they named the renamed shape by its old name, in the list and its tooltips."""
     from PySide6 import QtCore
-    from PySide6.QtTest import QTest
     w = make_window(qtbot, tmp_path)
     w.activateWindow()
     qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=5000)
     _ready(qtbot, w)
-    panel, shapes = w.segmentation_panel, w.shapes_panel
+    panel = w.segmentation_panel
     item = panel.regions.topLevelItem(0)
     top = item.text(2).split(" ")[0]            # region 0's most active shape
     panel.regions.setCurrentItem(item)
     assert w.segmentation.highlight == 0
     seg = w.segmentation.segmentation
-    row = shapes.row(top)
-    shapes.scroll.ensureWidgetVisible(row)
-    QTest.mouseClick(row.label, QtCore.Qt.LeftButton, QtCore.Qt.NoModifier, row.label.rect().center())
-    qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is shapes._rows_host, timeout=5000)
-    QTest.keyClick(QtWidgets.QApplication.focusWidget(), QtCore.Qt.Key_F2)
-    editor = QtWidgets.QApplication.focusWidget()
-    editor.selectAll()
-    QTest.keyClicks(editor, "renamedTop")
-    QTest.keyClick(editor, QtCore.Qt.Key_Return)
-    QtWidgets.QApplication.processEvents()
+    key_on_shape_name(qtbot, w, top, QtCore.Qt.Key_F2, "renamedTop")
     assert w.segmentation.segmentation is seg                 # not segmented again
     texts = [panel.regions.topLevelItem(i).text(2) + panel.regions.topLevelItem(i).toolTip(2)
              for i in range(panel.regions.topLevelItemCount())]

@@ -10,15 +10,7 @@ from PySide6.QtTest import QTest
 
 from model.correctives import Corrective, set_correctives
 from model.pose import PoseEvaluator
-from tests.gui_helpers import make_window
-
-
-def _click_name(qtbot, window, name, modifier=QtCore.Qt.NoModifier):
-    row = window.shapes_panel.row(name)
-    window.shapes_panel.scroll.ensureWidgetVisible(row)
-    QtWidgets.QApplication.processEvents()
-    QTest.mouseClick(row.label, QtCore.Qt.LeftButton, modifier, row.label.rect().center())
-    qtbot.waitUntil(lambda: QtWidgets.QApplication.focusWidget() is window.shapes_panel._rows_host, timeout=5000)
+from tests.gui_helpers import click_shape_name as _click_name, make_window
 
 
 def _key(window, key, modifier=QtCore.Qt.NoModifier):
