@@ -68,9 +68,7 @@ class InterferenceFinder:
                 self.panel.pair_info.setText("The shapes changed: Find Pairs to rank them again.")
         elif self.rows:       # a corrective saved, mirrored or deleted, a shape renamed: the listed rows say so
             rig = self.document.rig
-            names = rig.shape_names
-            self.panel.set_pair_names([(names[r.i], names[r.j], "" if r.mirror is None else
-                                        f"{names[r.mirror[0]]} × {names[r.mirror[1]]}") for r in self.rows])
+            self.panel.set_pair_names([_row_names(rig.shape_names, r) for r in self.rows])
             self.panel.set_pair_correctives([corrective_status(rig, r) for r in self.rows])
             row = self.panel.selected_pair_row()
             if 0 <= row < len(self.rows):
@@ -144,9 +142,11 @@ class InterferenceFinder:
         self.rows = ranked_pairs(self._overlap[measure], names, self.panel.top.value(),
                                  merge_mirrored=self.panel.merge_mirrored.isChecked(),
                                  partner_of=self.panel.partner_of.currentData())
-        self.panel.set_pairs([(names[r.i], names[r.j], r.score,
-                               "" if r.mirror is None else f"{names[r.mirror[0]]} × {names[r.mirror[1]]}",
-                               corrective_status(rig, r)) for r in self.rows])
+        listed = []
+        for r in self.rows:
+            a, b, twin = _row_names(names, r)
+            listed.append((a, b, r.score, twin, corrective_status(rig, r)))
+        self.panel.set_pairs(listed)
         self.leave_heat_map()
         return self.pairs
 
@@ -214,3 +214,8 @@ class InterferenceFinder:
         names = self.document.rig.shape_names
         self.leave_heat_map()
         self._start_authoring([names[i], names[j]], self.panel.current_rule())
+
+
+def _row_names(names: list[str], row) -> tuple[str, str, str]:
+    """A listed row's (shape, shape, its mirror pair as text or "") by the shapes' names now."""
+    return names[row.i], names[row.j], "" if row.mirror is None else f"{names[row.mirror[0]]} × {names[row.mirror[1]]}"

@@ -425,14 +425,14 @@ class CorrectivesPanel(QtWidgets.QWidget):
     def set_pairs(self, rows) -> None:
         """Rows (shape, shape, score[, the mirror pair as text or "", the corrective status as text or ""])."""
         self.pairs.clear()
+        names = []
         for i, (a, b, s, *rest) in enumerate(rows):
             twin = rest[0] if rest else ""
             item = QtWidgets.QTreeWidgetItem([str(i + 1), f"{s:.3f}", a, b, "both" if twin else ""])
             item.setTextAlignment(1, QtCore.Qt.AlignRight | QtCore.Qt.AlignVCenter)   # the score before the names
-            if twin:
-                for c in range(5):
-                    item.setToolTip(c, f"{a} × {b}, and its mirror image {twin}")
             self.pairs.addTopLevelItem(item)
+            names.append((a, b, twin))
+        self.set_pair_names(names)
         self.set_pair_correctives([r[4] if len(r) > 4 else "" for r in rows])
         self.set_pair_action(False)
         for c in range(self.pairs.columnCount()):
@@ -440,7 +440,8 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.create_pair_button.setEnabled(False)
 
     def set_pair_names(self, rows) -> None:
-        """The listed rows' shape names, (shape, shape, the mirror pair as text or ""), after a rename."""
+        """The listed rows' shape names, (shape, shape, the mirror pair as text or ""), and their tooltips (as listed,
+        and after a rename)."""
         for i, (a, b, twin) in enumerate(rows):
             item = self.pairs.topLevelItem(i)
             if item is not None:
