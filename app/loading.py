@@ -8,6 +8,7 @@ import numpy as np
 from PySide6 import QtCore
 
 from model.errors import RigInputError
+from model.gltf import DEFAULT_POSE
 from model.project import Project, load_project
 from model.readers import load_rig
 from model.rig_prep import prepare_rig
@@ -20,7 +21,6 @@ def open_project_or_rig(path: str | Path, progress=None) -> Project:
     if path.suffix.lower() == ".bsproj":
         return load_project(path)
     rig = load_rig(path, progress=progress)
-    from model.gltf import DEFAULT_POSE
     default = rig.presets.get(DEFAULT_POSE)   # a glTF's default weights: the pose its viewers show it in
     weights = None if default is None else np.array([default.get(n, 0.0) for n in rig.shape_names])
     return Project(rig=rig, weights=weights)
