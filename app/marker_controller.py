@@ -11,12 +11,12 @@ once per press (it depends on the markers and the level); one drag is one undo s
 """
 from __future__ import annotations
 
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future, ThreadPoolExecutor, wait as wait_for
 from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
-from PySide6 import QtCore
+from PySide6 import QtCore, QtWidgets
 
 from app.document import PoseState
 from app.marker_commands import SetMarkersCommand, SetPoseCommand
@@ -58,6 +58,20 @@ class DragState:
     correctives: tuple | None = None   # the rig's live correctives: (activate, marker displacements (C, 3M), drivers)
 
 
+@dataclass
+class HeldPress:
+    """A press on a marker that came before what a drag of the level needs was ready (``MarkerController.held``:
+    found ahead on the worker thread when Marker Mode or a level was chosen; ~0.7 s on the 106k-vertex, 228-shape
+    studio rig). The window keeps running; the mouse's latest ``motion`` and whether the button is already
+    ``released`` are played into the drag when the work arrives (``MarkerController._start_held_press``)."""
+
+    index: int
+    jobs: list                     # the Futures still running at the press
+    motion: np.ndarray | None = None
+    released: bool = False
+
+
+HOLD_AFTER_S = 0.1          # a press waits this long for the level's set-up found ahead, then is held (HeldPress)
 DRAG_CORRECTIVE_STEPS = 4   # Gauss–Newton solves a move at most, on a rig with correctives (~2 ms each on ICT)
 
 
@@ -97,7 +111,7 @@ class MarkerTool(ViewportTool):
 
     def press(self, g: Gesture) -> bool:
         c = self.controller
-        if c.document.project is None or c.drag is not None:
+        if c.document.project is None or c.drag is not None or c.held is not None:
             return False
         i = c.marker_at(g.x, g.y)
         if i is None:
@@ -109,16 +123,28 @@ class MarkerTool(ViewportTool):
             return False
         if i in [c.markers.index(n) for n in c.markers.background]:
             c.message(f"Marker {c.markers.names[i]} is on the background: no shape can move it.")
-        g.anchor = c.begin_drag(i).start[i]
+        jobs = c.unfinished_jobs()
+        if jobs:           # the drag starts when they are done; the window runs meanwhile
+            c.hold_press(i, jobs)
+            g.anchor = c.marker_positions()[i]
+        else:
+            g.anchor = c.begin_drag(i).start[i]
         c.panel.select_marker(i)
         return True
 
     def drag(self, g: Gesture) -> None:
-        if self.controller.drag is not None:
-            self.controller.drag_by(g.motion)   # the window redraws once per event-loop turn (coalesced)
+        c = self.controller
+        if c.drag is not None:
+            c.drag_by(g.motion)   # the window redraws once per event-loop turn (coalesced)
+        elif c.held is not None:
+            c.held.motion = g.motion
 
     def release(self, g: Gesture) -> None:
-        self.controller.end_drag()
+        c = self.controller
+        if c.held is not None:
+            c.held.released = True
+        else:
+            c.end_drag()
 
 
 class MarkerController(QtCore.QObject):
@@ -127,6 +153,7 @@ class MarkerController(QtCore.QObject):
 
     markers_changed = QtCore.Signal()
     drag_updated = QtCore.Signal()
+    _jobs_done = QtCore.Signal()       # from the worker thread: a job a held press waits for is done
 
     def __init__(self, window) -> None:
         super().__init__(window)
@@ -146,6 +173,8 @@ class MarkerController(QtCore.QObject):
         self.mode = False
         self.lam_reg = DRAG_LAM_REG      # cm², whatever the rig's units (MarkerSet.drag_solver converts it)
         self.drag: DragState | None = None
+        self.held: HeldPress | None = None
+        self._jobs_done.connect(self._start_held_press, QtCore.Qt.QueuedConnection)
         self.last_message = ""
         self._gains: np.ndarray | None = None
         self._region_max: dict[int, tuple] = {}   # id(blend) -> (blend, (R, K) array or its Future)
@@ -197,6 +226,7 @@ class MarkerController(QtCore.QObject):
             self.viewport.remove_tool(self.tool)
             if self.drag is not None:   # leaving marker mode mid-drag (M with the button held) ends the drag
                 self.end_drag()
+            self._drop_held_press()
         if self.mode:
             self.message("Marker mode: click the face to add a marker, drag a marker to pose, right-click removes.")
             self._warm_region_max()
@@ -215,6 +245,7 @@ class MarkerController(QtCore.QObject):
         self._triangles = self.document.triangles()
         self._face_size = extent(rig.neutral)
         self.drag = None
+        self._drop_held_press()
         self._load_markers()
 
     def _on_shapes_change(self) -> None:
@@ -222,6 +253,7 @@ class MarkerController(QtCore.QObject):
         self._gains = None
         self._region_max.clear()
         self.drag = None
+        self._drop_held_press()
         self._load_markers()
 
     @property
@@ -390,7 +422,7 @@ class MarkerController(QtCore.QObject):
         return True
 
     def _on_picked(self, vertex: int, point) -> None:
-        if self.mode and self.drag is None:
+        if self.mode and self.drag is None and self.held is None:
             self.add_marker_at(vertex, point)
 
     def marker_at(self, x: float, y: float) -> int | None:
@@ -441,6 +473,56 @@ class MarkerController(QtCore.QObject):
         ahead, self._parts_ahead = self._parts_ahead, None
         if ahead is not None and ahead[0] is self.document.evaluator and ahead[1] is blend:
             ahead[0].adopt_blend_parts(blend, ahead[2].result())
+
+    def unfinished_jobs(self, patience: float = HOLD_AFTER_S) -> list[Future]:
+        """What a press at the chosen level would wait for from ``_warm_region_max``: its Futures not done after
+        ``patience`` seconds (on ICT they are done within it, and the drag starts at the press)."""
+        lvl = self._level_obj(self.level)
+        if lvl is None:
+            return []
+        region_max, pairs, ahead = self._region_max.get(id(lvl.blend)), self._antagonist_cache, self._parts_ahead
+        jobs = []
+        if region_max is not None and region_max[0] is lvl.blend:
+            jobs.append(region_max[1])
+        if pairs is not None and pairs[:2] == self._antagonist_key():
+            jobs.append(pairs[2])
+        if ahead is not None and ahead[0] is self.document.evaluator and ahead[1] is lvl.blend:
+            jobs.append(ahead[2])
+        jobs = [job for job in jobs if isinstance(job, Future)]
+        return list(wait_for(jobs, timeout=patience).not_done) if jobs else []
+
+    def hold_press(self, index: int, jobs: list[Future]) -> None:
+        """A press on marker ``index`` before ``jobs`` are done: the drag begins when they are, with where the mouse
+        has gone by then (``HeldPress``), so that the window never waits for them."""
+        self.held = HeldPress(index, jobs)
+        QtWidgets.QApplication.setOverrideCursor(QtCore.Qt.BusyCursor)
+        self.message(f"Getting level {self.level}'s regions ready for the drag…", 4000)
+        for job in jobs:
+            job.add_done_callback(self._emit_jobs_done)
+
+    def _emit_jobs_done(self, _job: Future) -> None:
+        try:
+            self._jobs_done.emit()      # queued: ``_start_held_press`` runs on the GUI thread
+        except RuntimeError:            # the window has gone meanwhile
+            pass
+
+    def _start_held_press(self) -> None:
+        held = self.held
+        if held is None or not all(job.done() for job in held.jobs):
+            return
+        self._drop_held_press()
+        if not self.mode or self.markers is None or held.index >= len(self.markers):
+            return
+        self.begin_drag(held.index)
+        if held.motion is not None:
+            self.drag_by(held.motion)
+        if held.released:
+            self.end_drag()
+
+    def _drop_held_press(self) -> None:
+        if self.held is not None:
+            self.held = None
+            QtWidgets.QApplication.restoreOverrideCursor()
 
     def _antagonist_key(self) -> tuple:
         project = self.document.project

@@ -391,3 +391,62 @@ def test_the_levels_shapes_per_region_are_found_before_the_first_press(qtbot, tm
     c.drag_by(np.array([-0.5, 0.5, 0.0]))
     c.end_drag()
     assert threads == [False] and w.document.is_regional and w.document.undo_stack.count() > 0
+
+
+def test_a_press_before_the_levels_set_up_is_ready_never_freezes_the_window(qtbot, tmp_path, geometry, nose_tip,
+                                                                             monkeypatch):
+    """What a drag of a level needs is found on a worker thread when Marker Mode or a level is chosen (0.7 s on the
+    106k-vertex, 228-shape studio rig). A press before it is done used to wait for it with the window frozen; now
+    the press is held (a busy cursor) and the drag starts when the work arrives, from where the mouse has gone,
+    even if the button is already up: one undo step either way."""
+    import threading
+    import app.marker_controller as marker_controller
+    from PySide6 import QtWidgets
+    gate = threading.Event()
+    real = marker_controller.shape_region_max
+
+    def slow_region_max(*args, **kwargs):          # the studio rig's wait, as long as the test wants it
+        gate.wait(5.0)
+        return real(*args, **kwargs)
+    monkeypatch.setattr(marker_controller, "shape_region_max", slow_region_max)
+    w = _window(qtbot, tmp_path)
+    c = _pins(w, geometry, nose_tip)
+    doc, widget, corner = w.document, w.viewport.canvas, 0
+    w.markers.mode_action.trigger()
+    P0 = c.marker_positions()
+    q = _screen(w, P0[corner:corner + 1])[0]
+    start = QtCore.QPoint(round(q.x()), round(q.y()))
+    drag = QtCore.QPoint(-25, -15)
+    steps_before = doc.undo_stack.count()
+
+    t0 = QtCore.QElapsedTimer()
+    t0.start()
+    mouse(widget, "press", start)
+    mouse(widget, "move", start + drag / 2)
+    mouse(widget, "move", start + drag)
+    assert t0.elapsed() < 1000                         # the window did not wait (before: 5 s, the gate's time out)
+    assert c.held is not None and c.drag is None and not doc.is_regional
+    assert QtWidgets.QApplication.overrideCursor().shape() == QtCore.Qt.BusyCursor
+    gate.set()
+    qtbot.waitUntil(lambda: c.drag is not None, timeout=5000)
+    assert QtWidgets.QApplication.overrideCursor() is None
+    assert doc.is_regional and doc.region_level == c.level
+    moved = c.marker_positions()[corner] - P0[corner]
+    assert np.linalg.norm(moved) > 0.2 and moved[0] < 0 < moved[1]   # toward the mouse: left and up (cm)
+    mouse(widget, "release", start + drag)
+    assert doc.undo_stack.count() == steps_before + 1 and c.drag is None
+
+    # A whole click-drag-release before the next level's set-up is ready: played when it is, one undo step.
+    gate.clear()
+    doc.undo_stack.undo()
+    level = c.panel.level
+    level.setCurrentIndex(level.findData(c.level + 1))
+    mouse(widget, "press", start)
+    mouse(widget, "move", start + drag)
+    mouse(widget, "release", start + drag)
+    assert c.held is not None and c.held.released and not doc.is_regional
+    gate.set()
+    qtbot.waitUntil(lambda: c.held is None, timeout=5000)
+    assert c.drag is None and doc.undo_stack.count() == steps_before + 1
+    assert doc.is_regional and doc.region_level == c.level
+    assert np.linalg.norm(c.marker_positions()[corner] - P0[corner]) > 0.2
