@@ -29,7 +29,7 @@ def test_mouth_corner_drag_on_ict_keeps_antagonists_apart(qtbot, tmp_path, ict_d
     drag = QtCore.QPoint(round(1.5 * px_per_cm), -round(1.0 * px_per_cm))
     widget = w.viewport.canvas
     mouse(widget, "press", start)
-    assert c.drag is not None
+    qtbot.waitUntil(lambda: c.drag is not None, timeout=10000)   # at once, or held until marker mode's set-up is done
     for i in range(1, 7):
         mouse(widget, "move", start + drag * i / 6)
     qtbot.waitUntil(lambda: not w.redraw_pending)

@@ -499,7 +499,7 @@ def test_marker_drag_release_returns_at_once_on_ict(qtbot, tmp_path, ict_dir):
     steps = w.document.undo_stack.count()
     canvas = w.viewport.canvas
     mouse(canvas, "press", at)
-    assert c.drag is not None
+    qtbot.waitUntil(lambda: c.drag is not None, timeout=10000)   # at once, or held until marker mode's set-up is done
     for k in range(1, 6):
         mouse(canvas, "move", at + QtCore.QPoint(3 * k, -4 * k))
     _returns_fast(lambda: mouse(canvas, "release", at + QtCore.QPoint(15, -20)))
