@@ -497,6 +497,10 @@ class MarkerController(QtCore.QObject):
         self.held = HeldPress(index, jobs)
         QtWidgets.QApplication.setOverrideCursor(QtCore.Qt.BusyCursor)
         self.message(f"Getting level {self.level}'s regions ready for the drag…", 4000)
+        self._when_done(jobs)
+
+    def _when_done(self, jobs: list[Future]) -> None:
+        self.held.jobs = jobs
         for job in jobs:
             job.add_done_callback(self._emit_jobs_done)
 
@@ -509,6 +513,10 @@ class MarkerController(QtCore.QObject):
     def _start_held_press(self) -> None:
         held = self.held
         if held is None or not all(job.done() for job in held.jobs):
+            return
+        more = self.unfinished_jobs(patience=0.0)     # another level chosen meanwhile: its set-up too
+        if more:
+            self._when_done(more)
             return
         self._drop_held_press()
         if not self.mode or self.markers is None or held.index >= len(self.markers):
