@@ -515,6 +515,27 @@ def test_a_view_change_draws_one_frame(qtbot, tmp_path):
         assert (colormap is None) == (view == "shaded")
 
 
+def test_the_direction_colour_view_finds_its_vectors_off_the_gui_thread(qtbot, tmp_path, monkeypatch):
+    """The direction-colour view (Joshi §2's vector view) colours each vertex by the Laplacian vector of its
+    strongest shape. Those vectors are made with the segmentation, on its worker thread: choosing the view made them
+    on the GUI thread (0.1-0.2 s of a frozen window on the 422k-vertex studio rig), and the view shows them."""
+    import solvers.deformation_maps as deformation_maps
+    from tests.gui_helpers import calls_on_gui_thread
+    threads = calls_on_gui_thread(monkeypatch, deformation_maps, "argmax_vectors")
+    w = make_window(qtbot, tmp_path)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=60000)
+    sp = w.segmentation_panel
+    sp.view.setCurrentIndex(sp.view.findData("deformation-rgb"))
+    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=5000)
+    assert threads == [False]
+    maps = w.segmentation.cache.maps()
+    expected = deformation_maps.vector_colors(maps.vector, float(np.percentile(np.abs(maps.vector)[maps.vector != 0],
+                                                                                 98)))
+    shown = w.viewport.colormap
+    assert shown.rgb and np.abs(shown.scalars.astype(float) - expected * 255).max() <= 1.0
+    assert len(np.unique(shown.scalars, axis=0)) > 100       # colours by direction, not one grey
+
+
 def test_an_expose_shows_the_last_render_again_unless_something_changed(qtbot, tmp_path):
     """A window closing over the viewport (a menu, a tooltip, a dialog; no compositor) exposes it: the picture VTK
     keeps is shown again without a render when nothing changed since the last one (a render is 0.1-0.16 s at 422k
