@@ -65,9 +65,12 @@ def cmd_render(args) -> int:
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
     from model.segmentation import SegmentationSettings
-    t = SegmentationSettings().t if args.threshold is None else args.threshold
+    settings = SegmentationSettings(min_region_size=args.min_size)
+    if args.threshold is not None:
+        settings.t = args.threshold
     with about(args.rig):       # a --level the segmentation lacks, a threshold that leaves no region: name the rig
-        view = build_view(rig, weights, args.view, threshold=t, level=args.level)
+        settings.validate()
+        view = build_view(rig, weights, args.view, settings=settings, level=args.level)
     from model.parts import checked_hidden, drawn_faces, rig_parts, vertex_colors
     from widgets.scene import SKIN, render_png
     parts = rig_parts(rig)
@@ -212,6 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--threshold", type=float, default=None,
                     help="segmentation quantile t in [0, 1] of the moving skin (default 0.5)")
     sp.add_argument("--level", type=int, default=0, help="hierarchy level to show (0 = finest)")
+    sp.add_argument("--min-size", type=int, default=30, help="segmentation: smallest region in vertices (default 30)")
     sp.add_argument("--size", default="1024,768", help="W,H in pixels (default 1024,768)")
     sp.add_argument("--camera", default="front", choices=["front", "left", "right", "three-quarter"])
     sp.add_argument("--wireframe", action="store_true", help="draw polygon edges")

@@ -108,5 +108,33 @@ def test_a_segmentation_or_level_the_rig_cannot_give_names_the_rig(ict_dir, tmp_
         f"error: {ict_dir}: --level 99 does not exist: this segmentation has levels 0 to 4.\n", proc.stderr
     morph = require_data(DATA / "thirdparty" / "gltf" / "SimpleMorph.gltf")
     proc = run_cli("render", morph, "--view", "segmentation", "-o", tmp_path / "x.png", check=False)
-    assert proc.returncode == 2 and proc.stderr.startswith(f"error: {morph}: the threshold t=0.5 leaves no region")
+    assert proc.returncode == 2 and proc.stderr.startswith(f"error: {morph}: this rig cannot be segmented")
     assert proc.stderr.count("\n") == 1 and not (tmp_path / "x.png").exists()
+
+
+@pytest.mark.parametrize("rig, args, advice", [
+    # 3 vertices, one of them moving: no threshold and no minimum size can make a region; lowering either is no help
+    ("tiny", (), "this rig cannot be segmented: its shapes move 1 vertex of the skin, too few for a region at any "
+                 "threshold or minimum region size."),
+    # 36 vertices: a threshold as low as 0 still leaves fewer than 100; only a smaller --min-size helps, and works
+    ("grid", ("--min-size", "100"), "no threshold leaves a region of at least 100 vertices on this rig (its shapes "
+                                    "move 35 vertices of the skin); lower the minimum region size."),
+    ("grid", ("--threshold", "1"), "the threshold t=1 leaves no region of at least 30 vertices; lower the threshold "
+                                   "or the minimum region size."),
+])
+def test_a_segmentation_that_leaves_no_region_gives_advice_that_helps(tmp_path, rig, args, advice):
+    """`render --view segmentation` on a rig too small for a region said "lower the threshold", which cannot help:
+    the advice names only what would leave a region, and `render --min-size` is there to follow it."""
+    folder = tmp_path / rig
+    if rig == "tiny":
+        folder.mkdir()
+        (folder / "neutral.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+        (folder / "jawOpen.obj").write_text("v 0 0 0.1\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    else:
+        write_rig_folder(folder)
+    out = tmp_path / "x.png"
+    proc = run_cli("render", folder, "--view", "segmentation", *args, "-o", out, check=False)
+    assert (proc.returncode, proc.stderr) == (2, f"error: {folder}: {advice}\n") and not out.exists()
+    if "--min-size" in args:       # the advice followed: a smaller minimum region size renders the regions
+        run_cli("render", folder, "--view", "segmentation", "--min-size", "5", "--size", "64,64", "-o", out)
+        assert out.exists()
