@@ -231,6 +231,30 @@ def test_cli_writes_the_actor_project_and_reports_changes(sample_rig, tmp_path):
     assert proc.returncode == 2 and "none was given" in proc.stderr
 
 
+def test_a_scan_or_target_that_is_not_an_obj_is_named_as_what_it_is(tmp_path):
+    """A glTF given to ``personalize --neutral-scan``/``--scans`` (or ``corrective --target``) read as "has no vertex
+    ('v') records" (a .gltf) or "is a binary file, not a text OBJ" (a .glb, even one the rig's own export wrote):
+    one sentence saying it is a glTF, not an OBJ mesh, exit 2, nothing written."""
+    from tests.conftest import DATA, require_data
+    from tests.rig_files import write_rig_folder
+    folder = tmp_path / "rig"
+    write_rig_folder(folder)
+    glb = tmp_path / "rig.glb"
+    run_cli("export", folder, "-o", glb)
+    gltf = require_data(DATA / "thirdparty" / "gltf" / "SimpleMorph.gltf")
+    disguised = tmp_path / "scan.obj"                     # a GLB renamed: its bytes say what it is
+    disguised.write_bytes(glb.read_bytes())
+    out = tmp_path / "actor.bsproj"
+    advice = "file, not an OBJ mesh; save it as OBJ with the rig's vertices in the rig's order."
+    for args, path, kind in [
+            (("personalize", folder, "--neutral-scan", gltf), gltf, "a glTF"),
+            (("personalize", folder, "--scans", glb), glb, "a binary glTF (GLB)"),
+            (("personalize", folder, "--scans", disguised), disguised, "a binary glTF (GLB)"),
+            (("corrective", folder, "--drivers", "raise,push", "--target", glb), glb, "a binary glTF (GLB)")]:
+        proc = run_cli(*args, "-o", out, check=False)
+        assert (proc.returncode, proc.stderr) == (2, f"error: {path}: is {kind} {advice}\n") and not out.exists()
+
+
 # --- the actor of mocap/actor_take ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def actor_dir():
