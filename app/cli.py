@@ -14,8 +14,8 @@ import numpy as np
 
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.command_line import opens_window
-from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, check_outputs, check_threshold,
-                             join_dash_values, load_rig_arg, parse_size, pose_weights)
+from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, add_rate_option, check_outputs,
+                             check_rate, check_threshold, join_dash_values, load_rig_arg, parse_size, pose_weights)
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -94,9 +94,12 @@ def cmd_render(args) -> int:
 
 def cmd_export(args) -> int:
     from model.export import export_rig, load_animation
+    check_rate(args)
+    if args.rate is not None and not args.animation:
+        raise RigInputError("--rate: gives the frame rate of --animation's weights CSV; no --animation was given.")
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
-    animation = load_animation(args.animation, rig) if args.animation else None
+    animation = load_animation(args.animation, rig, args.rate) if args.animation else None
     export_rig(rig, args.output, weights, animation, units=args.out_units, up=args.up)
     for message in animation.warnings if animation is not None else ():
         print(f"warning: {message}", file=sys.stderr)
@@ -154,7 +157,8 @@ def cmd_corrective(args) -> int:
 
 def cmd_take_info(args) -> int:
     from model.takes import load_take, take_summary
-    info = take_summary(load_take(args.take))
+    check_rate(args)
+    info = take_summary(load_take(args.take, rate=args.rate))
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
@@ -203,6 +207,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("take-info", help="print what a take (C3D, TRC, marker CSV, Live Link Face CSV) holds")
     sp.add_argument("take", metavar="TAKE", help="a .c3d, .trc or .csv take")
+    add_rate_option(sp)
     sp.add_argument("--json", action="store_true", help="machine-readable output")
     sp.set_defaults(func=cmd_take_info)
 
@@ -237,6 +242,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", required=True, help=".glb, .gltf, .usd, .usda, .usdc or .obj file to write")
     sp.set_defaults(output_files=(("output", "-o"),))
     sp.add_argument("--animation", help="weights CSV (as solve writes) or Live Link Face CSV to animate (glTF, USD)")
+    add_rate_option(sp, "frames a second of an --animation weights CSV without a time column (default 30, with a "
+                        "warning); a file's own times are kept")
     sp.add_argument("--out-units", choices=["m", "cm", "mm"],
                     help="units of the file written (default: m for glTF and USD, the rig's for OBJ)")
     sp.add_argument("--up", choices=["y", "z"], default="y", help="up axis of the file written (default y)")

@@ -86,6 +86,22 @@ def about(path):
         raise RigInputError(f"{path}: {text[:1].lower()}{text[1:]}") from None
 
 
+RATE_HELP = "frames a second of a take whose file gives no rate (a weights CSV without a time column: default 30 " \
+            "with a warning; a plain marker CSV: 60); a file's own rate is kept"
+
+
+def add_rate_option(sp, help_text: str = "") -> None:
+    """--rate, one option wherever a take is read (take-info, solve, batch, export --animation)."""
+    sp.add_argument("--rate", type=float, default=None, metavar="FPS", help=help_text or RATE_HELP)
+
+
+def check_rate(args) -> None:
+    """--rate, checked before any file is read (``model.take_data.given_rate``): a number of frames a second."""
+    from model.take_data import given_rate
+    if getattr(args, "rate", None) is not None:
+        args.rate = given_rate(args.rate)
+
+
 def check_threshold(args) -> None:
     """--threshold, a quantile of the rig's moving skin, in [0, 1] (before the rig is read)."""
     t = getattr(args, "threshold", None)

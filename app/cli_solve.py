@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from app.cli_common import about, check_threshold, load_rig_arg
+from app.cli_common import about, add_rate_option, check_rate, check_threshold, load_rig_arg
 
 
 def add_parser(sub, rig_arg) -> None:
@@ -53,6 +53,7 @@ def add_solve_options(sp) -> None:
     sp.add_argument("--stable", default=None, metavar="M1,M2,...|PATTERN",
                     help="markers the head motion is taken from (names or patterns such as 'root-*'; head-band "
                          "markers need not be in the map; default: all markers)")
+    add_rate_option(sp)
     sp.add_argument("--fixed-head", action="store_true",
                     help="the markers are already head-stabilised in rig space: no calibration, no head motion "
                          "(always so for a one-frame take)")
@@ -79,6 +80,7 @@ def check_solve_options(args) -> None:
     --calibration-frames count of 0 or more, not 0 with --neutral-frames (``check_calibration_settings``)."""
     from model.take_workspace import check_calibration_settings
     check_threshold(args)
+    check_rate(args)
     check_calibration_settings(solve_options(args))
 
 
@@ -92,7 +94,7 @@ def solve_options(args) -> dict:
         regional = not args.global_solve
     return {"mode": "region" if regional else "global", "residual": args.residual,
             "calibration_frames": args.calibration_frames, "fixed_head": args.fixed_head,
-            "neutral_frames": args.neutral_frames, "stable": args.stable}
+            "neutral_frames": args.neutral_frames, "stable": args.stable, "rate": getattr(args, "rate", None)}
 
 
 def solve_settings(args, rig) -> tuple[dict, object]:

@@ -9,7 +9,8 @@ Solve settings are a plain dict, as the panel and the command line gather them:
 ``model.units`` converts them), ``calibration_frames``, ``neutral_frames`` (None: the first
 ``calibration_frames``; ``"auto"``; or ``"A:B"`` / (A, B), inclusive), ``stable`` (marker names or patterns such as
 ``root-*``, comma-separated, for the head motion), ``fixed_head`` (markers already head-stabilised in rig space) and
-``antagonists`` (the shape pairs kept apart, as names; None: the rig's, ``model.antagonists``).
+``antagonists`` (the shape pairs kept apart, as names; None: the rig's, ``model.antagonists``) and ``rate`` (the frame
+rate of a take whose file gives none, ``--rate``; None: ``read_take``'s defaults).
 """
 from __future__ import annotations
 
@@ -121,23 +122,27 @@ def resolve_stable(labels: list[str], spec) -> list[str]:
     return found
 
 
-def read_take(path: str | Path, rig: Rig | None = None) -> MarkerTake | WeightTake:
+def read_take(path: str | Path, rig: Rig | None = None, *, rate: float | None = None) -> MarkerTake | WeightTake:
     """Open a marker take (C3D, TRC, CSV), or a weight take on ``rig``'s shapes: a Live Link Face CSV (its ARKit
     columns mapped by ``model.livelink.default_arkit_mapping``) or a weights CSV (``frame,time,<shapes>``).
+    ``rate``: the frame rate of a take whose file gives none (``model.takes.load_take``).
     Raises RigInputError (one sentence naming the file) for anything unreadable."""
     from .livelink import is_livelink_csv, read_livelink_csv
+    from .take_data import rate_not_used
     from .takes import load_take
     from .weights_csv import is_weights_csv, read_weights_take
     path = Path(path)
     try:
         if path.suffix.lower() == ".csv" and path.is_file():
             for is_kind, read, what in ((is_livelink_csv, read_livelink_csv, "a Live Link Face take"),
-                                        (is_weights_csv, read_weights_take, "a weights CSV")):
+                                        (is_weights_csv, partial(read_weights_take, rate=rate), "a weights CSV")):
                 if is_kind(path):
                     if rig is None:
                         raise RigInputError(f"{path}: open a rig before playing {what} on it.")
-                    return read(path, rig.shape_names)
-        return load_take(path)
+                    take = read(path, rig.shape_names)
+                    take.warnings += rate_not_used(path, take.rate, rate)   # a rate of its own: the file's kept
+                    return take
+        return load_take(path, rate=rate)
     except RigInputError:
         raise
     except (OSError, ValueError) as exc:
@@ -375,8 +380,8 @@ class TakeWorkspace:
             return self.take.weights
         return self.solution.shape_weights if self.solution is not None else None
 
-    def load_take(self, path: str | Path) -> MarkerTake | WeightTake:
-        take = read_take(path, self.rig)
+    def load_take(self, path: str | Path, rate: float | None = None) -> MarkerTake | WeightTake:
+        take = read_take(path, self.rig, rate=rate)
         self.take, self.take_path, self.solution = take, Path(path), None
         return take
 
@@ -385,8 +390,9 @@ class TakeWorkspace:
         ``marker_map`` (markers the take lacks are warnings, not a refusal) or automatically from its neutral
         frames (``settings``' ``calibration_frames``, ``neutral_frames`` and ``stable``; checked against the take
         first: ``check_take_calibration``). False for a weight take (Live Link Face, weights CSV): it has nothing
-        to solve, it plays on the rig as it is."""
-        self.load_take(path)
+        to solve, it plays on the rig as it is. ``settings``' ``rate``: the frame rate of a take whose file gives
+        none (``read_take``)."""
+        self.load_take(path, settings.get("rate"))
         if self.marker_take is None:
             return False
         check_take_calibration(self.take, settings)
