@@ -177,9 +177,17 @@ def cmd_take_info(args) -> int:
 
 
 def cmd_sample(args) -> int:
+    from model.readers import PRESETS_FILE
     from resources.sample_rig import write_sample
     from resources.sample_textures import write_sample_textures
-    out = write_sample(args.output)
+    folder = Path(args.output)
+    taken = sorted(p.name for p in folder.iterdir() if p.suffix.lower() == ".obj" or p.name == PRESETS_FILE) \
+        if folder.is_dir() else []
+    if taken:      # the sample's files would overwrite that rig's, or be read with them as one rig
+        more = f" and {len(taken) - 1} more" if len(taken) > 1 else ""
+        raise RigInputError(f"{folder}: already holds {taken[0]}{more}; write the sample rig into a new or empty "
+                            "folder.")
+    out = write_sample(folder)
     write_sample_textures(out)
     print(f"wrote the sample rig to {out}")
     return 0
@@ -282,7 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--mirror", action="store_true",
                     help="also add the other side's corrective (drivers _L<->_R, reflected across x = 0)")
     sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
-    sp.set_defaults(func=cmd_corrective, output_files=(("output", "-o"),))
+    sp.set_defaults(func=cmd_corrective, output_files=(("output", "-o"),), rig_updated_in_place=True)
 
     cli_solve.add_parser(sub, rig_arg)
     cli_pairs.add_parser(sub, rig_arg)

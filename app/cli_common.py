@@ -12,6 +12,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from model.errors import RigInputError
+from model.textures import NORMAL_SUFFIX
 
 EXIT_INPUT = 2        # bad input: one sentence naming the file and the problem
 EXIT_UNEXPECTED = 1   # anything else: one sentence and a crash log with the traceback
@@ -62,6 +63,7 @@ def check_outputs(args) -> None:
         if path is None:
             continue
         check_output_file(path)
+        check_not_an_input(args, path, option)
         key = os.path.realpath(path)
         if key in seen:
             raise RigInputError(f"{path}: is given for both {seen[key]} and {option}; each output needs its own "
@@ -71,6 +73,53 @@ def check_outputs(args) -> None:
         path = getattr(args, dest, None)
         if path is not None:
             check_output_folder(path)
+
+
+# What a command reads, by the option naming it (a file, a folder, or a list of them), and which files in a folder
+# given there are read: an output may not be one of them (the command would write over what it reads, or the next
+# run would read the output as part of the input: a posed OBJ in the rig's folder as one more shape).
+_INPUTS = (("rig", "RIG"), ("take", "TAKE"), ("map", "--map"), ("animation", "--animation"),
+           ("neutral_scan", "--neutral-scan"), ("target", "--target"), ("scans", "--scans"), ("takes", "TAKES"))
+_READ_IN_A_FOLDER = {"rig": (".obj", ".mtl", ".json", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"),
+                     "scans": (".obj",)}
+
+
+def check_not_an_input(args, path, option: str) -> None:
+    """Refuse an output file that is one of the command's inputs, or a file the input folder's reader reads
+    (``_READ_IN_A_FOLDER``: one that exists there, or a new OBJ, which would be read as one more shape or scan).
+    ``corrective`` may write its project over the RIG project it adds to (``rig_updated_in_place``)."""
+    out = os.path.realpath(path)
+    for dest, name in _INPUTS:
+        values = getattr(args, dest, None)
+        for value in values if isinstance(values, list) else [] if values is None else [values]:
+            source = os.path.realpath(value)
+            if source == out:
+                if dest == "rig" and getattr(args, "rig_updated_in_place", False):
+                    continue
+                raise RigInputError(f"{path}: is {name} itself, which this command reads; give {option} another file.")
+            folder = source if os.path.isdir(source) else \
+                os.path.dirname(source) if dest == "rig" and source.lower().endswith(".obj") else None
+            if folder and os.path.dirname(out) == folder:
+                shown_folder = value if folder == source else os.path.dirname(value) or "."
+                _check_beside(out, folder, dest, f"{path}: is in {shown_folder}, which {name} reads, and would",
+                              f"; give {option} a file elsewhere.")
+
+
+def _check_beside(out: str, folder: str, dest: str, start: str, end: str) -> None:
+    """An output ``out`` in the ``folder`` an input (``dest``) reads: refused if it is a file the reader reads there
+    and exists, or would be read as part of the input (a new OBJ: one more shape or scan; a new picture named after
+    a shape's OBJ: that shape's texture, ``model.textures``)."""
+    stem, suffix = os.path.splitext(os.path.basename(out))
+    suffix = suffix.lower()
+    if suffix not in _READ_IN_A_FOLDER.get(dest, ()):
+        return
+    if os.path.exists(out):
+        raise RigInputError(f"{start} overwrite a file it reads{end}")
+    if suffix == ".obj":
+        raise RigInputError(f"{start} be read there as one more {'shape' if dest == 'rig' else 'scan'}{end}")
+    shape = stem[:-len(NORMAL_SUFFIX)] if stem.endswith(NORMAL_SUFFIX) else stem
+    if dest == "rig" and suffix != ".json" and os.path.isfile(os.path.join(folder, shape + ".obj")):
+        raise RigInputError(f"{start} be read there as the texture of {shape}{end}")
 
 
 @contextmanager
