@@ -102,6 +102,8 @@ def read_weights_table(path: str | Path) -> tuple[np.ndarray, np.ndarray | None,
     if len(set(names)) != len(names):
         raise RigInputError(f"{path}: duplicate shape names in the header.")
     data = rows[1:]
+    if not data:     # a header alone: a take of no frames, which nothing can play or solve
+        raise RigInputError(f"{path}: holds no frames.")
     bad = next((i for i, r in enumerate(data) if len(r) != len(header)), None)
     if bad is not None:
         raise RigInputError(f"{path}: row {bad + 2} has {len(data[bad])} values, the header has {len(header)}.")

@@ -117,3 +117,19 @@ def test_rate_gives_the_frame_rate_of_a_weight_take_whose_file_has_none(tmp_path
             proc = run_cli(*args, "--rate", rate, check=False)
             assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", sentence), (args, proc.stderr)
     assert not any((tmp_path / n).exists() for n in ("x.csv", "x.glb", "xb"))
+
+
+def test_a_weights_csv_of_a_header_alone_holds_no_frames(tmp_path):
+    """`frame,time,jawOpen` with no rows read as a take of 0 frames ("one frame has no frame rate" said the warning);
+    `solve` and `export --animation` then refused it as needing "one row of weights per frame time". Every command
+    says what it is: no frames, one sentence, exit 2."""
+    from tests.rig_files import write_rig_folder
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    for header in ("frame,time,raise\n", "frame,raise\n"):
+        take = tmp_path / "take.csv"
+        take.write_text(header)
+        for args in (("take-info", take), ("solve", rig, take, "-o", tmp_path / "w.csv"),
+                     ("export", rig, "-o", tmp_path / "a.glb", "--animation", take)):
+            proc = run_cli(*args, check=False)
+            assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", f"error: {take}: holds no frames.\n"), args
