@@ -427,13 +427,14 @@ def _no_region(s: SegmentationSettings, leaves_one, moving: int) -> str:
     from .wording import count
     threshold = s.method == "threshold"
     lowest = 0.0 if threshold else s.t
+    size = count(s.min_region_size, "vertex", "vertices")
     if threshold and s.t > 0 and leaves_one(lowest, s.min_region_size):
-        return (f"The threshold t={s.t:g} leaves no region of at least {s.min_region_size} vertices; "
-                "lower the threshold or the minimum region size.")
+        return (f"The threshold t={s.t:g} leaves no region of at least {size}; "
+                f"lower the threshold{' or the minimum region size' if s.min_region_size > 1 else ''}.")
     skin = f"its shapes move {count(moving, 'vertex', 'vertices')} of the skin"
     if s.min_region_size > 1 and leaves_one(lowest, 1):
         return (f"{'No threshold leaves a' if threshold else 'Region growing leaves no'} region of at least "
-                f"{s.min_region_size} vertices on this rig ({skin}); lower the minimum region size.")
+                f"{size} on this rig ({skin}); lower the minimum region size.")
     return (f"This rig cannot be segmented: {skin}, too few for a region at any threshold or minimum region "
             "size.")
 

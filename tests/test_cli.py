@@ -121,6 +121,9 @@ def test_a_segmentation_or_level_the_rig_cannot_give_names_the_rig(ict_dir, tmp_
                                     "move 35 vertices of the skin); lower the minimum region size."),
     ("grid", ("--threshold", "1"), "the threshold t=1 leaves no region of at least 30 vertices; lower the threshold "
                                    "or the minimum region size."),
+    # a minimum of 1 cannot be lowered: only the threshold is named
+    ("grid", ("--threshold", "1", "--min-size", "1"), "the threshold t=1 leaves no region of at least 1 vertex; "
+                                                      "lower the threshold."),
 ])
 def test_a_segmentation_that_leaves_no_region_gives_advice_that_helps(tmp_path, rig, args, advice):
     """`render --view segmentation` on a rig too small for a region said "lower the threshold", which cannot help:
