@@ -15,7 +15,8 @@ import numpy as np
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.command_line import opens_window
 from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, add_rate_option, check_outputs,
-                             check_rate, check_threshold, join_dash_values, load_rig_arg, parse_size, pose_weights)
+                             check_rate, check_threshold, join_dash_values, load_rig_arg, parse_size, pose_weights,
+                             print_warnings)
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -101,8 +102,7 @@ def cmd_export(args) -> int:
     weights = pose_weights(rig, args)
     animation = load_animation(args.animation, rig, args.rate) if args.animation else None
     export_rig(rig, args.output, weights, animation, units=args.out_units, up=args.up)
-    for message in animation.warnings if animation is not None else ():
-        print(f"warning: {message}", file=sys.stderr)
+    print_warnings(animation.warnings if animation is not None else ())
     frames = f", {animation.n_frames} frames" if animation is not None else ""
     print(f"wrote {args.output} ({rig.n_vertices} vertices, {rig.n_faces} faces, {rig.n_shapes} shapes, "
           f"{len(rig.correctives)} correctives{frames})")
@@ -171,8 +171,7 @@ def cmd_take_info(args) -> int:
     if info["bounds"]:
         print(f"  bounds: {info['bounds']['min']} .. {info['bounds']['max']}")
     print(f"  labels: {', '.join(info['labels'])}")
-    for w in info["warnings"]:
-        print(f"warning: {w}", file=sys.stderr)
+    print_warnings(info["warnings"])
     return 0
 
 

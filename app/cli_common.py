@@ -52,6 +52,13 @@ def join_dash_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[s
     return out
 
 
+def print_warnings(messages) -> None:
+    """What a reader decided for a file (a take cut short, a rate assumed), one ``warning:`` line each on stderr."""
+    import sys
+    for message in messages or ():
+        print(f"warning: {message}", file=sys.stderr)
+
+
 def check_outputs(args) -> None:
     """Refuse, before any work, an output option naming what cannot be written (``model.atomic``: a folder where a
     file goes, a file where a folder goes, a device, a path through a file) and two outputs naming the same file.

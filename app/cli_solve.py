@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import sys
 
-from app.cli_common import about, add_rate_option, check_rate, check_threshold, load_rig_arg
+from app.cli_common import about, add_rate_option, check_rate, check_threshold, load_rig_arg, print_warnings
 
 
 def add_parser(sub, rig_arg) -> None:
@@ -144,8 +144,7 @@ def cmd_solve(args) -> int:
     announce_solver_build()
     sol = ws.solve(settings, segmentation=segmentation)
     report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
-    for message in report["warnings"]:            # the take reader's (a file cut short), also in the report
-        print(f"warning: {message}", file=sys.stderr)
+    print_warnings(report["warnings"])            # the take reader's (a file cut short), also in the report
     for lab in report["markers_left_out"]:
         print(f"warning: marker {lab} left out ({report['markers_left_out_why'][lab]})", file=sys.stderr)
     with_c = f" with {len(report['correctives'])} corrective(s)" if report["correctives"] else ""
@@ -174,8 +173,7 @@ def write_weight_take(ws, args) -> int:
     if args.map:
         print(f"warning: {args.take} holds weights, not markers: --map is not used", file=sys.stderr)
     report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
-    for message in take.warnings:
-        print(f"warning: {message}", file=sys.stderr)
+    print_warnings(take.warnings)
     if take.unmapped:
         print(f"warning: {len(take.unmapped)} column(s) drive no shape of the rig: {', '.join(take.unmapped)}",
               file=sys.stderr)

@@ -255,6 +255,20 @@ def test_a_scan_or_target_that_is_not_an_obj_is_named_as_what_it_is(tmp_path):
         assert (proc.returncode, proc.stderr) == (2, f"error: {path}: is {kind} {advice}\n") and not out.exists()
 
 
+def test_personalize_says_what_the_takes_reader_decided(tmp_path):
+    """`personalize --take` on a take cut short read it to its last whole frame and said nothing (`solve` prints the
+    reader's warnings): it prints them too, one `warning:` line each."""
+    from resources.sample_rig import write_sample
+    from tests.conftest import DATA, require_data
+    folder = write_sample(tmp_path / "sample")
+    data = require_data(DATA / "mocap" / "actor_take" / "take.c3d").read_bytes()
+    take = tmp_path / "cut.c3d"
+    take.write_bytes(data[:int(len(data) * 0.6)])
+    proc = run_cli("personalize", folder, "--take", take, "-o", tmp_path / "actor.bsproj")
+    assert proc.stderr == (f"warning: {take}: the file ends early: 358 frames declared but 214 whole frames present; "
+                           "read to the last whole frame.\n")
+
+
 # --- the actor of mocap/actor_take ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def actor_dir():
