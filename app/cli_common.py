@@ -12,6 +12,7 @@ from contextlib import contextmanager
 import numpy as np
 
 from model.errors import RigInputError
+from model.rig import MAX_WEIGHT
 from model.textures import NORMAL_SUFFIX
 
 EXIT_INPUT = 2        # bad input: one sentence naming the file and the problem
@@ -184,6 +185,8 @@ def parse_weights(text: str | None) -> dict[str, float]:
             raise RigInputError(f"--weights: the value of '{name}' is not a number: '{value}'.") from None
         if not np.isfinite(v):
             raise RigInputError(f"--weights: the value of '{name}' is not finite.")
+        if abs(v) > MAX_WEIGHT:     # as for presets and poses: 1e308 posed the surface to inf and NaN, written out
+            raise RigInputError(f"--weights: the value of '{name}' is outside ±{MAX_WEIGHT:g}.")
         out[name.strip()] = v
     return out
 

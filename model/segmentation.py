@@ -76,6 +76,12 @@ class Segmentation:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
+# Settings counted in rounds over the mesh (rings, smoothing passes): more than this reaches across any face many
+# times over, and each round is a pass over the mesh (`segment --smoothing 100000000` still ran after 5 minutes, 10⁴
+# took 0.6 s on the sample face; a project file may say anything)
+ROUNDS_SETTINGS, MAX_ROUNDS = ("overlap_rings", "concavity_rings", "smoothing"), 1000
+
+
 @dataclass
 class SegmentationSettings:
     """What the user chose for the segmentation (ALGORITHMS.md §3 defaults); saved in the project file.
@@ -140,6 +146,8 @@ class SegmentationSettings:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
                 raise RigInputError(f"The segmentation setting '{name}' must be a whole number ≥ 0; got {value!r}.")
+            if name in ROUNDS_SETTINGS and value > MAX_ROUNDS:   # each round is one more pass over the mesh
+                raise RigInputError(f"The segmentation setting '{name}' must be at most {MAX_ROUNDS}; got {value!r}.")
             setattr(self, name, int(value))
         if self.max_groups < 1:
             raise RigInputError("Region growing needs at least one group (max_groups ≥ 1).")

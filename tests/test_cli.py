@@ -102,6 +102,26 @@ def test_errors_are_one_sentence_naming_the_rig_and_argparse_gives_no_usage_bloc
     assert proc.stderr.startswith(head) and proc.stderr.endswith(tail) and proc.stderr.count("\n") == 1, proc.stderr
 
 
+@pytest.mark.parametrize("args, sentence", [
+    # 1e308 passed as finite and posed the surface to inf and NaN: the OBJ was written full of "v nan nan -inf"
+    (["export", "{folder}", "-o", "{tmp}/x.obj", "--weights", "raise=1e308"],
+     "--weights: the value of 'raise' is outside ±1000."),
+    (["render", "{folder}", "-o", "{tmp}/x.png", "--weights", "push=-1001"],
+     "--weights: the value of 'push' is outside ±1000."),
+    # 10⁸ rounds of smoothing (or of a project's closing rings) ran on and on: still running after 5 minutes
+    (["segment", "{folder}", "-o", "{tmp}/x.json", "--smoothing", "100000000"],
+     "{folder}: the segmentation setting 'smoothing' must be at most 1000; got 100000000."),
+    (["segment", "{folder}", "-o", "{tmp}/x.json", "--overlap", "1001"],
+     "{folder}: the segmentation setting 'overlap_rings' must be at most 1000; got 1001."),
+])
+def test_a_weight_or_a_round_count_beyond_reason_is_refused_at_once(tmp_path, args, sentence):
+    folder = tmp_path / "rig"
+    write_rig_folder(folder)
+    proc = run_cli(*[a.format(folder=folder, tmp=tmp_path) for a in args], check=False, timeout=60)
+    assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", f"error: {sentence.format(folder=folder)}\n")
+    assert not any(p.name.startswith("x.") for p in tmp_path.iterdir())
+
+
 def test_a_segmentation_or_level_the_rig_cannot_give_names_the_rig(ict_dir, tmp_path):
     proc = run_cli("render", ict_dir, "--view", "segmentation", "--level", "99", "-o", tmp_path / "x.png", check=False)
     assert proc.returncode == 2 and proc.stderr == \
