@@ -15,8 +15,8 @@ import numpy as np
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.command_line import opens_window
 from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, add_rate_option, check_outputs,
-                             check_rate, check_threshold, join_dash_values, load_rig_arg, parse_size, pose_weights,
-                             print_warnings)
+                             check_rate, check_rig_options, check_threshold, join_dash_values, load_rig_arg, parse_size,
+                             pose_weights, print_warnings)
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -137,6 +137,7 @@ def cmd_corrective(args) -> int:
     from model.obj_io import read_obj
     from model.project import Project, load_project, save_project
     path = Path(args.rig)
+    check_rig_options(args)
     project = load_project(path) if path.suffix.lower() == ".bsproj" else Project(rig=load_rig_arg(args))
     rig = project.rig
     drivers = [d.strip() for d in args.drivers.split(",") if d.strip()]

@@ -204,10 +204,24 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def load_rig_arg(args):
-    """The rig named by the command's RIG argument (with --neutral and --units where the command has them)."""
+    """The rig named by the command's RIG argument (with --neutral, --units and --mesh where the command has them)."""
     from model.readers import load_rig
+    check_rig_options(args)
     return load_rig(args.rig, neutral=getattr(args, "neutral", None), units=getattr(args, "units", None),
                     mesh=getattr(args, "mesh", None))
+
+
+def check_rig_options(args) -> None:
+    """--neutral, --units and --mesh given to a rig they say nothing of are refused (they were ignored: `--units mm`
+    on a project, `--mesh` on an OBJ folder)."""
+    suffix = "" if os.path.isdir(args.rig) else os.path.splitext(str(args.rig))[1].lower()
+    kind = {".gltf": "a glTF", ".glb": "a glTF", ".bsproj": "a project"}.get(suffix, "an OBJ folder")
+    for option, dest, kinds, what in (("--neutral", "neutral", ("an OBJ folder",), "the neutral OBJ of an OBJ folder"),
+                                      ("--mesh", "mesh", ("a glTF",), "the mesh of a glTF to read"),
+                                      ("--units", "units", ("an OBJ folder", "a glTF"),
+                                       "the units of an OBJ folder or a glTF (a project keeps its own)")):
+        if getattr(args, dest, None) and kind not in kinds:
+            raise RigInputError(f"{args.rig}: is {kind}, and {option} names {what}.")
 
 
 def pose_weights(rig, args) -> np.ndarray:

@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import sys
 
-from app.cli_common import about, add_rate_option, check_rate, check_threshold, load_rig_arg, print_warnings
+from app.cli_common import (about, add_rate_option, check_rate, check_rig_options, check_threshold, load_rig_arg,
+                             print_warnings)
 
 
 def add_parser(sub, rig_arg) -> None:
@@ -66,6 +67,7 @@ def load_solve_rig(args):
     args.antagonists = None
     if str(args.rig).lower().endswith(".bsproj") and Path(args.rig).is_file():
         from model.project import load_project
+        check_rig_options(args)
         project = load_project(args.rig)
         rig, args.antagonists = project.rig, project.antagonists
     else:

@@ -115,6 +115,33 @@ def test_errors_are_one_sentence_naming_the_rig_and_argparse_gives_no_usage_bloc
     assert not any(p.name.startswith("x.") for p in tmp_path.iterdir())      # nothing written
 
 
+def test_a_rig_option_that_says_nothing_of_the_rig_is_refused(tmp_path):
+    """--units on a project, --mesh on an OBJ folder, --neutral on a glTF were ignored (`info P.bsproj --units mm`
+    printed the project's cm): one sentence naming the rig, exit 2."""
+    from model.gltf import write_gltf
+    from model.project import Project, save_project
+    folder = tmp_path / "rig"
+    write_rig_folder(folder)
+    rig = load_rig(folder)
+    save_project(Project(rig=rig), tmp_path / "p.bsproj")
+    write_gltf(rig, tmp_path / "r.glb")
+    take = tmp_path / "take.csv"
+    take.write_text("frame,raise\n0,0.5\n1,1\n")
+    for args, path, sentence in [
+            (("info", folder, "--mesh", "Face"), folder,
+             "is an OBJ folder, and --mesh names the mesh of a glTF to read."),
+            (("info", tmp_path / "r.glb", "--neutral", "neutral.obj"), tmp_path / "r.glb",
+             "is a glTF, and --neutral names the neutral OBJ of an OBJ folder."),
+            *((args, tmp_path / "p.bsproj", "is a project, and --units names the units of an OBJ folder or a glTF (a "
+                                            "project keeps its own).")
+              for args in (("info", tmp_path / "p.bsproj", "--units", "mm"),
+                           ("solve", tmp_path / "p.bsproj", take, "--units", "mm", "-o", tmp_path / "w.csv"),
+                           ("corrective", tmp_path / "p.bsproj", "--drivers", "raise,push", "--target",
+                            folder / "raise.obj", "--units", "mm", "-o", tmp_path / "c.bsproj")))]:
+        proc = run_cli(*args, check=False)
+        assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", f"error: {path}: {sentence}\n"), args
+
+
 def test_a_segmentation_or_level_the_rig_cannot_give_names_the_rig(ict_dir, tmp_path):
     proc = run_cli("render", ict_dir, "--view", "segmentation", "--level", "99", "-o", tmp_path / "x.png", check=False)
     assert proc.returncode == 2 and proc.stderr == \
