@@ -395,6 +395,9 @@ class TakeWorkspace:
         self.load_take(path, settings.get("rate"))
         if self.marker_take is None:
             return False
+        if self.rig.n_shapes == 0:      # nothing to solve for (and automatic mapping maps onto what the shapes move)
+            raise RigInputError(f"{self.rig.source or self.rig.name}: the rig has no shapes to solve the take's "
+                                "markers with.")
         check_take_calibration(self.take, settings)
         if marker_map is not None:
             self.set_map(marker_map, strict=False)

@@ -142,6 +142,24 @@ def test_a_rig_option_that_says_nothing_of_the_rig_is_refused(tmp_path):
         assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", f"error: {path}: {sentence}\n"), args
 
 
+def test_a_rig_of_a_neutral_alone_renders_exports_and_refuses_a_solve(tmp_path):
+    """A folder holding only its neutral is a rig of no shapes: `render` and `export` to OBJ failed unexpectedly
+    (exit 1, a crash log: ValueError reshaping its 0 deltas), and so did `solve` on a marker take (a maximum of no
+    shapes). The surface renders and exports as it is, and the solve is one sentence naming the rig."""
+    folder = tmp_path / "rig"
+    write_rig_folder(folder)
+    for shape in ("raise", "push"):
+        (folder / f"{shape}.obj").unlink()
+    run_cli("render", folder, "--size", "32,32", "-o", tmp_path / "r.png")
+    run_cli("export", folder, "-o", tmp_path / "e.obj")
+    np.testing.assert_array_equal(read_obj(tmp_path / "e.obj").vertices, read_obj(folder / "neutral.obj").vertices)
+    take = tmp_path / "markers.csv"
+    take.write_text("frame,A_X,A_Y,A_Z\n" + "".join(f"{i},1,2,3\n" for i in range(40)))
+    proc = run_cli("solve", folder, take, "-o", tmp_path / "w.csv", check=False)
+    assert (proc.returncode, proc.stderr) == (2, f"error: {folder}: the rig has no shapes to solve the take's markers "
+                                                 "with.\n") and not (tmp_path / "w.csv").exists()
+
+
 def test_a_segmentation_or_level_the_rig_cannot_give_names_the_rig(ict_dir, tmp_path):
     proc = run_cli("render", ict_dir, "--view", "segmentation", "--level", "99", "-o", tmp_path / "x.png", check=False)
     assert proc.returncode == 2 and proc.stderr == \
