@@ -251,6 +251,9 @@ def auto_marker_map(rig: Rig, take: MarkerTake, *, calibration_frames: int | sli
 
     full = calibration_cloud(take, calibration_frames, rig.units, allow_unseen=True)
     usable = np.isfinite(full).all(axis=1) & ~np.isin(take.labels, exclude or [])
+    if not usable.any():
+        raise RigInputError(f"{take.source or 'take'}: no marker is seen in the calibration frames, so none can be "
+                            "mapped automatically.")
     if usable.sum() < MIN_AUTO_MARKERS:
         raise RigInputError(f"{take.source or 'take'}: only {int(usable.sum())} markers are seen in the calibration "
                             f"frames, too few to tell whether they are on a face ({MIN_AUTO_MARKERS} or more are "

@@ -66,6 +66,10 @@ def test_too_few_markers_to_tell_a_face_are_not_mapped(ict_rig, sample_rig, tmp_
     assert proc.returncode == 2 and proc.stderr == f"error: {body}: only 5 markers are seen in the calibration " \
         f"frames, too few to tell whether they are on a face ({MIN_AUTO_MARKERS} or more are mapped automatically); " \
         "give a marker map.\n" and not (tmp_path / "w.csv").exists()
+    walk = require_data(THIRDPARTY / "c3d" / "Sample06__newwalk.c3d")     # every marker missing in its first 30 frames
+    with pytest.raises(RigInputError, match=f"^{walk}: no marker is seen in the calibration frames, so none can be "
+                                            "mapped automatically.$"):
+        auto_marker_map(ict_rig, read_take(walk, ict_rig), calibration_frames=30, refine=0)
     face = read_take(require_data(DATA / "mocap" / "actor_take" / "take.c3d"), ict_rig)
     few = MarkerTake(positions=face.positions[:, :MIN_AUTO_MARKERS], labels=face.labels[:MIN_AUTO_MARKERS],
                      rate=face.rate, units=face.units, source=face.source)
