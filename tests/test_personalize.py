@@ -231,6 +231,16 @@ def test_cli_writes_the_actor_project_and_reports_changes(sample_rig, tmp_path):
     assert proc.returncode == 2 and "none was given" in proc.stderr
 
 
+def test_a_scan_folders_obj_that_is_not_a_file_is_named(tmp_path):
+    """A folder named like a scan in --scans' folder was passed over (one scan fewer, without a word)."""
+    from model.personalize import scan_paths
+    (tmp_path / "scans").mkdir()
+    (tmp_path / "scans" / "s0.obj").write_text("v 0 0 0\n")
+    (tmp_path / "scans" / "s1.obj").mkdir()
+    with pytest.raises(RigInputError, match=r"^.*s1\.obj: is a folder, not a file\.$"):
+        scan_paths([tmp_path / "scans"])
+
+
 def test_a_scan_or_target_that_is_not_an_obj_is_named_as_what_it_is(tmp_path):
     """A glTF given to ``personalize --neutral-scan``/``--scans`` (or ``corrective --target``) read as "has no vertex
     ('v') records" (a .gltf) or "is a binary file, not a text OBJ" (a .glb, even one the rig's own export wrote):
