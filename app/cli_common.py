@@ -13,7 +13,7 @@ import numpy as np
 
 from model.errors import RigInputError
 from model.rig import MAX_WEIGHT
-from model.textures import NORMAL_SUFFIX
+from model.textures import MASK_NAME, NORMAL_SUFFIX, SUFFIXES as IMAGE_SUFFIXES
 
 EXIT_INPUT = 2        # bad input: one sentence naming the file and the problem
 EXIT_UNEXPECTED = 1   # anything else: one sentence and a crash log with the traceback
@@ -83,19 +83,17 @@ def check_outputs(args) -> None:
             check_output_folder(path)
 
 
-# What a command reads, by the option naming it (a file, a folder, or a list of them), and which files in a folder
-# given there are read: an output may not be one of them (the command would write over what it reads, or the next
-# run would read the output as part of the input: a posed OBJ in the rig's folder as one more shape).
+# What a command reads, by the option naming it (a file, a folder, or a list of them): an output may not be one of
+# them, nor a file read with a folder given there (the command would write over what it reads, or the next run would
+# read the output as part of the input: a posed OBJ in the rig's folder as one more shape).
 _INPUTS = (("rig", "RIG"), ("take", "TAKE"), ("map", "--map"), ("animation", "--animation"),
            ("neutral_scan", "--neutral-scan"), ("target", "--target"), ("scans", "--scans"), ("takes", "TAKES"))
-_READ_IN_A_FOLDER = {"rig": (".obj", ".mtl", ".json", ".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"),
-                     "scans": (".obj",)}
 
 
 def check_not_an_input(args, path, option: str) -> None:
-    """Refuse an output file that is one of the command's inputs, or a file the input folder's reader reads
-    (``_READ_IN_A_FOLDER``: one that exists there, or a new OBJ, which would be read as one more shape or scan).
-    ``corrective`` may write its project over the RIG project it adds to (``rig_updated_in_place``)."""
+    """Refuse an output file that is one of the command's inputs, or a file the reader of an input folder (the rig's,
+    the scans') reads there (``_check_beside``). ``corrective`` may write its project over the RIG project it adds to
+    (``rig_updated_in_place``)."""
     out = os.path.realpath(path)
     for dest, name in _INPUTS:
         values = getattr(args, dest, None)
@@ -114,20 +112,28 @@ def check_not_an_input(args, path, option: str) -> None:
 
 
 def _check_beside(out: str, folder: str, dest: str, start: str, end: str) -> None:
-    """An output ``out`` in the ``folder`` an input (``dest``) reads: refused if it is a file the reader reads there
-    and exists, or would be read as part of the input (a new OBJ: one more shape or scan; a new picture named after
-    a shape's OBJ: that shape's texture, ``model.textures``)."""
-    stem, suffix = os.path.splitext(os.path.basename(out))
-    suffix = suffix.lower()
-    if suffix not in _READ_IN_A_FOLDER.get(dest, ()):
-        return
-    if os.path.exists(out):
-        raise RigInputError(f"{start} overwrite a file it reads{end}")
-    if suffix == ".obj":
-        raise RigInputError(f"{start} be read there as one more {'shape' if dest == 'rig' else 'scan'}{end}")
+    """An output ``out`` in the ``folder`` an input (``dest``) is read from: refused if the folder's reader reads
+    it: an OBJ (a shape, or a scan), and for a rig its ``presets.json``, its materials (an existing ``.mtl``) and a
+    picture named after a shape's OBJ or the neutral's (that one's texture, ``model.textures``) or the keep mask.
+    Any other file there (a render's ``preview.png``, a ``regions.json``) is no part of the rig."""
+    from model.readers import PRESETS_FILE
+    name = os.path.basename(out)
+    stem, suffix = os.path.splitext(name)
+    suffix, exists = suffix.lower(), os.path.exists(out)
     shape = stem[:-len(NORMAL_SUFFIX)] if stem.endswith(NORMAL_SUFFIX) else stem
-    if dest == "rig" and suffix != ".json" and os.path.isfile(os.path.join(folder, shape + ".obj")):
-        raise RigInputError(f"{start} be read there as the texture of {shape}{end}")
+    if suffix == ".obj":
+        read_as = f"one more {'shape' if dest == 'rig' else 'scan'}"
+    elif dest != "rig":
+        return
+    elif name == PRESETS_FILE:
+        read_as = "the rig's presets"
+    elif suffix in IMAGE_SUFFIXES and (shape == MASK_NAME or os.path.isfile(os.path.join(folder, shape + ".obj"))):
+        read_as = "the texture keep mask" if shape == MASK_NAME else f"the texture of {shape}"
+    elif suffix == ".mtl" and exists:
+        read_as = "the rig's materials"
+    else:
+        return
+    raise RigInputError(f"{start} {'overwrite a file it reads' if exists else f'be read there as {read_as}'}{end}")
 
 
 @contextmanager

@@ -132,6 +132,16 @@ def test_no_command_writes_over_what_it_reads(tmp_path, command, sentence):
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
 
 
+def test_a_file_the_rigs_folder_does_not_read_may_be_written_there_again(tmp_path):
+    """Only what the rig's reader reads is refused in its folder: a render's preview.png or a segmentation's
+    regions.json there is no part of the rig, and writing it again is fine."""
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    for _ in range(2):
+        run_cli("render", rig, "--size", "32,32", "-o", rig / "preview.png")
+        run_cli("segment", rig, "--min-size", "5", "-o", rig / "regions.json")
+
+
 def test_corrective_may_add_to_the_project_it_reads(tmp_path):
     """`corrective P.bsproj ... -o P.bsproj` adds the corrective to the project in place (saved atomically): the one
     output that may be its input."""
