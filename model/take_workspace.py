@@ -101,9 +101,10 @@ def check_take_calibration(take: MarkerTake, settings: dict) -> None:
                             f"would come from (--calibration-frames); give at most {F}, or --neutral-frames A:B.")
 
 
-def resolve_stable(labels: list[str], spec) -> list[str]:
+def resolve_stable(labels: list[str], spec, where: str = "") -> list[str]:
     """The take's marker labels named by ``spec`` (comma-separated names or fnmatch patterns such as ``root-*``, or a
-    list of them), in take order. RigInputError (one sentence) for a name the take does not have or fewer than 3."""
+    list of them), in take order. RigInputError (one sentence, naming the take ``where``) for a name the take does
+    not have or fewer than 3."""
     from fnmatch import fnmatchcase
     items = [x.strip() for x in (spec.split(",") if isinstance(spec, str) else spec) if x.strip()]
     chosen, absent = set(), []
@@ -113,11 +114,12 @@ def resolve_stable(labels: list[str], spec) -> list[str]:
             absent.append(item)
         chosen.update(hits)
     if absent:
-        raise RigInputError(f"Stable markers {', '.join(absent[:6])} are not in the take "
+        raise RigInputError(f"{where or 'take'}: the stable markers {', '.join(absent[:6])} are not in the take "
                             f"(it has {', '.join(labels[:6])}{'…' if len(labels) > 6 else ''}).")
     found = [lab for lab in labels if lab in chosen]
     if len(found) < 3:
-        raise RigInputError(f"Head motion needs at least 3 stable markers, but '{', '.join(items)}' names "
+        raise RigInputError(f"{where or 'take'}: head motion needs at least 3 stable markers, but "
+                            f"'{', '.join(items)}' names "
                             f"{len(found)} ({', '.join(found) or 'none'}).")
     return found
 
@@ -191,7 +193,7 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
                             "frames; a solve needs at least 3.")
     stable_mask, head_cols = None, []
     if stable:
-        names = resolve_stable(take.labels, stable)
+        names = resolve_stable(take.labels, stable, take.source)
         stable_mask = np.array([lab in names for lab in labels])
         head_cols = [take.labels.index(lab) for lab in names
                      if lab not in marker_map.markers and missing[take.labels.index(lab)] <= MOSTLY_MISSING]
@@ -448,7 +450,7 @@ class TakeWorkspace:
         if self.marker_take is None or self.rig is None:
             raise RigInputError("Load a marker take (and open a rig) before mapping its markers.")
         if stable:
-            resolve_stable(self.take.labels, stable)
+            resolve_stable(self.take.labels, stable, self.take.source)
         take, n = self.take, max(1, int(calibration_frames))
         neutral = parse_neutral_frames(neutral_frames)
         frames: int | slice = n
