@@ -15,8 +15,8 @@ import numpy as np
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.command_line import opens_window
 from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, add_rate_option, check_outputs,
-                             check_rate, check_rig_options, check_threshold, join_dash_values, load_rig_arg, parse_size,
-                             pose_weights, print_warnings)
+                             check_rate, check_rig_options, check_shape_names, check_threshold, join_dash_values,
+                             load_rig_arg, parse_size, pose_weights, print_warnings)
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -143,6 +143,10 @@ def cmd_corrective(args) -> int:
     drivers = [d.strip() for d in args.drivers.split(",") if d.strip()]
     if len(drivers) < 2:
         raise RigInputError(f"--drivers: a corrective needs two or more driver shapes, got {len(drivers)}.")
+    if len(set(drivers)) < len(drivers):
+        raise RigInputError(f"--drivers: {', '.join(sorted({d for d in drivers if drivers.count(d) > 1}))} is "
+                            "listed more than once.")
+    check_shape_names(rig, drivers, "--drivers", args.rig)
     corrective, _ = corrective_from_scan(rig, drivers, read_obj(args.target).vertices, args.rule, fit=args.fit,
                                          name=args.name or "", source=str(args.target))
     made = [corrective]

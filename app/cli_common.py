@@ -230,6 +230,15 @@ def check_rig_options(args) -> None:
             raise RigInputError(f"{args.rig}: is {kind}, and {option} names {what}.")
 
 
+def check_shape_names(rig, names, option: str, where) -> None:
+    """RigInputError naming the rig (``where``) and the option when ``names`` holds names the rig has no shape of."""
+    unknown = [n for n in names if n not in rig.shape_names]
+    if unknown:
+        shown_names = ", ".join(f"'{n}'" for n in unknown[:5]) + (" ..." if len(unknown) > 5 else "")
+        raise RigInputError(f"{where}: the rig has no shape{'s' if len(unknown) > 1 else ''} named {shown_names} "
+                            f"({option}).")
+
+
 def pose_weights(rig, args) -> np.ndarray:
     """The weight vector of --preset then --weights (the latter win), in the rig's shape order."""
     named = {}
@@ -239,10 +248,6 @@ def pose_weights(rig, args) -> np.ndarray:
                                 f"{', '.join(sorted(rig.presets)) or 'none'}).")
         named.update(rig.presets[args.preset])
     given = parse_weights(getattr(args, "weights", None))
-    unknown = [n for n in given if n not in rig.shape_names]
-    if unknown:
-        names = ", ".join(f"'{n}'" for n in unknown[:5]) + (" ..." if len(unknown) > 5 else "")
-        raise RigInputError(f"{args.rig}: the rig has no shape{'s' if len(unknown) > 1 else ''} named {names} "
-                            "(--weights).")
+    check_shape_names(rig, given, "--weights", args.rig)
     named.update(given)
     return rig.weights_from_dict(named)
