@@ -14,8 +14,9 @@ import numpy as np
 
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.command_line import opens_window
-from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, check_outputs, check_threshold,
-                             join_dash_values, load_rig_arg, parse_size, pose_weights)
+from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, add_rate_option, check_outputs,
+                             check_rate, check_rig_options, check_shape_names, check_threshold, join_dash_values,
+                             load_rig_arg, parse_size, pose_weights, print_warnings)
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -65,9 +66,12 @@ def cmd_render(args) -> int:
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
     from model.segmentation import SegmentationSettings
-    t = SegmentationSettings().t if args.threshold is None else args.threshold
+    settings = SegmentationSettings(min_region_size=args.min_size)
+    if args.threshold is not None:
+        settings.t = args.threshold
     with about(args.rig):       # a --level the segmentation lacks, a threshold that leaves no region: name the rig
-        view = build_view(rig, weights, args.view, threshold=t, level=args.level)
+        settings.validate()
+        view = build_view(rig, weights, args.view, settings=settings, level=args.level)
     from model.parts import checked_hidden, drawn_faces, rig_parts, vertex_colors
     from widgets.scene import SKIN, render_png
     parts = rig_parts(rig)
@@ -91,12 +95,14 @@ def cmd_render(args) -> int:
 
 def cmd_export(args) -> int:
     from model.export import export_rig, load_animation
+    check_rate(args)
+    if args.rate is not None and not args.animation:
+        raise RigInputError("--rate: gives the frame rate of --animation's weights CSV; no --animation was given.")
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
-    animation = load_animation(args.animation, rig) if args.animation else None
+    animation = load_animation(args.animation, rig, args.rate) if args.animation else None
     export_rig(rig, args.output, weights, animation, units=args.out_units, up=args.up)
-    for message in animation.warnings if animation is not None else ():
-        print(f"warning: {message}", file=sys.stderr)
+    print_warnings(animation.warnings if animation is not None else ())
     frames = f", {animation.n_frames} frames" if animation is not None else ""
     print(f"wrote {args.output} ({rig.n_vertices} vertices, {rig.n_faces} faces, {rig.n_shapes} shapes, "
           f"{len(rig.correctives)} correctives{frames})")
@@ -131,11 +137,16 @@ def cmd_corrective(args) -> int:
     from model.obj_io import read_obj
     from model.project import Project, load_project, save_project
     path = Path(args.rig)
+    check_rig_options(args)
     project = load_project(path) if path.suffix.lower() == ".bsproj" else Project(rig=load_rig_arg(args))
     rig = project.rig
     drivers = [d.strip() for d in args.drivers.split(",") if d.strip()]
     if len(drivers) < 2:
         raise RigInputError(f"--drivers: a corrective needs two or more driver shapes, got {len(drivers)}.")
+    if len(set(drivers)) < len(drivers):
+        raise RigInputError(f"--drivers: {', '.join(sorted({d for d in drivers if drivers.count(d) > 1}))} is "
+                            "listed more than once.")
+    check_shape_names(rig, drivers, "--drivers", args.rig)
     corrective, _ = corrective_from_scan(rig, drivers, read_obj(args.target).vertices, args.rule, fit=args.fit,
                                          name=args.name or "", source=str(args.target))
     made = [corrective]
@@ -151,7 +162,8 @@ def cmd_corrective(args) -> int:
 
 def cmd_take_info(args) -> int:
     from model.takes import load_take, take_summary
-    info = take_summary(load_take(args.take))
+    check_rate(args)
+    info = take_summary(load_take(args.take, rate=args.rate))
     if args.json:
         print(json.dumps(info, indent=2))
         return 0
@@ -164,15 +176,22 @@ def cmd_take_info(args) -> int:
     if info["bounds"]:
         print(f"  bounds: {info['bounds']['min']} .. {info['bounds']['max']}")
     print(f"  labels: {', '.join(info['labels'])}")
-    for w in info["warnings"]:
-        print(f"warning: {w}", file=sys.stderr)
+    print_warnings(info["warnings"])
     return 0
 
 
 def cmd_sample(args) -> int:
+    from model.readers import PRESETS_FILE
     from resources.sample_rig import write_sample
     from resources.sample_textures import write_sample_textures
-    out = write_sample(args.output)
+    folder = Path(args.output)
+    taken = sorted(p.name for p in folder.iterdir() if p.suffix.lower() == ".obj" or p.name == PRESETS_FILE) \
+        if folder.is_dir() else []
+    if taken:      # the sample's files would overwrite that rig's, or be read with them as one rig
+        more = f" and {len(taken) - 1} more" if len(taken) > 1 else ""
+        raise RigInputError(f"{folder}: already holds {taken[0]}{more}; write the sample rig into a new or empty "
+                            "folder.")
+    out = write_sample(folder)
     write_sample_textures(out)
     print(f"wrote the sample rig to {out}")
     return 0
@@ -200,6 +219,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     sp = sub.add_parser("take-info", help="print what a take (C3D, TRC, marker CSV, Live Link Face CSV) holds")
     sp.add_argument("take", metavar="TAKE", help="a .c3d, .trc or .csv take")
+    add_rate_option(sp)
     sp.add_argument("--json", action="store_true", help="machine-readable output")
     sp.set_defaults(func=cmd_take_info)
 
@@ -212,6 +232,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--threshold", type=float, default=None,
                     help="segmentation quantile t in [0, 1] of the moving skin (default 0.5)")
     sp.add_argument("--level", type=int, default=0, help="hierarchy level to show (0 = finest)")
+    sp.add_argument("--min-size", type=int, default=30, help="segmentation: smallest region in vertices (default 30)")
     sp.add_argument("--size", default="1024,768", help="W,H in pixels (default 1024,768)")
     sp.add_argument("--camera", default="front", choices=["front", "left", "right", "three-quarter"])
     sp.add_argument("--wireframe", action="store_true", help="draw polygon edges")
@@ -233,6 +254,8 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("-o", "--output", required=True, help=".glb, .gltf, .usd, .usda, .usdc or .obj file to write")
     sp.set_defaults(output_files=(("output", "-o"),))
     sp.add_argument("--animation", help="weights CSV (as solve writes) or Live Link Face CSV to animate (glTF, USD)")
+    add_rate_option(sp, "frames a second of an --animation weights CSV without a time column (default 30, with a "
+                        "warning); a file's own times are kept")
     sp.add_argument("--out-units", choices=["m", "cm", "mm"],
                     help="units of the file written (default: m for glTF and USD, the rig's for OBJ)")
     sp.add_argument("--up", choices=["y", "z"], default="y", help="up axis of the file written (default y)")
@@ -271,7 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--mirror", action="store_true",
                     help="also add the other side's corrective (drivers _L<->_R, reflected across x = 0)")
     sp.add_argument("-o", "--output", required=True, help=".bsproj project to write")
-    sp.set_defaults(func=cmd_corrective, output_files=(("output", "-o"),))
+    sp.set_defaults(func=cmd_corrective, output_files=(("output", "-o"),), rig_updated_in_place=True)
 
     cli_solve.add_parser(sub, rig_arg)
     cli_pairs.add_parser(sub, rig_arg)

@@ -12,6 +12,7 @@ import sys
 
 from app.batch_preload import BATCH_PRELOAD
 from app.crash import log_unexpected_rows
+from app.cli_common import print_warnings
 from app.cli_solve import add_solve_options, announce_solver_build, check_solve_options, load_solve_rig, solve_settings
 from model.errors import RigInputError
 
@@ -189,8 +190,7 @@ def cmd_batch(args) -> int:
     print(f"{counts_text(rows)}; wrote {args.output}/batch.json and batch.csv")
     for r in rows:                # what the readers decided for the takes solved now (also in batch.json, per take)
         if r["status"] == "solved":
-            for message in r.get("warnings") or ():
-                print(f"warning: {message}", file=sys.stderr)
+            print_warnings(r.get("warnings"))
     if status_counts(rows)["failed"]:
         for r in rows:
             if r["status"] == "failed":

@@ -12,6 +12,8 @@ from contextlib import contextmanager
 import numpy as np
 
 from model.errors import RigInputError
+from model.rig import MAX_WEIGHT
+from model.textures import MASK_NAME, NORMAL_SUFFIX, SUFFIXES as IMAGE_SUFFIXES
 
 EXIT_INPUT = 2        # bad input: one sentence naming the file and the problem
 EXIT_UNEXPECTED = 1   # anything else: one sentence and a crash log with the traceback
@@ -51,6 +53,13 @@ def join_dash_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[s
     return out
 
 
+def print_warnings(messages) -> None:
+    """What a reader decided for a file (a take cut short, a rate assumed), one ``warning:`` line each on stderr."""
+    import sys
+    for message in messages or ():
+        print(f"warning: {message}", file=sys.stderr)
+
+
 def check_outputs(args) -> None:
     """Refuse, before any work, an output option naming what cannot be written (``model.atomic``: a folder where a
     file goes, a file where a folder goes, a device, a path through a file) and two outputs naming the same file.
@@ -62,6 +71,7 @@ def check_outputs(args) -> None:
         if path is None:
             continue
         check_output_file(path)
+        check_not_an_input(args, path, option)
         key = os.path.realpath(path)
         if key in seen:
             raise RigInputError(f"{path}: is given for both {seen[key]} and {option}; each output needs its own "
@@ -71,6 +81,59 @@ def check_outputs(args) -> None:
         path = getattr(args, dest, None)
         if path is not None:
             check_output_folder(path)
+
+
+# What a command reads, by the option naming it (a file, a folder, or a list of them): an output may not be one of
+# them, nor a file read with a folder given there (the command would write over what it reads, or the next run would
+# read the output as part of the input: a posed OBJ in the rig's folder as one more shape).
+_INPUTS = (("rig", "RIG"), ("take", "TAKE"), ("map", "--map"), ("animation", "--animation"),
+           ("neutral_scan", "--neutral-scan"), ("target", "--target"), ("scans", "--scans"), ("takes", "TAKES"))
+
+
+def check_not_an_input(args, path, option: str) -> None:
+    """Refuse an output file that is one of the command's inputs, or a file the reader of an input folder (the rig's,
+    the scans') reads there (``_check_beside``). ``corrective`` may write its project over the RIG project it adds to
+    (``rig_updated_in_place``)."""
+    out = os.path.realpath(path)
+    for dest, name in _INPUTS:
+        values = getattr(args, dest, None)
+        for value in values if isinstance(values, list) else [] if values is None else [values]:
+            source = os.path.realpath(value)
+            if source == out:
+                if dest == "rig" and getattr(args, "rig_updated_in_place", False):
+                    continue
+                raise RigInputError(f"{path}: is {name} itself, which this command reads; give {option} another file.")
+            folder = source if os.path.isdir(source) else \
+                os.path.dirname(source) if dest == "rig" and source.lower().endswith(".obj") else None
+            if folder and os.path.dirname(out) == folder:
+                shown_folder = value if folder == source else os.path.dirname(value) or "."
+                _check_beside(out, folder, dest, f"{path}: is in {shown_folder}, which {name} reads, and would",
+                              f"; give {option} a file elsewhere.")
+
+
+def _check_beside(out: str, folder: str, dest: str, start: str, end: str) -> None:
+    """An output ``out`` in the ``folder`` an input (``dest``) is read from: refused if the folder's reader reads
+    it: an OBJ (a shape, or a scan), and for a rig its ``presets.json``, its materials (an existing ``.mtl``) and a
+    picture named after a shape's OBJ or the neutral's (that one's texture, ``model.textures``) or the keep mask.
+    Any other file there (a render's ``preview.png``, a ``regions.json``) is no part of the rig."""
+    from model.readers import PRESETS_FILE
+    name = os.path.basename(out)
+    stem, suffix = os.path.splitext(name)
+    suffix, exists = suffix.lower(), os.path.exists(out)
+    shape = stem[:-len(NORMAL_SUFFIX)] if stem.endswith(NORMAL_SUFFIX) else stem
+    if suffix == ".obj":
+        read_as = f"one more {'shape' if dest == 'rig' else 'scan'}"
+    elif dest != "rig":
+        return
+    elif name == PRESETS_FILE:
+        read_as = "the rig's presets"
+    elif suffix in IMAGE_SUFFIXES and (shape == MASK_NAME or os.path.isfile(os.path.join(folder, shape + ".obj"))):
+        read_as = "the texture keep mask" if shape == MASK_NAME else f"the texture of {shape}"
+    elif suffix == ".mtl" and exists:
+        read_as = "the rig's materials"
+    else:
+        return
+    raise RigInputError(f"{start} {'overwrite a file it reads' if exists else f'be read there as {read_as}'}{end}")
 
 
 @contextmanager
@@ -84,6 +147,22 @@ def about(path):
         if str(path) in text:
             raise
         raise RigInputError(f"{path}: {text[:1].lower()}{text[1:]}") from None
+
+
+RATE_HELP = "frames a second of a take whose file gives no rate (a weights CSV without a time column: default 30 " \
+            "with a warning; a plain marker CSV: 60); a file's own rate is kept"
+
+
+def add_rate_option(sp, help_text: str = "") -> None:
+    """--rate, one option wherever a take is read (take-info, solve, batch, export --animation)."""
+    sp.add_argument("--rate", type=float, default=None, metavar="FPS", help=help_text or RATE_HELP)
+
+
+def check_rate(args) -> None:
+    """--rate, checked before any file is read (``model.take_data.given_rate``): a number of frames a second."""
+    from model.take_data import given_rate
+    if getattr(args, "rate", None) is not None:
+        args.rate = given_rate(args.rate)
 
 
 def check_threshold(args) -> None:
@@ -112,6 +191,8 @@ def parse_weights(text: str | None) -> dict[str, float]:
             raise RigInputError(f"--weights: the value of '{name}' is not a number: '{value}'.") from None
         if not np.isfinite(v):
             raise RigInputError(f"--weights: the value of '{name}' is not finite.")
+        if abs(v) > MAX_WEIGHT:     # as for presets and poses: 1e308 posed the surface to inf and NaN, written out
+            raise RigInputError(f"--weights: the value of '{name}' is outside ±{MAX_WEIGHT:g}.")
         out[name.strip()] = v
     return out
 
@@ -129,10 +210,33 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def load_rig_arg(args):
-    """The rig named by the command's RIG argument (with --neutral and --units where the command has them)."""
+    """The rig named by the command's RIG argument (with --neutral, --units and --mesh where the command has them)."""
     from model.readers import load_rig
+    check_rig_options(args)
     return load_rig(args.rig, neutral=getattr(args, "neutral", None), units=getattr(args, "units", None),
                     mesh=getattr(args, "mesh", None))
+
+
+def check_rig_options(args) -> None:
+    """--neutral, --units and --mesh given to a rig they say nothing of are refused (they were ignored: `--units mm`
+    on a project, `--mesh` on an OBJ folder)."""
+    suffix = "" if os.path.isdir(args.rig) else os.path.splitext(str(args.rig))[1].lower()
+    kind = {".gltf": "a glTF", ".glb": "a glTF", ".bsproj": "a project"}.get(suffix, "an OBJ folder")
+    for option, dest, kinds, what in (("--neutral", "neutral", ("an OBJ folder",), "the neutral OBJ of an OBJ folder"),
+                                      ("--mesh", "mesh", ("a glTF",), "the mesh of a glTF to read"),
+                                      ("--units", "units", ("an OBJ folder", "a glTF"),
+                                       "the units of an OBJ folder or a glTF (a project keeps its own)")):
+        if getattr(args, dest, None) and kind not in kinds:
+            raise RigInputError(f"{args.rig}: is {kind}, and {option} names {what}.")
+
+
+def check_shape_names(rig, names, option: str, where) -> None:
+    """RigInputError naming the rig (``where``) and the option when ``names`` holds names the rig has no shape of."""
+    unknown = [n for n in names if n not in rig.shape_names]
+    if unknown:
+        shown_names = ", ".join(f"'{n}'" for n in unknown[:5]) + (" ..." if len(unknown) > 5 else "")
+        raise RigInputError(f"{where}: the rig has no shape{'s' if len(unknown) > 1 else ''} named {shown_names} "
+                            f"({option}).")
 
 
 def pose_weights(rig, args) -> np.ndarray:
@@ -144,10 +248,6 @@ def pose_weights(rig, args) -> np.ndarray:
                                 f"{', '.join(sorted(rig.presets)) or 'none'}).")
         named.update(rig.presets[args.preset])
     given = parse_weights(getattr(args, "weights", None))
-    unknown = [n for n in given if n not in rig.shape_names]
-    if unknown:
-        names = ", ".join(f"'{n}'" for n in unknown[:5]) + (" ..." if len(unknown) > 5 else "")
-        raise RigInputError(f"{args.rig}: the rig has no shape{'s' if len(unknown) > 1 else ''} named {names} "
-                            "(--weights).")
+    check_shape_names(rig, given, "--weights", args.rig)
     named.update(given)
     return rig.weights_from_dict(named)

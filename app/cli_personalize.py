@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 
-from app.cli_common import load_rig_arg
+from app.cli_common import load_rig_arg, print_warnings
 
 
 def add_parser(sub, rig_arg) -> None:
@@ -55,6 +55,7 @@ def cmd_personalize(args) -> int:
         if args.map:
             from model.marker_map import load_marker_map
             marker_map = load_marker_map(args.map)
+        print_warnings(take.warnings)    # what its reader decided (a file cut short, gaps at the origin)
     options = {} if args.iterations is None else {"iterations": args.iterations}
     actor, _, summary = personalize_rig_detailed(rig, args.neutral_scan, scans, take, marker_map,
                                                  calibration_frames=args.calibration_frames, **options)

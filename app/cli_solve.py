@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import sys
 
-from app.cli_common import about, check_threshold, load_rig_arg
+from app.cli_common import (about, add_rate_option, check_rate, check_rig_options, check_threshold, load_rig_arg,
+                             print_warnings)
 
 
 def add_parser(sub, rig_arg) -> None:
@@ -53,6 +54,7 @@ def add_solve_options(sp) -> None:
     sp.add_argument("--stable", default=None, metavar="M1,M2,...|PATTERN",
                     help="markers the head motion is taken from (names or patterns such as 'root-*'; head-band "
                          "markers need not be in the map; default: all markers)")
+    add_rate_option(sp)
     sp.add_argument("--fixed-head", action="store_true",
                     help="the markers are already head-stabilised in rig space: no calibration, no head motion "
                          "(always so for a one-frame take)")
@@ -65,6 +67,7 @@ def load_solve_rig(args):
     args.antagonists = None
     if str(args.rig).lower().endswith(".bsproj") and Path(args.rig).is_file():
         from model.project import load_project
+        check_rig_options(args)
         project = load_project(args.rig)
         rig, args.antagonists = project.rig, project.antagonists
     else:
@@ -79,6 +82,7 @@ def check_solve_options(args) -> None:
     --calibration-frames count of 0 or more, not 0 with --neutral-frames (``check_calibration_settings``)."""
     from model.take_workspace import check_calibration_settings
     check_threshold(args)
+    check_rate(args)
     check_calibration_settings(solve_options(args))
 
 
@@ -92,7 +96,7 @@ def solve_options(args) -> dict:
         regional = not args.global_solve
     return {"mode": "region" if regional else "global", "residual": args.residual,
             "calibration_frames": args.calibration_frames, "fixed_head": args.fixed_head,
-            "neutral_frames": args.neutral_frames, "stable": args.stable}
+            "neutral_frames": args.neutral_frames, "stable": args.stable, "rate": getattr(args, "rate", None)}
 
 
 def solve_settings(args, rig) -> tuple[dict, object]:
@@ -142,8 +146,7 @@ def cmd_solve(args) -> int:
     announce_solver_build()
     sol = ws.solve(settings, segmentation=segmentation)
     report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
-    for message in report["warnings"]:            # the take reader's (a file cut short), also in the report
-        print(f"warning: {message}", file=sys.stderr)
+    print_warnings(report["warnings"])            # the take reader's (a file cut short), also in the report
     for lab in report["markers_left_out"]:
         print(f"warning: marker {lab} left out ({report['markers_left_out_why'][lab]})", file=sys.stderr)
     with_c = f" with {len(report['correctives'])} corrective(s)" if report["correctives"] else ""
@@ -172,8 +175,7 @@ def write_weight_take(ws, args) -> int:
     if args.map:
         print(f"warning: {args.take} holds weights, not markers: --map is not used", file=sys.stderr)
     report = export_solve_outputs(ws, args.output, args.cache, args.report, args.gltf)
-    for message in take.warnings:
-        print(f"warning: {message}", file=sys.stderr)
+    print_warnings(take.warnings)
     if take.unmapped:
         print(f"warning: {len(take.unmapped)} column(s) drive no shape of the rig: {', '.join(take.unmapped)}",
               file=sys.stderr)

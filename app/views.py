@@ -11,6 +11,7 @@ import numpy as np
 from model.errors import RigInputError
 from model.pose import PoseEvaluator
 from model.rig import Rig
+from model.segmentation import SegmentationSettings
 from model.rig_prep import focus_vertices, framed_points, shape_reach
 from widgets.scene import ColorMap
 
@@ -25,8 +26,8 @@ class View:
     title: str
 
 
-def build_view(rig: Rig, weights: np.ndarray, view: str = "shaded", *, threshold: float | None = None,
-               level: int = 0) -> View:
+def build_view(rig: Rig, weights: np.ndarray, view: str = "shaded", *, level: int = 0,
+               settings: SegmentationSettings | None = None) -> View:
     if view not in VIEWS:
         raise RigInputError(f"Unknown view '{view}': use one of {', '.join(VIEWS)}.")
     points = PoseEvaluator(rig).evaluate(weights)
@@ -34,6 +35,6 @@ def build_view(rig: Rig, weights: np.ndarray, view: str = "shaded", *, threshold
     if view == "shaded":
         return View(points, focus, None, "shaded")
     from app.map_views import map_colormap
-    colormap = map_colormap(rig, view, threshold=threshold, level=level)
+    colormap = map_colormap(rig, view, level=level, settings=settings)
     return View(points, framed_points(focus, points, colormap.marked), colormap, view)
 

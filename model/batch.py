@@ -97,6 +97,9 @@ def find_takes(items: list[str], exclude: str | Path | None = None) -> list[Path
         if key not in seen:
             seen.add(key)
             out.append(key)
+    if found and not out:   # `batch RIG day1 -o day1`: every take left out as an output, and nothing solved (exit 0)
+        raise RigInputError(f"{exclude}: every take given is in the output folder, where a batch's own outputs are "
+                            "left out; give -o a folder of its own.")
     return out
 
 

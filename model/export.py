@@ -79,9 +79,11 @@ def animation_from_timeline(timeline, rate: float = 30.0, *, deltas=None, blend=
     return WeightAnimation(times=times - T[0], weights=W, source="keyframes")
 
 
-def load_animation(path: str | Path, rig: Rig) -> WeightAnimation:
-    """A weights CSV (``frame,time,<shapes>``, as ``solve`` writes, or ``frame,<shapes>`` at
-    ``model.weights_csv.UNTIMED_RATE`` with a warning) or a Live Link Face CSV, for ``rig``."""
+def load_animation(path: str | Path, rig: Rig, rate: float | None = None) -> WeightAnimation:
+    """A weights CSV (``frame,time,<shapes>``, as ``solve`` writes, or ``frame,<shapes>`` at ``rate`` frames a second
+    (``model.take_data.given_rate``), else ``model.weights_csv.UNTIMED_RATE`` with a warning) or a Live Link Face
+    CSV, for ``rig``. A file with its own times keeps them (a warning when ``rate`` is given)."""
+    from .take_data import rate_not_used
     path = regular_file(path)   # a missing file, a folder, a FIFO or a device: one sentence, nothing read
     if path.suffix.lower() != ".csv":
         raise RigInputError(f"{path}: an animation is a weights CSV or a Live Link Face CSV.")
@@ -90,13 +92,18 @@ def load_animation(path: str | Path, rig: Rig) -> WeightAnimation:
         from .livelink import read_livelink_csv
         take = read_livelink_csv(path, rig.shape_names)
         times = np.asarray(take.times(), dtype=np.float64)   # the frame times from the timecodes
-        return WeightAnimation(times=times - times[0], weights=take.weights, source=str(path))
-    from .weights_csv import UNTIMED_RATE, read_weights_table
+        animation = WeightAnimation(times=times - times[0], weights=take.weights, source=str(path))
+        animation.warnings = rate_not_used(path, take.rate, rate)
+        return animation
+    from .weights_csv import UNTIMED_RATE, read_weights_table, times_rate
     frames, times, names, W = read_weights_table(path)
     warnings = []
     if times is None:           # frame,<shapes>: no time column
-        times = (frames - (frames[0] if frames.size else 0)) / UNTIMED_RATE
-        warnings.append(f"{path}: has no time column; {UNTIMED_RATE:g} frames a second assumed.")
+        times = (frames - (frames[0] if frames.size else 0)) / (rate or UNTIMED_RATE)
+        if rate is None:
+            warnings.append(f"{path}: has no time column; {UNTIMED_RATE:g} frames a second assumed.")
+    elif times.size > 1:
+        warnings += rate_not_used(path, times_rate(times), rate)
     animation = animation_for_rig(rig, names, W, times - (times[0] if times.size else 0.0), source=str(path))
     animation.warnings = warnings
     return animation

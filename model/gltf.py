@@ -34,7 +34,7 @@ from .input_files import read_input_bytes, regular_file
 from .json_file import parse_json_text
 from .pages import memory_shortfall, small_pages_for
 from .presets import fitting_presets
-from .rig import CornerAttributes, Rig
+from .rig import MAX_WEIGHT, CornerAttributes, Rig
 
 from .export_gltf import CHUNK_BIN as _CHUNK_BIN, CHUNK_JSON as _CHUNK_JSON, GLB_MAGIC as _GLB_MAGIC
 _COMPONENT = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
@@ -609,7 +609,11 @@ def _default_weights(doc: _Doc, mesh: dict, K: int) -> np.ndarray | None:
     if not isinstance(w, list) or len(w) != K or not all(_is_num(v) for v in w) or \
             not np.isfinite(np.asarray(w, dtype=np.float64)).all():
         raise doc.fail(f"its mesh's default weights are not {K} numbers, one per morph target.")
-    return np.asarray(w, dtype=np.float64)
+    w = np.asarray(w, dtype=np.float64)
+    if np.abs(w).max(initial=0.0) > MAX_WEIGHT:   # the pose it opens in (1e30: the surface posed 10^30 m away)
+        raise doc.fail(f"its mesh's default weights reach {shown(float(np.abs(w).max()), 20)}, beyond the ±"
+                       f"{MAX_WEIGHT:g} a weight may have.")
+    return w
 
 
 def _material_parts(doc: _Doc, prims: list[dict], n_tris: list[int]) -> tuple[list[tuple[int, str]], dict]:

@@ -52,6 +52,10 @@ def _read_bytes(path: Path) -> bytes:
         raise RigInputError(f"{path}: cannot be read ({exc.strerror}).") from None
     if not data or data.isspace():      # (no copy of the file, unlike strip())
         raise RigInputError(f"{path}: the file is empty.")
+    kind = _other_format(Path(path), data)
+    if kind:
+        raise RigInputError(f"{path}: is {kind} file, not an OBJ mesh; save it as OBJ with the rig's vertices in the "
+                            "rig's order.")
     if b"\0" in data[:65536]:
         raise RigInputError(f"{path}: is a binary file, not a text OBJ.")
     try:
@@ -60,6 +64,31 @@ def _read_bytes(path: Path) -> bytes:
     except UnicodeDecodeError as exc:
         raise RigInputError(f"{path}: is not UTF-8 text (bad byte at offset {exc.start}).") from None
     return data
+
+
+# Other mesh and scene formats a user may hand over where an OBJ is read (a scan, a target), by their first bytes and
+# then by their extension: named as what they are, not as an OBJ without 'v' records or a binary OBJ
+_MAGIC = ((b"glTF", "a binary glTF (GLB)"), (b"ply", "a PLY"), (b"Kaydara FBX Binary", "an FBX"),
+          (b"PK\x03\x04", "a zip (a .bsproj project or an archive)"), (b"#usda", "a USD"), (b"PXR-USDC", "a USD"),
+          (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"))
+_SUFFIXES = {".glb": "a binary glTF (GLB)", ".gltf": "a glTF", ".ply": "a PLY", ".fbx": "an FBX", ".stl": "an STL",
+             ".usd": "a USD", ".usda": "a USD", ".usdc": "a USD", ".usdz": "a USD", ".abc": "an Alembic",
+             ".bsproj": "a Blendshape Studio project", ".dae": "a COLLADA", ".3ds": "a 3DS", ".blend": "a Blender",
+             ".c3d": "a C3D (motion capture)", ".trc": "a TRC (motion capture)"}
+
+
+def _other_format(path: Path, data: bytes) -> str | None:
+    """What ``data`` is when it is plainly not an OBJ: its signature, else (with no 'v' record at all) its
+    extension or, for JSON text, glTF. None for anything that may be an OBJ."""
+    for magic, kind in _MAGIC:
+        if data.startswith(magic):
+            return kind
+    if data[:2] in (b"v ", b"v\t") or _V_NEXT.search(data) is not None:
+        return None
+    suffix = path.suffix.lower()
+    if suffix in _SUFFIXES:
+        return _SUFFIXES[suffix]
+    return "a JSON (glTF?)" if data.lstrip()[:1] == b"{" else None
 
 
 # the start of a record of each kind, and of a line that is not one (runs of 'vt' and 'vn' lines)

@@ -30,6 +30,7 @@ import numpy as np
 from solvers.personalize import LAM_D, LAM_R, PersonalizeResult, ShapeChange, personalize, shape_change
 
 from .errors import RigInputError
+from .input_files import regular_file
 from .rig import Rig
 from .units import length
 
@@ -44,7 +45,7 @@ def scan_paths(items) -> list[Path]:
     for item in items:
         p = Path(item)
         if p.is_dir():
-            found = sorted(q for q in p.iterdir() if q.suffix.lower() == ".obj" and q.is_file())
+            found = sorted(regular_file(q) for q in p.iterdir() if q.suffix.lower() == ".obj")   # none passed over
             if not found:
                 raise RigInputError(f"{p}: the folder holds no .obj scans.")
             out.extend(found)

@@ -100,7 +100,7 @@ class PoseEvaluator:
         self._names = tuple(rig.shape_names)
         self._corr_names = [c.name for c in corr]
         self._muted = np.array([c.muted for c in corr], dtype=bool)
-        blocks = [rig.deltas.reshape(rig.n_shapes, -1)]
+        blocks = [rig.deltas.reshape(rig.n_shapes, 3 * V)]     # (3V, not -1: a rig of no shapes has none)
         if sw.N:
             blocks.append(sw.inbetween_deltas.reshape(sw.N, -1))
         if corr:

@@ -9,6 +9,7 @@ import numpy as np
 from solvers.parallel import ordered_map
 
 from .errors import RigInputError
+from .input_files import regular_file
 from .obj_io import read_obj, read_obj_target
 from .pages import small_pages_for
 from .presets import fitting_presets
@@ -39,8 +40,8 @@ def load_obj_folder(folder: str | Path, neutral: str | None = None, units: str =
     folder = Path(folder)
     if not folder.is_dir():
         raise RigInputError(f"{folder}: is not a folder.")
-    paths = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".obj" and p.is_file())
-    if not paths:
+    paths = sorted(regular_file(p) for p in folder.iterdir() if p.suffix.lower() == ".obj")   # a folder named
+    if not paths:                                     # x.obj is no shape (it was passed over: a shape gone unsaid)
         raise RigInputError(f"{folder}: contains no OBJ files.")
     neutral_path = find_neutral(paths, neutral, folder)
     targets = [p for p in paths if p != neutral_path]

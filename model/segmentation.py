@@ -76,6 +76,12 @@ class Segmentation:
     seconds: dict[str, float] = field(default_factory=dict)
 
 
+# Settings counted in rounds over the mesh (rings, smoothing passes): more than this reaches across any face many
+# times over, and each round is a pass over the mesh (`segment --smoothing 100000000` still ran after 5 minutes, 10⁴
+# took 0.6 s on the sample face; a project file may say anything)
+ROUNDS_SETTINGS, MAX_ROUNDS = ("overlap_rings", "concavity_rings", "smoothing"), 1000
+
+
 @dataclass
 class SegmentationSettings:
     """What the user chose for the segmentation (ALGORITHMS.md §3 defaults); saved in the project file.
@@ -140,6 +146,8 @@ class SegmentationSettings:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
                 raise RigInputError(f"The segmentation setting '{name}' must be a whole number ≥ 0; got {value!r}.")
+            if name in ROUNDS_SETTINGS and value > MAX_ROUNDS:   # each round is one more pass over the mesh
+                raise RigInputError(f"The segmentation setting '{name}' must be at most {MAX_ROUNDS}; got {value!r}.")
             setattr(self, name, int(value))
         if self.max_groups < 1:
             raise RigInputError("Region growing needs at least one group (max_groups ≥ 1).")
@@ -380,26 +388,27 @@ def _segment_rig(neutral, face_counts, face_indices, deltas, settings, cache, fi
         cache.start_mirror_lookup()    # the hierarchy's mirror images, on another core while the regions form
     piece, main = cache.pieces()
 
-    t0 = time.perf_counter()
-    if s.method == "threshold":
-        labels, thr = _seg.threshold_labels(values, A, s.t, sorted_values=sorted_values, domain=cache.domain(),
-                                            split=split.result() if split is not None else None)
-    else:
-        labels, thr = _seg.relabel(grow_regions(values, A, s.growth_ratio, s.max_groups)), None
-    secs["threshold"] = time.perf_counter() - t0
+    def regions_at(t: float, min_size: int) -> tuple[np.ndarray, float | None]:   # the finest level and its threshold
+        if s.method == "threshold":
+            lab, thr_t = _seg.threshold_labels(values, A, t, sorted_values=sorted_values, domain=cache.domain(),
+                                               split=split.result() if split is not None else None)
+        else:
+            lab, thr_t = _seg.relabel(grow_regions(values, A, s.growth_ratio, s.max_groups)), None
+        secs["threshold"] = time.perf_counter() - t0
+        lab = _seg.clean_up(lab, A, min_size=min_size, concavity_rings=s.concavity_rings)
+        if not main.all():  # separate meshes: never by proximity; they follow the region that moves like them
+            lab = np.where(main, lab, _seg.BACKGROUND)
+            if s.separate_meshes == "follow":
+                lab = _seg.attach_separate_meshes(lab, piece, main, cache.support())
+            lab = _seg.relabel(lab)
+        return lab, thr_t
 
     t0 = time.perf_counter()
-    labels = _seg.clean_up(labels, A, min_size=s.min_region_size, concavity_rings=s.concavity_rings)
-    if not main.all():  # separate meshes: never by proximity; they follow the region that moves like them
-        labels = np.where(main, labels, _seg.BACKGROUND)
-        if s.separate_meshes == "follow":
-            labels = _seg.attach_separate_meshes(labels, piece, main, cache.support())
-        labels = _seg.relabel(labels)
-    secs["cleanup"] = time.perf_counter() - t0
+    labels, thr = regions_at(s.t, s.min_region_size)
+    secs["cleanup"] = time.perf_counter() - t0 - secs["threshold"]
     if not (labels >= 0).any():
-        raise RigInputError(
-            f"The threshold t={s.t:g} leaves no region of at least {s.min_region_size} vertices; "
-            "lower the threshold or the minimum region size.")
+        raise RigInputError(_no_region(s, lambda t, size: bool((regions_at(t, size)[0] >= 0).any()),
+                                       int(cache.domain().sum())))
 
     t0 = time.perf_counter()
     if finest_only:
@@ -418,6 +427,24 @@ def _segment_rig(neutral, face_counts, face_indices, deltas, settings, cache, fi
     return Segmentation(threshold_t=s.t, threshold_value=thr, levels=levels, map_kind=s.map_kind,
                         min_region_size=s.min_region_size, overlap_rings=s.overlap_rings, method=s.method,
                         seconds=secs)
+
+
+def _no_region(s: SegmentationSettings, leaves_one, moving: int) -> str:
+    """Why no region was left, with only the advice that helps: ``leaves_one(t, min_size)`` says whether the
+    rig's segmentation at those settings would leave one (a lower threshold, then a smaller minimum size, tried)."""
+    from .wording import count
+    threshold = s.method == "threshold"
+    lowest = 0.0 if threshold else s.t
+    size = count(s.min_region_size, "vertex", "vertices")
+    if threshold and s.t > 0 and leaves_one(lowest, s.min_region_size):
+        return (f"The threshold t={s.t:g} leaves no region of at least {size}; "
+                f"lower the threshold{' or the minimum region size' if s.min_region_size > 1 else ''}.")
+    skin = f"its shapes move {count(moving, 'vertex', 'vertices')} of the skin"
+    if s.min_region_size > 1 and leaves_one(lowest, 1):
+        return (f"{'No threshold leaves a' if threshold else 'Region growing leaves no'} region of at least "
+                f"{size} on this rig ({skin}); lower the minimum region size.")
+    return (f"This rig cannot be segmented: {skin}, too few for a region at any threshold or minimum region "
+            "size.")
 
 
 def region_statistics(seg: Segmentation, maps: DeformationMaps, shape_names: list[str], level: int = 0,

@@ -13,6 +13,32 @@ from .errors import RigInputError, repeated, shown
 from .rig import MAX_COORDINATE, MAX_WEIGHT, UNIT_IN_METRES, unit_scale
 
 MAX_RATE = 100_000.0   # frames per second: no capture system records faster
+MIN_RATE = 0.001       # frames per second given for a take (--rate): a frame every 1000 s; slower, times overflow
+
+
+def given_rate(rate, where: str = "--rate") -> float | None:
+    """A frame rate the user gives for a take whose file states none (None: none given), checked: a number from
+    ``MIN_RATE`` to ``MAX_RATE`` frames a second, else RigInputError (one sentence)."""
+    if rate is None:
+        return None
+    try:
+        value = float(rate)
+    except (TypeError, ValueError):
+        value = float("nan")
+    if not (np.isfinite(value) and MIN_RATE <= value <= MAX_RATE):
+        text = f"{value:g}" if value == value or isinstance(rate, float) else shown(rate, 20)
+        raise RigInputError(f"{where}: {text} is not a frame rate; give frames a second from {MIN_RATE:g} to "
+                            f"{MAX_RATE:g}.")
+    return value
+
+
+def rate_not_used(source, own: float | None, given: float | None) -> list[str]:
+    """The warning for a rate given (``given_rate``) to a take whose file has its own (``own``; None: its own times
+    without one rate), or none when none was given or the two agree."""
+    if given is None or (own is not None and abs(own - given) <= 1e-9 * given):
+        return []
+    return [f"{source}: --rate {given:g} is not used: the file gives its own frame "
+            f"{'times' if own is None else f'rate ({own:g} fps)'}."]
 
 
 @dataclass

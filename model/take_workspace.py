@@ -9,7 +9,8 @@ Solve settings are a plain dict, as the panel and the command line gather them:
 ``model.units`` converts them), ``calibration_frames``, ``neutral_frames`` (None: the first
 ``calibration_frames``; ``"auto"``; or ``"A:B"`` / (A, B), inclusive), ``stable`` (marker names or patterns such as
 ``root-*``, comma-separated, for the head motion), ``fixed_head`` (markers already head-stabilised in rig space) and
-``antagonists`` (the shape pairs kept apart, as names; None: the rig's, ``model.antagonists``).
+``antagonists`` (the shape pairs kept apart, as names; None: the rig's, ``model.antagonists``) and ``rate`` (the frame
+rate of a take whose file gives none, ``--rate``; None: ``read_take``'s defaults).
 """
 from __future__ import annotations
 
@@ -100,9 +101,10 @@ def check_take_calibration(take: MarkerTake, settings: dict) -> None:
                             f"would come from (--calibration-frames); give at most {F}, or --neutral-frames A:B.")
 
 
-def resolve_stable(labels: list[str], spec) -> list[str]:
+def resolve_stable(labels: list[str], spec, where: str = "") -> list[str]:
     """The take's marker labels named by ``spec`` (comma-separated names or fnmatch patterns such as ``root-*``, or a
-    list of them), in take order. RigInputError (one sentence) for a name the take does not have or fewer than 3."""
+    list of them), in take order. RigInputError (one sentence, naming the take ``where``) for a name the take does
+    not have or fewer than 3."""
     from fnmatch import fnmatchcase
     items = [x.strip() for x in (spec.split(",") if isinstance(spec, str) else spec) if x.strip()]
     chosen, absent = set(), []
@@ -112,32 +114,37 @@ def resolve_stable(labels: list[str], spec) -> list[str]:
             absent.append(item)
         chosen.update(hits)
     if absent:
-        raise RigInputError(f"Stable markers {', '.join(absent[:6])} are not in the take "
+        raise RigInputError(f"{where or 'take'}: the stable markers {', '.join(absent[:6])} are not in the take "
                             f"(it has {', '.join(labels[:6])}{'…' if len(labels) > 6 else ''}).")
     found = [lab for lab in labels if lab in chosen]
     if len(found) < 3:
-        raise RigInputError(f"Head motion needs at least 3 stable markers, but '{', '.join(items)}' names "
+        raise RigInputError(f"{where or 'take'}: head motion needs at least 3 stable markers, but "
+                            f"'{', '.join(items)}' names "
                             f"{len(found)} ({', '.join(found) or 'none'}).")
     return found
 
 
-def read_take(path: str | Path, rig: Rig | None = None) -> MarkerTake | WeightTake:
+def read_take(path: str | Path, rig: Rig | None = None, *, rate: float | None = None) -> MarkerTake | WeightTake:
     """Open a marker take (C3D, TRC, CSV), or a weight take on ``rig``'s shapes: a Live Link Face CSV (its ARKit
     columns mapped by ``model.livelink.default_arkit_mapping``) or a weights CSV (``frame,time,<shapes>``).
+    ``rate``: the frame rate of a take whose file gives none (``model.takes.load_take``).
     Raises RigInputError (one sentence naming the file) for anything unreadable."""
     from .livelink import is_livelink_csv, read_livelink_csv
+    from .take_data import rate_not_used
     from .takes import load_take
     from .weights_csv import is_weights_csv, read_weights_take
     path = Path(path)
     try:
         if path.suffix.lower() == ".csv" and path.is_file():
             for is_kind, read, what in ((is_livelink_csv, read_livelink_csv, "a Live Link Face take"),
-                                        (is_weights_csv, read_weights_take, "a weights CSV")):
+                                        (is_weights_csv, partial(read_weights_take, rate=rate), "a weights CSV")):
                 if is_kind(path):
                     if rig is None:
                         raise RigInputError(f"{path}: open a rig before playing {what} on it.")
-                    return read(path, rig.shape_names)
-        return load_take(path)
+                    take = read(path, rig.shape_names)
+                    take.warnings += rate_not_used(path, take.rate, rate)   # a rate of its own: the file's kept
+                    return take
+        return load_take(path, rate=rate)
     except RigInputError:
         raise
     except (OSError, ValueError) as exc:
@@ -186,7 +193,7 @@ def solve_take(rig: Rig, take: MarkerTake, marker_map: MarkerMap, *, evaluator: 
                             "frames; a solve needs at least 3.")
     stable_mask, head_cols = None, []
     if stable:
-        names = resolve_stable(take.labels, stable)
+        names = resolve_stable(take.labels, stable, take.source)
         stable_mask = np.array([lab in names for lab in labels])
         head_cols = [take.labels.index(lab) for lab in names
                      if lab not in marker_map.markers and missing[take.labels.index(lab)] <= MOSTLY_MISSING]
@@ -375,8 +382,8 @@ class TakeWorkspace:
             return self.take.weights
         return self.solution.shape_weights if self.solution is not None else None
 
-    def load_take(self, path: str | Path) -> MarkerTake | WeightTake:
-        take = read_take(path, self.rig)
+    def load_take(self, path: str | Path, rate: float | None = None) -> MarkerTake | WeightTake:
+        take = read_take(path, self.rig, rate=rate)
         self.take, self.take_path, self.solution = take, Path(path), None
         return take
 
@@ -385,10 +392,14 @@ class TakeWorkspace:
         ``marker_map`` (markers the take lacks are warnings, not a refusal) or automatically from its neutral
         frames (``settings``' ``calibration_frames``, ``neutral_frames`` and ``stable``; checked against the take
         first: ``check_take_calibration``). False for a weight take (Live Link Face, weights CSV): it has nothing
-        to solve, it plays on the rig as it is."""
-        self.load_take(path)
+        to solve, it plays on the rig as it is. ``settings``' ``rate``: the frame rate of a take whose file gives
+        none (``read_take``)."""
+        self.load_take(path, settings.get("rate"))
         if self.marker_take is None:
             return False
+        if self.rig.n_shapes == 0:      # nothing to solve for (and automatic mapping maps onto what the shapes move)
+            raise RigInputError(f"{self.rig.source or self.rig.name}: the rig has no shapes to solve the take's "
+                                "markers with.")
         check_take_calibration(self.take, settings)
         if marker_map is not None:
             self.set_map(marker_map, strict=False)
@@ -439,7 +450,7 @@ class TakeWorkspace:
         if self.marker_take is None or self.rig is None:
             raise RigInputError("Load a marker take (and open a rig) before mapping its markers.")
         if stable:
-            resolve_stable(self.take.labels, stable)
+            resolve_stable(self.take.labels, stable, self.take.source)
         take, n = self.take, max(1, int(calibration_frames))
         neutral = parse_neutral_frames(neutral_frames)
         frames: int | slice = n

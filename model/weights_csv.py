@@ -102,6 +102,8 @@ def read_weights_table(path: str | Path) -> tuple[np.ndarray, np.ndarray | None,
     if len(set(names)) != len(names):
         raise RigInputError(f"{path}: duplicate shape names in the header.")
     data = rows[1:]
+    if not data:     # a header alone: a take of no frames, which nothing can play or solve
+        raise RigInputError(f"{path}: holds no frames.")
     bad = next((i for i, r in enumerate(data) if len(r) != len(header)), None)
     if bad is not None:
         raise RigInputError(f"{path}: row {bad + 2} has {len(data[bad])} values, the header has {len(header)}.")
@@ -157,13 +159,14 @@ def times_rate(times: np.ndarray) -> float | None:
     return float(np.round(rate, 6))
 
 
-def read_weights_take(path: str | Path, shape_names: list[str] | None):
+def read_weights_take(path: str | Path, shape_names: list[str] | None, *, rate: float | None = None):
     """A weights CSV as a weight take (``model.take_data.WeightTake``) on a rig's ``shape_names``: each column in
     its shape's place, shapes without a column at 0 (None: the file's own columns, for ``take-info``). The rate
     comes from the time column, which must step evenly with the frame column (RigInputError, one sentence,
-    otherwise, or for a column the rig has no shape for); without a time column it is ``UNTIMED_RATE``, with a
-    warning."""
+    otherwise, or for a column the rig has no shape for); without a time column (or with one row) it is ``rate``
+    (the user's, ``model.take_data.given_rate``), else ``UNTIMED_RATE`` with a warning."""
     from .take_data import WeightTake
+    given = rate
     frames, times, names, W = read_weights_table(path)
     if shape_names is None:
         shape_names = list(names)
@@ -177,13 +180,15 @@ def read_weights_take(path: str | Path, shape_names: list[str] | None):
         if (steps != 1).any():
             raise RigInputError(f"{path}: its frame numbers do not count up one by one (row "
                                 f"{int(np.argmax(steps != 1)) + 3}).")
-    if times is None:
-        rate = UNTIMED_RATE
-        warnings.append(f"{path}: has no time column; {UNTIMED_RATE:g} frames a second assumed.")
-    elif frames.size > 1:
+    if times is not None and frames.size > 1:
         rate = times_rate(times)
         if rate is None:
             raise RigInputError(f"{path}: its times are not evenly spaced frames (a frame every 1/rate seconds).")
+    elif given is not None:
+        rate = given
+    elif times is None:
+        rate = UNTIMED_RATE
+        warnings.append(f"{path}: has no time column; {UNTIMED_RATE:g} frames a second assumed.")
     else:
         rate = 30.0
         warnings.append(f"{path}: one frame has no frame rate; 30 frames a second assumed.")

@@ -123,6 +123,21 @@ def test_take_names_tell_takes_apart(tmp_path):
         find_takes([str(tmp_path / "*.nothing")])
 
 
+def test_a_batch_whose_output_folder_holds_every_take_is_refused(tmp_path):
+    """`batch RIG day1 -o day1`: every take in day1 was left out as one of the batch's own outputs, and the command
+    said "0 take(s)", solved nothing and exited 0. It is one sentence, exit 2, nothing written."""
+    from tests.rig_files import write_rig_folder
+    write_rig_folder(tmp_path / "rig")
+    day = tmp_path / "day1"
+    day.mkdir()
+    (day / "take.csv").write_text("frame,raise\n0,0.5\n1,1\n")
+    proc = run_cli("batch", tmp_path / "rig", day, "-o", day, "--workers", "1", check=False)
+    assert (proc.returncode, proc.stdout, proc.stderr) == (
+        2, "", f"error: {day}: every take given is in the output folder, where a batch's own outputs are left out; "
+               "give -o a folder of its own.\n")
+    assert [p.name for p in day.iterdir()] == ["take.csv"]
+
+
 def test_a_batch_summary_reads_back_as_written_and_anything_else_is_one_sentence(tmp_path, monkeypatch):
     """``read_summary`` (the dialog's Open Results…): what ``write_summary`` wrote comes back row for row, from the
     file or its folder; a file that is not a summary is one sentence naming it; a value that is not a number is

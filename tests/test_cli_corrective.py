@@ -50,7 +50,10 @@ def test_corrective_bad_input(sample_dir, tmp_path):
     _scan(sample_dir, tmp_path, "browInnerUp_L=1,browInnerUp_R=1")
     cases = [
         (["--drivers", "browInnerUp_L"], "two or more driver shapes"),
-        (["--drivers", "browInnerUp_L,notAShape"], "no shape named 'notAShape'"),
+        # the rig named (before: "The rig has no shape named 'notAShape'.", no file)
+        (["--drivers", "browInnerUp_L,notAShape"], f"error: {sample_dir}: the rig has no shape named 'notAShape' "
+                                                   "(--drivers).\n"),
+        (["--drivers", "browInnerUp_L,browInnerUp_L"], "error: --drivers: browInnerUp_L is listed more than once.\n"),
         (["--drivers", "browInnerUp_L,browInnerUp_R", "--rule", "sum"], "unknown rule"),
     ]
     for extra, words in cases:

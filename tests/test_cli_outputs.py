@@ -85,3 +85,71 @@ def test_an_output_in_a_folder_named_by_its_trailing_slash_is_refused(tmp_path):
     proc = run_cli("segment", rig, "-o", f"{tmp_path}/regions/", check=False)
     _refused(proc, f"{tmp_path}/regions/: is a folder, not a file.")
     assert not (tmp_path / "regions").exists()
+
+
+@pytest.mark.parametrize("command, sentence", [
+    # the take itself: its markers or weights were replaced by the solve's weights
+    (["solve", "{rig}", "{tmp}/take.csv", "-o", "{tmp}/take.csv"],
+     "{tmp}/take.csv: is TAKE itself, which this command reads; give -o another file."),
+    (["export", "{rig}", "-o", "{tmp}/take.csv", "--animation", "{tmp}/take.csv"],
+     "{tmp}/take.csv: is --animation itself, which this command reads; give -o another file."),
+    (["personalize", "{tmp}/p.bsproj", "--neutral-scan", "{rig}/neutral.obj", "-o", "{tmp}/p.bsproj"],
+     "{tmp}/p.bsproj: is RIG itself, which this command reads; give -o another file."),
+    # the rig's own neutral: the rig's every shape silently measured from a posed face
+    (["export", "{rig}", "--weights", "raise=1", "-o", "{rig}/neutral.obj"],
+     "{rig}/neutral.obj: is in {rig}, which RIG reads, and would overwrite a file it reads; give -o a file "
+     "elsewhere."),
+    # a new OBJ in the rig's folder is one more shape the next time the rig is read
+    (["export", "{rig}/neutral.obj", "-o", "{rig}/posed.obj"],
+     "{rig}/posed.obj: is in {rig}, which RIG reads, and would be read there as one more shape; give -o a file "
+     "elsewhere."),
+    (["render", "{rig}", "--size", "64,64", "-o", "{rig}/raise.png"],
+     "{rig}/raise.png: is in {rig}, which RIG reads, and would be read there as the texture of raise; give -o a "
+     "file elsewhere."),
+    (["personalize", "{rig}", "--scans", "{tmp}/scans", "-o", "{tmp}/scans/actor.obj"],
+     "{tmp}/scans/actor.obj: is in {tmp}/scans, which --scans reads, and would be read there as one more scan; give "
+     "-o a file elsewhere."),
+    # the sample into a folder holding a rig: its neutral.obj was written over the user's
+    (["sample", "-o", "{rig}"], "{rig}: already holds neutral.obj and 2 more; write the sample rig into a new or "
+                                "empty folder."),
+])
+def test_no_command_writes_over_what_it_reads(tmp_path, command, sentence):
+    """An output naming one of the command's inputs was written over it: `solve RIG take.csv -o take.csv` replaced
+    the take, `export RIG -o RIG/neutral.obj --weights ...` the rig's neutral (every shape then measured from a posed
+    face), `sample -o DIR` the rig in DIR; a new OBJ in the rig's folder became one more shape. Each is refused before
+    any work, one sentence, exit 2, every file as it was."""
+    from model.project import Project, save_project
+    from model.readers import load_rig
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    (tmp_path / "take.csv").write_text("frame,raise\n0,0.5\n1,1\n")
+    (tmp_path / "scans").mkdir()
+    (tmp_path / "scans" / "s0.obj").write_bytes((rig / "raise.obj").read_bytes())
+    save_project(Project(rig=load_rig(rig)), tmp_path / "p.bsproj")
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    proc = run_cli(*[a.format(rig=rig, tmp=tmp_path) for a in command], check=False)
+    _refused(proc, sentence.format(rig=rig, tmp=tmp_path))
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+
+
+def test_a_file_the_rigs_folder_does_not_read_may_be_written_there_again(tmp_path):
+    """Only what the rig's reader reads is refused in its folder: a render's preview.png or a segmentation's
+    regions.json there is no part of the rig, and writing it again is fine."""
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    for _ in range(2):
+        run_cli("render", rig, "--size", "32,32", "-o", rig / "preview.png")
+        run_cli("segment", rig, "--min-size", "5", "-o", rig / "regions.json")
+
+
+def test_corrective_may_add_to_the_project_it_reads(tmp_path):
+    """`corrective P.bsproj ... -o P.bsproj` adds the corrective to the project in place (saved atomically): the one
+    output that may be its input."""
+    from model.project import Project, load_project, save_project
+    from model.readers import load_rig
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    save_project(Project(rig=load_rig(rig)), tmp_path / "p.bsproj")
+    run_cli("corrective", tmp_path / "p.bsproj", "--drivers", "raise,push", "--target", rig / "raise.obj",
+            "-o", tmp_path / "p.bsproj")
+    assert [c.name for c in load_project(tmp_path / "p.bsproj").rig.correctives] == ["raise+push"]

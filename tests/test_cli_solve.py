@@ -155,8 +155,9 @@ def test_solve_a_project_with_a_corrective(ict_dir, tmp_path):
 
 @pytest.mark.parametrize("option, words", [
     (["--neutral-frames", "400:420"], "outside the take"),
-    (["--stable", "root-*"], "not in the take"),
-    (["--stable", "M00,M01"], "at least 3 stable markers"),
+    # the take named (before: "Stable markers root-* are not in the take", no file)
+    (["--stable", "root-*"], "take.c3d: the stable markers root-* are not in the take"),
+    (["--stable", "M00,M01"], "take.c3d: head motion needs at least 3 stable markers"),
     # a count the take cannot give (before: the whole take, expressions and all, silently taken as the neutral),
     # a negative count (before: no calibration, silently), and a neutral range for a solve that calibrates on none
     (["--calibration-frames", "100000"], "has 358 frames, fewer than the 100000 calibration frames"),

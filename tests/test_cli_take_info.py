@@ -75,3 +75,61 @@ def test_a_weights_csv_without_a_time_column_is_a_weight_take(ict_rig, ict_dir, 
         (tmp_path / "m.csv").write_text(text)
         proc = run_cli("take-info", tmp_path / "m.csv", check=False)
         assert proc.returncode == 2 and words in proc.stderr, proc.stderr
+
+
+def test_rate_gives_the_frame_rate_of_a_weight_take_whose_file_has_none(tmp_path):
+    """A weights CSV without a time column read at 30 fps with a warning, and nothing could say its rate: `--rate` on
+    take-info, solve, batch and export --animation reads it at the rate given (no warning); a file with its own rate
+    keeps it, with a warning naming --rate; a rate that is not positive and finite is one sentence, exit 2, before
+    anything is written."""
+    from model.weights_csv import read_weights_csv
+    from tests.gltf_reference import reference_animation
+    from tests.rig_files import write_rig_folder
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    take = tmp_path / "take.csv"
+    W = np.round(np.abs(np.sin(np.arange(10)[:, None] + np.arange(2))), 4)
+    take.write_text("frame,raise,push\n" + "".join(f"{f},{a},{b}\n" for f, (a, b) in enumerate(W)))
+    info = json.loads(run_cli("take-info", take, "--json", "--rate", "24").stdout)
+    assert info["rate"] == 24.0 and info["warnings"] == []
+    run_cli("solve", rig, take, "--rate", "24", "-o", tmp_path / "w.csv", "--report", tmp_path / "r.json")
+    _, times, names, solved = read_weights_csv(tmp_path / "w.csv")
+    assert np.allclose(times, np.arange(10) / 24) and np.array_equal(solved[:, [names.index("raise"),
+                                                                                names.index("push")]], W)
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["rate"] == 24.0 and report["warnings"] == []
+    proc = run_cli("export", rig, "-o", tmp_path / "a.glb", "--animation", take, "--rate", "24")
+    assert proc.stderr == "" and np.allclose(reference_animation(tmp_path / "a.glb")[0], np.arange(10) / 24)
+    run_cli("batch", rig, take, "-o", tmp_path / "batch", "--rate", "24", "--workers", "1")
+    assert json.loads((tmp_path / "batch" / "batch.json").read_text())["takes"][0]["rate"] == 24.0
+    assert np.allclose(read_weights_csv(tmp_path / "batch" / "take" / "weights.csv")[1], np.arange(10) / 24)
+    # a file with its own times keeps them: --rate is for a file without
+    info = json.loads(run_cli("take-info", tmp_path / "w.csv", "--json", "--rate", "30").stdout)
+    assert info["rate"] == 24.0 and info["warnings"] == [
+        f"{tmp_path / 'w.csv'}: --rate 30 is not used: the file gives its own frame rate (24 fps)."]
+    # not a frame rate: one sentence, exit 2, nothing written
+    for rate in ("0", "-5", "nan", "inf"):
+        shown = {"-5": "-5", "nan": "nan", "inf": "inf"}.get(rate, "0")
+        sentence = f"error: --rate: {shown} is not a frame rate; give frames a second from 0.001 to 100000.\n"
+        for args in (("take-info", take), ("solve", rig, take, "-o", tmp_path / "x.csv"),
+                     ("export", rig, "-o", tmp_path / "x.glb", "--animation", take),
+                     ("batch", rig, take, "-o", tmp_path / "xb")):
+            proc = run_cli(*args, "--rate", rate, check=False)
+            assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", sentence), (args, proc.stderr)
+    assert not any((tmp_path / n).exists() for n in ("x.csv", "x.glb", "xb"))
+
+
+def test_a_weights_csv_of_a_header_alone_holds_no_frames(tmp_path):
+    """`frame,time,jawOpen` with no rows read as a take of 0 frames ("one frame has no frame rate" said the warning);
+    `solve` and `export --animation` then refused it as needing "one row of weights per frame time". Every command
+    says what it is: no frames, one sentence, exit 2."""
+    from tests.rig_files import write_rig_folder
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    for header in ("frame,time,raise\n", "frame,raise\n"):
+        take = tmp_path / "take.csv"
+        take.write_text(header)
+        for args in (("take-info", take), ("solve", rig, take, "-o", tmp_path / "w.csv"),
+                     ("export", rig, "-o", tmp_path / "a.glb", "--animation", take)):
+            proc = run_cli(*args, check=False)
+            assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", f"error: {take}: holds no frames.\n"), args

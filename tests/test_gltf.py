@@ -570,3 +570,23 @@ def test_default_weights_that_are_not_one_number_per_target_are_refused(tmp_path
         path.write_text(json.dumps(doc))
         with pytest.raises(RigInputError, match="default weights are not"):
             load_gltf(path)
+
+
+def test_default_weights_beyond_any_weight_are_refused(tmp_path, cube):
+    """A mesh whose default weights are 1e30 opened in that pose (and kept it as the preset "glTF default pose"):
+    `export --preset "glTF default pose"` wrote an OBJ with a vertex 10^30 away. Beyond ±MAX_WEIGHT (as a preset's
+    or a pose's) it is one sentence naming the file; within it, the pose is kept."""
+    from model.rig import MAX_WEIGHT
+    from tests.cli_runner import run_cli
+    path = tmp_path / "cube.gltf"
+    write_gltf(cube, path)
+    doc = json.loads(path.read_text())
+    doc["meshes"][0]["weights"] = [1e30] + [0.0] * (cube.n_shapes - 1)
+    path.write_text(json.dumps(doc))
+    proc = run_cli("export", path, "-o", tmp_path / "x.obj", check=False)
+    assert (proc.returncode, proc.stderr) == (2, f"error: {path}: its mesh's default weights reach 1e+30, beyond the "
+                                                 f"±{MAX_WEIGHT:g} a weight may have.\n")
+    assert not (tmp_path / "x.obj").exists()
+    doc["meshes"][0]["weights"][0] = -MAX_WEIGHT
+    path.write_text(json.dumps(doc))
+    assert load_gltf(path).presets["glTF default pose"] == {cube.shape_names[0]: -MAX_WEIGHT}

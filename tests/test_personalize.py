@@ -231,6 +231,54 @@ def test_cli_writes_the_actor_project_and_reports_changes(sample_rig, tmp_path):
     assert proc.returncode == 2 and "none was given" in proc.stderr
 
 
+def test_a_scan_folders_obj_that_is_not_a_file_is_named(tmp_path):
+    """A folder named like a scan in --scans' folder was passed over (one scan fewer, without a word)."""
+    from model.personalize import scan_paths
+    (tmp_path / "scans").mkdir()
+    (tmp_path / "scans" / "s0.obj").write_text("v 0 0 0\n")
+    (tmp_path / "scans" / "s1.obj").mkdir()
+    with pytest.raises(RigInputError, match=r"^.*s1\.obj: is a folder, not a file\.$"):
+        scan_paths([tmp_path / "scans"])
+
+
+def test_a_scan_or_target_that_is_not_an_obj_is_named_as_what_it_is(tmp_path):
+    """A glTF given to ``personalize --neutral-scan``/``--scans`` (or ``corrective --target``) read as "has no vertex
+    ('v') records" (a .gltf) or "is a binary file, not a text OBJ" (a .glb, even one the rig's own export wrote):
+    one sentence saying it is a glTF, not an OBJ mesh, exit 2, nothing written."""
+    from tests.conftest import DATA, require_data
+    from tests.rig_files import write_rig_folder
+    folder = tmp_path / "rig"
+    write_rig_folder(folder)
+    glb = tmp_path / "rig.glb"
+    run_cli("export", folder, "-o", glb)
+    gltf = require_data(DATA / "thirdparty" / "gltf" / "SimpleMorph.gltf")
+    disguised = tmp_path / "scan.obj"                     # a GLB renamed: its bytes say what it is
+    disguised.write_bytes(glb.read_bytes())
+    out = tmp_path / "actor.bsproj"
+    advice = "file, not an OBJ mesh; save it as OBJ with the rig's vertices in the rig's order."
+    for args, path, kind in [
+            (("personalize", folder, "--neutral-scan", gltf), gltf, "a glTF"),
+            (("personalize", folder, "--scans", glb), glb, "a binary glTF (GLB)"),
+            (("personalize", folder, "--scans", disguised), disguised, "a binary glTF (GLB)"),
+            (("corrective", folder, "--drivers", "raise,push", "--target", glb), glb, "a binary glTF (GLB)")]:
+        proc = run_cli(*args, "-o", out, check=False)
+        assert (proc.returncode, proc.stderr) == (2, f"error: {path}: is {kind} {advice}\n") and not out.exists()
+
+
+def test_personalize_says_what_the_takes_reader_decided(tmp_path):
+    """`personalize --take` on a take cut short read it to its last whole frame and said nothing (`solve` prints the
+    reader's warnings): it prints them too, one `warning:` line each."""
+    from resources.sample_rig import write_sample
+    from tests.conftest import DATA, require_data
+    folder = write_sample(tmp_path / "sample")
+    data = require_data(DATA / "mocap" / "actor_take" / "take.c3d").read_bytes()
+    take = tmp_path / "cut.c3d"
+    take.write_bytes(data[:int(len(data) * 0.6)])
+    proc = run_cli("personalize", folder, "--take", take, "-o", tmp_path / "actor.bsproj")
+    assert proc.stderr == (f"warning: {take}: the file ends early: 358 frames declared but 214 whole frames present; "
+                           "read to the last whole frame.\n")
+
+
 # --- the actor of mocap/actor_take ------------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def actor_dir():

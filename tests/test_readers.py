@@ -107,6 +107,25 @@ def test_no_neutral_and_two_neutrals(tmp_path):
     _expect(folder2, "more than one OBJ could be the neutral")
 
 
+def test_an_obj_name_that_is_not_a_file_is_named(tmp_path):
+    """A folder (or a dangling link) named like a shape was passed over: the rig opened one shape short without a
+    word; a folder named neutral.obj read as "no OBJ has 'neutral' in its name". Each is one sentence naming it."""
+    write_rig_folder(tmp_path / "rig")
+    (tmp_path / "rig" / "raise.obj").unlink()
+    (tmp_path / "rig" / "raise.obj").mkdir()
+    with pytest.raises(RigInputError, match=r"^.*raise\.obj: is a folder, not a file\.$"):
+        load_rig(tmp_path / "rig")
+    write_rig_folder(tmp_path / "rig2")
+    (tmp_path / "rig2" / "neutral.obj").unlink()
+    (tmp_path / "rig2" / "neutral.obj").mkdir()
+    with pytest.raises(RigInputError, match=r"^.*rig2/neutral\.obj: is a folder, not a file\.$"):
+        load_rig(tmp_path / "rig2")
+    write_rig_folder(tmp_path / "rig3")
+    (tmp_path / "rig3" / "smile.obj").symlink_to(tmp_path / "gone.obj")
+    with pytest.raises(RigInputError, match=r"^.*smile\.obj: does not exist\.$"):
+        load_rig(tmp_path / "rig3")
+
+
 def test_duplicate_shape_names(tmp_path):
     folder = _bad_folder(tmp_path, lambda f: (f / "Push.OBJ").write_bytes((f / "push.obj").read_bytes()))
     _expect(folder, "duplicate shape names")
