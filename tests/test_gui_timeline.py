@@ -127,3 +127,22 @@ def test_the_last_time_on_the_ruler_is_shown_whole(qtbot):
     width = ruler.fontMetrics().horizontalAdvance("2s")
     assert not drawn[:, end + 2:].any()                       # nothing right of the last tick but its line
     assert drawn[:, end - 2 - width:end - 1].sum() > 10       # "2s", left of it
+
+
+def test_closing_the_graph_editor_gives_its_height_back_to_the_viewport(qtbot, tmp_path):
+    """The Graph Editor (and the Mocap Views, which share its place) sits above the timeline: closed, the height
+    it had went to the timeline, a quarter of the window of empty panel with one row of controls in its middle, and
+    the face stayed small."""
+    from tests.gui_helpers import make_window
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    timeline = w.keyframes.dock
+    viewport_before = w.viewport.height()
+    graph_action = next(a for a in w.findChildren(QtGui.QAction) if a.text() == "&Graph Editor")
+    graph_action.trigger()                                       # Animation ▸ Graph Editor (Ctrl+G)
+    qtbot.waitUntil(lambda: w.keyframes.graph_dock.isVisible())
+    assert w.viewport.height() < viewport_before - 100
+    w.keyframes.graph_dock.toggleViewAction().trigger()          # View ▸ Panels ▸ Graph Editor: closed
+    qtbot.waitUntil(lambda: not w.keyframes.graph_dock.isVisible())
+    QtWidgets.QApplication.processEvents()
+    assert timeline.height() < 2 * w.keyframes.panel.sizeHint().height() + 30
+    assert w.viewport.height() >= viewport_before - 5
