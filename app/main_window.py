@@ -631,8 +631,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
             self.show_error("Could not open", f"{len(rigs)} rigs or projects were dropped ({rigs[0].name}, "
                                               f"{rigs[1].name}, …): drop one at a time.")
             return False
-        steps = [(lambda p=p: self.mocap.load_take(p)) if kind == "take" else (lambda p=p: self.mocap.load_map(p))
-                 for kind, p in items if kind != "rig"]
+        steps = [lambda kind=kind, p=p: self.mocap.open_in_panel(kind, p) for kind, p in items if kind != "rig"]
         if rigs:
             if self.is_loading:
                 return False

@@ -213,6 +213,21 @@ class MocapController(QtCore.QObject):
         self._say_next_step()
         return True
 
+    def open_in_panel(self, kind: str, path: str | Path) -> bool:
+        """Load a take (``kind`` "take") or a marker map (else) that was dropped on the window or named on the command
+        line, and bring the Mocap panel forward with it: behind the Shapes tab, the drop looked like nothing
+        happened."""
+        if not (self.load_take(path) if kind == "take" else self.load_map(path)):
+            return False
+        self.show_panel(f"Loaded {Path(path).name} into the Mocap panel.")
+        return True
+
+    def show_panel(self, message: str) -> None:
+        """Show and raise the Mocap panel, saying ``message`` in the status bar."""
+        self.dock.show()
+        self.dock.raise_()
+        self.window.show_status(message)
+
     def _say_next_step(self) -> None:
         """The hint under the panel: what a marker take still needs before Solve."""
         if isinstance(self.take, MarkerTake):

@@ -288,6 +288,21 @@ def test_a_take_given_to_open_goes_to_the_mocap_panel(qtbot, tmp_path, ict_dir, 
     assert w.mocap.workspace.take_path == take_dir / "take.c3d" and w.document.rig.n_vertices == 26719
 
 
+def test_a_dropped_take_brings_the_mocap_panel_forward(qtbot, tmp_path, llf_csv):
+    """A take dropped on the window loaded into the Mocap panel behind the Shapes tab (or into a closed panel):
+    nothing on screen changed and the status bar said nothing, so the drop looked ignored."""
+    w = make_window(qtbot, tmp_path)
+    w.shapes_dock.raise_()
+    w.mocap.dock.toggleViewAction().trigger()       # View ▸ Panels ▸ Mocap: closed
+    qtbot.waitUntil(lambda: not w.mocap.dock.isVisible())
+    assert drop_files(w, [llf_csv])
+    QtWidgets.QApplication.processEvents()
+    assert w.mocap.workspace.take_path == llf_csv
+    assert w.mocap.dock.isVisible() and not w.mocap.dock.visibleRegion().isEmpty()   # shown, its tab in front
+    assert w.mocap.panel.take_label.isVisible()
+    assert llf_csv.name in w.statusBar().currentMessage()
+
+
 def test_a_dropped_project_gltf_or_take_opens_and_anything_else_is_one_sentence(qtbot, tmp_path, llf_csv):
     from model.project import Project, save_project
     from resources.sample_rig import build_sample_rig
