@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
+from app import settings as app_settings
 from app.commands import SetEditOffsetCommand, SetWeightsCommand
 from app.corrective_commands import SetCorrectivesCommand
 from app.interference_finder import InterferenceFinder
@@ -291,7 +292,7 @@ class CorrectiveController(QtCore.QObject):
             self._error(str(exc))
             return False
         if path is None:
-            path, _ = QtWidgets.QFileDialog.getOpenFileName(self.window, "Corrective from Scan", "", "OBJ (*.obj)")
+            path = app_settings.open_file(self.window, "scanFolder", "Corrective from Scan", "OBJ (*.obj)")
             if not path:
                 return False
         path = Path(path)

@@ -697,13 +697,32 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         return True
 
     def save_dialog(self, title: str, default_name: str, file_filter: str, write) -> None:
-        """Ask where to write (a file dialog starting at ``default_name``) and call ``write(path)``; nothing
-        without an open rig or when the user cancels. Every export of the window and its panels uses it."""
+        """Ask where to write (a file dialog with ``default_name`` in ``export_folder``) and call ``write(path)``;
+        nothing without an open rig or when the user cancels. Every export of the window and its panels uses it."""
         if self.document.project is None:
             return
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, title, default_name, file_filter)
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, title, str(self.export_folder() / default_name),
+                                                        file_filter)
         if path:
+            self.remember_export_folder(path)
             write(path)
+
+    def export_folder(self) -> Path:
+        """Where an export's file dialog starts: the folder the last export went to (in this session or an earlier
+        one), else the project's folder, else the last folder a project was saved in or a file opened from, else
+        the home folder; never the folder the program was started in (the dialogs opened there, wherever that was)
+        and never an OBJ rig's own folder (an OBJ written there is read as one of its shapes next time)."""
+        s = app_settings.settings()
+        rig_folder = Path(self.document.rig.source) if self.document.project is not None else None
+        for folder in (s.value("export/folder", ""), self.document.path.parent if self.document.path else "",
+                       s.value("lastProjectFolder", ""), s.value("lastFolder", "")):
+            if folder and Path(folder).is_dir():
+                return Path(folder).parent if rig_folder is not None and Path(folder) == rig_folder else Path(folder)
+        return Path.home()
+
+    @staticmethod
+    def remember_export_folder(path: str | Path) -> None:
+        app_settings.settings().setValue("export/folder", str(Path(path).parent))
 
     def export_pose(self) -> None:
         if self.document.project is not None:

@@ -152,7 +152,7 @@ class MocapController(QtCore.QObject):
 
     # --- loading ----------------------------------------------------------------------------------
     def load_take_dialog(self) -> None:
-        path, _ = QtWidgets.QFileDialog.getOpenFileName(self.window, "Load Take", "", TAKE_FILTER)
+        path = app_settings.open_file(self.window, "mocap/takeFolder", "Load Take", TAKE_FILTER)
         if path:
             self.load_take(path)
 
@@ -189,7 +189,7 @@ class MocapController(QtCore.QObject):
         return text
 
     def load_map_dialog(self) -> None:
-        path, _ = QtWidgets.QFileDialog.getOpenFileName(self.window, "Load Marker Map", "", "Marker maps (*.json)")
+        path = app_settings.open_file(self.window, "mocap/mapFolder", "Load Marker Map", "Marker maps (*.json)")
         if path:
             self.load_map(path)
 

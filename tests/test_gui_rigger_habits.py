@@ -3,6 +3,8 @@ Graph Editor, next/previous key, frame selected / frame all, files dropped on th
 size, the first start, Marker mode's button, status messages in the user's words."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from PySide6 import QtCore, QtGui, QtWidgets
@@ -512,3 +514,45 @@ def test_take_actions_without_a_take_to_play_say_why(qtbot, tmp_path, take_dir):
         _key(qtbot, w.viewport.canvas, key, modifier)
         assert w.statusBar().currentMessage().startswith("Solve the take first"), key
     assert not w.mocap.playback.playing and w.document.undo_stack.count() == 0
+
+
+def test_export_and_open_dialogs_start_where_the_last_such_file_went_not_in_the_working_folder(
+        qtbot, tmp_path, monkeypatch, take_dir):
+    """Export Pose, Export Image, the keys' and take's exports and Load Take gave their file dialogs a bare name:
+    they opened in the folder the program was started from, every time, and the folder chosen last was forgotten
+    (Export Rig alone remembered its own). Now an export starts in the folder the last export went to -- in a later
+    session too -- and Load Take in the folder the last take came from."""
+    started_in = tmp_path / "started_here"
+    started_in.mkdir()
+    monkeypatch.chdir(started_in)
+    out = tmp_path / "renders"
+    out.mkdir()
+    starts = []
+
+    def save_dialog(parent, title, start, *a, **k):
+        starts.append(Path(start))
+        return str(out / Path(start).name), ""
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", staticmethod(save_dialog))
+    w = make_window(qtbot, tmp_path)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_E, QtCore.Qt.ControlModifier)        # Export Pose as OBJ
+    assert starts[0].is_absolute() and starts[0].parent != started_in and starts[0].suffix == ".obj"
+    qtbot.waitUntil(lambda: (out / starts[0].name).exists(), timeout=20000)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_E, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    w.image_size_dialog.accept()                                                      # Export Image: the size
+    assert starts[1].parent == out and starts[1].suffix == ".png"
+    w.close()
+    w2 = make_window(qtbot, tmp_path)                                                 # the next session
+    _key(qtbot, w2.viewport.canvas, QtCore.Qt.Key_E, QtCore.Qt.ControlModifier)
+    assert starts[2].parent == out
+    opened = []
+
+    def open_dialog(parent, title, start, *a, **k):
+        opened.append(Path(start))
+        return str(take_dir / "take.c3d"), ""
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getOpenFileName", staticmethod(open_dialog))
+    w2.mocap.dock.show()
+    w2.mocap.dock.raise_()
+    for _ in range(2):
+        qtbot.mouseClick(w2.mocap.panel.load_take_button, QtCore.Qt.LeftButton)
+    assert opened[0] != started_in and opened[1] == take_dir
+    assert w2.mocap.workspace.take_path == take_dir / "take.c3d"
