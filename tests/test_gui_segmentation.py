@@ -135,16 +135,10 @@ def _whole_sentence_shown(label, sentence: str) -> None:
     assert label.height() >= label.heightForWidth(label.width())   # every wrapped line shown
 
 
-def test_a_failed_segmentation_wraps_its_message_inside_the_dock(qtbot, tmp_path):
-    """A failed segmentation's sentence is wrapped in the panel's width; it used to be one line that widened the
-    panel to ~900 px in a 370 px dock, behind a scroll bar that hid the threshold box, the level and the nudge."""
-    from PySide6 import QtCore
+def _fail_by_min_region(qtbot, w) -> None:
+    """Type more vertices than the sample face has in Min region, as a user does, and wait for the failure."""
     from PySide6.QtTest import QTest
-    from tests.conftest import DATA, require_data
-    w = make_window(qtbot, tmp_path, size=(1400, 900))
-    _ready(qtbot, w)
     panel = w.segmentation_panel
-    # typed in Min region, as a user does: more vertices than the sample face has
     edit = panel.min_size.lineEdit()
     QTest.mouseClick(edit, QtCore.Qt.LeftButton)
     QTest.keyClick(edit, QtCore.Qt.Key_A, QtCore.Qt.ControlModifier)
@@ -152,6 +146,16 @@ def test_a_failed_segmentation_wraps_its_message_inside_the_dock(qtbot, tmp_path
     QTest.keyClick(edit, QtCore.Qt.Key_Return)
     w.segmentation.wait()
     qtbot.waitUntil(lambda: panel.status.text().startswith("No segmentation: "), timeout=10000)
+
+
+def test_a_failed_segmentation_wraps_its_message_inside_the_dock(qtbot, tmp_path):
+    """A failed segmentation's sentence is wrapped in the panel's width; it used to be one line that widened the
+    panel to ~900 px in a 370 px dock, behind a scroll bar that hid the threshold box, the level and the nudge."""
+    from tests.conftest import DATA, require_data
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    _ready(qtbot, w)
+    panel = w.segmentation_panel
+    _fail_by_min_region(qtbot, w)
     sentence = panel.status.text()
     assert sentence.endswith("lower the threshold or the minimum region size.")
     assert panel.level_label.text() == ""   # not the level count of the segmentation before
@@ -283,3 +287,26 @@ def test_a_shape_saved_from_a_nudge_shows_its_own_deformation_map(qtbot, tmp_pat
     np.testing.assert_allclose(cmap.scalars, mine)
     moved = np.linalg.norm(rig.deltas[-1], axis=1) > 0
     assert cmap.scalars[moved].max() > 0 and (cmap.scalars[~moved] == 0).mean() > 0.9   # where the nudge bends
+
+
+def test_the_deformation_map_shows_when_the_settings_leave_no_region(qtbot, tmp_path):
+    """The deformation map needs no regions, but it vanished (the plain shaded face, no colour bar) whenever the
+    segmentation failed: a minimum region larger than the regions, a threshold too high, or a glTF smaller than the
+    default minimum region (the Khronos cube and triangle) -- just when the map is what one looks at to choose."""
+    from tests.conftest import DATA, require_data
+    w = make_window(qtbot, tmp_path)
+    _ready(qtbot, w)
+    panel = w.segmentation_panel
+    panel.view.setCurrentIndex(panel.view.findText("Deformation map"))
+    assert w.viewport.colormap is not None
+    shown = w.viewport.colormap.title
+    _fail_by_min_region(qtbot, w)
+    assert w.viewport.colormap is not None and w.viewport.colormap.title == shown
+    panel.view.setCurrentIndex(panel.view.findText("Segmentation"))
+    assert w.viewport.colormap is None                # no regions to colour
+    panel.view.setCurrentIndex(panel.view.findText("Deformation map"))
+    open_and_wait(qtbot, w, require_data(DATA / "thirdparty" / "gltf" / "singleBlendshapeCube_sparse.glb"))
+    w.segmentation.wait()
+    qtbot.waitUntil(lambda: panel.status.text().startswith("No segmentation: "), timeout=10000)
+    cmap = w.viewport.colormap
+    assert cmap is not None and "(m)" in cmap.title and np.ptp(np.asarray(cmap.scalars)) > 0
