@@ -199,7 +199,22 @@ class MocapController(QtCore.QObject):
         except RigInputError as exc:
             self._error("Could not use the marker map", str(exc))
             return False
-        return self.use_map(mm)
+        return self.replace_map(mm, f"Load marker map {Path(path).name}")
+
+    def replace_map(self, marker_map, text: str) -> bool:
+        """Use ``marker_map`` (loaded or found by Auto Map); when it replaces a map, one undo step (``text``): the
+        map it replaces may hold points corrected by hand, or an automatic map that took seconds to find."""
+        old = self.marker_map
+        if old is None or self.document.project is None:
+            return self.use_map(marker_map)
+        try:
+            self.workspace.check_map(marker_map)
+        except RigInputError as exc:
+            self._error("Could not use the marker map", str(exc))
+            return False
+        from app.actor_commands import SetMarkerMapCommand
+        self.document.undo_stack.push(SetMarkerMapCommand(self, old, marker_map, text))
+        return self.marker_map is marker_map
 
     def use_map(self, marker_map) -> bool:
         """Use a marker map already read (a saved project's); on failure keep what was loaded and say why."""
@@ -269,9 +284,8 @@ class MocapController(QtCore.QObject):
             if ws.take is not take or ws.rig is not rig:
                 return                      # another take or rig since: this map belongs to neither
             mm, rms = result
-            ws.marker_map, ws.solution = mm, None
-            self._drop_solution()
-            self._describe_map(mm)
+            if not self.replace_map(mm, "Auto Map the take's markers"):
+                return
             self.panel.set_status(f"Automatic map: {len(mm.labels)} markers, fit RMS "
                                   f"{rms * unit_scale(rig.units, 'mm'):.2f} mm.")
             self.map_found.emit()

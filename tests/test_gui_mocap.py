@@ -435,3 +435,34 @@ def test_the_first_solve_frames_the_views_at_their_size_and_draws_them_once(qtbo
     assert mc.views.size().toTuple() == at_solved["size"]
     assert mc.views.plotter.camera_position == at_solved["camera"]   # not framed again at another size
     assert at_solved["size"][0] > 600 and at_solved["size"][1] > 150
+
+
+def test_a_marker_map_replaced_by_load_map_or_auto_map_comes_back_with_undo(qtbot, tmp_path, ict_dir, take_dir,
+                                                                             monkeypatch):
+    """Load Map… or Auto Map over a map already loaded threw the old map away with no undo step, though dragging one
+    of its points is undoable: a map corrected by hand, or an automatic map that took seconds, was lost for good."""
+    from PySide6 import QtCore, QtGui
+    w, mc = _install(qtbot, tmp_path, size=(1100, 800))
+    open_and_wait(qtbot, w, ict_dir)
+    assert mc.load_take(take_dir / "take.c3d")
+    qtbot.mouseClick(mc.panel.auto_map_button, QtCore.Qt.LeftButton)
+    with qtbot.waitSignal(mc.map_found, timeout=120000):
+        pass
+    auto = mc.marker_map
+    steps = w.document.undo_stack.count()
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getOpenFileName",
+                        staticmethod(lambda *a, **k: (str(take_dir / "marker_map.json"), "")))
+    qtbot.mouseClick(mc.panel.load_map_button, QtCore.Qt.LeftButton)          # Load Map… over the automatic map
+    loaded = mc.marker_map
+    assert loaded is not auto and loaded.source and w.document.undo_stack.count() == steps + 1
+    undo = next(a for a in w.findChildren(QtGui.QAction) if a.shortcut() == QtGui.QKeySequence.Undo)
+    undo.trigger()
+    assert mc.marker_map is auto and "automatic" in mc.panel.map_label.text()
+    w.redo_action.trigger()
+    assert mc.marker_map is loaded and "marker_map.json" in mc.panel.map_label.text()
+    qtbot.mouseClick(mc.panel.auto_map_button, QtCore.Qt.LeftButton)          # Auto Map over the loaded map
+    with qtbot.waitSignal(mc.map_found, timeout=120000):
+        pass
+    assert mc.marker_map.markers == auto.markers and "Automatic map: 60 markers" in mc.panel.status_label.text()
+    undo.trigger()
+    assert mc.marker_map is loaded
