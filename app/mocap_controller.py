@@ -245,9 +245,17 @@ class MocapController(QtCore.QObject):
 
     def _say_next_step(self) -> None:
         """The hint under the panel: what a marker take still needs before Solve."""
-        if isinstance(self.take, MarkerTake):
-            self.panel.set_status("Ready: Solve the take." if self.marker_map is not None
-                                  else "Load or build a marker map, then Solve.")
+        if not isinstance(self.take, MarkerTake):
+            return
+        if self.marker_map is None:
+            self.panel.set_status("Load or build a marker map, then Solve.")
+            return
+        try:   # a map kept from the last take may not fit this one: say so now, not "Ready" until Solve refuses
+            self.workspace.check_map(self.marker_map)
+        except RigInputError as exc:
+            self.panel.set_status(str(exc))
+            return
+        self.panel.set_status("Ready: Solve the take.")
 
     def _describe_map(self, mm) -> None:
         name = Path(mm.source).name if mm.source else "automatic map"

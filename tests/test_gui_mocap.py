@@ -466,3 +466,19 @@ def test_a_marker_map_replaced_by_load_map_or_auto_map_comes_back_with_undo(qtbo
     assert mc.marker_map.markers == auto.markers and "Automatic map: 60 markers" in mc.panel.status_label.text()
     undo.trigger()
     assert mc.marker_map is loaded
+
+
+def test_a_new_take_that_the_kept_marker_map_does_not_fit_is_not_called_ready(qtbot, tmp_path, ict_dir, take_dir):
+    """The marker map stays when another take is loaded; the panel said "Ready: Solve the take." even when the map
+    names none of the new take's markers (a body take from another lab), and only Solve said otherwise."""
+    from tests.conftest import DATA, require_data
+    body = require_data(DATA / "thirdparty" / "c3d" / "pyomeca_Vicon.c3d")
+    w, mc = _install(qtbot, tmp_path)
+    open_and_wait(qtbot, w, ict_dir)
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    assert mc.panel.status_label.text() == "Ready: Solve the take."
+    assert mc.load_take(body)
+    status = mc.panel.status_label.text()
+    assert "Ready" not in status and "none of its 60 marker labels appear in the take" in status
+    assert mc.load_take(take_dir / "take.c3d")
+    assert mc.panel.status_label.text() == "Ready: Solve the take."
