@@ -470,7 +470,7 @@ class MocapController(QtCore.QObject):
         mm = unit_scale(self.rig.units, "mm")
         err = solution.marker_rmse * mm
         self.error_plot.title = "marker error RMS (mm)"
-        self.error_plot.set_curves([("projection", err), ("dense", solution.marker_rmse_residual * mm)])
+        self.error_plot.set_curves([("projection", err), ("dense", solution.marker_rmse_residual * mm)], rate=self.rate)
         self._init_weight_curves(solution.shape_weights)
         self.panel.set_frames(solution.n_frames, self.rate)
         with_c = "" if not solution.solver.C else f" with the rig's {count(solution.solver.C, 'corrective')}"
@@ -549,7 +549,7 @@ class MocapController(QtCore.QObject):
         names = self.rig.shape_names
         chosen = [n for n in self.panel.checked_curves() if n in names]
         self.weight_plot.title = "weights"
-        self.weight_plot.set_curves([(n, W[:, names.index(n)]) for n in chosen], y_range=(0.0, 1.0))
+        self.weight_plot.set_curves([(n, W[:, names.index(n)]) for n in chosen], y_range=(0.0, 1.0), rate=self.rate)
         self.weight_plot.set_cursor(self.frame)
 
     # --- playback ---------------------------------------------------------------------------------

@@ -156,6 +156,34 @@ def test_graph_editor_moves_and_deletes_a_key_undoably_and_the_viewport_follows(
     assert kf.time == 1.5 and w.document.weights[jaw] == pytest.approx(0.3125)   # smooth between 0.5 and 0
 
 
+def test_the_graph_editor_and_the_take_curves_label_their_time_axis_in_seconds(qtbot, tmp_path, llf_csv):
+    """The Graph Editor's curves and the Mocap Views' weight and error curves had no time axis: a key's time could
+    only be read by moving the playhead onto it. The seconds are written under the curves, a key at 1 s on the
+    "1 s" tick."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    kf = w.keyframes
+    jaw = w.document.rig.shape_index("jawOpen")
+    kf.set_key(0.0)
+    kf.scrub(1.0)
+    _pose(w, jawOpen=0.5)
+    kf.set_key(1.0)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_G, QtCore.Qt.ControlModifier)     # Animation ▸ Graph Editor
+    plot = kf.graph.plot
+    qtbot.waitUntil(lambda: plot.isVisible() and plot.height() > 120, timeout=3000)
+    ticks = dict((label, x) for x, label in plot.time_ticks())
+    assert ticks.keys() >= {"0 s", "1 s", "2 s"}
+    assert abs(ticks["1 s"] - plot.key_point(1.0, 0.5).x()) < 0.5 and jaw in plot.keys
+    image = plot.grab().toImage()
+    bottom = plot.key_point(1.0, plot.y_range[0]).y()        # the plot's lower edge
+    below = [QtGui.QColor(image.pixel(int(ticks["1 s"]) + dx, int(bottom) + dy)).lightness()
+             for dx in range(-8, 9) for dy in range(5, 14)]
+    assert max(below) > 120                                    # the label is drawn under its tick
+    assert w.mocap.load_take(llf_csv)                          # a Live Link Face take: its weight curves
+    weights = w.mocap.weight_plot
+    labels = [label for _, label in weights.time_ticks()]
+    assert labels[0] == "0 s" and weights.rate == w.mocap.take.rate and len(labels) >= 2
+
+
 def test_a_click_on_a_curve_makes_it_the_graph_editors_active_curve(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     kf, rig = w.keyframes, w.document.rig
