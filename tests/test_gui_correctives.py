@@ -8,7 +8,7 @@ from PySide6 import QtCore, QtWidgets
 
 from model.obj_io import write_obj
 from model.pose import PoseEvaluator
-from tests.gui_helpers import key_on_shape_name, make_window, mouse
+from tests.gui_helpers import combo_text_shown_whole, key_on_shape_name, make_window, mouse
 
 PAIR = ["browInnerUp_L", "browInnerUp_R"]
 
@@ -650,3 +650,21 @@ def test_the_sculpt_menu_actions_are_enabled_only_when_they_can_act(qtbot, win):
     assert doc.edit_offset is None and not discard.isEnabled() and stop.isEnabled()
     stop.trigger()
     assert not ctrl.sculpting and not stop.isEnabled() and not discard.isEnabled()
+
+
+def test_the_interference_measure_is_shown_whole_at_the_default_window_size(qtbot, tmp_path):
+    """In the Interference tab at 1400x900 the measure's name beside Top and Find pairs read "Overshoot where
+    both a"; every measure's name is shown whole, and Top and Find pairs stay in view."""
+    w = make_window(qtbot, tmp_path, (1400, 900))
+    panel = w.correctives.panel
+    w.correctives.dock.show()
+    w.correctives.dock.raise_()
+    panel.tabs.setCurrentIndex(1)
+    qtbot.waitUntil(lambda: panel.measure.isVisible())
+    for i in range(panel.measure.count()):
+        panel.measure.setCurrentIndex(i)
+        assert combo_text_shown_whole(panel.measure), panel.measure.currentText()
+    page = panel.tabs.currentWidget()
+    for widget in (panel.top, panel.find_button, panel.partner_of):
+        corner = widget.mapTo(page, QtCore.QPoint(widget.width(), 0))
+        assert widget.isVisible() and corner.x() <= page.width()

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from tests.gui_helpers import key_on_shape_name, make_window, open_and_wait
+from tests.gui_helpers import combo_text_shown_whole, key_on_shape_name, make_window, open_and_wait
 
 
 def _ready(qtbot, w):
@@ -224,11 +224,7 @@ def test_the_panels_choices_are_shown_whole_at_the_default_window_size(qtbot, tm
     def whole():
         qtbot.wait(100)    # the scroll area lays out again on a posted event
         for combo in (panel.view, panel.map_kind, panel.shape, panel.method, panel.separate):
-            opt = QtWidgets.QStyleOptionComboBox()
-            combo.initStyleOption(opt)
-            field = combo.style().subControlRect(QtWidgets.QStyle.CC_ComboBox, opt,
-                                                 QtWidgets.QStyle.SC_ComboBoxEditField, combo)
-            assert combo.fontMetrics().horizontalAdvance(combo.currentText()) <= field.width(), combo.currentText()
+            assert combo_text_shown_whole(combo), combo.currentText()
     whole()
     w.keyframes.show_graph_editor()      # Ctrl+G: the panel's dock is shorter and shows its vertical scroll bar
     qtbot.waitUntil(lambda: w.segmentation_dock.widget().verticalScrollBar().isVisible(), timeout=5000)
