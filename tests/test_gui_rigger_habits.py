@@ -333,6 +333,24 @@ def test_a_dropped_take_brings_the_mocap_panel_forward(qtbot, tmp_path, llf_csv)
     assert llf_csv.name in w.statusBar().currentMessage()
 
 
+def test_a_rig_folder_with_its_neutral_alone_is_refused_in_one_sentence(qtbot, tmp_path):
+    """An actor's neutral scan dropped on the window (its folder holds no shape OBJ) failed with "could not be opened
+    (ValueError: cannot reshape array of size 0 into shape (0,newaxis))". Now: one sentence saying there are no
+    blendshapes; the open rig stays."""
+    from model.obj_io import write_obj
+    w = make_window(qtbot, tmp_path)
+    rig = w.document.rig
+    scan = tmp_path / "actor" / "actor_neutral.obj"
+    scan.parent.mkdir()
+    write_obj(scan, rig.neutral, rig.face_counts, rig.face_indices)
+    assert drop_files(w, [scan])
+    qtbot.waitUntil(lambda: not w.is_loading, timeout=60000)
+    QtWidgets.QApplication.processEvents()
+    assert w.last_error == (f"{scan}: has no blendshapes (no OBJ beside its neutral), so there is nothing to "
+                            "pose; a rig needs at least one shape besides its neutral.")
+    assert w.document.rig is rig
+
+
 def test_a_dropped_project_gltf_or_take_opens_and_anything_else_is_one_sentence(qtbot, tmp_path, llf_csv):
     from model.project import Project, save_project
     from resources.sample_rig import build_sample_rig
