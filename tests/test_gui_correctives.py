@@ -668,3 +668,35 @@ def test_the_interference_measure_is_shown_whole_at_the_default_window_size(qtbo
     for widget in (panel.top, panel.find_button, panel.partner_of):
         corner = widget.mapTo(page, QtCore.QPoint(widget.width(), 0))
         assert widget.isVisible() and corner.x() <= page.width()
+
+
+def test_the_interference_heat_map_is_framed_whole(qtbot, tmp_path, ict_dir):
+    """On ICT FaceKit the window frames where the shapes act most; Smith's inner-brow pair overshoots up the
+    forehead's midline, above that, and its heat map was cut by the view's top edge. Every vertex it paints (above
+    10% of its peak: the area the summary counts) is in view, and so after the front camera (1)."""
+    from model.interference import hot_vertices
+    from tests.gui_helpers import open_and_wait
+    w = make_window(qtbot, tmp_path, (1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    panel = w.correctives.panel
+    w.correctives.dock.show()
+    w.correctives.dock.raise_()
+    panel.tabs.setCurrentIndex(1)
+    qtbot.mouseClick(panel.find_button, QtCore.Qt.LeftButton)
+    qtbot.waitUntil(lambda: panel.pairs.topLevelItemCount() > 0, timeout=60000)
+    row = next(i for i in range(panel.pairs.topLevelItemCount())
+               if {panel.pairs.topLevelItem(i).text(2), panel.pairs.topLevelItem(i).text(3)} == set(PAIR))
+    panel.pairs.setCurrentItem(panel.pairs.topLevelItem(row))
+    _settle(qtbot, w)
+    heat = w.viewport.colormap.scalars
+    hot = hot_vertices(np.asarray(heat))
+    assert hot.size > 100
+
+    def in_view() -> bool:
+        xy = w.viewport.world_to_display(w.viewport.points()[hot])[:, :2]
+        width, height = w.viewport.plotter.window_size
+        return bool(np.all((xy >= 0) & (xy <= [width, height])))
+    assert in_view()
+    qtbot.keyClick(w.viewport.canvas, QtCore.Qt.Key_1)                # the front camera
+    _settle(qtbot, w)
+    assert in_view()
