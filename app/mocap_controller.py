@@ -610,7 +610,10 @@ class MocapController(QtCore.QObject):
         self._shape_names = list(self.document.rig.shape_names)
         self.panel.set_units(self.document.rig.units)
         self._drop_solution()
-        for message in self.workspace.set_rig(self.document.rig):
+        messages = self.workspace.set_rig(self.document.rig)
+        self.panel.set_status("")   # what it said was of the last rig (a failed load's error stayed for good)
+        self._say_next_step()
+        for message in messages:
             self.panel.set_status(message)
         if self.workspace.take is None:
             self.panel.take_label.setText("no take")

@@ -482,3 +482,18 @@ def test_a_new_take_that_the_kept_marker_map_does_not_fit_is_not_called_ready(qt
     assert "Ready" not in status and "none of its 60 marker labels appear in the take" in status
     assert mc.load_take(take_dir / "take.c3d")
     assert mc.panel.status_label.text() == "Ready: Solve the take."
+
+
+def test_the_mocap_panels_status_is_of_the_rig_that_is_open(qtbot, tmp_path, take_dir):
+    """A failed take load's sentence stayed under the Mocap panel after another rig was opened, above a take that
+    had loaded fine; the panel now says the take's next step on the new rig."""
+    w, mc = _install(qtbot, tmp_path)
+    assert mc.load_take(take_dir / "take.c3d")
+    bad = tmp_path / "bad.c3d"
+    bad.write_bytes(b"\x02P" + b"\x00" * 600)
+    assert not mc.load_take(bad)
+    assert str(bad) in mc.panel.status_label.text()
+    w.open_sample()
+    QtWidgets.QApplication.processEvents()
+    assert mc.workspace.take_path == take_dir / "take.c3d"
+    assert mc.panel.status_label.text() == "Load or build a marker map, then Solve."
