@@ -112,7 +112,7 @@ class KeyframeController(QtCore.QObject):
         self.playback.ticked.connect(lambda _f: window.redraw_now())
         self.playback.playing_changed.connect(panel.set_playing)
         d = self.document
-        d.rig_changed.connect(self._load)
+        d.rig_changed.connect(self._on_new_document)
         d.section_changed.connect(lambda name: self._load() if name == SECTION else None)
         p = panel
         p.time_changed.connect(self.scrub)
@@ -139,6 +139,12 @@ class KeyframeController(QtCore.QObject):
     def _stored(self) -> tuple[dict | None, dict]:
         proj = self.document.project
         return proj.sections.get(SECTION), {k: proj.arrays.get(k) for k in ARRAY_KEYS}
+
+    def _on_new_document(self) -> None:
+        """Another rig or project opened: its timeline from its start, as a scene opens (the time of the last one
+        stayed, on a timeline without its keys)."""
+        self.time = 0.0
+        self._load()
 
     def _load(self) -> None:
         """Rebuild the timeline from the project (after open, set key, undo, ...)."""

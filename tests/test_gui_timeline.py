@@ -146,3 +146,18 @@ def test_closing_the_graph_editor_gives_its_height_back_to_the_viewport(qtbot, t
     QtWidgets.QApplication.processEvents()
     assert timeline.height() < 2 * w.keyframes.panel.sizeHint().height() + 30
     assert w.viewport.height() >= viewport_before - 5
+
+
+def test_another_rig_opens_at_the_start_of_its_timeline(qtbot, tmp_path):
+    """The time of the last rig's animation stayed when another rig or project was opened ("1.000 s · frame 24"
+    on a timeline without any key); it starts at 0 s, as a scene opens in Maya or Blender."""
+    from tests.gui_helpers import make_window
+    w = make_window(qtbot, tmp_path)
+    kf = w.keyframes
+    kf.set_key(0.0)
+    ruler = kf.panel.ruler
+    qtbot.mouseClick(ruler, QtCore.Qt.LeftButton, pos=QtCore.QPoint(int(ruler.x_of(1.0)), ruler.height() // 2))
+    assert kf.time == 1.0
+    w.open_sample()
+    QtWidgets.QApplication.processEvents()
+    assert kf.time == 0.0 and kf.panel.time_label.text().startswith("0.000 s")
