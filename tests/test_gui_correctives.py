@@ -700,3 +700,20 @@ def test_the_interference_heat_map_is_framed_whole(qtbot, tmp_path, ict_dir):
     qtbot.keyClick(w.viewport.canvas, QtCore.Qt.Key_1)                # the front camera
     _settle(qtbot, w)
     assert in_view()
+
+
+def test_use_posed_shapes_shows_the_drivers_it_ticked(qtbot, win):
+    """"Use posed shapes" ticked shapes far down the drivers list and left it scrolled at its top: none of the
+    ticked drivers was in view, and the user could not see what the new corrective would be of."""
+    w, ctrl = win
+    rig = w.document.rig
+    weights = np.zeros(rig.n_shapes)
+    late = sorted(rig.shape_names[rig.n_shapes // 2:])[:2]                 # two shapes past the list's first rows
+    weights[[rig.shape_index(n) for n in late]] = 0.6
+    w.set_pose(weights, "pose")
+    drivers = ctrl.panel.drivers
+    drivers.scrollToTop()
+    qtbot.mouseClick(ctrl.panel.use_pose_button, QtCore.Qt.LeftButton)
+    assert sorted(ctrl.panel.ticked_drivers()) == late
+    first = next(drivers.item(i) for i in range(drivers.count()) if drivers.item(i).text() in late)
+    assert drivers.viewport().rect().contains(drivers.visualItemRect(first))

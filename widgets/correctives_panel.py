@@ -291,10 +291,17 @@ class CorrectivesPanel(QtWidgets.QWidget):
                 if self.drivers.item(i).checkState() == QtCore.Qt.Checked]
 
     def set_ticked(self, names) -> None:
+        """Tick ``names`` (and only them) among the drivers; the first is scrolled into view (Use posed shapes
+        ticked shapes far down the list and showed none of them)."""
         names = set(names)
+        first = None
         for i in range(self.drivers.count()):
             it = self.drivers.item(i)
             it.setCheckState(QtCore.Qt.Checked if it.text() in names else QtCore.Qt.Unchecked)
+            if first is None and it.text() in names and not it.isHidden():
+                first = it
+        if first is not None:
+            self.drivers.scrollToItem(first, QtWidgets.QAbstractItemView.PositionAtTop)
 
     def _filter_drivers(self, text: str) -> None:
         t = text.strip().lower()
