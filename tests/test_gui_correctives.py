@@ -632,24 +632,27 @@ def test_the_pairs_listed_stay_the_shapes_they_name_after_shape_list_edits(qtbot
 
 
 def test_the_sculpt_menu_actions_are_enabled_only_when_they_can_act(qtbot, win):
-    """Correctives ▸ Discard Sculpt and Stop Sculpting are enabled as the panel's Discard sculpt and Stop buttons
-    are: they were enabled with nothing to discard and no sculpt to stop, and then did nothing and said nothing."""
+    """Correctives ▸ Save Corrective, Discard Sculpt and Stop Sculpting are enabled as the panel's Save corrective,
+    Discard sculpt and Stop buttons are: they were enabled with nothing to save, discard or stop, and then did
+    nothing and said nothing (Save, an error box)."""
     w, ctrl = win
     doc = w.document
     actions = {a.text().replace("&", ""): a for a in w.actions()}
-    discard, stop = actions["Discard Sculpt"], actions["Stop Sculpting"]
+    discard, stop, save = actions["Discard Sculpt"], actions["Stop Sculpting"], actions["Save Corrective"]
     assert not discard.isEnabled() and not stop.isEnabled()
+    assert not save.isEnabled() and not ctrl.panel.save_button.isEnabled()   # it was, and said "Start a corrective"
     ctrl.panel.set_ticked(PAIR)
     qtbot.mouseClick(ctrl.panel.new_button, QtCore.Qt.LeftButton)
     _settle(qtbot, w)
     assert stop.isEnabled() and not discard.isEnabled() and ctrl.panel.cancel_button.isEnabled()
+    assert save.isEnabled() == ctrl.panel.save_button.isEnabled() is True
     from app.commands import SetEditOffsetCommand      # what a brush stroke pushes
     doc.undo_stack.push(SetEditOffsetCommand(doc, None, np.full((doc.rig.n_vertices, 3), 0.01), "stroke"))
     assert discard.isEnabled() == ctrl.panel.discard_button.isEnabled() is True
     discard.trigger()
     assert doc.edit_offset is None and not discard.isEnabled() and stop.isEnabled()
     stop.trigger()
-    assert not ctrl.sculpting and not stop.isEnabled() and not discard.isEnabled()
+    assert not ctrl.sculpting and not stop.isEnabled() and not discard.isEnabled() and not save.isEnabled()
 
 
 def test_the_interference_measure_is_shown_whole_at_the_default_window_size(qtbot, tmp_path):
