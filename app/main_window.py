@@ -475,10 +475,12 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         return True
 
     def mirror_shape(self, name: str) -> bool:
-        """Make the other side's shape the mirror image of ``name`` across x = 0 (browInnerUp_L → browInnerUp_R):
-        added if the rig lacks it, replaced if it has it; one undoable edit (Maya's Mirror Target)."""
-        from app.commands import AddShapeCommand, SetShapeDeltaCommand
+        """Make the other side's shape the mirror image of ``name`` across x = 0 (browInnerUp_L → browInnerUp_R),
+        its in-betweens too: added if the rig lacks it, replaced if it has it; one undoable edit (Maya's Mirror
+        Target)."""
+        from app.commands import AddShapeCommand, SetShapeDeltaCommand, SetShapeSettingsCommand
         from model.errors import RigInputError
+        from model.shape_edits import ShapeSettings, with_mirrored_inbetweens
         from model.sides import check_mirrorable, mirror_name
         from solvers.symmetry import mirror_delta
         rig = self.document.rig
@@ -495,14 +497,21 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
             self.show_error("Mirror Shape", str(exc))
             return False
         delta = mirror_delta(rig.deltas[k], m)
-        if twin in rig.shape_names:
-            self.document.undo_stack.push(SetShapeDeltaCommand(self.document, twin, delta,
-                                                               f"Mirror {name} onto {twin}"))
-            self.show_status(f"Replaced {twin} with the mirror image of {name}.")
-        else:
-            self.document.undo_stack.push(AddShapeCommand(self.document, twin, delta, f"Mirror {name} to new {twin}",
-                                                          takes_offset=False))
-            self.show_status(f"Added {twin}, the mirror image of {name}.")
+        replace = twin in rig.shape_names
+        text = f"Mirror {name} onto {twin}" if replace else f"Mirror {name} to new {twin}"
+        stack = self.document.undo_stack
+        stack.beginMacro(text)   # the shape and its in-betweens: one undo step
+        try:
+            stack.push(SetShapeDeltaCommand(self.document, twin, delta, text) if replace else
+                       AddShapeCommand(self.document, twin, delta, text, takes_offset=False))
+            rig = self.document.rig
+            if rig.inbetweens.get(name) or rig.inbetweens.get(twin):   # the twin's follow name's, mirrored
+                stack.push(SetShapeSettingsCommand(self.document, ShapeSettings.of(rig),
+                                                   with_mirrored_inbetweens(rig, name, twin, m), text))
+        finally:
+            stack.endMacro()
+        self.show_status(f"Replaced {twin} with the mirror image of {name}." if replace else
+                         f"Added {twin}, the mirror image of {name}.")
         return True
 
     def apply_preset(self, name: str) -> None:
