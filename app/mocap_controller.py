@@ -615,8 +615,9 @@ class MocapController(QtCore.QObject):
         self._say_next_step()
         for message in messages:
             self.panel.set_status(message)
-        if self.workspace.take is None:
+        if self.workspace.take is None:   # none, or a weight take the new rig dropped: its frame went with it
             self.panel.take_label.setText("no take")
+            self.panel.set_frames(0, 1.0)
         if self.workspace.marker_map is None:
             self.panel.map_label.setText("no marker map")
         self.map_editor.refresh()

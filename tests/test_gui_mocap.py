@@ -497,3 +497,18 @@ def test_the_mocap_panels_status_is_of_the_rig_that_is_open(qtbot, tmp_path, tak
     QtWidgets.QApplication.processEvents()
     assert mc.workspace.take_path == take_dir / "take.c3d"
     assert mc.panel.status_label.text() == "Load or build a marker map, then Solve."
+
+
+def test_a_take_the_new_rig_drops_leaves_no_frame_shown(qtbot, tmp_path, llf_csv):
+    """A Live Link Face take that does not fit the next rig opened is dropped ("no take"), but the panel went on
+    showing its frame ("frame 151/328 · 2.50 s") and slider; it shows none now."""
+    from tests.conftest import DATA, require_data
+    cube = require_data(DATA / "thirdparty" / "gltf" / "singleBlendshapeCube_sparse.glb")
+    w, mc = _install(qtbot, tmp_path)
+    assert mc.load_take(llf_csv)
+    mc.panel.slider.setValue(150)
+    assert mc.panel.frame_label.text().startswith("frame 151/328")
+    open_and_wait(qtbot, w, cube)
+    assert mc.take is None and mc.panel.take_label.text() == "no take"
+    assert mc.panel.frame_label.text() == "frame –" and mc.panel.slider.maximum() == 0
+    assert "The weight take does not fit this rig" in mc.panel.status_label.text()
