@@ -149,15 +149,19 @@ def test_closing_the_graph_editor_gives_its_height_back_to_the_viewport(qtbot, t
 
 
 def test_another_rig_opens_at_the_start_of_its_timeline(qtbot, tmp_path):
-    """The time of the last rig's animation stayed when another rig or project was opened ("1.000 s · frame 24"
-    on a timeline without any key); it starts at 0 s, as a scene opens in Maya or Blender."""
-    from tests.gui_helpers import make_window
+    """The time of the last rig's animation stayed when another rig was opened ("1.000 s · frame 24" on a timeline
+    without any key); it starts at 0 s, and a saved project where its playhead was, as a scene opens in Maya."""
+    from tests.gui_helpers import make_window, open_and_wait
     w = make_window(qtbot, tmp_path)
     kf = w.keyframes
     kf.set_key(0.0)
     ruler = kf.panel.ruler
     qtbot.mouseClick(ruler, QtCore.Qt.LeftButton, pos=QtCore.QPoint(int(ruler.x_of(1.0)), ruler.height() // 2))
     assert kf.time == 1.0
+    project = tmp_path / "keys.bsproj"
+    assert w.save_to(project)
     w.open_sample()
     QtWidgets.QApplication.processEvents()
     assert kf.time == 0.0 and kf.panel.time_label.text().startswith("0.000 s")
+    open_and_wait(qtbot, w, project)                 # a saved project: where its playhead was
+    assert kf.time == 1.0 and kf.panel.time_label.text().startswith("1.000 s")
