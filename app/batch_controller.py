@@ -212,9 +212,7 @@ class BatchController(QtCore.QObject):
             return False
         if self.map_path and not mocap.load_map(self.map_path):
             return False
-        mocap.dock.show()
-        mocap.dock.raise_()
-        self.window.show_status(f"Opened {self.rows[row]['take']} in the Mocap panel: Solve to see it frame by frame.")
+        mocap.show_panel(f"Opened {self.rows[row]['take']} in the Mocap panel: Solve to see it frame by frame.")
         return True
 
     def shutdown(self) -> None:

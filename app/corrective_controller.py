@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
+from app import settings as app_settings
 from app.commands import SetEditOffsetCommand, SetWeightsCommand
 from app.corrective_commands import SetCorrectivesCommand
 from app.interference_finder import InterferenceFinder
@@ -39,7 +40,7 @@ class CorrectiveController(QtCore.QObject):
         self.document, self.viewport = window.document, window.viewport
         self.authoring: list[str] | None = None   # drivers being sculpted (sculpt mode on when not None)
         self.new_rule = "product"
-        self.sculpt_actions: dict = {}            # the Correctives menu's Discard Sculpt and Stop Sculpting
+        self.sculpt_actions: dict = {}            # the Correctives menu's Save, Discard Sculpt and Stop Sculpting
         self.sculpt = SculptTool(window.viewport, window.document, panel, lambda: self.authoring is not None)
         self.finder = InterferenceFinder(window, panel, self.start_authoring)
         d = self.document
@@ -98,11 +99,13 @@ class CorrectiveController(QtCore.QObject):
         self._show_sculpting()
 
     def _show_sculpting(self) -> None:
-        """The panel's sculpt state and buttons, and the menu's Discard Sculpt (a sculpt pending) and Stop Sculpting
-        (sculpting) enabled as the panel's buttons are: enabled, they did nothing and said nothing."""
+        """The panel's sculpt state and buttons, and the menu's Save Corrective and Stop Sculpting (sculpting) and
+        Discard Sculpt (a sculpt pending) enabled as the panel's buttons are: enabled, they did nothing and said
+        nothing (Save, an error box)."""
         has_offset = self.document.edit_offset is not None
         self.panel.set_sculpting(self.authoring, has_offset)
-        for key, on in (("discard", has_offset), ("stop", self.authoring is not None)):
+        for key, on in (("discard", has_offset), ("stop", self.authoring is not None),
+                        ("save", self.authoring is not None)):
             if key in self.sculpt_actions:
                 self.sculpt_actions[key].setEnabled(on)
 
@@ -291,7 +294,7 @@ class CorrectiveController(QtCore.QObject):
             self._error(str(exc))
             return False
         if path is None:
-            path, _ = QtWidgets.QFileDialog.getOpenFileName(self.window, "Corrective from Scan", "", "OBJ (*.obj)")
+            path = app_settings.open_file(self.window, "scanFolder", "Corrective from Scan", "OBJ (*.obj)")
             if not path:
                 return False
         path = Path(path)
@@ -491,8 +494,9 @@ def install(window) -> CorrectiveController:
         "Set the ticked drivers (or the posed shapes) to 1 and sculpt their corrective")
     act("Corrective from &Scan…", ctrl.from_scan, "Ctrl+Shift+I",
         "Make the corrective of the ticked drivers from an OBJ of the desired combination")
-    act("&Save Corrective", ctrl.save, "Ctrl+Return", "Store the sculpt as the corrective: e = (x_des − x_cur) / a")
     ctrl.sculpt_actions = {
+        "save": act("&Save Corrective", ctrl.save, "Ctrl+Return",
+                    "Store the sculpt as the corrective: e = (x_des − x_cur) / a"),
         "discard": act("&Discard Sculpt", ctrl.discard_sculpt, None, "Drop the pending sculpt (undoable)"),
         "stop": act("S&top Sculpting", ctrl.stop_sculpting, None, "Leave sculpt mode")}
     ctrl._show_sculpting()

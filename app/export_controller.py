@@ -89,14 +89,13 @@ class ExportController(QtCore.QObject):
         doc = self.window.document
         if doc.project is None:
             return
-        s = app_settings.settings()
-        start = str(Path(s.value("export/folder", s.value("lastFolder", ""))) / f"{doc.rig.name}.glb")
+        start = str(self.window.export_folder() / f"{doc.rig.name}.glb")
         path, _ = QtWidgets.QFileDialog.getSaveFileName(self.window, "Export Rig", start, FILTERS)
         if not path:
             return
         if not Path(path).suffix:
             path += ".glb"
-        s.setValue("export/folder", str(Path(path).parent))
+        self.window.remember_export_folder(path)
         anims = self.animations()
         dialog = ExportDialog(list(anims), self.window)
         if dialog.exec() != QtWidgets.QDialog.Accepted:

@@ -11,8 +11,8 @@ import numpy as np
 from PySide6 import QtCore, QtWidgets
 
 from model.correctives import find_corrective
-from model.interference import (PairRow, corrective_status, hot_area, pair_heat, pair_scores, ranked_pairs,
-                                rig_vertex_areas)
+from model.interference import (PairRow, corrective_status, hot_area, hot_vertices, pair_heat, pair_scores,
+                                ranked_pairs, rig_vertex_areas)
 from app.background import BackgroundRunner
 from widgets.correctives_panel import INTERFERENCE_TAB, PAIR_HINT, CorrectivesPanel
 from widgets.scene import ColorMap
@@ -169,7 +169,10 @@ class InterferenceFinder:
             self._saved_colormap = self.viewport.colormap
         top = float(self.heat.max())
         title = f"overshoot ({rig.units})" if overshoot else f"interference ({rig.units})"
-        self._heat_colormap = ColorMap(self.heat, title=title, cmap="YlOrRd", clim=(0.0, top if top > 0 else 1.0))
+        # framed with the face (the camera presets, F, a framing made again beside the colour bar): the brows'
+        # overshoot runs up the forehead, above where the shapes act most, and was cut by the view's top edge
+        self._heat_colormap = ColorMap(self.heat, title=title, cmap="YlOrRd", clim=(0.0, top if top > 0 else 1.0),
+                                       marked=hot_vertices(self.heat))
         self.viewport.set_colormap(self._heat_colormap)
         n, area = hot_area(self.heat, self.vertex_areas())
         what = "‖d_i + d_j‖ − max(‖d_i‖, ‖d_j‖)" if overshoot else "min(‖d_i‖, ‖d_j‖)"

@@ -112,7 +112,7 @@ class KeyframeController(QtCore.QObject):
         self.playback.ticked.connect(lambda _f: window.redraw_now())
         self.playback.playing_changed.connect(panel.set_playing)
         d = self.document
-        d.rig_changed.connect(self._load)
+        d.rig_changed.connect(self._on_new_document)
         d.section_changed.connect(lambda name: self._load() if name == SECTION else None)
         p = panel
         p.time_changed.connect(self.scrub)
@@ -139,6 +139,18 @@ class KeyframeController(QtCore.QObject):
     def _stored(self) -> tuple[dict | None, dict]:
         proj = self.document.project
         return proj.sections.get(SECTION), {k: proj.arrays.get(k) for k in ARRAY_KEYS}
+
+    def _on_new_document(self) -> None:
+        """Another rig or project opened: its timeline from its start (the time of the last one stayed, on a
+        timeline without its keys), or where a saved project's playhead was (``app.session_state``, after this)."""
+        self.time = 0.0
+        self._load()
+
+    def show_time(self, t: float) -> None:
+        """Put the playhead at ``t`` (clamped to the timeline) without posing the face: a saved project's time, its
+        saved pose being the one shown."""
+        self.time = float(np.clip(t, 0.0, self.duration))
+        self._show()
 
     def _load(self) -> None:
         """Rebuild the timeline from the project (after open, set key, undo, ...)."""

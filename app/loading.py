@@ -21,6 +21,10 @@ def open_project_or_rig(path: str | Path, progress=None) -> Project:
     if path.suffix.lower() == ".bsproj":
         return load_project(path)
     rig = load_rig(path, progress=progress)
+    if rig.n_shapes == 0:   # a folder with its neutral alone, a glTF without morph targets: nothing to pose
+        what = "no OBJ beside its neutral" if path.is_dir() or path.suffix.lower() == ".obj" else "no morph targets"
+        raise RigInputError(f"{path}: has no blendshapes ({what}), so there is nothing to pose; a rig needs at "
+                            "least one shape besides its neutral.")
     default = rig.presets.get(DEFAULT_POSE)   # a glTF's default weights: the pose its viewers show it in
     weights = None if default is None else np.array([default.get(n, 0.0) for n in rig.shape_names])
     return Project(rig=rig, weights=weights)

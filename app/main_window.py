@@ -475,10 +475,12 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         return True
 
     def mirror_shape(self, name: str) -> bool:
-        """Make the other side's shape the mirror image of ``name`` across x = 0 (browInnerUp_L → browInnerUp_R):
-        added if the rig lacks it, replaced if it has it; one undoable edit (Maya's Mirror Target)."""
-        from app.commands import AddShapeCommand, SetShapeDeltaCommand
+        """Make the other side's shape the mirror image of ``name`` across x = 0 (browInnerUp_L → browInnerUp_R),
+        its in-betweens too: added if the rig lacks it, replaced if it has it; one undoable edit (Maya's Mirror
+        Target)."""
+        from app.commands import AddShapeCommand, SetShapeDeltaCommand, SetShapeSettingsCommand
         from model.errors import RigInputError
+        from model.shape_edits import ShapeSettings, with_mirrored_inbetweens
         from model.sides import check_mirrorable, mirror_name
         from solvers.symmetry import mirror_delta
         rig = self.document.rig
@@ -495,14 +497,21 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
             self.show_error("Mirror Shape", str(exc))
             return False
         delta = mirror_delta(rig.deltas[k], m)
-        if twin in rig.shape_names:
-            self.document.undo_stack.push(SetShapeDeltaCommand(self.document, twin, delta,
-                                                               f"Mirror {name} onto {twin}"))
-            self.show_status(f"Replaced {twin} with the mirror image of {name}.")
-        else:
-            self.document.undo_stack.push(AddShapeCommand(self.document, twin, delta, f"Mirror {name} to new {twin}",
-                                                          takes_offset=False))
-            self.show_status(f"Added {twin}, the mirror image of {name}.")
+        replace = twin in rig.shape_names
+        text = f"Mirror {name} onto {twin}" if replace else f"Mirror {name} to new {twin}"
+        stack = self.document.undo_stack
+        stack.beginMacro(text)   # the shape and its in-betweens: one undo step
+        try:
+            stack.push(SetShapeDeltaCommand(self.document, twin, delta, text) if replace else
+                       AddShapeCommand(self.document, twin, delta, text, takes_offset=False))
+            rig = self.document.rig
+            if rig.inbetweens.get(name) or rig.inbetweens.get(twin):   # the twin's follow name's, mirrored
+                stack.push(SetShapeSettingsCommand(self.document, ShapeSettings.of(rig),
+                                                   with_mirrored_inbetweens(rig, name, twin, m), text))
+        finally:
+            stack.endMacro()
+        self.show_status(f"Replaced {twin} with the mirror image of {name}." if replace else
+                         f"Added {twin}, the mirror image of {name}.")
         return True
 
     def apply_preset(self, name: str) -> None:
@@ -631,8 +640,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
             self.show_error("Could not open", f"{len(rigs)} rigs or projects were dropped ({rigs[0].name}, "
                                               f"{rigs[1].name}, …): drop one at a time.")
             return False
-        steps = [(lambda p=p: self.mocap.load_take(p)) if kind == "take" else (lambda p=p: self.mocap.load_map(p))
-                 for kind, p in items if kind != "rig"]
+        steps = [lambda kind=kind, p=p: self.mocap.open_in_panel(kind, p) for kind, p in items if kind != "rig"]
         if rigs:
             if self.is_loading:
                 return False
@@ -698,13 +706,32 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         return True
 
     def save_dialog(self, title: str, default_name: str, file_filter: str, write) -> None:
-        """Ask where to write (a file dialog starting at ``default_name``) and call ``write(path)``; nothing
-        without an open rig or when the user cancels. Every export of the window and its panels uses it."""
+        """Ask where to write (a file dialog with ``default_name`` in ``export_folder``) and call ``write(path)``;
+        nothing without an open rig or when the user cancels. Every export of the window and its panels uses it."""
         if self.document.project is None:
             return
-        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, title, default_name, file_filter)
+        path, _ = QtWidgets.QFileDialog.getSaveFileName(self, title, str(self.export_folder() / default_name),
+                                                        file_filter)
         if path:
+            self.remember_export_folder(path)
             write(path)
+
+    def export_folder(self) -> Path:
+        """Where an export's file dialog starts: the folder the last export went to (in this session or an earlier
+        one), else the project's folder, else the last folder a project was saved in or a file opened from, else
+        the home folder; never the folder the program was started in (the dialogs opened there, wherever that was)
+        and never an OBJ rig's own folder (an OBJ written there is read as one of its shapes next time)."""
+        s = app_settings.settings()
+        rig_folder = Path(self.document.rig.source) if self.document.project is not None else None
+        for folder in (s.value("export/folder", ""), self.document.path.parent if self.document.path else "",
+                       s.value("lastProjectFolder", ""), s.value("lastFolder", "")):
+            if folder and Path(folder).is_dir():
+                return Path(folder).parent if rig_folder is not None and Path(folder) == rig_folder else Path(folder)
+        return Path.home()
+
+    @staticmethod
+    def remember_export_folder(path: str | Path) -> None:
+        app_settings.settings().setValue("export/folder", str(Path(path).parent))
 
     def export_pose(self) -> None:
         if self.document.project is not None:

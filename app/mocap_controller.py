@@ -152,7 +152,7 @@ class MocapController(QtCore.QObject):
 
     # --- loading ----------------------------------------------------------------------------------
     def load_take_dialog(self) -> None:
-        path, _ = QtWidgets.QFileDialog.getOpenFileName(self.window, "Load Take", "", TAKE_FILTER)
+        path = app_settings.open_file(self.window, "mocap/takeFolder", "Load Take", TAKE_FILTER)
         if path:
             self.load_take(path)
 
@@ -189,7 +189,7 @@ class MocapController(QtCore.QObject):
         return text
 
     def load_map_dialog(self) -> None:
-        path, _ = QtWidgets.QFileDialog.getOpenFileName(self.window, "Load Marker Map", "", "Marker maps (*.json)")
+        path = app_settings.open_file(self.window, "mocap/mapFolder", "Load Marker Map", "Marker maps (*.json)")
         if path:
             self.load_map(path)
 
@@ -199,7 +199,22 @@ class MocapController(QtCore.QObject):
         except RigInputError as exc:
             self._error("Could not use the marker map", str(exc))
             return False
-        return self.use_map(mm)
+        return self.replace_map(mm, f"Load marker map {Path(path).name}")
+
+    def replace_map(self, marker_map, text: str) -> bool:
+        """Use ``marker_map`` (loaded or found by Auto Map); when it replaces a map, one undo step (``text``): the
+        map it replaces may hold points corrected by hand, or an automatic map that took seconds to find."""
+        old = self.marker_map
+        if old is None or self.document.project is None:
+            return self.use_map(marker_map)
+        try:
+            self.workspace.check_map(marker_map)
+        except RigInputError as exc:
+            self._error("Could not use the marker map", str(exc))
+            return False
+        from app.actor_commands import SetMarkerMapCommand
+        self.document.undo_stack.push(SetMarkerMapCommand(self, old, marker_map, text))
+        return self.marker_map is marker_map
 
     def use_map(self, marker_map) -> bool:
         """Use a marker map already read (a saved project's); on failure keep what was loaded and say why."""
@@ -213,11 +228,34 @@ class MocapController(QtCore.QObject):
         self._say_next_step()
         return True
 
+    def open_in_panel(self, kind: str, path: str | Path) -> bool:
+        """Load a take (``kind`` "take") or a marker map (else) that was dropped on the window or named on the command
+        line, and bring the Mocap panel forward with it: behind the Shapes tab, the drop looked like nothing
+        happened."""
+        if not (self.load_take(path) if kind == "take" else self.load_map(path)):
+            return False
+        self.show_panel(f"Loaded {Path(path).name} into the Mocap panel.")
+        return True
+
+    def show_panel(self, message: str) -> None:
+        """Show and raise the Mocap panel, saying ``message`` in the status bar."""
+        self.dock.show()
+        self.dock.raise_()
+        self.window.show_status(message)
+
     def _say_next_step(self) -> None:
         """The hint under the panel: what a marker take still needs before Solve."""
-        if isinstance(self.take, MarkerTake):
-            self.panel.set_status("Ready: Solve the take." if self.marker_map is not None
-                                  else "Load or build a marker map, then Solve.")
+        if not isinstance(self.take, MarkerTake):
+            return
+        if self.marker_map is None:
+            self.panel.set_status("Load or build a marker map, then Solve.")
+            return
+        try:   # a map kept from the last take may not fit this one: say so now, not "Ready" until Solve refuses
+            self.workspace.check_map(self.marker_map)
+        except RigInputError as exc:
+            self.panel.set_status(str(exc))
+            return
+        self.panel.set_status("Ready: Solve the take.")
 
     def _describe_map(self, mm) -> None:
         name = Path(mm.source).name if mm.source else "automatic map"
@@ -254,9 +292,8 @@ class MocapController(QtCore.QObject):
             if ws.take is not take or ws.rig is not rig:
                 return                      # another take or rig since: this map belongs to neither
             mm, rms = result
-            ws.marker_map, ws.solution = mm, None
-            self._drop_solution()
-            self._describe_map(mm)
+            if not self.replace_map(mm, "Auto Map the take's markers"):
+                return
             self.panel.set_status(f"Automatic map: {len(mm.labels)} markers, fit RMS "
                                   f"{rms * unit_scale(rig.units, 'mm'):.2f} mm.")
             self.map_found.emit()
@@ -433,7 +470,7 @@ class MocapController(QtCore.QObject):
         mm = unit_scale(self.rig.units, "mm")
         err = solution.marker_rmse * mm
         self.error_plot.title = "marker error RMS (mm)"
-        self.error_plot.set_curves([("projection", err), ("dense", solution.marker_rmse_residual * mm)])
+        self.error_plot.set_curves([("projection", err), ("dense", solution.marker_rmse_residual * mm)], rate=self.rate)
         self._init_weight_curves(solution.shape_weights)
         self.panel.set_frames(solution.n_frames, self.rate)
         with_c = "" if not solution.solver.C else f" with the rig's {count(solution.solver.C, 'corrective')}"
@@ -512,7 +549,7 @@ class MocapController(QtCore.QObject):
         names = self.rig.shape_names
         chosen = [n for n in self.panel.checked_curves() if n in names]
         self.weight_plot.title = "weights"
-        self.weight_plot.set_curves([(n, W[:, names.index(n)]) for n in chosen], y_range=(0.0, 1.0))
+        self.weight_plot.set_curves([(n, W[:, names.index(n)]) for n in chosen], y_range=(0.0, 1.0), rate=self.rate)
         self.weight_plot.set_cursor(self.frame)
 
     # --- playback ---------------------------------------------------------------------------------
@@ -573,10 +610,14 @@ class MocapController(QtCore.QObject):
         self._shape_names = list(self.document.rig.shape_names)
         self.panel.set_units(self.document.rig.units)
         self._drop_solution()
-        for message in self.workspace.set_rig(self.document.rig):
+        messages = self.workspace.set_rig(self.document.rig)
+        self.panel.set_status("")   # what it said was of the last rig (a failed load's error stayed for good)
+        self._say_next_step()
+        for message in messages:
             self.panel.set_status(message)
-        if self.workspace.take is None:
+        if self.workspace.take is None:   # none, or a weight take the new rig dropped: its frame went with it
             self.panel.take_label.setText("no take")
+            self.panel.set_frames(0, 1.0)
         if self.workspace.marker_map is None:
             self.panel.map_label.setText("no marker map")
         self.map_editor.refresh()

@@ -87,7 +87,8 @@ class PersonalizeController(QtCore.QObject):
         take = str(ws.take_path) if ws.marker_take is not None and ws.take_path else ""
         mm = ws.marker_map.source if ws.marker_map is not None and Path(ws.marker_map.source or "").is_file() else ""
         dlg = PersonalizeDialog(self.window, rig_name=doc.rig.name, output=str(folder / f"{base}_actor.bsproj"),
-                                take=take, marker_map=mm, folder=str(folder))
+                                take=take, marker_map=mm, folder=str(folder),   # the take's calibration as solved
+                                calibration_frames=self.window.mocap.panel.settings()["calibration_frames"])
         dlg.setAttribute(QtCore.Qt.WA_DeleteOnClose)
         dlg.accepted.connect(lambda: self.personalize(dlg.request()))
         dlg.destroyed.connect(lambda *_: setattr(self, "dialog", None))

@@ -42,6 +42,7 @@ class SegmentationController(QtCore.QObject):
         self.runner = BackgroundRunner(self)
         self.segmentation = None
         self.maps = None
+        self.map_kind = SegmentationSettings().map_kind   # the map thresholded by the last segmentation asked for
         self.level = 0
         self.view = "shaded"
         self.shape_map = -1
@@ -166,10 +167,15 @@ class SegmentationController(QtCore.QObject):
         s = SegmentationSettings.from_dict(settings)
         arrays = (rig.neutral, rig.face_counts, rig.face_indices, rig.deltas)
         names = list(rig.shape_names)
+        self.map_kind = s.map_kind
 
         def job():
             t0 = time.perf_counter()
-            seg = segment_rig(*arrays, s, cache=cache)
+            cache.bind(*arrays)            # a rig with nothing to map raises here: no maps, no segmentation
+            try:
+                seg = segment_rig(*arrays, s, cache=cache)
+            except RigInputError as exc:   # no region (a small mesh, a high threshold): the maps still show
+                return None, cache.maps(s.laplacian), str(exc), 0.0
             maps = cache.maps(s.laplacian)
             stats = [region_statistics(seg, maps, names, level=i) for i in range(len(seg.levels))]
             seconds = time.perf_counter() - t0
@@ -182,6 +188,10 @@ class SegmentationController(QtCore.QObject):
         self.runner.submit(job, self._on_done, self._on_failed)
 
     def _on_done(self, result) -> None:
+        if result[0] is None:
+            self.maps = result[1]
+            self._on_failed(result[2])
+            return
         self.segmentation, self.maps, self.stats, self.last_seconds = result
         counts = [lvl.n_regions for lvl in self.segmentation.levels]
         self.level = min(self.level, len(counts) - 1)
@@ -247,14 +257,17 @@ class SegmentationController(QtCore.QObject):
         self.refresh_view()
 
     def colormap(self):
+        """The colour map of the chosen view. The deformation maps need no regions: they show when the threshold
+        (or a mesh smaller than the minimum region) leaves none, which is when they are needed to choose another."""
         rig = self.document.rig
-        if self.view == "shaded" or self.segmentation is None:
-            return None
         if self.view in ("deformation", "deformation-rgb"):
             if self.maps is None:
                 return None
             k = self.shape_map if self.shape_map >= 0 else None
-            return deformation_colormap(self.cache, rig, self.view, k, self.segmentation.map_kind)
+            kind = self.segmentation.map_kind if self.segmentation is not None else self.map_kind
+            return deformation_colormap(self.cache, rig, self.view, k, kind)
+        if self.view == "shaded" or self.segmentation is None:
+            return None
         return segmentation_colormap(self.segmentation, self.level, self.highlight)
 
     def refresh_view(self) -> None:

@@ -1,8 +1,8 @@
 """What a saved project brings back besides the rig and the pose: the view (the Segmentation panel's view mode
-and level) and the take with its marker map. Stored in ``project.sections`` when the project is saved, applied
-when it is opened; view state, not an edit (no undo step, the project stays unmodified).
+and level, the timeline's time) and the take with its marker map. Stored in ``project.sections`` when the project
+is saved, applied when it is opened; view state, not an edit (no undo step, the project stays unmodified).
 
-``sections['view']``: ``{"view": "segmentation", "level": 1}``.
+``sections['view']``: ``{"view": "segmentation", "level": 1, "time": 1.25}`` (the time: the timeline's playhead).
 ``sections['take']``: ``{"path": "/takes/take.c3d", "map": {<marker map JSON>, "source": "..."}, "neutral_frames":
 "A:B"}`` -- the map is stored whole, so an automatic map (no file) comes back too; the neutral frames only when
 chosen.
@@ -21,7 +21,7 @@ def store(window) -> None:
     """Write the view and the take into the project's sections (before it is saved)."""
     sections = window.document.project.sections
     seg = window.segmentation
-    sections["view"] = {"view": seg.view, "level": int(seg.level)}
+    sections["view"] = {"view": seg.view, "level": int(seg.level), "time": float(window.keyframes.time)}
     ws = window.mocap.workspace
     if ws.take_path is None:
         sections.pop("take", None)
@@ -46,6 +46,9 @@ def restore(window) -> None:
             window.segmentation.set_level(level)
         if view.get("view") in VIEWS:
             window.segmentation_panel.set_view(view["view"])
+        time = view.get("time")
+        if isinstance(time, (int, float)) and not isinstance(time, bool):
+            window.keyframes.show_time(float(time))   # where the playhead was (a new rig's timeline starts at 0)
     take = project.sections.get("take")
     if not isinstance(take, dict) or not isinstance(take.get("path"), str):
         return

@@ -29,6 +29,25 @@ def clear_recent_files() -> None:
     settings().setValue("recentFiles", [])
 
 
+def start_folder(key: str) -> str:
+    """Where an open-file dialog for ``key``'s kind of file starts: the folder such a file last came from (this
+    session or an earlier one), else the last folder a rig or project was opened from, else the home folder -- not
+    the folder the program was started in, where a dialog given no folder opens."""
+    s = settings()
+    for folder in (s.value(key, ""), s.value("lastFolder", "")):
+        if folder and QtCore.QDir(str(folder)).exists():
+            return str(folder)
+    return QtCore.QDir.homePath()
+
+
+def open_file(parent, key: str, title: str, file_filter: str) -> str:
+    """Ask for one file to open, starting in ``start_folder(key)``; remembers its folder. "" when cancelled."""
+    path, _ = QtWidgets.QFileDialog.getOpenFileName(parent, title, start_folder(key), file_filter)
+    if path:
+        settings().setValue(key, QtCore.QFileInfo(path).absolutePath())
+    return path
+
+
 def _combo_value(combo: QtWidgets.QComboBox):
     data = combo.currentData()
     return combo.currentText() if data is None else data

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
+from app import settings as app_settings
 from app.commands import (DeleteShapesCommand, DuplicateShapeCommand, RenameShapeCommand, ReorderShapesCommand,
                           SetShapeSettingsCommand)
 from model import shape_edits as se
@@ -188,7 +189,7 @@ class ShapeListController(QtCore.QObject):
                          self._weight_now(name), lambda w: self._guarded(self.add_inbetween_from_pose, name, w))
 
     def inbetween_obj_dialog(self, name: str) -> None:
-        path, _ = QtWidgets.QFileDialog.getOpenFileName(self.window, f"In-between of {name}", "", "OBJ (*.obj)")
+        path = app_settings.open_file(self.window, "scanFolder", f"In-between of {name}", "OBJ (*.obj)")
         if path:
             self._ask_weight(f"Weight at which {name} reaches {Path(path).name}:", 0.5,
                              lambda w: self._guarded(self.add_inbetween_from_obj, name, w, path))

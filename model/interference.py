@@ -91,10 +91,13 @@ def pair_heat(rig, row: PairRow, measure: str = "overshoot") -> np.ndarray:
     return heat
 
 
+def hot_vertices(heat: np.ndarray, fraction: float = 0.1) -> np.ndarray:
+    """The vertices where ``heat`` is above ``fraction`` of its peak (none when it is nowhere above 0)."""
+    top = float(heat.max()) if heat.size else 0.0
+    return np.flatnonzero(heat > fraction * top) if top > 0 else np.zeros(0, dtype=np.intp)
+
+
 def hot_area(heat: np.ndarray, areas: np.ndarray, fraction: float = 0.1) -> tuple[int, float]:
     """(vertices, area) where ``heat`` is above ``fraction`` of its peak: how large the problem is."""
-    top = float(heat.max()) if heat.size else 0.0
-    if top <= 0:
-        return 0, 0.0
-    hot = heat > fraction * top
-    return int(hot.sum()), float(areas[hot].sum())
+    hot = hot_vertices(heat, fraction)
+    return int(hot.size), float(areas[hot].sum())

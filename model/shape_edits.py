@@ -431,6 +431,21 @@ def with_inbetween(rig: Rig, name: str, weight: float, delta: np.ndarray) -> Sha
     return ShapeSettings(inb, s.ranges, s.muted, s.solo)
 
 
+def with_mirrored_inbetweens(rig: Rig, name: str, twin: str, mirror_map: np.ndarray) -> ShapeSettings:
+    """The settings with ``twin``'s in-betweens the mirror images (``mirror_map``: vertex -> its mirror vertex) of
+    ``name``'s, at the same weights; none when ``name`` has none (Maya's Mirror Target mirrors them too)."""
+    from solvers.symmetry import mirror_delta
+    rig.shape_index(name)
+    s = ShapeSettings.of(rig)
+    inb = dict(s.inbetweens)
+    items = [Inbetween(i.weight, mirror_delta(i.delta, mirror_map)) for i in s.inbetweens.get(name, [])]
+    if items:
+        inb[twin] = items
+    else:
+        inb.pop(twin, None)
+    return ShapeSettings(inb, s.ranges, s.muted, s.solo)
+
+
 def without_inbetweens(rig: Rig, name: str, weight: float | None = None) -> ShapeSettings:
     """The settings without ``name``'s in-between at ``weight`` (all of them when None)."""
     rig.shape_index(name)

@@ -111,3 +111,12 @@ def drop_files(widget, paths) -> bool:
     QtWidgets.QApplication.sendEvent(widget, drop)
     QtWidgets.QApplication.processEvents()
     return drop.isAccepted()
+
+
+def combo_text_shown_whole(combo: QtWidgets.QComboBox) -> bool:
+    """Whether a drop-down list's current choice fits its text field (not cut at the right)."""
+    opt = QtWidgets.QStyleOptionComboBox()
+    combo.initStyleOption(opt)
+    field = combo.style().subControlRect(QtWidgets.QStyle.CC_ComboBox, opt, QtWidgets.QStyle.SC_ComboBoxEditField,
+                                         combo)
+    return combo.fontMetrics().horizontalAdvance(combo.currentText()) <= field.width()

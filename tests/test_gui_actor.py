@@ -494,3 +494,18 @@ def test_personalize_starts_its_process_off_the_gui_thread(qtbot, tmp_path, monk
         _click(dlg.ok_button)
     assert threads == [False]
     assert out.exists()
+
+
+def test_the_personalize_dialog_takes_the_mocap_panels_calibration_length(qtbot, tmp_path, take_dir):
+    """File ▸ Personalize to Actor… filled in the Mocap panel's take and map but always said 30 neutral frames at
+    the take's start, whatever the panel's calibration length the take was solved with."""
+    w = make_window(qtbot, tmp_path)
+    assert w.mocap.load_take(take_dir / "take.c3d")
+    box = w.mocap.panel.calibration_spin
+    _type(box.lineEdit(), "12")
+    QTest.keyClick(box, QtCore.Qt.Key_Return)
+    assert w.mocap.panel.settings()["calibration_frames"] == 12
+    _key(qtbot, w, QtCore.Qt.Key_P, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    dlg = w.actor.dialog
+    assert dlg.take_edit.text() == str(take_dir / "take.c3d") and dlg.calibration_spin.value() == 12
+    dlg.reject()

@@ -8,7 +8,7 @@ from PySide6 import QtCore, QtWidgets
 
 from model.obj_io import write_obj
 from model.pose import PoseEvaluator
-from tests.gui_helpers import key_on_shape_name, make_window, mouse
+from tests.gui_helpers import combo_text_shown_whole, key_on_shape_name, make_window, mouse
 
 PAIR = ["browInnerUp_L", "browInnerUp_R"]
 
@@ -632,21 +632,91 @@ def test_the_pairs_listed_stay_the_shapes_they_name_after_shape_list_edits(qtbot
 
 
 def test_the_sculpt_menu_actions_are_enabled_only_when_they_can_act(qtbot, win):
-    """Correctives ▸ Discard Sculpt and Stop Sculpting are enabled as the panel's Discard sculpt and Stop buttons
-    are: they were enabled with nothing to discard and no sculpt to stop, and then did nothing and said nothing."""
+    """Correctives ▸ Save Corrective, Discard Sculpt and Stop Sculpting are enabled as the panel's Save corrective,
+    Discard sculpt and Stop buttons are: they were enabled with nothing to save, discard or stop, and then did
+    nothing and said nothing (Save, an error box)."""
     w, ctrl = win
     doc = w.document
     actions = {a.text().replace("&", ""): a for a in w.actions()}
-    discard, stop = actions["Discard Sculpt"], actions["Stop Sculpting"]
+    discard, stop, save = actions["Discard Sculpt"], actions["Stop Sculpting"], actions["Save Corrective"]
     assert not discard.isEnabled() and not stop.isEnabled()
+    assert not save.isEnabled() and not ctrl.panel.save_button.isEnabled()   # it was, and said "Start a corrective"
     ctrl.panel.set_ticked(PAIR)
     qtbot.mouseClick(ctrl.panel.new_button, QtCore.Qt.LeftButton)
     _settle(qtbot, w)
     assert stop.isEnabled() and not discard.isEnabled() and ctrl.panel.cancel_button.isEnabled()
+    assert save.isEnabled() == ctrl.panel.save_button.isEnabled() is True
     from app.commands import SetEditOffsetCommand      # what a brush stroke pushes
     doc.undo_stack.push(SetEditOffsetCommand(doc, None, np.full((doc.rig.n_vertices, 3), 0.01), "stroke"))
     assert discard.isEnabled() == ctrl.panel.discard_button.isEnabled() is True
     discard.trigger()
     assert doc.edit_offset is None and not discard.isEnabled() and stop.isEnabled()
     stop.trigger()
-    assert not ctrl.sculpting and not stop.isEnabled() and not discard.isEnabled()
+    assert not ctrl.sculpting and not stop.isEnabled() and not discard.isEnabled() and not save.isEnabled()
+
+
+def test_the_interference_measure_is_shown_whole_at_the_default_window_size(qtbot, tmp_path):
+    """In the Interference tab at 1400x900 the measure's name beside Top and Find pairs read "Overshoot where
+    both a"; every measure's name is shown whole, and Top and Find pairs stay in view."""
+    w = make_window(qtbot, tmp_path, (1400, 900))
+    panel = w.correctives.panel
+    w.correctives.dock.show()
+    w.correctives.dock.raise_()
+    panel.tabs.setCurrentIndex(1)
+    qtbot.waitUntil(lambda: panel.measure.isVisible())
+    for i in range(panel.measure.count()):
+        panel.measure.setCurrentIndex(i)
+        assert combo_text_shown_whole(panel.measure), panel.measure.currentText()
+    page = panel.tabs.currentWidget()
+    for widget in (panel.top, panel.find_button, panel.partner_of):
+        corner = widget.mapTo(page, QtCore.QPoint(widget.width(), 0))
+        assert widget.isVisible() and corner.x() <= page.width()
+
+
+def test_the_interference_heat_map_is_framed_whole(qtbot, tmp_path, ict_dir):
+    """On ICT FaceKit the window frames where the shapes act most; Smith's inner-brow pair overshoots up the
+    forehead's midline, above that, and its heat map was cut by the view's top edge. Every vertex it paints (above
+    10% of its peak: the area the summary counts) is in view, and so after the front camera (1)."""
+    from model.interference import hot_vertices
+    from tests.gui_helpers import open_and_wait
+    w = make_window(qtbot, tmp_path, (1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    panel = w.correctives.panel
+    w.correctives.dock.show()
+    w.correctives.dock.raise_()
+    panel.tabs.setCurrentIndex(1)
+    qtbot.mouseClick(panel.find_button, QtCore.Qt.LeftButton)
+    qtbot.waitUntil(lambda: panel.pairs.topLevelItemCount() > 0, timeout=60000)
+    row = next(i for i in range(panel.pairs.topLevelItemCount())
+               if {panel.pairs.topLevelItem(i).text(2), panel.pairs.topLevelItem(i).text(3)} == set(PAIR))
+    panel.pairs.setCurrentItem(panel.pairs.topLevelItem(row))
+    _settle(qtbot, w)
+    heat = w.viewport.colormap.scalars
+    hot = hot_vertices(np.asarray(heat))
+    assert hot.size > 100
+
+    def in_view() -> bool:
+        xy = w.viewport.world_to_display(w.viewport.points()[hot])[:, :2]
+        width, height = w.viewport.plotter.window_size
+        return bool(np.all((xy >= 0) & (xy <= [width, height])))
+    assert in_view()
+    qtbot.keyClick(w.viewport.canvas, QtCore.Qt.Key_1)                # the front camera
+    _settle(qtbot, w)
+    assert in_view()
+
+
+def test_use_posed_shapes_shows_the_drivers_it_ticked(qtbot, win):
+    """"Use posed shapes" ticked shapes far down the drivers list and left it scrolled at its top: none of the
+    ticked drivers was in view, and the user could not see what the new corrective would be of."""
+    w, ctrl = win
+    rig = w.document.rig
+    weights = np.zeros(rig.n_shapes)
+    late = sorted(rig.shape_names[rig.n_shapes // 2:])[:2]                 # two shapes past the list's first rows
+    weights[[rig.shape_index(n) for n in late]] = 0.6
+    w.set_pose(weights, "pose")
+    drivers = ctrl.panel.drivers
+    drivers.scrollToTop()
+    qtbot.mouseClick(ctrl.panel.use_pose_button, QtCore.Qt.LeftButton)
+    assert sorted(ctrl.panel.ticked_drivers()) == late
+    first = next(drivers.item(i) for i in range(drivers.count()) if drivers.item(i).text() in late)
+    assert drivers.viewport().rect().contains(drivers.visualItemRect(first))

@@ -382,6 +382,39 @@ def test_mirror_shape_replaces_or_adds_the_other_side(qtbot, tmp_path):
     assert rig.shape_names == ["lift_L"]
 
 
+def test_mirror_shape_mirrors_its_inbetweens_in_one_undo_step(qtbot, tmp_path):
+    """Mirror to the Other Side replaced the other side's full shape and left its in-betweens as they were: a
+    mouthSmile_L with an in-between at 0.5 mirrored onto mouthSmile_R gave a right smile that went through the
+    right side's old in-between (or none) at half weight. Its in-betweens are mirrored too, in the same undo step,
+    and undo and redo give back each side exactly."""
+    from solvers.symmetry import mirror_delta, mirror_map
+    w = make_window(qtbot, tmp_path)
+    doc, rig = w.document, w.document.rig
+    weights = np.zeros(rig.n_shapes)
+    weights[[rig.shape_index("mouthSmile_L"), rig.shape_index("jawOpen")]] = [0.5, 0.4]
+    w.set_pose(weights, "pose")
+    w.shape_list.add_inbetween_from_pose("mouthSmile_L", 0.5)        # a smile with the jaw a little open at 0.5
+    left = rig.inbetweens["mouthSmile_L"][0].delta.copy()
+    assert "mouthSmile_R" not in rig.inbetweens
+    n = doc.undo_stack.count()
+    row = w.shapes_panel.row("mouthSmile_L")
+    row.label.customContextMenuRequested.emit(QtCore.QPoint(2, 2))
+    menu = row.findChild(QtWidgets.QMenu)
+    next(a for a in menu.actions() if a.text() == "Mirror to the Other Side").trigger()
+    menu.close()
+    rig = doc.rig
+    assert doc.undo_stack.count() == n + 1
+    right = rig.inbetweens["mouthSmile_R"]
+    assert [i.weight for i in right] == [0.5]
+    np.testing.assert_allclose(right[0].delta, mirror_delta(left, mirror_map(rig.neutral)))
+    after = doc.surface().copy()
+    doc.undo_stack.undo()
+    assert "mouthSmile_R" not in doc.rig.inbetweens
+    doc.undo_stack.redo()
+    np.testing.assert_array_equal(doc.rig.inbetweens["mouthSmile_R"][0].delta, right[0].delta)
+    np.testing.assert_array_equal(doc.surface(), after)
+
+
 def test_tool_options_come_back_in_the_next_session(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path)
     cp, mp = w.correctives.panel, w.mocap.panel

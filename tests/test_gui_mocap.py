@@ -435,3 +435,80 @@ def test_the_first_solve_frames_the_views_at_their_size_and_draws_them_once(qtbo
     assert mc.views.size().toTuple() == at_solved["size"]
     assert mc.views.plotter.camera_position == at_solved["camera"]   # not framed again at another size
     assert at_solved["size"][0] > 600 and at_solved["size"][1] > 150
+
+
+def test_a_marker_map_replaced_by_load_map_or_auto_map_comes_back_with_undo(qtbot, tmp_path, ict_dir, take_dir,
+                                                                             monkeypatch):
+    """Load Map… or Auto Map over a map already loaded threw the old map away with no undo step, though dragging one
+    of its points is undoable: a map corrected by hand, or an automatic map that took seconds, was lost for good."""
+    from PySide6 import QtCore, QtGui
+    w, mc = _install(qtbot, tmp_path, size=(1100, 800))
+    open_and_wait(qtbot, w, ict_dir)
+    assert mc.load_take(take_dir / "take.c3d")
+    qtbot.mouseClick(mc.panel.auto_map_button, QtCore.Qt.LeftButton)
+    with qtbot.waitSignal(mc.map_found, timeout=120000):
+        pass
+    auto = mc.marker_map
+    steps = w.document.undo_stack.count()
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getOpenFileName",
+                        staticmethod(lambda *a, **k: (str(take_dir / "marker_map.json"), "")))
+    qtbot.mouseClick(mc.panel.load_map_button, QtCore.Qt.LeftButton)          # Load Map… over the automatic map
+    loaded = mc.marker_map
+    assert loaded is not auto and loaded.source and w.document.undo_stack.count() == steps + 1
+    undo = next(a for a in w.findChildren(QtGui.QAction) if a.shortcut() == QtGui.QKeySequence.Undo)
+    undo.trigger()
+    assert mc.marker_map is auto and "automatic" in mc.panel.map_label.text()
+    w.redo_action.trigger()
+    assert mc.marker_map is loaded and "marker_map.json" in mc.panel.map_label.text()
+    qtbot.mouseClick(mc.panel.auto_map_button, QtCore.Qt.LeftButton)          # Auto Map over the loaded map
+    with qtbot.waitSignal(mc.map_found, timeout=120000):
+        pass
+    assert mc.marker_map.markers == auto.markers and "Automatic map: 60 markers" in mc.panel.status_label.text()
+    undo.trigger()
+    assert mc.marker_map is loaded
+
+
+def test_a_new_take_that_the_kept_marker_map_does_not_fit_is_not_called_ready(qtbot, tmp_path, ict_dir, take_dir):
+    """The marker map stays when another take is loaded; the panel said "Ready: Solve the take." even when the map
+    names none of the new take's markers (a body take from another lab), and only Solve said otherwise."""
+    from tests.conftest import DATA, require_data
+    body = require_data(DATA / "thirdparty" / "c3d" / "pyomeca_Vicon.c3d")
+    w, mc = _install(qtbot, tmp_path)
+    open_and_wait(qtbot, w, ict_dir)
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    assert mc.panel.status_label.text() == "Ready: Solve the take."
+    assert mc.load_take(body)
+    status = mc.panel.status_label.text()
+    assert "Ready" not in status and "none of its 60 marker labels appear in the take" in status
+    assert mc.load_take(take_dir / "take.c3d")
+    assert mc.panel.status_label.text() == "Ready: Solve the take."
+
+
+def test_the_mocap_panels_status_is_of_the_rig_that_is_open(qtbot, tmp_path, take_dir):
+    """A failed take load's sentence stayed under the Mocap panel after another rig was opened, above a take that
+    had loaded fine; the panel now says the take's next step on the new rig."""
+    w, mc = _install(qtbot, tmp_path)
+    assert mc.load_take(take_dir / "take.c3d")
+    bad = tmp_path / "bad.c3d"
+    bad.write_bytes(b"\x02P" + b"\x00" * 600)
+    assert not mc.load_take(bad)
+    assert str(bad) in mc.panel.status_label.text()
+    w.open_sample()
+    QtWidgets.QApplication.processEvents()
+    assert mc.workspace.take_path == take_dir / "take.c3d"
+    assert mc.panel.status_label.text() == "Load or build a marker map, then Solve."
+
+
+def test_a_take_the_new_rig_drops_leaves_no_frame_shown(qtbot, tmp_path, llf_csv):
+    """A Live Link Face take that does not fit the next rig opened is dropped ("no take"), but the panel went on
+    showing its frame ("frame 151/328 · 2.50 s") and slider; it shows none now."""
+    from tests.conftest import DATA, require_data
+    cube = require_data(DATA / "thirdparty" / "gltf" / "singleBlendshapeCube_sparse.glb")
+    w, mc = _install(qtbot, tmp_path)
+    assert mc.load_take(llf_csv)
+    mc.panel.slider.setValue(150)
+    assert mc.panel.frame_label.text().startswith("frame 151/328")
+    open_and_wait(qtbot, w, cube)
+    assert mc.take is None and mc.panel.take_label.text() == "no take"
+    assert mc.panel.frame_label.text() == "frame –" and mc.panel.slider.maximum() == 0
+    assert "The weight take does not fit this rig" in mc.panel.status_label.text()

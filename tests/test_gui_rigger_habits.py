@@ -3,6 +3,8 @@ Graph Editor, next/previous key, frame selected / frame all, files dropped on th
 size, the first start, Marker mode's button, status messages in the user's words."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from PySide6 import QtCore, QtGui, QtWidgets
@@ -154,6 +156,34 @@ def test_graph_editor_moves_and_deletes_a_key_undoably_and_the_viewport_follows(
     assert kf.time == 1.5 and w.document.weights[jaw] == pytest.approx(0.3125)   # smooth between 0.5 and 0
 
 
+def test_the_graph_editor_and_the_take_curves_label_their_time_axis_in_seconds(qtbot, tmp_path, llf_csv):
+    """The Graph Editor's curves and the Mocap Views' weight and error curves had no time axis: a key's time could
+    only be read by moving the playhead onto it. The seconds are written under the curves, a key at 1 s on the
+    "1 s" tick."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    kf = w.keyframes
+    jaw = w.document.rig.shape_index("jawOpen")
+    kf.set_key(0.0)
+    kf.scrub(1.0)
+    _pose(w, jawOpen=0.5)
+    kf.set_key(1.0)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_G, QtCore.Qt.ControlModifier)     # Animation ▸ Graph Editor
+    plot = kf.graph.plot
+    qtbot.waitUntil(lambda: plot.isVisible() and plot.height() > 120, timeout=3000)
+    ticks = dict((label, x) for x, label in plot.time_ticks())
+    assert ticks.keys() >= {"0 s", "1 s", "2 s"}
+    assert abs(ticks["1 s"] - plot.key_point(1.0, 0.5).x()) < 0.5 and jaw in plot.keys
+    image = plot.grab().toImage()
+    bottom = plot.key_point(1.0, plot.y_range[0]).y()        # the plot's lower edge
+    below = [QtGui.QColor(image.pixel(int(ticks["1 s"]) + dx, int(bottom) + dy)).lightness()
+             for dx in range(-8, 9) for dy in range(5, 14)]
+    assert max(below) > 120                                    # the label is drawn under its tick
+    assert w.mocap.load_take(llf_csv)                          # a Live Link Face take: its weight curves
+    weights = w.mocap.weight_plot
+    labels = [label for _, label in weights.time_ticks()]
+    assert labels[0] == "0 s" and weights.rate == w.mocap.take.rate and len(labels) >= 2
+
+
 def test_a_click_on_a_curve_makes_it_the_graph_editors_active_curve(qtbot, tmp_path):
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     kf, rig = w.keyframes, w.document.rig
@@ -286,6 +316,39 @@ def test_a_take_given_to_open_goes_to_the_mocap_panel(qtbot, tmp_path, ict_dir, 
     qtbot.waitUntil(lambda: w.last_error is not None, timeout=20000)
     assert str(cut) in w.last_error and "rig format" not in w.last_error and ". " not in w.last_error
     assert w.mocap.workspace.take_path == take_dir / "take.c3d" and w.document.rig.n_vertices == 26719
+
+
+def test_a_dropped_take_brings_the_mocap_panel_forward(qtbot, tmp_path, llf_csv):
+    """A take dropped on the window loaded into the Mocap panel behind the Shapes tab (or into a closed panel):
+    nothing on screen changed and the status bar said nothing, so the drop looked ignored."""
+    w = make_window(qtbot, tmp_path)
+    w.shapes_dock.raise_()
+    w.mocap.dock.toggleViewAction().trigger()       # View ▸ Panels ▸ Mocap: closed
+    qtbot.waitUntil(lambda: not w.mocap.dock.isVisible())
+    assert drop_files(w, [llf_csv])
+    QtWidgets.QApplication.processEvents()
+    assert w.mocap.workspace.take_path == llf_csv
+    assert w.mocap.dock.isVisible() and not w.mocap.dock.visibleRegion().isEmpty()   # shown, its tab in front
+    assert w.mocap.panel.take_label.isVisible()
+    assert llf_csv.name in w.statusBar().currentMessage()
+
+
+def test_a_rig_folder_with_its_neutral_alone_is_refused_in_one_sentence(qtbot, tmp_path):
+    """An actor's neutral scan dropped on the window (its folder holds no shape OBJ) failed with "could not be opened
+    (ValueError: cannot reshape array of size 0 into shape (0,newaxis))". Now: one sentence saying there are no
+    blendshapes; the open rig stays."""
+    from model.obj_io import write_obj
+    w = make_window(qtbot, tmp_path)
+    rig = w.document.rig
+    scan = tmp_path / "actor" / "actor_neutral.obj"
+    scan.parent.mkdir()
+    write_obj(scan, rig.neutral, rig.face_counts, rig.face_indices)
+    assert drop_files(w, [scan])
+    qtbot.waitUntil(lambda: not w.is_loading, timeout=60000)
+    QtWidgets.QApplication.processEvents()
+    assert w.last_error == (f"{scan}: has no blendshapes (no OBJ beside its neutral), so there is nothing to "
+                            "pose; a rig needs at least one shape besides its neutral.")
+    assert w.document.rig is rig
 
 
 def test_a_dropped_project_gltf_or_take_opens_and_anything_else_is_one_sentence(qtbot, tmp_path, llf_csv):
@@ -497,3 +560,45 @@ def test_take_actions_without_a_take_to_play_say_why(qtbot, tmp_path, take_dir):
         _key(qtbot, w.viewport.canvas, key, modifier)
         assert w.statusBar().currentMessage().startswith("Solve the take first"), key
     assert not w.mocap.playback.playing and w.document.undo_stack.count() == 0
+
+
+def test_export_and_open_dialogs_start_where_the_last_such_file_went_not_in_the_working_folder(
+        qtbot, tmp_path, monkeypatch, take_dir):
+    """Export Pose, Export Image, the keys' and take's exports and Load Take gave their file dialogs a bare name:
+    they opened in the folder the program was started from, every time, and the folder chosen last was forgotten
+    (Export Rig alone remembered its own). Now an export starts in the folder the last export went to -- in a later
+    session too -- and Load Take in the folder the last take came from."""
+    started_in = tmp_path / "started_here"
+    started_in.mkdir()
+    monkeypatch.chdir(started_in)
+    out = tmp_path / "renders"
+    out.mkdir()
+    starts = []
+
+    def save_dialog(parent, title, start, *a, **k):
+        starts.append(Path(start))
+        return str(out / Path(start).name), ""
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", staticmethod(save_dialog))
+    w = make_window(qtbot, tmp_path)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_E, QtCore.Qt.ControlModifier)        # Export Pose as OBJ
+    assert starts[0].is_absolute() and starts[0].parent != started_in and starts[0].suffix == ".obj"
+    qtbot.waitUntil(lambda: (out / starts[0].name).exists(), timeout=20000)
+    _key(qtbot, w.viewport.canvas, QtCore.Qt.Key_E, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    w.image_size_dialog.accept()                                                      # Export Image: the size
+    assert starts[1].parent == out and starts[1].suffix == ".png"
+    w.close()
+    w2 = make_window(qtbot, tmp_path)                                                 # the next session
+    _key(qtbot, w2.viewport.canvas, QtCore.Qt.Key_E, QtCore.Qt.ControlModifier)
+    assert starts[2].parent == out
+    opened = []
+
+    def open_dialog(parent, title, start, *a, **k):
+        opened.append(Path(start))
+        return str(take_dir / "take.c3d"), ""
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getOpenFileName", staticmethod(open_dialog))
+    w2.mocap.dock.show()
+    w2.mocap.dock.raise_()
+    for _ in range(2):
+        qtbot.mouseClick(w2.mocap.panel.load_take_button, QtCore.Qt.LeftButton)
+    assert opened[0] != started_in and opened[1] == take_dir
+    assert w2.mocap.workspace.take_path == take_dir / "take.c3d"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6 import QtCore, QtWidgets
 
-from tests.gui_helpers import key_on_shape_name, make_window, open_and_wait
+from tests.gui_helpers import combo_text_shown_whole, key_on_shape_name, make_window, open_and_wait
 
 
 def _ready(qtbot, w):
@@ -135,16 +135,10 @@ def _whole_sentence_shown(label, sentence: str) -> None:
     assert label.height() >= label.heightForWidth(label.width())   # every wrapped line shown
 
 
-def test_a_failed_segmentation_wraps_its_message_inside_the_dock(qtbot, tmp_path):
-    """A failed segmentation's sentence is wrapped in the panel's width; it used to be one line that widened the
-    panel to ~900 px in a 370 px dock, behind a scroll bar that hid the threshold box, the level and the nudge."""
-    from PySide6 import QtCore
+def _fail_by_min_region(qtbot, w) -> None:
+    """Type more vertices than the sample face has in Min region, as a user does, and wait for the failure."""
     from PySide6.QtTest import QTest
-    from tests.conftest import DATA, require_data
-    w = make_window(qtbot, tmp_path, size=(1400, 900))
-    _ready(qtbot, w)
     panel = w.segmentation_panel
-    # typed in Min region, as a user does: more vertices than the sample face has
     edit = panel.min_size.lineEdit()
     QTest.mouseClick(edit, QtCore.Qt.LeftButton)
     QTest.keyClick(edit, QtCore.Qt.Key_A, QtCore.Qt.ControlModifier)
@@ -152,6 +146,16 @@ def test_a_failed_segmentation_wraps_its_message_inside_the_dock(qtbot, tmp_path
     QTest.keyClick(edit, QtCore.Qt.Key_Return)
     w.segmentation.wait()
     qtbot.waitUntil(lambda: panel.status.text().startswith("No segmentation: "), timeout=10000)
+
+
+def test_a_failed_segmentation_wraps_its_message_inside_the_dock(qtbot, tmp_path):
+    """A failed segmentation's sentence is wrapped in the panel's width; it used to be one line that widened the
+    panel to ~900 px in a 370 px dock, behind a scroll bar that hid the threshold box, the level and the nudge."""
+    from tests.conftest import DATA, require_data
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    _ready(qtbot, w)
+    panel = w.segmentation_panel
+    _fail_by_min_region(qtbot, w)
     sentence = panel.status.text()
     # no threshold makes a region that large: the advice is the one that helps (it said "lower the threshold" too)
     assert sentence.endswith("on this rig (its shapes move 8,279 vertices of the skin); lower the minimum region size.")
@@ -221,11 +225,7 @@ def test_the_panels_choices_are_shown_whole_at_the_default_window_size(qtbot, tm
     def whole():
         qtbot.wait(100)    # the scroll area lays out again on a posted event
         for combo in (panel.view, panel.map_kind, panel.shape, panel.method, panel.separate):
-            opt = QtWidgets.QStyleOptionComboBox()
-            combo.initStyleOption(opt)
-            field = combo.style().subControlRect(QtWidgets.QStyle.CC_ComboBox, opt,
-                                                 QtWidgets.QStyle.SC_ComboBoxEditField, combo)
-            assert combo.fontMetrics().horizontalAdvance(combo.currentText()) <= field.width(), combo.currentText()
+            assert combo_text_shown_whole(combo), combo.currentText()
     whole()
     w.keyframes.show_graph_editor()      # Ctrl+G: the panel's dock is shorter and shows its vertical scroll bar
     qtbot.waitUntil(lambda: w.segmentation_dock.widget().verticalScrollBar().isVisible(), timeout=5000)
@@ -284,3 +284,26 @@ def test_a_shape_saved_from_a_nudge_shows_its_own_deformation_map(qtbot, tmp_pat
     np.testing.assert_allclose(cmap.scalars, mine)
     moved = np.linalg.norm(rig.deltas[-1], axis=1) > 0
     assert cmap.scalars[moved].max() > 0 and (cmap.scalars[~moved] == 0).mean() > 0.9   # where the nudge bends
+
+
+def test_the_deformation_map_shows_when_the_settings_leave_no_region(qtbot, tmp_path):
+    """The deformation map needs no regions, but it vanished (the plain shaded face, no colour bar) whenever the
+    segmentation failed: a minimum region larger than the regions, a threshold too high, or a glTF smaller than the
+    default minimum region (the Khronos cube and triangle) -- just when the map is what one looks at to choose."""
+    from tests.conftest import DATA, require_data
+    w = make_window(qtbot, tmp_path)
+    _ready(qtbot, w)
+    panel = w.segmentation_panel
+    panel.view.setCurrentIndex(panel.view.findText("Deformation map"))
+    assert w.viewport.colormap is not None
+    shown = w.viewport.colormap.title
+    _fail_by_min_region(qtbot, w)
+    assert w.viewport.colormap is not None and w.viewport.colormap.title == shown
+    panel.view.setCurrentIndex(panel.view.findText("Segmentation"))
+    assert w.viewport.colormap is None                # no regions to colour
+    panel.view.setCurrentIndex(panel.view.findText("Deformation map"))
+    open_and_wait(qtbot, w, require_data(DATA / "thirdparty" / "gltf" / "singleBlendshapeCube_sparse.glb"))
+    w.segmentation.wait()
+    qtbot.waitUntil(lambda: panel.status.text().startswith("No segmentation: "), timeout=10000)
+    cmap = w.viewport.colormap
+    assert cmap is not None and "(m)" in cmap.title and np.ptp(np.asarray(cmap.scalars)) > 0

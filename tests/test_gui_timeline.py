@@ -127,3 +127,41 @@ def test_the_last_time_on_the_ruler_is_shown_whole(qtbot):
     width = ruler.fontMetrics().horizontalAdvance("2s")
     assert not drawn[:, end + 2:].any()                       # nothing right of the last tick but its line
     assert drawn[:, end - 2 - width:end - 1].sum() > 10       # "2s", left of it
+
+
+def test_closing_the_graph_editor_gives_its_height_back_to_the_viewport(qtbot, tmp_path):
+    """The Graph Editor (and the Mocap Views, which share its place) sits above the timeline: closed, the height
+    it had went to the timeline, a quarter of the window of empty panel with one row of controls in its middle, and
+    the face stayed small."""
+    from tests.gui_helpers import make_window
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    timeline = w.keyframes.dock
+    viewport_before = w.viewport.height()
+    graph_action = next(a for a in w.findChildren(QtGui.QAction) if a.text() == "&Graph Editor")
+    graph_action.trigger()                                       # Animation ▸ Graph Editor (Ctrl+G)
+    qtbot.waitUntil(lambda: w.keyframes.graph_dock.isVisible())
+    assert w.viewport.height() < viewport_before - 100
+    w.keyframes.graph_dock.toggleViewAction().trigger()          # View ▸ Panels ▸ Graph Editor: closed
+    qtbot.waitUntil(lambda: not w.keyframes.graph_dock.isVisible())
+    QtWidgets.QApplication.processEvents()
+    assert timeline.height() < 2 * w.keyframes.panel.sizeHint().height() + 30
+    assert w.viewport.height() >= viewport_before - 5
+
+
+def test_another_rig_opens_at_the_start_of_its_timeline(qtbot, tmp_path):
+    """The time of the last rig's animation stayed when another rig was opened ("1.000 s · frame 24" on a timeline
+    without any key); it starts at 0 s, and a saved project where its playhead was, as a scene opens in Maya."""
+    from tests.gui_helpers import make_window, open_and_wait
+    w = make_window(qtbot, tmp_path)
+    kf = w.keyframes
+    kf.set_key(0.0)
+    ruler = kf.panel.ruler
+    qtbot.mouseClick(ruler, QtCore.Qt.LeftButton, pos=QtCore.QPoint(int(ruler.x_of(1.0)), ruler.height() // 2))
+    assert kf.time == 1.0
+    project = tmp_path / "keys.bsproj"
+    assert w.save_to(project)
+    w.open_sample()
+    QtWidgets.QApplication.processEvents()
+    assert kf.time == 0.0 and kf.panel.time_label.text().startswith("0.000 s")
+    open_and_wait(qtbot, w, project)                 # a saved project: where its playhead was
+    assert kf.time == 1.0 and kf.panel.time_label.text().startswith("1.000 s")

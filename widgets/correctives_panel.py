@@ -222,20 +222,22 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.top.setToolTip("How many pairs to list")
         self.find_button = _button("Find pairs", "Rank shape pairs by how much their displacements overlap",
                                    self.find_requested)
-        row.addWidget(self.measure, 1)
-        row.addWidget(QtWidgets.QLabel("Top"))
-        row.addWidget(self.top)
-        row.addWidget(self.find_button)
-        lay.addLayout(row)
-        prow = QtWidgets.QHBoxLayout()
-        prow.addWidget(QtWidgets.QLabel("Pairs with"))
         self.partner_of = QtWidgets.QComboBox()
         self.partner_of.addItem("any shape", None)
         self.partner_of.setToolTip("List every pair, or only the partners of one shape (the shape you are "
                                    "correcting), best first")
         self.partner_of.activated.connect(lambda _=0: self.find_requested.emit())
-        prow.addWidget(self.partner_of, 1)
-        lay.addLayout(prow)
+        # the measure on a row of its own, the dock's width: beside Top and Find pairs its name was cut to
+        # "Overshoot where both a" in the dock at the window's default size
+        form = QtWidgets.QFormLayout()
+        form.setFieldGrowthPolicy(QtWidgets.QFormLayout.AllNonFixedFieldsGrow)
+        form.addRow("Measure", self.measure)
+        form.addRow("Pairs with", self.partner_of)
+        row.addWidget(self.top)
+        row.addStretch(1)
+        row.addWidget(self.find_button)
+        form.addRow("Top", row)
+        lay.addLayout(form)
         self.merge_mirrored = QtWidgets.QCheckBox("One row for a pair and its mirror")
         self.merge_mirrored.setChecked(True)
         self.merge_mirrored.setToolTip("List eyeWide_L × eyeLookUp_L and eyeWide_R × eyeLookUp_R as one problem "
@@ -289,10 +291,17 @@ class CorrectivesPanel(QtWidgets.QWidget):
                 if self.drivers.item(i).checkState() == QtCore.Qt.Checked]
 
     def set_ticked(self, names) -> None:
+        """Tick ``names`` (and only them) among the drivers; the first is scrolled into view (Use posed shapes
+        ticked shapes far down the list and showed none of them)."""
         names = set(names)
+        first = None
         for i in range(self.drivers.count()):
             it = self.drivers.item(i)
             it.setCheckState(QtCore.Qt.Checked if it.text() in names else QtCore.Qt.Unchecked)
+            if first is None and it.text() in names and not it.isHidden():
+                first = it
+        if first is not None:
+            self.drivers.scrollToItem(first, QtWidgets.QAbstractItemView.PositionAtTop)
 
     def _filter_drivers(self, text: str) -> None:
         t = text.strip().lower()

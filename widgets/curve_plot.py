@@ -1,8 +1,9 @@
 """A small line plot of per-frame curves with a cursor at the current frame (QPainter, no matplotlib).
 
 Used under the mocap views for weight curves and per-frame marker error; clicking or dragging in the plot
-asks for that frame (``frame_requested``). The curves are drawn once into a pixmap (redrawn when they or
-the size change); moving the cursor during playback repaints only the two strips it leaves and enters.
+asks for that frame (``frame_requested``); given the frames' rate, the time axis is labelled in seconds. The
+curves are drawn once into a pixmap (redrawn when they or the size change); moving the cursor during playback
+repaints only the two strips it leaves and enters.
 """
 from __future__ import annotations
 
@@ -11,6 +12,11 @@ from PySide6 import QtCore, QtGui, QtWidgets
 
 PALETTE = [(230, 120, 60), (90, 170, 230), (120, 200, 110), (220, 90, 160), (230, 200, 80), (160, 130, 230),
            (80, 200, 190), (200, 200, 200)]
+
+
+TIME_AXIS_PX = 14          # the time axis's labels under the plot
+TICK_SPACING_PX = 56       # the least room between two of its labels
+TIME_STEPS = (0.05, 0.1, 0.2, 0.25, 0.5, 1, 2, 5, 10, 15, 30, 60, 120, 300, 600, 1800, 3600)
 
 
 class CurvePlot(QtWidgets.QWidget):
@@ -23,6 +29,7 @@ class CurvePlot(QtWidgets.QWidget):
         self.cursor = 0
         self.n_frames = 0
         self.y_range: tuple[float, float] = (0.0, 1.0)
+        self.rate = 0.0        # frames per second: the time axis is labelled in seconds (0: no time axis)
         self._background: QtGui.QPixmap | None = None   # everything but the cursor; redrawn at a new size
         self.setMinimumSize(240, 70)
         self.setSizePolicy(QtWidgets.QSizePolicy.Expanding, QtWidgets.QSizePolicy.Expanding)
@@ -37,8 +44,12 @@ class CurvePlot(QtWidgets.QWidget):
         self._background = None
         self.update()
 
-    def set_curves(self, curves: list[tuple[str, np.ndarray]], y_range: tuple[float, float] | None = None) -> None:
-        """Curves as (name, values (F,)); NaN values leave gaps. The y range defaults to the data's."""
+    def set_curves(self, curves: list[tuple[str, np.ndarray]], y_range: tuple[float, float] | None = None,
+                   rate: float | None = None) -> None:
+        """Curves as (name, values (F,)); NaN values leave gaps. The y range defaults to the data's; ``rate`` (frames
+        per second) labels the time axis in seconds (None: as before)."""
+        if rate is not None:
+            self.rate = float(rate)
         self.curves = [(name, np.asarray(v, dtype=np.float64), PALETTE[i % len(PALETTE)])
                        for i, (name, v) in enumerate(curves)]
         self.n_frames = max((c[1].size for c in self.curves), default=0)
@@ -65,7 +76,19 @@ class CurvePlot(QtWidgets.QWidget):
 
     # --- geometry ----------------------------------------------------------------------------------
     def _plot_rect(self) -> QtCore.QRectF:
-        return QtCore.QRectF(44, 16, max(10, self.width() - 52), max(10, self.height() - 24))
+        below = TIME_AXIS_PX if self.rate > 0 else 0   # the seconds under the plot
+        return QtCore.QRectF(44, 16, max(10, self.width() - 52), max(10, self.height() - 24 - below))
+
+    def time_ticks(self) -> list[tuple[float, str]]:
+        """(x, label) of the time axis: whole steps of seconds at least ``TICK_SPACING_PX`` apart (none without a
+        rate). Without them a key or a frame of the curves had no time to read."""
+        if self.rate <= 0 or self.n_frames < 2:
+            return []
+        r = self._plot_rect()
+        duration = (self.n_frames - 1) / self.rate
+        per_second = r.width() / duration
+        step = next((s for s in TIME_STEPS if s * per_second >= TICK_SPACING_PX), TIME_STEPS[-1])
+        return [(r.left() + t * per_second, f"{t:g} s") for t in np.arange(0.0, duration + 1e-9, step)]
 
     def _x(self, frame: float, r: QtCore.QRectF) -> float:
         return r.left() + r.width() * (frame / max(1, self.n_frames - 1))
@@ -105,6 +128,12 @@ class CurvePlot(QtWidgets.QWidget):
         p.drawText(QtCore.QPointF(2, r.bottom()), f"{lo:.3g}")
         p.drawText(QtCore.QPointF(2, r.top() + 10), f"{hi:.3g}")
         p.drawText(QtCore.QPointF(r.left(), 12), self.title)
+        metrics = p.fontMetrics()
+        for x, label in self.time_ticks():
+            p.drawLine(QtCore.QPointF(x, r.bottom()), QtCore.QPointF(x, r.bottom() + 3))
+            half = metrics.horizontalAdvance(label) / 2
+            left = min(max(x - half, 0.0), self.width() - 2 * half - 1)
+            p.drawText(QtCore.QPointF(left, r.bottom() + 4 + metrics.ascent()), label)
         x_legend = r.left() + p.fontMetrics().horizontalAdvance(self.title) + 16
         for name, values, color in self.curves:
             pen = QtGui.QPen(QtGui.QColor(*color), 1.4)

@@ -48,7 +48,7 @@ class GraphPlot(CurvePlot):
         if self.selected_key is not None and not any(abs(t - self.selected_key[1]) < 1e-6
                                                     for t, _ in keys.get(self.selected_key[0], [])):
             self.selected_key = None
-        self.set_curves([(names[k], curves[:, i]) for i, k in enumerate(shapes)], y_range)
+        self.set_curves([(names[k], curves[:, i]) for i, k in enumerate(shapes)], y_range, rate=self.fps)
 
     # --- geometry ------------------------------------------------------------------------------------
     def key_point(self, time: float, value: float) -> QtCore.QPointF:

@@ -326,11 +326,14 @@ class MocapPanel(QtWidgets.QWidget):
         self.export_weights_button.setEnabled(on)
 
     def set_frames(self, n_frames: int, rate: float) -> None:
+        """The take's length (0: none, and no frame shown)."""
         self.slider.blockSignals(True)
         self.slider.setRange(0, max(0, n_frames - 1))
         self.slider.setValue(0)
         self.slider.blockSignals(False)
         self.rate = rate
+        if n_frames == 0:
+            self.frame_label.setText("frame –")
 
     def show_frame(self, frame: int, n_frames: int, rate: float) -> None:
         if self.slider.value() != frame:

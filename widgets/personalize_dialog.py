@@ -27,7 +27,7 @@ class PersonalizeDialog(QtWidgets.QDialog):
     """The actor's neutral scan, pose scans or a marker take (+ its map), and the project to write."""
 
     def __init__(self, parent=None, *, rig_name: str = "rig", output: str = "", take: str = "", marker_map: str = "",
-                 folder: str = "") -> None:
+                 folder: str = "", calibration_frames: int = 30) -> None:
         super().__init__(parent)
         self.setWindowTitle("Personalize to Actor")
         self._folder = folder
@@ -72,7 +72,7 @@ class PersonalizeDialog(QtWidgets.QDialog):
         self.map_edit.setPlaceholderText("automatic")
         self.calibration_spin = QtWidgets.QSpinBox()
         self.calibration_spin.setRange(1, 100000)
-        self.calibration_spin.setValue(30)
+        self.calibration_spin.setValue(calibration_frames)
         self.calibration_spin.setToolTip("The take's neutral frames at its start")
         form.addRow("Take", _file_row(self.take_edit, "Browse…", self._pick_take))
         form.addRow("Marker map", _file_row(self.map_edit, "Browse…", self._pick_map))

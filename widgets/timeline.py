@@ -177,6 +177,9 @@ class TimelinePanel(QtWidgets.QWidget):
         lay.addWidget(self.ruler, 1)
         for wdg in (self.time_label, self.interp, self.fps, self.duration, self.export_csv, self.export_pc2):
             lay.addWidget(wdg)
+        # one row of controls, never taller: when the Mocap Views or the Graph Editor above it closes, the height
+        # they had goes back to the viewport, not to an empty timeline with its controls floating in the middle
+        self.setSizePolicy(QtWidgets.QSizePolicy.Preferred, QtWidgets.QSizePolicy.Fixed)
 
     def _fit_time_label(self, duration: float, fps: float) -> None:
         """Fix the time readout's size to its longest text for this animation (the last frame, on a key). A
