@@ -23,7 +23,7 @@ from app.marker_commands import SetMarkersCommand, SetPoseCommand
 from model.correctives import solver_correctives
 from model.errors import RigInputError
 from model.antagonists import pair_indices
-from model.markers import DRAG_LAM_REG, Marker, MarkerSet
+from model.markers import DRAG_LAM_REG, Marker, MarkerSet, in_view_plane
 from model.wording import count
 from solvers.correctives import linearised_correctives
 from solvers.damping import damping_gains
@@ -56,6 +56,7 @@ class DragState:
     moved: bool = False
     W: np.ndarray | None = None    # (R+1, K) pose after the last move
     correctives: tuple | None = None   # the rig's live correctives: (activate, marker displacements (C, 3M), drivers)
+    forward: np.ndarray | None = None  # the camera's view direction at the press: the dragged marker's free depth
 
 
 @dataclass
@@ -564,8 +565,9 @@ class MarkerController(QtCore.QObject):
             level, blend, regions, region_max = None, None, [], np.zeros((0, rig.n_shapes))
         W0 = pose_at_level(old, blend)
         ms = self.markers
+        forward = self.viewport.camera_frame().forward
         solver = ms.drag_solver(rig, regions, region_max, lam_reg=self.lam_reg, antagonists=self._antagonists(rig),
-                                background=background)
+                                background=background, dragged=(index, forward))
         if blend is not None:
             self._adopt_parts_ahead(blend)
         if blend is not None and not (old.is_regional and same_blend(old.blend, blend)):
@@ -574,10 +576,11 @@ class MarkerController(QtCore.QObject):
         gain = float(np.asarray(ms.S[index] @ self.gains).reshape(-1)[0])
         live = solver_correctives(rig)
         correctives = None if live is None else \
-            (live[0], np.ascontiguousarray(ms.delta_rows(live[1]).T), np.asarray(live[2], np.intp))
+            (live[0], np.ascontiguousarray(in_view_plane(ms.delta_rows(live[1]).T, index, forward, axis=1)),
+             np.asarray(live[2], np.intp))
         self.drag = DragState(index=index, old=old, level=level, blend=blend, W0=W0, solver=solver,
                               neutral_at=ms.positions(rig.neutral), start=start, targets=start.copy(), gain=gain,
-                              W=W0.copy(), correctives=correctives)
+                              W=W0.copy(), correctives=correctives, forward=forward)
         self._selected = index
         self.refresh_overlay(render=True)
         return self.drag
@@ -587,7 +590,7 @@ class MarkerController(QtCore.QObject):
         dr = self.drag
         dr.targets = dr.start.copy()
         dr.targets[dr.index] = dr.start[dr.index] + dr.gain * np.asarray(mouse_delta, dtype=np.float64)
-        b = (dr.targets - dr.neutral_at).reshape(-1)
+        b = in_view_plane((dr.targets - dr.neutral_at).reshape(-1), dr.index, dr.forward)   # as the solver's rows
         # From the current pose, λ_r toward it (Joshi §4): warm-started, so a move costs a few solver steps.
         W = dr.solver.solve(b, dr.W) if dr.correctives is None else self._solve_with_correctives(dr, b)
         dr.W = W

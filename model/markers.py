@@ -180,18 +180,25 @@ class MarkerSet:
         return np.ascontiguousarray(sampled.reshape(-1, K, 3).transpose(0, 2, 1).reshape(-1, K))
 
     def drag_solver(self, rig: Rig, regions: list[np.ndarray], region_max: np.ndarray, *,
-                    lam_reg: float = DRAG_LAM_REG, antagonists=None, background: np.ndarray | None = None):
+                    lam_reg: float = DRAG_LAM_REG, antagonists=None, background: np.ndarray | None = None,
+                    dragged: tuple[int, np.ndarray] | None = None):
         """The regional solver a drag of these markers re-solves at each mouse move (``solvers.regional_solve``;
         ALGORITHMS.md §8): ``regions`` of the chosen level (none: one global solve), ``region_max`` their
         per-shape displacement, ``background`` the level's vertices its background blends into (its row is solved
         from the markers there), ``lam_reg`` the pull toward the pose at the press in cm² (a physical weight,
-        converted to the rig's units by ``model.units``, so a drag poses a face in m, cm or mm alike)."""
+        converted to the rig's units by ``model.units``, so a drag poses a face in m, cm or mm alike). A region no
+        marker sits on follows the markers with its own shapes (``unmarked="follow"``). ``dragged`` (marker index,
+        the camera's forward direction): that marker is held in the view plane only (``in_view_plane``); give its
+        targets through ``in_view_plane`` too."""
         from solvers.regional_solve import RegionalSolver
         from .shape_weights import live_mask       # a muted shape does not follow the markers
         from .units import area
-        return RegionalSolver(regions, self.S, self.delta_rows(rig.deltas) * live_mask(rig), region_max=region_max,
-                              solve_background=True, background=background, lam_reg=area(lam_reg, rig.units),
-                              antagonists=antagonists)
+        rows = self.delta_rows(rig.deltas) * live_mask(rig)
+        if dragged is not None:
+            rows = in_view_plane(rows, *dragged)
+        return RegionalSolver(regions, self.S, rows, region_max=region_max, solve_background=True,
+                              background=background, lam_reg=area(lam_reg, rig.units), antagonists=antagonists,
+                              unmarked="follow")
 
     # --- editing (returns new sets; markers are immutable) ----------------------------------------
     def with_marker(self, marker: Marker) -> "MarkerSet":
@@ -214,6 +221,21 @@ class MarkerSet:
             raise RigInputError(f"{source or 'project'}: the markers entry must be a list of markers.")
         return cls.for_rig(rig, [Marker.from_dict(m) for m in d["markers"]], source=source, triangles=triangles,
                            moving=moving)
+
+
+def in_view_plane(rows: np.ndarray, index: int, forward: np.ndarray, axis: int = 0) -> np.ndarray:
+    """A copy of ``rows`` (marker j's x, y, z at 3j, 3j+1, 3j+2 along ``axis``: marker rows of the deltas, targets,
+    a corrective's displacements) with marker ``index``'s three projected onto the plane facing ``forward``
+    (``P = I − f fᵀ``, f the unit view direction). A drag holds the marker it pulls where the user sees it and
+    leaves its depth free: a chin dragged down on screen opens the jaw (jawOpen moves the chin down and back),
+    where a target fixed in depth took jawForward at 0.86 to bring the chin forward again, and the face folded."""
+    f = np.asarray(forward, dtype=np.float64).reshape(3)
+    f = f / np.linalg.norm(f)
+    P = np.eye(3) - np.outer(f, f)
+    out = np.array(rows, dtype=np.float64)
+    block = np.moveaxis(out, axis, 0)        # a view: writing it writes ``out``
+    block[3 * index:3 * index + 3] = np.tensordot(P, block[3 * index:3 * index + 3], axes=(1, 0))
+    return out
 
 
 # --- marker map JSON (polygon + per-corner bary in the file, triangle + bary here) ----------------

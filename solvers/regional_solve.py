@@ -6,7 +6,8 @@ move inside it (max displacement in r above ``shape_threshold`` × the region's 
 holding markers the bounded least-squares problem of ``solvers.weight_solve`` (Joshi Eq. 2 with Ma et al.
 2016 Eq. 3–4 sparsity and the λ_r term to the current pose) is solved for the region's shapes; the region's
 other shapes keep their weights, and their contribution at the markers is subtracted from the targets.
-Regions without markers keep their weights; the background row (last) keeps the global weights.
+Regions without markers keep their weights (``unmarked="keep"``), or, for a drag (``unmarked="follow"``), are
+solved from every marker with their own shapes; the background row (last) keeps the global weights.
 The result is a (R+1, K) regional pose, evaluated as ``x(v) = b0(v) + Σ_r φ_r(v) Σ_k W_rk d_k(v)``
 (``model.pose.PoseEvaluator.evaluate_regional(W, blend)`` evaluates it).
 
@@ -91,6 +92,12 @@ class RegionalSolver:
                    shape the drag needs: a chin dragged down with the lower lip pinned uses jawOpen with
                    mouthShrugLower, and holding jawOpen, the weaker at first, left the chin 1.4 mm short of a
                    5.4 mm move and moved a pinned marker 1.6 mm; ``tests/test_regional_solve.py``).
+    unmarked       "keep": a region holding no marker keeps its weights (Joshi §4: a drag changes the regions it
+                   touches). "follow": it is solved from every marker with its own shapes, so that a region no marker
+                   sits on moves with the face around it where its shapes move the markers (a chin dragged down
+                   with one marker opens the jaw: the lower lip's region takes jawOpen too) and stays where they
+                   do not (a brow's shapes move no mouth marker). With "keep", the chin's region alone took the jaw
+                   shapes and the face creased along its border.
     Other keywords go to ``WeightSolver`` (mode, lam_sparsity, lam_temporal, lam_reg, lower, upper).
     """
 
@@ -99,7 +106,8 @@ class RegionalSolver:
                  shape_threshold: float = 0.02, solve_background: bool = False,
                  background: np.ndarray | None = None, mode: str = "box",
                  lam_sparsity: float = 0.0, lam_temporal: float = 0.0, lam_reg: float = 1e-3,
-                 lower=0.0, upper=1.0, antagonists=None, exclusion_level: float = 0.1) -> None:
+                 lower=0.0, upper=1.0, antagonists=None, exclusion_level: float = 0.1,
+                 unmarked: str = "keep") -> None:
         A = np.asarray(marker_rows, dtype=np.float64)
         S = sp.csr_matrix(sampling)
         M = S.shape[0]
@@ -119,7 +127,12 @@ class RegionalSolver:
         self.shapes = region_shapes(region_max, shape_threshold)
         self.antagonists = [(int(i), int(j)) for i, j in (antagonists or [])]
         self.exclusion_level = float(exclusion_level)
+        if unmarked not in ("keep", "follow"):
+            raise RigInputError(f"A region without markers must 'keep' its weights or 'follow' the markers, not "
+                                f"{unmarked!r}.")
         self.markers = markers_in_regions(S, regions)
+        if unmarked == "follow":
+            self.markers = [mk if mk.size else np.arange(M) for mk in self.markers]
         lo = np.broadcast_to(np.asarray(lower, dtype=np.float64), (self.K,))
         hi = np.broadcast_to(np.asarray(upper, dtype=np.float64), (self.K,))
         opts = dict(mode=mode, lam_sparsity=lam_sparsity, lam_temporal=lam_temporal, lam_reg=lam_reg)

@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 
 from model.errors import RigInputError
 from model.keyframes import Keyframe, Timeline
@@ -348,3 +349,44 @@ def test_regional_solve_at_the_finest_level_fits_markers_at_least_as_well_as_glo
     assert W.min() >= 0 and W.max() <= 1
     print(f"marker RMS: regional {rms(regional_fit):.5f} cm, global {rms(global_fit):.5f} cm")
     assert rms(regional_fit) <= rms(global_fit) + 1e-9, (rms(regional_fit), rms(global_fit))
+
+
+def test_a_region_without_markers_follows_them_with_its_own_shapes_in_a_drag():
+    """``RegionalSolver(unmarked="follow")``, as a drag solves: a region holding no marker is solved from every marker
+    with its own shapes (against scipy's bounded least squares on ‖A w − b‖² + λ_r ‖w − w₀‖²); with "keep" it keeps
+    its weights; a region with markers is solved from its own either way."""
+    from scipy.optimize import lsq_linear
+    rng = np.random.default_rng(3)
+    M, K, V, lam = 4, 5, 8, 1e-2
+    S = sp.csr_matrix((np.ones(M), (np.arange(M), np.arange(M))), shape=(M, V))   # markers on vertices 0-3
+    regions = [np.arange(4), np.arange(4, 8)]                                       # the second holds none
+    A = rng.normal(size=(3 * M, K))
+    region_max = np.ones((2, K))
+    region_max[1, 0] = 0.0                                                          # shape 0 does not move it
+    b = 0.3 * rng.normal(size=3 * M)
+    W = np.zeros((3, K))
+    keep = RegionalSolver(regions, S, A, region_max=region_max, lam_reg=lam).solve(b, W)
+    follow = RegionalSolver(regions, S, A, region_max=region_max, lam_reg=lam, unmarked="follow").solve(b, W)
+    np.testing.assert_array_equal(keep[1], W[1])
+    np.testing.assert_array_equal(follow[0], keep[0])
+    sh = np.arange(1, K)
+    ref = lsq_linear(np.vstack([A[:, sh], np.sqrt(lam) * np.eye(sh.size)]), np.concatenate([b, np.zeros(sh.size)]),
+                     bounds=(0.0, 1.0), tol=1e-12).x
+    np.testing.assert_allclose(follow[1, sh], ref, atol=1e-6)
+    assert follow[1, 0] == 0.0 and np.abs(follow[1] - keep[1]).max() > 0.05
+
+
+def test_a_dragged_marker_is_held_in_the_view_plane_its_depth_free():
+    """``model.markers.in_view_plane``: the dragged marker's three rows (of the deltas, the targets, a corrective's
+    displacements) projected by P = I − f fᵀ, every other marker's untouched, along either axis."""
+    from model.markers import in_view_plane
+    rng = np.random.default_rng(5)
+    rows = rng.normal(size=(12, 6))                      # 4 markers, 6 shapes
+    f = np.array([0.3, -0.2, -1.0])
+    out = in_view_plane(rows, 2, f)
+    u = f / np.linalg.norm(f)
+    np.testing.assert_allclose(u @ out[6:9], 0.0, atol=1e-12)              # no depth left in marker 2's rows
+    np.testing.assert_allclose(out[6:9], (np.eye(3) - np.outer(u, u)) @ rows[6:9], atol=1e-12)
+    np.testing.assert_array_equal(np.delete(out, [6, 7, 8], axis=0), np.delete(rows, [6, 7, 8], axis=0))
+    np.testing.assert_allclose(in_view_plane(rows.T, 2, f, axis=1), out.T, atol=1e-12)
+    np.testing.assert_array_equal(in_view_plane(rows, 2, [0.0, 0.0, 1.0])[6:8], rows[6:8])   # x, y stay (front)
