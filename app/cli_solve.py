@@ -134,13 +134,14 @@ def announce_solver_build() -> None:
 
 def cmd_solve(args) -> int:
     from model.marker_map import load_marker_map
-    from model.take_exports import export_solve_outputs
+    from model.take_exports import check_solve_output_space, export_solve_outputs
     from model.take_workspace import TakeWorkspace
 
     check_solve_options(args)
     rig = load_solve_rig(args)
     ws = TakeWorkspace(rig)
-    if not ws.prepare_solve(args.take, load_marker_map(args.map) if args.map else None, solve_options(args)):
+    if not ws.prepare_solve(args.take, load_marker_map(args.map) if args.map else None, solve_options(args),
+                            check_outputs=lambda w: check_solve_output_space(w, args.cache, args.gltf)):
         return write_weight_take(ws, args)
     settings, segmentation = solve_settings(args, rig)
     announce_solver_build()

@@ -260,6 +260,16 @@ def _smooth_unless_said(corners, normals: bool):
 EXPORT_SUFFIXES = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".obj")
 
 
+def export_size(rig: Rig, path: str | Path, n_frames: int = 0) -> int:
+    """The least a glTF or USD export of ``rig`` to ``path`` with an animation of ``n_frames`` frames takes (bytes,
+    known before writing: the neutral's float32 positions, a key time and a float32 weight per frame for each shape
+    and corrective; in-betweens, normals and a text file's digits take more), for ``model.free_space``; 0 for an
+    OBJ (one surface, no animation)."""
+    if Path(path).suffix.lower() not in (".glb", ".gltf", ".usd", ".usda", ".usdc"):
+        return 0
+    return rig.n_vertices * 12 + int(n_frames) * (1 + rig.n_shapes + len(rig.correctives)) * 4
+
+
 def export_rig(rig: Rig, path: str | Path, weights: np.ndarray | None = None,
                animation: WeightAnimation | None = None, *, units: str | None = None, up: str = "y") -> Path:
     """Write ``rig`` to ``path`` as glTF, USD or OBJ, chosen by the extension; returns the path.
