@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError, shown
-from .take_data import MarkerTake, check_row_cells, unique_labels, units_from_text
+from .take_data import MarkerTake, check_row_cells, text_table, unique_labels, units_from_text
 
 
 def _rows(path: Path) -> list[list[str]]:
@@ -49,17 +49,6 @@ def _rows(path: Path) -> list[list[str]]:
         raise RigInputError(f"{path}: cannot be read ({exc.strerror}).") from None
     except csv.Error as exc:   # a cell over the csv module's 131,072 characters, a NUL byte, ...
         raise RigInputError(f"{path}: is not a readable CSV ({shown(exc, 80)}).") from None
-
-
-def _table(path: Path, rows: list[tuple[int, list[str]]], columns: list[int]) -> np.ndarray:
-    """Numbers from the given columns of the given (line number, cells) rows; empty or absent cells NaN."""
-    out = np.full((len(rows), len(columns)), np.nan)
-    for i, (line_no, r) in enumerate(rows):
-        try:
-            out[i] = [float(r[c]) if c < len(r) and r[c] else np.nan for c in columns]
-        except ValueError:
-            raise RigInputError(f"{path}: line {line_no} has a cell that is not a number.") from None
-    return out
 
 
 def _names(raw: list[str], path: Path, warnings: list[str]) -> list[str]:
@@ -80,10 +69,10 @@ def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings) -> Mar
         raise RigInputError(f"{path}: names no marker positions.")
     labels = _names(raw_names, path, warnings)
     check_row_cells(path, data_rows, 1 + max(c for trip in xyz_columns for c in trip), len(labels))
-    table = _table(path, data_rows, [c for trip in xyz_columns for c in trip])
+    table = text_table(path, data_rows, [c for trip in xyz_columns for c in trip])
     pos = table.reshape(len(data_rows), len(labels), 3)
     pos[~np.isfinite(pos).all(axis=2)] = np.nan
-    first = _table(path, data_rows[:1], [0])[0, 0]
+    first = text_table(path, data_rows[:1], [0])[0, 0]
     return MarkerTake(positions=pos, labels=labels, rate=rate, units=units, source=str(path),
                       first_frame=int(first) if np.isfinite(first) else 1, warnings=warnings)
 
