@@ -165,10 +165,31 @@ def _read_plain(path: Path, rows: list[list[str]], rate: float, units: str) -> M
     return _take(path, rows[1:], xyz, raw, rate, units, [])
 
 
+def check_is_csv(path: Path, sample: int = 1 << 16) -> None:
+    """Refuse a .csv file that is no CSV at all before its header is read as markers' ("the header needs X, Y and Z
+    columns" said nothing true of a binary file or of prose): binary data (a NUL byte, or more than 1% of its first
+    64 KB no UTF-8 text), or text none of whose first lines is cut into cells by a comma or a semicolon. An empty
+    file is left to say it is empty."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(sample)
+    except OSError as exc:
+        raise RigInputError(f"{path}: cannot be read ({exc.strerror}).") from None
+    if not head.strip():
+        return
+    text = head.decode("utf-8", errors="replace")
+    if b"\0" in head or text.count("\ufffd") > 0.01 * len(text):
+        raise RigInputError(f"{path}: is not a CSV take: it holds binary data, not lines of text.")
+    if not any("," in line or ";" in line for line in text.splitlines()[:100]):
+        raise RigInputError(f"{path}: is not a CSV take: none of its lines is cells separated by commas or "
+                            "semicolons.")
+
+
 def read_marker_csv(path: str | Path, *, rate: float = 60.0, units: str = "mm") -> MarkerTake:
     """Read a marker CSV: a Vicon Nexus or OptiTrack Motive export (rate and units from the file), or the
     plain ``frame, A_X, A_Y, A_Z, ...`` layout (``rate`` fps, ``units``)."""
     path = Path(path)
+    check_is_csv(path)
     rows = _rows(path)
     if not any(any(r) for r in rows):
         raise RigInputError(f"{path}: the file is empty.")
