@@ -77,8 +77,9 @@ def test_solve_refuses_a_marker_take_before_mapping_or_solving(ict_dir, take_dir
     code = main(["solve", str(ict_dir), str(take_dir / "take.c3d"), "--map", str(take_dir / "marker_map.json"),
                  "-o", str(tmp_path / "w.csv"), "--gltf", str(tmp_path / "a.glb")])
     err = capsys.readouterr().err
-    # at least the neutral (26,719 vertices x 12 bytes) and a key per frame for each of the 53 shapes
-    assert code == 2 and err == (f"error: {tmp_path / 'a.glb'}: needs at least 404 KB, but the disk of {tmp_path} "
+    # at least the neutral (26,719 vertices x 12 bytes), each shape's offsets (the vertices it moves) and a key per
+    # frame for each shape (the real file: 27 MB)
+    assert code == 2 and err == (f"error: {tmp_path / 'a.glb'}: needs at least 9.72 MB, but the disk of {tmp_path} "
                                  "has 1 KB free; free some space or write to another disk.\n")
     assert _listing(tmp_path) == []
 
@@ -87,8 +88,8 @@ def test_export_refuses_an_animation_its_disk_has_no_room_for(tmp_path, tiny_dis
     rig, take = _rig_and_weights(tmp_path, frames=100)
     code = main(["export", str(rig), "-o", str(tmp_path / "a.glb"), "--animation", str(take)])
     err = capsys.readouterr().err
-    # at least 36 vertices x 12 bytes + 100 frames x (1 + 2 shapes) x 4 bytes
-    assert code == 2 and err == (f"error: {tmp_path / 'a.glb'}: needs at least 1.63 KB, but the disk of "
+    # at least 36 vertices x 12 bytes + the 30 vertices each shape moves x 14 bytes + 100 frames x (1 + 2) x 4 bytes
+    assert code == 2 and err == (f"error: {tmp_path / 'a.glb'}: needs at least 2.47 KB, but the disk of "
                                  f"{tmp_path} has 1 KB free; free some space or write to another disk.\n")
     assert not (tmp_path / "a.glb").exists()
 
