@@ -13,7 +13,7 @@ import numpy as np
 
 from model.errors import RigInputError
 from model.rig import MAX_WEIGHT
-from model.textures import MASK_NAME, NORMAL_SUFFIX, SUFFIXES as IMAGE_SUFFIXES
+from model.beside_inputs import check_beside
 
 EXIT_INPUT = 2        # bad input: one sentence naming the file and the problem
 EXIT_UNEXPECTED = 1   # anything else: one sentence and a crash log with the traceback
@@ -92,8 +92,8 @@ _INPUTS = (("rig", "RIG"), ("take", "TAKE"), ("map", "--map"), ("animation", "--
 
 def check_not_an_input(args, path, option: str) -> None:
     """Refuse an output file that is one of the command's inputs, or a file the reader of an input folder (the rig's,
-    the scans') reads there (``_check_beside``). ``corrective`` may write its project over the RIG project it adds to
-    (``rig_updated_in_place``)."""
+    the scans') reads there (``model.beside_inputs.check_beside``). ``corrective`` may write its project over the
+    RIG project it adds to (``rig_updated_in_place``)."""
     out = os.path.realpath(path)
     for dest, name in _INPUTS:
         values = getattr(args, dest, None)
@@ -107,33 +107,9 @@ def check_not_an_input(args, path, option: str) -> None:
                 os.path.dirname(source) if dest == "rig" and source.lower().endswith(".obj") else None
             if folder and os.path.dirname(out) == folder:
                 shown_folder = value if folder == source else os.path.dirname(value) or "."
-                _check_beside(out, folder, dest, f"{path}: is in {shown_folder}, which {name} reads, and would",
-                              f"; give {option} a file elsewhere.")
-
-
-def _check_beside(out: str, folder: str, dest: str, start: str, end: str) -> None:
-    """An output ``out`` in the ``folder`` an input (``dest``) is read from: refused if the folder's reader reads
-    it: an OBJ (a shape, or a scan), and for a rig its ``presets.json``, its materials (an existing ``.mtl``) and a
-    picture named after a shape's OBJ or the neutral's (that one's texture, ``model.textures``) or the keep mask.
-    Any other file there (a render's ``preview.png``, a ``regions.json``) is no part of the rig."""
-    from model.readers import PRESETS_FILE
-    name = os.path.basename(out)
-    stem, suffix = os.path.splitext(name)
-    suffix, exists = suffix.lower(), os.path.exists(out)
-    shape = stem[:-len(NORMAL_SUFFIX)] if stem.endswith(NORMAL_SUFFIX) else stem
-    if suffix == ".obj":
-        read_as = f"one more {'shape' if dest == 'rig' else 'scan'}"
-    elif dest != "rig":
-        return
-    elif name == PRESETS_FILE:
-        read_as = "the rig's presets"
-    elif suffix in IMAGE_SUFFIXES and (shape == MASK_NAME or os.path.isfile(os.path.join(folder, shape + ".obj"))):
-        read_as = "the texture keep mask" if shape == MASK_NAME else f"the texture of {shape}"
-    elif suffix == ".mtl" and exists:
-        read_as = "the rig's materials"
-    else:
-        return
-    raise RigInputError(f"{start} {'overwrite a file it reads' if exists else f'be read there as {read_as}'}{end}")
+                check_beside(out, folder, "rig" if dest == "rig" else "scans",
+                             f"{path}: is in {shown_folder}, which {name} reads, and would", f"; give {option} a file "
+                             "elsewhere.")
 
 
 @contextmanager

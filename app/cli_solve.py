@@ -79,8 +79,15 @@ def load_solve_rig(args):
 
 def check_solve_options(args) -> None:
     """The solve options that need no rig or take, checked before either is read: --threshold in [0, 1], a
-    --calibration-frames count of 0 or more, not 0 with --neutral-frames (``check_calibration_settings``)."""
+    --calibration-frames count of 0 or more, not 0 with --neutral-frames (``check_calibration_settings``), and no
+    per-region option (--threshold, --level) with --global (it solved globally, the option unused)."""
+    from model.errors import RigInputError
     from model.take_workspace import check_calibration_settings
+    regional = [o for o, v in (("--threshold", args.threshold), ("--level", args.level)) if v is not None]
+    if args.global_solve and regional:
+        raise RigInputError(f"--global: solves one weight vector for the whole face, and {' and '.join(regional)} "
+                            f"choose{'s' if len(regional) == 1 else ''} the regions of a per-region solve; give one or "
+                            "the other.")
     check_threshold(args)
     check_rate(args)
     check_calibration_settings(solve_options(args))
@@ -134,13 +141,14 @@ def announce_solver_build() -> None:
 
 def cmd_solve(args) -> int:
     from model.marker_map import load_marker_map
-    from model.take_exports import export_solve_outputs
+    from model.take_exports import check_solve_output_space, export_solve_outputs
     from model.take_workspace import TakeWorkspace
 
     check_solve_options(args)
     rig = load_solve_rig(args)
     ws = TakeWorkspace(rig)
-    if not ws.prepare_solve(args.take, load_marker_map(args.map) if args.map else None, solve_options(args)):
+    if not ws.prepare_solve(args.take, load_marker_map(args.map) if args.map else None, solve_options(args),
+                            check_outputs=lambda w: check_solve_output_space(w, args.cache, args.gltf)):
         return write_weight_take(ws, args)
     settings, segmentation = solve_settings(args, rig)
     announce_solver_build()

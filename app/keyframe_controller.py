@@ -28,7 +28,7 @@ from app.marker_controller import pose_at_level, same_blend
 from model.errors import RigInputError
 from model.keyframes import Keyframe, Timeline, keyed_frames, keyed_global_weights
 from model.pose import PoseEvaluator
-from model.pc2 import write_pc2
+from model.pc2 import check_room_for_pc2, write_pc2
 from model.weights_csv import write_weights_csv
 from model.wording import count
 from widgets.graph_editor import GraphEditor
@@ -437,6 +437,7 @@ class KeyframeController(QtCore.QObject):
     def _pc2_job(self, path: str | Path):
         self._require_keys()
         rig, times = self.document.rig, self.frame_times()
+        check_room_for_pc2(path, len(times), rig.n_vertices)
         states = [self.pose_at(t) for t in times]
 
         def job() -> int:

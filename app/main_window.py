@@ -740,10 +740,17 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
 
     def export_pose_to(self, path: str | Path) -> None:
         """Write the posed surface as an OBJ in the background (control returns at once; 1.6 s on ICT), with the
-        rig's UVs, groups and materials as ``export`` writes them (``model.export.write_surface_obj``)."""
+        rig's UVs, groups and materials as ``export`` writes them (``model.export.write_surface_obj``); a file the
+        rig's own OBJ folder would read is refused in a dialog, as the command line refuses it."""
+        from model.beside_inputs import check_not_in_rig_folder
         from model.export import write_surface_obj
         from model.pose import PoseEvaluator
         rig, state = self.document.rig, self.document.pose_state()
+        try:        # the rule of the command line's outputs: not into the rig's own OBJ folder, as one more shape
+            check_not_in_rig_folder(path, rig.source)
+        except RigInputError as exc:
+            self.show_error("Could not export", str(exc))
+            return
 
         def job() -> None:
             w = state.weights if state.region_weights is None else state.region_weights

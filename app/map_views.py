@@ -8,7 +8,8 @@ import numpy as np
 
 from model.errors import RigInputError
 from model.rig import Rig
-from model.segmentation import Segmentation, SegmentationCache, SegmentationSettings, segment_rig
+from model.segmentation import (Segmentation, SegmentationCache, SegmentationSettings, check_rig_deforms,
+                                segment_rig)
 from model.wording import count
 from solvers.deformation_maps import deformation_maps, vector_colors
 from widgets.scene import ColorMap
@@ -85,6 +86,8 @@ def segmentation_colormap(seg: Segmentation, level: int, highlight: int | None =
 def map_colormap(rig: Rig, view: str, *, threshold: float | None = None, level: int = 0,
                  settings: SegmentationSettings | None = None) -> ColorMap:
     """The colour map of a view for the command line (computes what it needs once)."""
+    if view in ("deformation", "deformation-rgb"):     # not "nothing to segment": no segmentation was asked for
+        check_rig_deforms(np.asarray(rig.deltas), "there is no deformation to show")
     cache = SegmentationCache()
     cache.bind(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas)
     if view in ("deformation", "deformation-rgb"):

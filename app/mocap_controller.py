@@ -21,6 +21,7 @@ from model.errors import RigInputError
 from model.marker_map import load_marker_map
 from model.rig import unit_scale
 from model.wording import count
+from model.pc2 import check_room_for_pc2
 from model.take_exports import export_pc2, export_report, export_weights_csv, take_surfaces
 from model.take_workspace import TakeWorkspace, solver_options
 from model.takes import MarkerTake, WeightTake
@@ -654,6 +655,7 @@ class MocapController(QtCore.QObject):
         cache = self.cache
 
         def write() -> None:
+            check_room_for_pc2(path, self.workspace.n_frames, self.workspace.rig.n_vertices)
             frames = None if cache is None else (cache.frame(f)[1] for f in range(cache.n_frames))
             if frames is None:
                 frames = take_surfaces(self.workspace, self.document.evaluator)

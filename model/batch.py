@@ -350,7 +350,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     """Solve one take as ``solve`` does and write its outputs into ``out_dir`` as one set, the done-marker last.
     Returns the summary row; a bad take gives a failed row with its one-sentence error (nothing is written).
     Anything unexpected propagates (the cluster retries the take, then reports it)."""
-    from .take_exports import solve_output_writers
+    from .take_exports import check_solve_output_space, solve_output_writers
     from .take_workspace import TakeWorkspace
 
     _limit_blas_once()
@@ -360,7 +360,9 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     try:
         check_output_folder(out_dir)              # no file where the take's folder goes: fail before any work
         ws = TakeWorkspace(job.rig)
-        solved = ws.prepare_solve(take_path, job.marker_map, job.settings)   # False: a weight take, played as it is
+        cache = out_dir / OUTPUTS["cache"] if job.cache else None       # room for it, checked before the solve
+        solved = ws.prepare_solve(take_path, job.marker_map, job.settings,   # False: a weight take, played as it is
+                                  check_outputs=lambda w: check_solve_output_space(w, cache))
         identity = _take_identity(take_path)
         sol = ws.solve(job.settings, segmentation=job.segmentation, evaluator=job.evaluator,
                        antagonists=job.antagonists, prepared=job.prepared) if solved else None
@@ -371,7 +373,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     # what ``solve`` writes (``solve_output_writers``), with the preview and done.json, as one set: each file
     # written once, straight into its temporary beside its target
     writers, report = solve_output_writers(ws, out_dir / OUTPUTS["weights"],
-                                           cache_path=out_dir / OUTPUTS["cache"] if job.cache else None,
+                                           cache_path=cache,
                                            report_path=out_dir / OUTPUTS["report"], evaluator=job.evaluator)
     weights = ws.playing_weights()
     frame, preview_error = preview_frame(weights), None

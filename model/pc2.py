@@ -20,6 +20,18 @@ MAGIC = b"POINTCACHE2\0"
 HEADER = struct.Struct("<12siiffi")
 
 
+def pc2_size(n_frames: int, n_points: int) -> int:
+    """Bytes of a PC2 file of ``n_frames`` samples of ``n_points`` points (known before writing it)."""
+    return HEADER.size + int(n_frames) * int(n_points) * 12
+
+
+def check_room_for_pc2(path: str | Path, n_frames: int, n_points: int) -> None:
+    """Refuse, before any frame is made, a PC2 of ``n_frames`` x ``n_points`` its disk has no room for
+    (``model.free_space``): the command line's caches and the window's PC2 exports alike."""
+    from .free_space import check_free_space
+    check_free_space({path: pc2_size(n_frames, n_points)})
+
+
 def write_pc2(path: str | Path, frames: np.ndarray | Iterable[np.ndarray], *, n_points: int | None = None,
               start_frame: float = 0.0, sample_rate: float = 1.0) -> int:
     """Write frames (F, N, 3) — an array, or any iterable of (N, 3) arrays for long takes, streamed one frame

@@ -189,6 +189,15 @@ def segmentation_to_json(seg: Segmentation) -> dict:
     }
 
 
+def check_rig_deforms(deltas: np.ndarray, so: str = "there is nothing to segment") -> None:
+    """RigInputError, one sentence ending "so ``so``.", for a rig whose shapes (K, V, 3) move nothing: none at all,
+    or every one equal to the neutral (a deformation view says "there is no deformation to show")."""
+    if deltas.ndim != 3 or deltas.shape[0] == 0:
+        raise RigInputError(f"The rig has no blendshapes, so {so}.")
+    if not _any_nonzero(deltas):
+        raise RigInputError(f"Every shape equals the neutral (all displacements are zero), so {so}.")
+
+
 def _any_nonzero(a: np.ndarray, chunk: int = 1 << 16) -> bool:
     """``np.any(a)``, stopping at the first chunk that holds a nonzero (a rig's first shape, as a rule)."""
     flat = a.reshape(-1)
@@ -225,14 +234,10 @@ class SegmentationCache:
         deltas = np.asarray(deltas, dtype=np.float64)
         if neutral.ndim != 2 or neutral.shape[1] != 3:
             raise RigInputError("The neutral must be a (V, 3) array of points.")
-        if deltas.ndim != 3 or deltas.shape[0] == 0:
-            raise RigInputError("The rig has no blendshapes, so there is nothing to segment.")
-        if deltas.shape[1:] != neutral.shape:
+        if deltas.ndim == 3 and deltas.shape[0] and deltas.shape[1:] != neutral.shape:
             raise RigInputError(
                 f"The shapes have {deltas.shape[1]} vertices but the neutral has {neutral.shape[0]}.")
-        if not _any_nonzero(deltas):
-            raise RigInputError(
-                "Every shape equals the neutral (all displacements are zero), so there is nothing to segment.")
+        check_rig_deforms(deltas)
         self._key = key
         self._neutral, self._counts, self._indices, self._deltas = neutral, face_counts, face_indices, deltas
         self.adjacency = mesh_adjacency(neutral.shape[0], face_counts, face_indices)

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError, shown
-from .take_data import MarkerTake, check_row_cells, unique_labels, units_from_text
+from .take_data import MarkerTake, check_row_cells, text_table, unique_labels, units_from_text
 
 
 def _rows(path: Path) -> list[list[str]]:
@@ -49,17 +49,6 @@ def _rows(path: Path) -> list[list[str]]:
         raise RigInputError(f"{path}: cannot be read ({exc.strerror}).") from None
     except csv.Error as exc:   # a cell over the csv module's 131,072 characters, a NUL byte, ...
         raise RigInputError(f"{path}: is not a readable CSV ({shown(exc, 80)}).") from None
-
-
-def _table(path: Path, rows: list[tuple[int, list[str]]], columns: list[int]) -> np.ndarray:
-    """Numbers from the given columns of the given (line number, cells) rows; empty or absent cells NaN."""
-    out = np.full((len(rows), len(columns)), np.nan)
-    for i, (line_no, r) in enumerate(rows):
-        try:
-            out[i] = [float(r[c]) if c < len(r) and r[c] else np.nan for c in columns]
-        except ValueError:
-            raise RigInputError(f"{path}: line {line_no} has a cell that is not a number.") from None
-    return out
 
 
 def _names(raw: list[str], path: Path, warnings: list[str]) -> list[str]:
@@ -80,10 +69,10 @@ def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings) -> Mar
         raise RigInputError(f"{path}: names no marker positions.")
     labels = _names(raw_names, path, warnings)
     check_row_cells(path, data_rows, 1 + max(c for trip in xyz_columns for c in trip), len(labels))
-    table = _table(path, data_rows, [c for trip in xyz_columns for c in trip])
+    table = text_table(path, data_rows, [c for trip in xyz_columns for c in trip])
     pos = table.reshape(len(data_rows), len(labels), 3)
     pos[~np.isfinite(pos).all(axis=2)] = np.nan
-    first = _table(path, data_rows[:1], [0])[0, 0]
+    first = text_table(path, data_rows[:1], [0])[0, 0]
     return MarkerTake(positions=pos, labels=labels, rate=rate, units=units, source=str(path),
                       first_frame=int(first) if np.isfinite(first) else 1, warnings=warnings)
 
@@ -176,10 +165,31 @@ def _read_plain(path: Path, rows: list[list[str]], rate: float, units: str) -> M
     return _take(path, rows[1:], xyz, raw, rate, units, [])
 
 
+def check_is_csv(path: Path, sample: int = 1 << 16) -> None:
+    """Refuse a .csv file that is no CSV at all before its header is read as markers' ("the header needs X, Y and Z
+    columns" said nothing true of a binary file or of prose): binary data (a NUL byte, or more than 1% of its first
+    64 KB no UTF-8 text), or text none of whose first lines is cut into cells by a comma or a semicolon. An empty
+    file is left to say it is empty."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(sample)
+    except OSError as exc:
+        raise RigInputError(f"{path}: cannot be read ({exc.strerror}).") from None
+    if not head.strip():
+        return
+    text = head.decode("utf-8", errors="replace")
+    if b"\0" in head or text.count("\ufffd") > 0.01 * len(text):
+        raise RigInputError(f"{path}: is not a CSV take: it holds binary data, not lines of text.")
+    if not any("," in line or ";" in line for line in text.splitlines()[:100]):
+        raise RigInputError(f"{path}: is not a CSV take: none of its lines is cells separated by commas or "
+                            "semicolons.")
+
+
 def read_marker_csv(path: str | Path, *, rate: float = 60.0, units: str = "mm") -> MarkerTake:
     """Read a marker CSV: a Vicon Nexus or OptiTrack Motive export (rate and units from the file), or the
     plain ``frame, A_X, A_Y, A_Z, ...`` layout (``rate`` fps, ``units``)."""
     path = Path(path)
+    check_is_csv(path)
     rows = _rows(path)
     if not any(any(r) for r in rows):
         raise RigInputError(f"{path}: the file is empty.")

@@ -153,6 +153,24 @@ def check_row_cells(path, rows: list[tuple[int, list[str]]], columns: int, marke
                             f"its header's {markers} markers need; the header or the rows are damaged.")
 
 
+def text_table(path, rows: list[tuple[int, list[str]]], columns: list[int]) -> np.ndarray:
+    """(rows, columns) numbers of the given columns of a text take's (line number, cells) rows (TRC, marker CSV):
+    empty or absent cells and NaN in any spelling are missing samples (NaN). A cell that is not a number, or that
+    is infinite (``inf``, ``-inf``, ``1e999``: no position, and no spelling of a gap either), is refused in one
+    sentence naming the line."""
+    out = np.full((len(rows), len(columns)), np.nan)
+    for i, (line_no, r) in enumerate(rows):
+        try:
+            out[i] = [float(r[c]) if c < len(r) and r[c] else np.nan for c in columns]
+        except ValueError:
+            raise RigInputError(f"{path}: line {line_no} has a cell that is not a number.") from None
+        if np.isinf(out[i]).any():
+            cell = r[columns[int(np.argmax(np.isinf(out[i])))]]
+            raise RigInputError(f"{path}: line {line_no} has an infinite number ('{shown(cell, 20)}'); a missing "
+                                "sample is an empty cell.")
+    return out
+
+
 _UNIT_WORDS = {"mm": ("millimeters", "millimetres"), "cm": ("centimeters", "centimetres"), "m": ("meters", "metres")}
 
 

@@ -101,6 +101,22 @@ def export_solve_outputs(workspace, weights_path: str | Path, cache_path: str | 
     return report
 
 
+def check_solve_output_space(workspace, cache_path: str | Path | None = None,
+                              gltf_path: str | Path | None = None) -> None:
+    """Refuse, once the take is read and before it is solved, a PC2 cache (exactly its frames × the rig's vertices)
+    or an animated glTF (at least its keys: ``model.export.export_size``) that its disk has no room for
+    (``model.free_space``): a 200,000-frame take's cache of ICT is 64 GB."""
+    from .export import export_size
+    from .free_space import check_free_space
+    from .pc2 import pc2_size
+    frames, sizes = workspace.take.n_frames, {}
+    if cache_path:
+        sizes[cache_path] = pc2_size(frames, workspace.rig.n_vertices)
+    if gltf_path:
+        sizes[gltf_path] = export_size(workspace.rig, gltf_path, frames)
+    check_free_space(sizes, lower_bounds=[gltf_path] if gltf_path else ())
+
+
 def solve_output_writers(workspace, weights_path: str | Path, cache_path: str | Path | None = None,
                          report_path: str | Path | None = None, gltf_path: str | Path | None = None, *,
                          evaluator: PoseEvaluator | None = None) -> tuple[dict, dict]:

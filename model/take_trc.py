@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RigInputError, shown
-from .take_data import MarkerTake, check_row_cells, unique_labels, units_from_text
+from .take_data import MarkerTake, check_row_cells, text_table, unique_labels, units_from_text
 
 
 def _cells(line: str) -> list[str]:
@@ -75,14 +75,10 @@ def read_trc(path: str | Path) -> MarkerTake:
         raise RigInputError(f"{path}: holds no frames.")
     ncol = 2 + 3 * M
     check_row_cells(path, rows, ncol, M)
-    table = np.full((len(rows), ncol), np.nan)
-    for i, (line_no, r) in enumerate(rows):
+    for line_no, r in rows:
         if len(r) > ncol and any(r[ncol:]):
             raise RigInputError(f"{path}: line {line_no} has {len(r)} columns, more than the {ncol} in the header.")
-        try:
-            table[i, :min(len(r), ncol)] = [float(c) if c else np.nan for c in r[:ncol]]
-        except ValueError:
-            raise RigInputError(f"{path}: line {line_no} has a cell that is not a number.") from None
+    table = text_table(path, rows, list(range(ncol)))
     if declared_frames is not None and declared_frames != len(rows):
         warnings.append(f"{path}: the header declares {declared_frames} frames but the file holds {len(rows)}; "
                         f"read the {len(rows)}.")

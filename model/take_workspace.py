@@ -14,6 +14,7 @@ rate of a take whose file gives none, ``--rate``; None: ``read_take``'s defaults
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
@@ -387,14 +388,18 @@ class TakeWorkspace:
         self.take, self.take_path, self.solution = take, Path(path), None
         return take
 
-    def prepare_solve(self, path: str | Path, marker_map: MarkerMap | None, settings: dict) -> bool:
+    def prepare_solve(self, path: str | Path, marker_map: MarkerMap | None, settings: dict,
+                      check_outputs: Callable[[TakeWorkspace], None] | None = None) -> bool:
         """What ``solve`` and ``batch`` do with a take file before solving it: load it, then map its markers with
         ``marker_map`` (markers the take lacks are warnings, not a refusal) or automatically from its neutral
         frames (``settings``' ``calibration_frames``, ``neutral_frames`` and ``stable``; checked against the take
         first: ``check_take_calibration``). False for a weight take (Live Link Face, weights CSV): it has nothing
         to solve, it plays on the rig as it is. ``settings``' ``rate``: the frame rate of a take whose file gives
-        none (``read_take``)."""
+        none (``read_take``). ``check_outputs(self)``: called once the take is read, before any mapping or solving
+        (what its outputs will take: ``model.take_exports.check_solve_output_space``)."""
         self.load_take(path, settings.get("rate"))
+        if check_outputs is not None:
+            check_outputs(self)
         if self.marker_take is None:
             return False
         if self.rig.n_shapes == 0:      # nothing to solve for (and automatic mapping maps onto what the shapes move)

@@ -158,6 +158,11 @@ def test_a_rig_of_a_neutral_alone_renders_exports_and_refuses_a_solve(tmp_path):
     proc = run_cli("solve", folder, take, "-o", tmp_path / "w.csv", check=False)
     assert (proc.returncode, proc.stderr) == (2, f"error: {folder}: the rig has no shapes to solve the take's markers "
                                                  "with.\n") and not (tmp_path / "w.csv").exists()
+    # a deformation view: no shapes, no deformation (before: "nothing to segment", though no segmentation was asked)
+    for view in ("deformation", "deformation-rgb"):
+        proc = run_cli("render", folder, "--view", view, "-o", tmp_path / "d.png", check=False)
+        assert (proc.returncode, proc.stderr) == (2, f"error: {folder}: the rig has no blendshapes, so there is no "
+                                                     "deformation to show.\n") and not (tmp_path / "d.png").exists()
 
 
 def test_a_segmentation_or_level_the_rig_cannot_give_names_the_rig(ict_dir, tmp_path):

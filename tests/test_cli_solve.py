@@ -163,6 +163,10 @@ def test_solve_a_project_with_a_corrective(ict_dir, tmp_path):
     (["--calibration-frames", "100000"], "has 358 frames, fewer than the 100000 calibration frames"),
     (["--calibration-frames", "-1"], "--calibration-frames: -1 is not a count of frames"),
     (["--calibration-frames", "0", "--neutral-frames", "0:29"], "calibrates on no neutral"),
+    # per-region options with --global (before: solved globally, the options silently unused)
+    (["--threshold", "0.4", "--global"], "--global: solves one weight vector for the whole face, and --threshold "
+                                         "chooses the regions of a per-region solve; give one or the other."),
+    (["--global", "--threshold", "0.4", "--level", "1"], "and --threshold and --level choose the regions"),
 ])
 def test_solve_bad_calibration_input(ict_dir, take_dir, tmp_path, option, words):
     proc = run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json", *option,

@@ -771,3 +771,26 @@ def test_a_background_result_waits_for_an_edit_under_way(qtbot, tmp_path):
     order.append(("returned",))
     qtbot.waitUntil(lambda: len(order) == 3, timeout=5000)
     assert order == [("edit done",), ("returned",), ("delivered", "result")]
+
+
+def test_export_pose_refuses_the_rigs_own_obj_folder(qtbot, tmp_path):
+    """File ▸ Export Pose as OBJ wrote into the rig's own OBJ folder: a new OBJ there is read as one more shape the
+    next time the rig is opened, an old one (a shape) was overwritten. The command line refuses both; the window
+    shows the same rule's sentence (``model.beside_inputs``) and writes nothing. Elsewhere it writes as before."""
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    before = sorted(p.name for p in rig.iterdir())
+    raise_obj = (rig / "raise.obj").read_bytes()
+    w = make_window(qtbot, tmp_path, sample=False)
+    open_and_wait(qtbot, w, rig)
+    w.export_pose_to(rig / "pose.obj")
+    assert w.last_error == (f"{rig / 'pose.obj'}: is in {rig}, the folder the rig is read from, and would be read "
+                            "there as one more shape; choose a file elsewhere.")
+    w.export_pose_to(rig / "raise.obj")
+    assert w.last_error == (f"{rig / 'raise.obj'}: is in {rig}, the folder the rig is read from, and would "
+                            "overwrite a file it reads; choose a file elsewhere.")
+    w.jobs.wait()
+    assert sorted(p.name for p in rig.iterdir()) == before and (rig / "raise.obj").read_bytes() == raise_obj
+    w.export_pose_to(tmp_path / "pose.obj")
+    w.jobs.wait()
+    assert (tmp_path / "pose.obj").stat().st_size > 0

@@ -204,6 +204,30 @@ def test_live_link_face_plays_on_sample_rig(qtbot, tmp_path, llf_csv):
     np.testing.assert_allclose(data[50], w.document.evaluator.evaluate(take.weights[50]), atol=1e-4)
 
 
+def test_a_point_cache_its_disk_has_no_room_for_is_refused(qtbot, tmp_path, llf_csv, monkeypatch):
+    """Export PC2 Point Cache checks the room on the disk first, as `solve --cache` does (``model.free_space``):
+    a dialog naming the file, the size and the space free, nothing written (before, it wrote until the disk was
+    full). File ▸ Export Keyed Animation as PC2 likewise."""
+    import shutil
+    from collections import namedtuple
+    from model.errors import RigInputError
+    from model.free_space import human_size
+    from model.pc2 import pc2_size
+    w, mc = _install(qtbot, tmp_path, size=(1100, 800))
+    assert mc.load_take(llf_csv)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: namedtuple("Usage", "total used free")(10**9, 0, 1000))
+    assert not mc.export_pc2(tmp_path / "llf.pc2") and not (tmp_path / "llf.pc2").exists()
+    needed = human_size(pc2_size(328, w.document.rig.n_vertices))
+    assert w.last_error == (f"{tmp_path / 'llf.pc2'}: needs {needed}, but the disk of {tmp_path} has 1 KB free; "
+                            "free some space or write to another disk.")
+    k = w.keyframes
+    k.set_key(0.0)
+    k.set_key(1.0)
+    with pytest.raises(RigInputError, match="keys.pc2: needs .*, but the disk of .* has 1 KB free"):
+        k.export_pc2(tmp_path / "keys.pc2")
+    assert not (tmp_path / "keys.pc2").exists()
+
+
 def test_solve_without_map_or_segmentation_says_why(qtbot, tmp_path, take_dir):
     w, mc = _install(qtbot, tmp_path, size=(1100, 800))
     assert mc.load_take(take_dir / "take.c3d")

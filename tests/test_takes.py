@@ -132,6 +132,50 @@ def test_marker_csv_round_trip_and_dispatch(c3d, tmp_path):
         read_marker_csv(bad)
 
 
+@pytest.mark.parametrize("cell", ["inf", "-inf", "Infinity", "1e999"])
+@pytest.mark.parametrize("kind", ["csv", "trc"])
+def test_an_infinite_cell_of_a_text_take_is_refused_not_a_gap(take_dir, tmp_path, kind, cell):
+    """``inf`` in a marker CSV (or a TRC) was read as a missing sample, silently: it is no spelling of a gap (an
+    empty cell, or NaN, is) and no position either. One sentence naming the file and the line; NaN stays a gap."""
+    if kind == "csv":
+        text = "frame,A_X,A_Y,A_Z,B_X,B_Y,B_Z\n0,1,2,3,4,5,6\n1,1,2,3,{},5,6\n2,1,2,3,4,5,6\n"
+    else:
+        lines = (take_dir / "take.trc").read_text().splitlines()
+        row = lines[6].split("\t")
+        row[3] = "{}"
+        lines[6] = "\t".join(row)
+        text = "\n".join(lines[:9]) + "\n"
+    path = tmp_path / f"take.{kind}"
+    path.write_text(text.format("nan"))
+    assert np.isnan(load_take(path).positions[1 if kind == "csv" else 0]).any()
+    path.write_text(text.format(cell))
+    with pytest.raises(RigInputError) as err:
+        load_take(path)
+    assert str(err.value) == f"{path}: line {3 if kind == 'csv' else 7} has an infinite number ('{cell}'); a " \
+                             "missing sample is an empty cell."
+
+
+@pytest.mark.parametrize("content, why", [
+    (bytes(range(256)) * 8, "it holds binary data, not lines of text."),
+    (b"PK\x03\x04\x14\x00\x00\x00\x08\x00" + bytes(200), "it holds binary data, not lines of text."),
+    ("\u00ff\u00fe".encode("latin-1") * 300, "it holds binary data, not lines of text."),
+    (b"Dear reader,\n", None),           # a comma: a CSV of one cell pair, refused by its header as before
+    (b"hello world\nthis is just text\nno structure here\n",
+     "none of its lines is cells separated by commas or semicolons."),
+])
+def test_a_csv_file_that_is_no_csv_says_so(tmp_path, content, why):
+    """A .csv holding binary data or prose was refused with the marker header's sentence ("after the frame column
+    the header needs X, Y and Z columns per marker"), true of no such file: it is not a CSV take."""
+    path = tmp_path / "take.csv"
+    path.write_bytes(content)
+    with pytest.raises(RigInputError) as err:
+        load_take(path)
+    if why is None:
+        assert "is not a CSV take" not in str(err.value)
+    else:
+        assert str(err.value) == f"{path}: is not a CSV take: {why}"
+
+
 # --- Live Link Face ------------------------------------------------------------------------------
 def test_livelink_maps_to_ict(llf_csv, ict_rig):
     take = read_livelink_csv(llf_csv, ict_rig.shape_names)
