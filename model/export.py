@@ -54,10 +54,8 @@ class WeightAnimation:
 def animation_for_rig(rig: Rig, names: list[str], weights: np.ndarray, times: np.ndarray,
                       source: str = "") -> WeightAnimation:
     """Per-frame weights given for ``names`` placed in the rig's shape order (shapes not named stay 0)."""
-    unknown = [n for n in names if n not in rig.shape_names]
-    if unknown:
-        raise RigInputError(f"{source or 'the animation'}: names shapes the rig does not have: "
-                            f"{', '.join(unknown[:5])}{f' and {len(unknown) - 5} more' if len(unknown) > 5 else ''}.")
+    from .weights_csv import check_shapes_known
+    check_shapes_known(source or "the animation", names, rig.shape_names)
     W = np.zeros((np.asarray(weights).shape[0], rig.n_shapes))
     W[:, [rig.shape_index(n) for n in names]] = weights
     return WeightAnimation(times=times, weights=W, source=source)

@@ -159,6 +159,15 @@ def times_rate(times: np.ndarray) -> float | None:
     return float(np.round(rate, 6))
 
 
+def check_shapes_known(source, names, shape_names) -> None:
+    """RigInputError naming ``source`` when a column of weights ``names`` a shape not in ``shape_names`` (the first
+    five unknown names, and how many more)."""
+    unknown = [n for n in names if n not in shape_names]
+    if unknown:
+        raise RigInputError(f"{source}: names shapes the rig does not have: {', '.join(unknown[:5])}"
+                            f"{f' and {len(unknown) - 5} more' if len(unknown) > 5 else ''}.")
+
+
 def read_weights_take(path: str | Path, shape_names: list[str] | None, *, rate: float | None = None):
     """A weights CSV as a weight take (``model.take_data.WeightTake``) on a rig's ``shape_names``: each column in
     its shape's place, shapes without a column at 0 (None: the file's own columns, for ``take-info``). The rate
@@ -170,10 +179,7 @@ def read_weights_take(path: str | Path, shape_names: list[str] | None, *, rate: 
     frames, times, names, W = read_weights_table(path)
     if shape_names is None:
         shape_names = list(names)
-    unknown = [n for n in names if n not in shape_names]
-    if unknown:
-        raise RigInputError(f"{path}: names shapes the rig does not have: {', '.join(unknown[:5])}"
-                            f"{f' and {len(unknown) - 5} more' if len(unknown) > 5 else ''}.")
+    check_shapes_known(path, names, shape_names)
     warnings = []
     if frames.size > 1:
         steps = np.diff(frames)
