@@ -12,7 +12,7 @@ once per press (it depends on the markers and the level); one drag is one undo s
 from __future__ import annotations
 
 from concurrent.futures import Future, ThreadPoolExecutor, wait as wait_for
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -67,7 +67,7 @@ class HeldPress:
     ``released`` are played into the drag when the work arrives (``MarkerController._start_held_press``)."""
 
     index: int
-    jobs: list                     # the Futures still running at the press
+    jobs: list = field(default_factory=list)   # the Futures it waits for (``MarkerController._when_done``)
     motion: np.ndarray | None = None
     released: bool = False
 
@@ -495,7 +495,7 @@ class MarkerController(QtCore.QObject):
     def hold_press(self, index: int, jobs: list[Future]) -> None:
         """A press on marker ``index`` before ``jobs`` are done: the drag begins when they are, with where the mouse
         has gone by then (``HeldPress``), so that the window never waits for them."""
-        self.held = HeldPress(index, jobs)
+        self.held = HeldPress(index)
         QtWidgets.QApplication.setOverrideCursor(QtCore.Qt.BusyCursor)
         self.message(f"Getting level {self.level}'s regions ready for the drag…", 4000)
         self._when_done(jobs)
