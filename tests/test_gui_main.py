@@ -452,6 +452,8 @@ def test_a_pose_change_draws_one_frame(qtbot, tmp_path):
     renders = [0]
     w.viewport.plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent,
                                            lambda *_: renders.__setitem__(0, renders[0] + 1))
+    # the sample's segmentation done and shown first: its colour map's render is another change's
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
     qtbot.wait(100)
     k = w.document.rig.shape_index("jawOpen")
     p = w.shapes_panel

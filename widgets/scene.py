@@ -92,11 +92,18 @@ class SurfaceArrays:
         self.normals = vtk_to_numpy(pd.GetNormals())
         self.scalars = vtk_to_numpy(pd.GetArray(scalars)) if scalars else None
         self._normals_of = mesh._display_normals
+        self.normals_stale = False    # the normals are for earlier points (``update(defer_normals=True)``)
 
-    def update(self, points: np.ndarray, normals: np.ndarray | None = None, scalars: np.ndarray | None = None) -> None:
-        """New points (same count); normals float or int8 (``VertexNormals.quantised``), computed if None."""
+    def update(self, points: np.ndarray, normals: np.ndarray | None = None, scalars: np.ndarray | None = None,
+               defer_normals: bool = False) -> None:
+        """New points (same count); normals float or int8 (``VertexNormals.quantised``), computed if None, unless
+        ``defer_normals``: then left for ``refresh_normals`` (a frame drawn by a proxy with its own normals,
+        ``widgets.lod``)."""
         self.points[:] = points
-        if normals is None:
+        self.normals_stale = normals is None and defer_normals
+        if self.normals_stale:
+            pass
+        elif normals is None:
             self.normals[:] = self._normals_of(self.points)
         elif normals.dtype == np.int8:
             dequantise(normals, out=self.normals)
@@ -106,6 +113,13 @@ class SurfaceArrays:
             self.scalars[:] = scalars
         for obj in self._vtk:
             obj.Modified()
+
+    def refresh_normals(self) -> None:
+        """The normals for the current points, if an update deferred them."""
+        if self.normals_stale:
+            self.normals[:] = self._normals_of(self.points)
+            self.normals_stale = False
+            self._vtk[1].Modified()
 
 
 @dataclass

@@ -26,6 +26,7 @@ from PySide6 import QtCore, QtWidgets
 from model.parts import subset_faces
 from model.rig_prep import framed_points
 
+from .lod import SurfaceDetail
 from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, drop_cached_background, fit_overlays, \
     overlay_room, rig_mesh, set_camera, style_plotter, surface_face
 
@@ -145,6 +146,9 @@ class Viewport(QtWidgets.QWidget):
         self._press: tuple | None = None             # that gesture's (start, button, anchor)
         self._click: tuple[int, int] | None = None   # a left press no tool took: a click if released near it
         self.plotter.interactor.installEventFilter(self)
+        # a studio-scale surface is drawn by fewer faces while it keeps changing (``widgets.lod``)
+        self.detail = SurfaceDetail(self.plotter.ren_win, self.render,
+                                    allowed=lambda: not self._wireframe and not self.textured)
 
     @property
     def canvas(self) -> QtWidgets.QWidget:
@@ -189,6 +193,7 @@ class Viewport(QtWidgets.QWidget):
         return self._shown_faces
 
     def _build_mesh(self, points, shown_faces, base_colors) -> None:
+        self.detail.set_mesh(None)
         counts, indices = subset_faces(*self._all_faces, shown_faces)
         self._shown_faces = None if shown_faces is None else np.asarray(shown_faces, dtype=np.int64)
         self._base_colors = base_colors
@@ -206,9 +211,11 @@ class Viewport(QtWidgets.QWidget):
             image8 = np.ascontiguousarray(self._textured.pixels_top_down())
             self._textured = self._textured_surface(self._texture_split, image8)
         self._redraw_surface()
+        self.detail.set_mesh(self.mesh, counts, indices, points, self._arrays)
 
     def _textured_surface(self, split, image8):
         from .texture_view import TexturedSurface
+        self.detail.show_full()     # its normals up to date
         return TexturedSurface(self._arrays.points, self._arrays.normals, self._face_counts,
                                split.of_faces(self._all_faces[0], self._shown_faces), image8)
 
@@ -217,7 +224,9 @@ class Viewport(QtWidgets.QWidget):
         if self.mesh is None:
             return
         given, self._given_normals = self._given_normals, None
-        self._arrays.update(points, given[1] if given is not None and given[0] is points else None)
+        given = given[1] if given is not None and given[0] is points else None
+        # a frame the proxy will draw computes only the proxy's normals (``widgets.lod``)
+        self._arrays.update(points, given, defer_normals=given is None and self.detail.expects_proxy())
         if self._textured is not None:
             self._textured.update_points(self._arrays.points, self._arrays.normals)
         self.render()
@@ -285,6 +294,7 @@ class Viewport(QtWidgets.QWidget):
         return self._wireframe
 
     def _redraw_surface(self) -> None:
+        self.detail.show_full()   # the actors are made anew over the mesh's own faces
         self.plotter.remove_scalar_bar(render=False) if self.plotter.scalar_bars else None   # (pyvista renders)
         # the previous colour map's legend and its title go with it (they stayed up in Shaded view)
         self.plotter.remove_legend(render=False)
@@ -318,6 +328,7 @@ class Viewport(QtWidgets.QWidget):
         from vtkmodules.vtkRenderingCore import vtkCellPicker
         if self.mesh is None:
             return None
+        self.detail.show_full()   # picked on the surface's own faces, not a proxy's
         picker = vtkCellPicker()
         picker.SetTolerance(0.0005)
         if not picker.Pick(x, y, 0, self.plotter.renderer) or picker.GetCellId() < 0:
@@ -528,11 +539,13 @@ class Viewport(QtWidgets.QWidget):
         if not reframed and vw > 0 and vh > 0 and w * vh < vw * h:   # narrower than the view: keep its horizontal field
             half = np.arctan(np.tan(np.radians(angle) / 2) * (vw / vh) / (w / h))
             cam.view_angle = float(np.degrees(2 * half))
+        self.detail.full_only = True
         try:
             self.render()
             window_size = [int(w), int(h)] if size else None
             return np.asarray(self.plotter.screenshot(None, return_img=True, window_size=window_size))[:, :, :3]
         finally:
+            self.detail.full_only = False
             fit_overlays(self.plotter)
             cam.view_angle = angle
             self.plotter.camera_position = saved
@@ -548,6 +561,7 @@ class Viewport(QtWidgets.QWidget):
         self._reframe_if_untouched()
 
     def close_viewport(self) -> None:
+        self.detail.stop()
         self._tools.clear()
         self._owner = None
         if not self.plotter._closed:

@@ -1,0 +1,217 @@
+"""The viewport's level of detail (``widgets.lod``): a studio-scale surface is drawn by a decimated proxy over its own
+vertices while a slider is dragged, and in full once the view is still.
+
+ICT FaceKit (53k triangles) is below the size at which the viewport uses a proxy (150k); these tests lower that
+size so that ICT's real surface and a real slider drag exercise the same code a 422k-vertex rig runs.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PySide6 import QtCore, QtWidgets
+
+from solvers.mesh import fan_triangulate
+from tests.gui_helpers import make_window, mouse, open_and_wait
+
+
+def _areas(points, tris):
+    p = np.asarray(points, dtype=np.float64)
+    return 0.5 * np.linalg.norm(np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]]), axis=1)
+
+
+def test_the_proxy_is_a_decimation_of_the_surface_over_its_own_vertices(ict_rig):
+    from scipy.sparse.csgraph import connected_components
+    import scipy.sparse as sp
+
+    from widgets.lod import proxy_faces
+    rig = ict_rig
+    full = fan_triangulate(rig.face_counts, rig.face_indices).astype(np.int64)
+    proxy = proxy_faces(rig.neutral, rig.face_counts, rig.face_indices, target=20_000)
+    assert np.all(np.diff(proxy.vertices) > 0) and proxy.vertices[-1] < rig.n_vertices
+    assert proxy.triangles.min() == 0 and proxy.triangles.max() == len(proxy.vertices) - 1
+    tris = proxy.vertices[proxy.triangles]                      # over the rig's own vertex ids
+    assert abs(len(tris) - 20_000) < 2_000, len(tris)
+    # the same surface: its area within 2% (triangles over the wrong vertices would span the head)
+    assert abs(_areas(rig.neutral, tris).sum() / _areas(rig.neutral, full).sum() - 1) < 0.02
+    # every proxy triangle joins vertices of one connected part of the rig (teeth, eyes, skin stay apart)
+    n = rig.n_vertices
+    adjacency = sp.coo_matrix((np.ones(full.size), (full.ravel(), np.roll(full, 1, axis=1).ravel())), shape=(n, n))
+    _, part = connected_components(adjacency, directed=False)
+    assert np.all(part[tris[:, 0]] == part[tris[:, 1]]) and np.all(part[tris[:, 0]] == part[tris[:, 2]])
+    # facing as the surface faces: each proxy triangle's normal agrees with its corners' vertex normals
+    p = np.asarray(rig.neutral, dtype=np.float64)
+    vn = np.zeros_like(p)
+    fn = np.cross(p[full[:, 1]] - p[full[:, 0]], p[full[:, 2]] - p[full[:, 0]])
+    for k in range(3):
+        np.add.at(vn, full[:, k], fn)
+    tn = np.cross(p[tris[:, 1]] - p[tris[:, 0]], p[tris[:, 2]] - p[tris[:, 0]])
+    agree = np.einsum("ij,ij->i", tn, vn[tris].sum(axis=1)) > 0
+    assert agree.mean() > 0.98, agree.mean()
+    # its normals from the faces around its vertices only: the whole surface's display normals there, in a pose
+    from solvers.normals import VertexNormals
+    posed = rig.neutral + 1.0 * rig.deltas[rig.shape_index("jawOpen")]
+    whole = VertexNormals(rig.face_counts, rig.face_indices, rig.n_vertices)(posed)
+    np.testing.assert_allclose(proxy.normals(posed), whole[proxy.vertices], atol=1e-6)
+
+
+def _handle_centre(slider) -> QtCore.QPoint:
+    opt = QtWidgets.QStyleOptionSlider()
+    slider.initStyleOption(opt)
+    return slider.style().subControlRect(QtWidgets.QStyle.CC_Slider, opt, QtWidgets.QStyle.SC_SliderHandle,
+                                         slider).center()
+
+
+@pytest.fixture
+def small_lod(monkeypatch):
+    import widgets.lod as lod
+    monkeypatch.setattr(lod, "LOD_MIN_TRIANGLES", 30_000)     # ICT's 53k triangles take a proxy
+    monkeypatch.setattr(lod, "LOD_TARGET_TRIANGLES", 12_000)
+
+
+def _drawn_faces(w):
+    """The number of faces each render of the viewport drew (its surface actor's), recorded as it ends."""
+    import vtk
+    drawn = []
+    surface = w.viewport.plotter.actors["surface"]
+    w.viewport.plotter.ren_win.AddObserver(
+        vtk.vtkCommand.EndEvent, lambda *_: drawn.append(surface.GetMapper().GetInput().GetNumberOfPolys()))
+    return drawn
+
+
+def _drag_jaw(qtbot, w, moves=12):
+    row = w.shapes_panel.row("jawOpen")
+    w.shapes_panel.scroll.ensureWidgetVisible(row)
+    slider = row.slider
+    qtbot.waitUntil(lambda: slider.isVisible() and slider.width() > 30, timeout=5000)
+    QtWidgets.QApplication.processEvents()
+    start = _handle_centre(slider)
+    mouse(slider, "press", start)
+    x = start.x()
+    for _ in range(moves):
+        x += 2
+        mouse(slider, "move", QtCore.QPoint(x, start.y()))
+        qtbot.waitUntil(lambda: not w.redraw_pending, timeout=5000)
+    mouse(slider, "release", QtCore.QPoint(x, start.y()))
+
+
+def test_a_slider_drag_draws_the_proxy_then_the_full_surface_once_still(qtbot, tmp_path, ict_dir, small_lod):
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
+    qtbot.wait(500)                         # still: the next change is drawn in full
+    n_faces = w.viewport.mesh.GetNumberOfPolys()      # the faces shown (ICT hides some parts)
+    drawn = _drawn_faces(w)
+    _drag_jaw(qtbot, w)
+    assert drawn[0] == n_faces, "the drag's first frame follows a still moment: drawn in full"
+    proxied = [n for n in drawn[1:] if n < n_faces]
+    assert len(proxied) >= 8, drawn
+    shown = w.viewport.shown_faces if w.viewport.shown_faces is not None else slice(None)
+    triangles = int((w.document.rig.face_counts[shown] - 2).sum())
+    assert max(proxied) < 0.35 * triangles, (max(proxied), triangles)   # ~12-15k of ICT's 51k shown
+    # once still, one more render draws the surface in full, and nothing more
+    qtbot.waitUntil(lambda: drawn[-1] == n_faces, timeout=3000)
+    count = len(drawn)
+    qtbot.wait(600)
+    assert len(drawn) == count
+    assert not w.viewport.detail.proxy_shown
+    # what was drawn is the pose: every vertex kept, in order
+    k = w.document.rig.shape_index("jawOpen")
+    assert w.document.weights[k] > 0.05
+    np.testing.assert_allclose(w.viewport.points(), w.document.surface(), atol=1e-4)
+    assert w.viewport.plotter.actors["surface"].GetMapper().GetInput() is w.viewport.mesh
+    # the frames the proxy drew left the surface's own normals for later: they are the pose's again
+    mesh = w.viewport.mesh
+    np.testing.assert_allclose(mesh.point_data["Normals"], w.viewport.normals_function()(mesh.points), atol=1e-6)
+
+
+def test_the_wireframe_is_drawn_with_the_surfaces_own_faces_while_dragging(qtbot, tmp_path, ict_dir, small_lod):
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
+    w.viewport.set_wireframe(True)
+    qtbot.wait(500)
+    drawn = _drawn_faces(w)
+    _drag_jaw(qtbot, w, moves=6)
+    assert len(drawn) >= 6 and set(drawn) == {len(w.viewport.shown_faces)}
+
+
+def test_a_click_right_after_a_drag_picks_the_surfaces_own_vertex(qtbot, tmp_path, ict_dir, small_lod):
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
+    qtbot.wait(500)
+    vp = w.viewport
+    _drag_jaw(qtbot, w, moves=3)
+    assert vp.detail.proxy_shown            # the last frame of the drag drew the proxy
+    x, y = (int(v) for v in vp.world_to_display(w.document.surface()[[964]])[0][:2])   # ICT's chin
+    got = vp.pick(x, y)
+    qtbot.waitUntil(lambda: not vp.detail.proxy_shown, timeout=3000)
+    qtbot.wait(100)
+    still = vp.pick(x, y)                   # the same pose, drawn in full
+    assert still is not None and got is not None
+    assert (got.face, got.vertex) == (still.face, still.vertex)
+    assert np.linalg.norm(w.document.surface()[still.vertex] - w.document.surface()[964]) < 0.5
+
+
+def test_closing_the_window_stops_a_proxy_being_made(qtbot, tmp_path, ict_dir, small_lod, monkeypatch):
+    import threading
+    import time
+
+    import vtk
+
+    import widgets.lod as lod
+    started = threading.Event()
+
+    def slow_proxy(points, counts, indices, target=None, on_filter=None):   # a decimation that runs until stopped
+        f = vtk.vtkDecimatePro()
+        on_filter(f)
+        started.set()
+        end = time.monotonic() + 20
+        while not f.GetAbortExecute() and time.monotonic() < end:
+            time.sleep(0.01)
+        return None
+    monkeypatch.setattr(lod, "proxy_faces", slow_proxy)
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    assert started.wait(10)
+    making = [t for t in threading.enumerate() if t.name == "surface-proxy"]
+    assert making and making[0].is_alive()
+    t0 = time.monotonic()
+    w.viewport.close_viewport()
+    assert not making[0].is_alive() and time.monotonic() - t0 < 2
+
+
+@pytest.mark.parametrize("view", ["shaded", "deformation"])
+def test_the_proxy_frame_looks_like_the_full_frame_of_the_same_pose(qtbot, tmp_path, ict_dir, small_lod, view,
+                                                                   monkeypatch):
+    import widgets.lod as lod
+    monkeypatch.setattr(lod, "LOD_TARGET_TRIANGLES", 30_000)    # as a studio rig's proxy is to it: a face's detail
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
+    vp = w.viewport
+    if view == "deformation":     # a colour map over every vertex: its colours are gathered with the points
+        sp = w.segmentation_panel
+        sp.view.setCurrentIndex(sp.view.findData("deformation"))
+        sp.shape.setCurrentIndex(sp.shape.findText("jawOpen"))
+        w.segmentation.wait()
+        qtbot.waitUntil(lambda: vp.colormap is not None, timeout=10000)
+    qtbot.wait(500)
+
+    def picture():
+        return np.asarray(vp.plotter.screenshot(None, return_img=True), dtype=np.float64)
+
+    neutral = picture()
+    _drag_jaw(qtbot, w, moves=20)
+    assert vp.detail.proxy_shown
+    proxy = picture()
+    assert vp.detail.proxy_shown
+    qtbot.waitUntil(lambda: not vp.detail.proxy_shown, timeout=3000)
+    qtbot.wait(100)
+    full = picture()
+    moved = np.abs(full - neutral).mean()
+    off = np.abs(full - proxy).mean()
+    assert moved > 0.3, moved                 # the jaw moved on screen
+    # the proxy draws that pose, lit and coloured as the surface is (coarser: a proxy left at the neutral pose
+    # would differ by about ``moved``, one without the colours or normals by far more)
+    assert off < 0.5 * moved, (off, moved)

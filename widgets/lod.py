@@ -1,0 +1,312 @@
+"""A level of detail for studio-scale surfaces: fewer faces over the same vertices, drawn while the pose or the
+camera keeps changing.
+
+On software OpenGL a render of a 422k-vertex rig (840k triangles) takes 0.1-0.2 s, so a slider drag there ran at
+5-9 frames/s. ParaView and VTK's LOD actors draw a decimated copy while the user interacts and the full surface
+once still; so does the viewport (``widgets.viewport.Viewport``), for surfaces of more than ``LOD_MIN_TRIANGLES``.
+
+The proxy is a decimation of the surface (``vtkDecimatePro``: it removes vertices and re-triangulates their holes,
+keeping the others where they are, with the topology preserved, so lips stay apart and closed parts closed): a
+subset of the surface's own vertices, by id. Each frame it draws, its points and point data (normals, colour-map
+scalars, part colours) are gathered from the surface's at those ids, so what is drawn at each kept vertex is exactly
+the full surface's, shading included; the surface itself, its vertex order and its arrays are never changed.
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+import traceback
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+from PySide6 import QtCore
+
+from solvers.mesh import fan_triangulate, hidden_back_faces, reversed_faces
+from solvers.normals import VertexNormals, compact_faces
+
+LOD_MIN_TRIANGLES = 150_000     # above this a render on llvmpipe takes >~30 ms (the 106k rig's 210k: 33 ms)
+LOD_TARGET_TRIANGLES = 50_000   # about ICT FaceKit's 53k: a production face's density
+STILL_AFTER_S = 0.3             # the full surface is drawn once the pose and camera were still this long
+
+
+def wants_proxy(face_counts: np.ndarray) -> bool:
+    """Whether a surface of these polygons is large enough to be drawn by a proxy while it changes."""
+    return int(np.maximum(np.asarray(face_counts) - 2, 0).sum()) > LOD_MIN_TRIANGLES
+
+
+@dataclass(frozen=True)
+class ProxyFaces:
+    """A proxy: the surface's vertices it keeps, and its triangles over them."""
+    vertices: np.ndarray        # (P,) int64 ids of the surface's vertices the proxy keeps, ascending
+    triangles: np.ndarray       # (T, 3) int64 indices into ``vertices``
+    back_faces: np.ndarray      # indices into ``triangles`` whose back side can be seen (``hidden_back_faces``)
+    ring: np.ndarray            # ids of the vertices of the surface's faces that touch a kept vertex, ascending
+    ring_normals: VertexNormals  # the normals of those faces, over ``ring``
+    kept_in_ring: np.ndarray    # where each kept vertex is in ``ring``
+
+    def normals(self, points: np.ndarray) -> np.ndarray:
+        """(P, 3) float32: the full surface's display normals at the kept vertices for the surface's ``points``,
+        from only the faces around them (every face at a kept vertex: the same sum as the whole surface's normals
+        there), a fraction of the whole surface's work."""
+        return self.ring_normals(np.asarray(points)[self.ring])[self.kept_in_ring]
+
+    def meshes(self):
+        """(front, backs or None): ``vtkPolyData`` of the proxy's triangles and of its back faces reversed, sharing
+        points and point data, made on the GUI thread; ``SurfaceDetail`` fills their points and point data."""
+        from vtkmodules.vtkCommonCore import vtkPoints
+        from vtkmodules.vtkCommonDataModel import vtkPolyData
+
+        from .scene import cell_array
+        n = len(self.triangles)
+        front = vtkPolyData()
+        points = vtkPoints()
+        points.SetDataTypeToFloat()
+        points.SetNumberOfPoints(len(self.vertices))
+        front.SetPoints(points)
+        front.SetPolys(cell_array(np.arange(0, 3 * n + 1, 3, dtype=np.int64), self.triangles.ravel()))
+        if not self.back_faces.size:
+            return front, None
+        backs = vtkPolyData()
+        backs.SetPoints(points)
+        backs.SetPolys(cell_array(*reversed_faces(np.full(n, 3, dtype=np.int64), self.triangles.ravel(),
+                                                  self.back_faces)))
+        return front, backs
+
+
+def proxy_faces(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
+                target: int | None = None, on_filter: Callable | None = None) -> ProxyFaces | None:
+    """About ``target`` triangles over a subset of the surface's vertices (their ids), shaped like the surface.
+
+    Decimation by vertex removal (Schroeder, Zarge & Lorensen 1992, "Decimation of triangle meshes";
+    ``vtkDecimatePro`` with topology preserved, no splitting and boundary vertices kept): a kept vertex is an
+    input vertex, unmoved, found by an id array carried through the filter. Thread-safe (no rendering); 1-6 s
+    at 106k-422k vertices, run on a worker thread. ``target`` defaults to ``LOD_TARGET_TRIANGLES``. ``on_filter`` is given the filter before
+    it runs, to stop it from another thread (``SetAbortExecute(1)``): None then."""
+    from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray, vtk_to_numpy
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
+    from vtkmodules.vtkFiltersCore import vtkDecimatePro
+    target = LOD_TARGET_TRIANGLES if target is None else target
+    tris = fan_triangulate(face_counts, face_indices).astype(np.int64)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    poly = vtkPolyData()
+    vpts = vtkPoints()
+    vpts.SetData(numpy_to_vtk(pts, deep=True))
+    poly.SetPoints(vpts)
+    cells = vtkCellArray()
+    cells.SetData(numpy_to_vtkIdTypeArray(np.arange(0, 3 * len(tris) + 1, 3, dtype=np.int64), deep=True),
+                  numpy_to_vtkIdTypeArray(tris.ravel(), deep=True))
+    poly.SetPolys(cells)
+    ids = numpy_to_vtk(np.arange(len(pts), dtype=np.float64), deep=True)   # float: exact below 2**53
+    ids.SetName("ids")
+    poly.GetPointData().AddArray(ids)
+    decimate = vtkDecimatePro()
+    decimate.SetInputData(poly)
+    decimate.SetTargetReduction(max(0.0, 1.0 - target / max(len(tris), 1)))
+    decimate.PreserveTopologyOn()
+    decimate.SplittingOff()
+    decimate.BoundaryVertexDeletionOff()
+    if on_filter is not None:
+        on_filter(decimate)
+    decimate.Update()
+    if decimate.GetAbortExecute():
+        return None
+    out = decimate.GetOutput()
+    kept = vtk_to_numpy(out.GetPointData().GetArray("ids")).astype(np.int64)
+    conn = vtk_to_numpy(out.GetPolys().GetConnectivityArray()).astype(np.int64)
+    offsets = vtk_to_numpy(out.GetPolys().GetOffsetsArray())
+    if not np.all(np.diff(offsets) == 3):
+        raise ValueError("the decimation made polygons other than triangles")
+    triangles = kept[conn].reshape(-1, 3)
+    vertices, local = np.unique(triangles, return_inverse=True)
+    local = local.reshape(-1, 3).astype(np.int64)
+    backs = np.flatnonzero(~hidden_back_faces(pts[vertices], np.full(len(local), 3), local.ravel()))
+    counts = np.asarray(face_counts, dtype=np.int64)
+    indices = np.asarray(face_indices, dtype=np.int64)
+    is_kept = np.zeros(len(pts), dtype=bool)
+    is_kept[vertices] = True
+    starts = np.concatenate(([0], np.cumsum(counts)[:-1]))
+    touching = np.add.reduceat(is_kept[indices].astype(np.int64), starts) > 0 if counts.size else np.zeros(0, bool)
+    ring, ring_local = compact_faces(indices[np.repeat(touching, counts)])
+    return ProxyFaces(vertices.astype(np.int64), local, backs, ring,
+                      VertexNormals(counts[touching], ring_local, len(ring)), np.searchsorted(ring, vertices))
+
+
+class SurfaceDetail(QtCore.QObject):
+    """Draws a surface mesh by its proxy's faces while renders come less than ``STILL_AFTER_S`` apart (a slider
+    dragged, playback, the camera turned: every render that follows another closely), and by its own faces in the
+    first render after a still moment and once the view is still again (one more render then, by this object).
+    A lone change (a preset chosen, a key set) is drawn in full at once.
+
+    The swap happens as each render starts (the render window's StartEvent), so it covers every render: the
+    window's, the camera's, playback's. ``full_only`` (a picture for export) and ``allowed()`` False (a texture or
+    the wireframe shown: they need the real faces) draw in full. ``show_full()`` puts the real faces back at once,
+    before a pick or a new colour map. The proxy is made on a worker thread (``proxy_faces``) for each new mesh
+    that ``wants_proxy``; until it arrives, everything is drawn in full."""
+
+    _made = QtCore.Signal(object, object)    # (generation, ProxyFaces or None), from the worker thread
+
+    def __init__(self, render_window, render: Callable[[], None], allowed: Callable[[], bool]) -> None:
+        super().__init__()
+        self._render, self._allowed = render, allowed
+        self.full_only = False
+        self._mesh = None
+        self._arrays = None
+        self._generation = 0
+        self._proxy: tuple | None = None   # once made: (kept vertex ids, front vtkPolyData, backs or None)
+        self._full = None           # while the proxy is shown: the (mapper, the dataset it drew) pairs swapped
+        self._last: float | None = None   # when the last render started
+        self._still_render = False
+        self._running: list = [None, None]   # the proxy being made: its thread and decimation filter
+        self._timer = QtCore.QTimer(self, singleShot=True, interval=int(STILL_AFTER_S * 1000))
+        self._timer.timeout.connect(self._when_still)
+        self._made.connect(self._adopt)
+        from vtkmodules.vtkCommonCore import vtkCommand
+        render_window.AddObserver(vtkCommand.StartEvent, self._on_start)
+
+    @property
+    def proxy_ready(self) -> bool:
+        return self._proxy is not None
+
+    @property
+    def proxy_shown(self) -> bool:
+        """Whether the last render (or the next, if nothing changes) draws the proxy's faces."""
+        return self._full is not None
+
+    def set_mesh(self, mesh, face_counts=None, face_indices=None, points=None, arrays=None) -> None:
+        """Draw ``mesh`` (a ``scene.rig_mesh`` of these polygons at ``points``, updated through ``arrays``, its
+        ``scene.SurfaceArrays``) from now on; None: no surface. Its proxy is made on a worker thread when it is large
+        enough (the last mesh's, if still being made, stops)."""
+        self.show_full()
+        self._timer.stop()
+        if self._running[1] is not None:
+            self._running[1].SetAbortExecute(1)
+        self._generation += 1
+        self._mesh, self._arrays, self._proxy = mesh, arrays, None
+        if mesh is None or not wants_proxy(face_counts):
+            return
+        generation = self._generation
+        args = (np.array(points, dtype=np.float64), np.array(face_counts), np.array(face_indices))
+        running: list = [None, None]
+
+        def make() -> None:
+            try:
+                _yield_to_other_threads()
+                proxy = proxy_faces(*args, on_filter=lambda f: running.__setitem__(1, f))
+            except Exception:   # no proxy: everything is drawn in full, as before
+                traceback.print_exc()
+                proxy = None
+            self._made.emit(generation, proxy)
+
+        running[0] = threading.Thread(target=make, name="surface-proxy", daemon=True)
+        self._running = running
+        running[0].start()
+
+    def _adopt(self, generation: int, proxy: ProxyFaces | None) -> None:
+        if generation == self._generation and proxy is not None and self._mesh is not None:
+            self._proxy = ((proxy.vertices, proxy), *proxy.meshes())
+
+    def expects_proxy(self) -> bool:
+        """Whether a render now would draw the proxy: the surface's own normals may then wait
+        (``SurfaceArrays.update(defer_normals=True)``); the proxy computes its own."""
+        return (self._proxy is not None and self._last is not None and not self.full_only and self._allowed()
+                and time.monotonic() - self._last < STILL_AFTER_S)
+
+    def show_full(self) -> None:
+        """The surface drawn by its own mesh again from now on (no render), its normals brought up to date."""
+        if self._arrays is not None:
+            self._arrays.refresh_normals()
+        if self._full is None:
+            return
+        swapped, self._full = self._full, None
+        for mapper, dataset in swapped:
+            mapper.SetInputData(dataset)
+
+    def _show_proxy(self, window) -> None:
+        """The proxy's points and point data gathered from the surface's now; the actors drawing the surface (its
+        front, and the backs of its two-sided parts: ``scene.add_surface``) made to draw the proxy."""
+        from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+        (kept, proxy), front, backs = self._proxy
+        mesh = self._mesh
+        points = vtk_to_numpy(mesh.GetPoints().GetData())
+        front.GetPoints().SetData(numpy_to_vtk(points[kept], deep=True))
+        source, target = mesh.GetPointData(), front.GetPointData()
+        target.Initialize()
+        stale = self._arrays is not None and self._arrays.normals_stale
+        for i in range(source.GetNumberOfArrays()):
+            array = source.GetAbstractArray(i)
+            if array is None or array.GetNumberOfTuples() != mesh.GetNumberOfPoints():
+                continue
+            if stale and array is source.GetNormals():
+                values = proxy.normals(points)      # the surface's own, not computed for this frame
+            else:
+                values = vtk_to_numpy(array)[kept]
+            copy = numpy_to_vtk(values, deep=True, array_type=array.GetDataType())
+            copy.SetName(array.GetName())
+            target.AddArray(copy)
+        if source.GetNormals() is not None:
+            target.SetActiveNormals(source.GetNormals().GetName())
+        if source.GetScalars() is not None:
+            target.SetActiveScalars(source.GetScalars().GetName())
+        if backs is not None:
+            backs.GetPointData().ShallowCopy(target)
+        if self._full is not None:
+            return
+        mine = {id(mesh): front, id(getattr(mesh, "_backs", None)): backs}
+        swapped = []
+        renderers = window.GetRenderers()
+        renderers.InitTraversal()
+        for _ in range(renderers.GetNumberOfItems()):
+            actors = renderers.GetNextItem().GetActors()
+            actors.InitTraversal()
+            for _ in range(actors.GetNumberOfItems()):
+                mapper = actors.GetNextActor().GetMapper()
+                drawn = mapper.GetInput() if mapper is not None else None
+                if drawn is not None and mine.get(id(drawn)) is not None:
+                    swapped.append((mapper, drawn))
+                    mapper.SetInputData(mine[id(drawn)])
+        self._full = swapped
+
+    def _on_start(self, window, _event) -> None:
+        now = time.monotonic()
+        busy = self._last is not None and now - self._last < STILL_AFTER_S
+        self._last = now
+        if busy and self._proxy is not None and not self._still_render and not self.full_only and self._allowed():
+            self._show_proxy(window)
+            self._timer.start()
+        else:
+            self.show_full()
+
+    def _when_still(self) -> None:
+        if self._full is None:
+            return
+        self.show_full()            # a change VTK sees: the window renders (``NativePlotter.render``)
+        self._still_render = True
+        try:
+            self._render()
+        finally:
+            self._still_render = False
+
+    def stop(self) -> None:
+        """No surface any more (the view closes): a proxy being made is stopped and waited for (a thread left inside
+        VTK as the process exits could crash it)."""
+        self._timer.stop()
+        self.show_full()
+        self._generation += 1
+        self._mesh, self._arrays, self._proxy = None, None, None
+        thread, running = self._running
+        if running is not None:
+            running.SetAbortExecute(1)
+        if thread is not None:
+            thread.join(timeout=5)
+
+
+def _yield_to_other_threads() -> None:
+    """Lower this thread's scheduling priority (Linux: a thread's own nice value), so that making a proxy (6 s of a
+    core at 422k vertices) slows neither the window nor the new rig's segmentation running beside it."""
+    try:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
+    except (AttributeError, OSError):   # not Linux: the thread runs at the process's priority
+        pass
