@@ -87,14 +87,26 @@ class PersonalizeController(QtCore.QObject):
         take = str(ws.take_path) if ws.marker_take is not None and ws.take_path else ""
         mm = ws.marker_map.source if ws.marker_map is not None and Path(ws.marker_map.source or "").is_file() else ""
         dlg = PersonalizeDialog(self.window, rig_name=doc.rig.name, output=str(folder / f"{base}_actor.bsproj"),
-                                take=take, marker_map=mm, folder=str(folder),   # the take's calibration as solved
-                                calibration_frames=self.window.mocap.panel.settings()["calibration_frames"])
+                                take=take, marker_map=mm, folder=str(folder),   # the take's neutral as solved
+                                calibration_frames=self.window.mocap.panel.settings()["calibration_frames"],
+                                neutral_frames=self._chosen_neutral() if take else "")
         dlg.setAttribute(QtCore.Qt.WA_DeleteOnClose)
         dlg.accepted.connect(lambda: self.personalize(dlg.request()))
         dlg.destroyed.connect(lambda *_: setattr(self, "dialog", None))
         self.dialog = dlg
         dlg.open()
         return dlg
+
+    def _chosen_neutral(self) -> str:
+        """The actor's neutral frames chosen in the Mocap panel ("Use This Frame as Neutral", typed, or 'auto' as the
+        last solve found them) as 'A:B', or "" for the first calibration frames."""
+        mocap = self.window.mocap
+        chosen = mocap.panel.settings()["neutral_frames"]
+        if chosen is not None and chosen.strip().lower() == "auto":
+            solution = mocap.workspace.solution
+            found = getattr(solution, "neutral_frames", None)
+            return f"{int(found[0])}:{int(found[1])}" if found is not None else ""
+        return chosen or ""
 
     def personalize(self, request: dict) -> bool:
         """Start the personalisation of the open rig with ``request`` (``PersonalizeDialog.request``) in the
@@ -116,6 +128,11 @@ class PersonalizeController(QtCore.QObject):
             if not (request.get("neutral_scan") or request.get("scans") or request.get("take")):
                 raise RigInputError("Personalising needs measurements of the actor: a neutral scan, pose scans "
                                     "or a marker take.")
+            if request.get("neutral_frames") and request.get("take"):
+                from model.take_workspace import parse_neutral_frames
+                if parse_neutral_frames(request["neutral_frames"], "Neutral frames") == "auto":
+                    raise RigInputError("Neutral frames: personalising takes the actor's neutral as a frame range "
+                                        "A:B, not 'auto'.")
         except RigInputError as exc:
             self._fail(str(exc))
             return False

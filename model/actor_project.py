@@ -43,6 +43,7 @@ def personalize_project(template, project_state: dict, request: dict):
         raise RigInputError("A marker map needs a marker take to go with it.")
     actor, _, summary = personalize_rig_detailed(template, request.get("neutral_scan"), scans, take, marker_map,
                                                  calibration_frames=int(request.get("calibration_frames") or 30),
+                                                 neutral_frames=request.get("neutral_frames") if take else None,
                                                  name=out.stem)
     sections = copy.deepcopy(project_state.get("sections") or {})
     arrays = dict(project_state.get("arrays") or {})
