@@ -35,6 +35,10 @@ def _button(text: str, tip: str, signal=None) -> QtWidgets.QPushButton:
     return b
 
 
+MIRROR_TIP = ("Add the other side's version of the selected corrective: drivers _L↔_R, shape reflected across x = 0 "
+              "(undoable)")
+
+
 class CorrectivesPanel(QtWidgets.QWidget):
     new_requested = QtCore.Signal()            # new corrective from the ticked drivers
     use_pose_requested = QtCore.Signal()       # tick the shapes whose weight is > 0
@@ -99,8 +103,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
                                       self.drivers_requested)
         self.edit_button = _button("Sculpt", "Set the selected corrective's drivers to 1 and sculpt it again",
                                    self.edit_shape_requested)
-        self.mirror_button = _button("Mirror", "Add the other side's version of the selected corrective: "
-                                     "drivers _L↔_R, shape reflected across x = 0 (undoable)", self.mirror_requested)
+        self.mirror_button = _button("Mirror", MIRROR_TIP, self.mirror_requested)
         self.delete_button = _button("Delete", "Delete the selected corrective (undoable; Delete key in the list)",
                                      self.delete_requested)
         # two rows of buttons: five in one made the panel wider than its dock at the default window size
@@ -385,6 +388,11 @@ class CorrectivesPanel(QtWidgets.QWidget):
             self._updating = True
             self.rule.setCurrentIndex(max(0, self.rule.findData(key)))
             self._updating = False
+
+    def set_mirror_allowed(self, allowed: bool, why: str | None = None) -> None:
+        """Enable Mirror for a selected corrective it can act on; disabled, its tooltip says ``why``."""
+        self.mirror_button.setEnabled(allowed)
+        self.mirror_button.setToolTip(MIRROR_TIP if allowed or not why else why)
 
     def _on_rule(self, _index: int) -> None:
         if not self._updating and self.selected_name() is not None:
