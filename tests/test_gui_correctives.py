@@ -773,3 +773,30 @@ def test_mirror_and_symmetrize_are_enabled_only_for_a_corrective_they_can_act_on
     doc.undo_stack.undo()
     click_row(one_sided)
     assert state() == (True, False, True)
+
+
+def test_every_interference_column_fits_the_list_at_the_default_window_size(qtbot, tmp_path, ict_dir):
+    """At the default window size (1400x900) on ICT FaceKit, the Interference list's Sides and Fixed columns sat past
+    its right edge (sized to their contents: 409 px of columns in a 338 px list), behind a horizontal scroll bar:
+    every column now ends within the list, the shape names elided in the middle with the pair whole in the tooltip."""
+    from tests.gui_helpers import open_and_wait
+    w = make_window(qtbot, tmp_path, size=(1400, 900), sample=False)
+    open_and_wait(qtbot, w, ict_dir)
+    ctrl = w.correctives
+    ctrl.dock.show()
+    ctrl.dock.raise_()
+    tabs = ctrl.panel.tabs
+    qtbot.mouseClick(tabs.tabBar(), QtCore.Qt.LeftButton, pos=tabs.tabBar().tabRect(1).center())   # Interference
+    assert tabs.currentIndex() == 1
+    qtbot.mouseClick(ctrl.panel.find_button, QtCore.Qt.LeftButton)
+    table = ctrl.panel.pairs
+    qtbot.waitUntil(lambda: table.topLevelItemCount() > 0, timeout=60000)
+    qtbot.wait(50)
+    header, width = table.header(), table.viewport().width()
+    edges = [header.sectionViewportPosition(c) + header.sectionSize(c) for c in range(table.columnCount())]
+    assert all(e <= width for e in edges), (edges, width)
+    assert not table.horizontalScrollBar().isVisible()
+    for c in (0, 1, 4, 5):      # the numbers and marks are shown whole
+        assert header.sectionSize(c) >= table.sizeHintForColumn(c), c
+    item = table.topLevelItem(0)
+    assert item.toolTip(2).startswith(f"{item.text(2)} × {item.text(3)}")

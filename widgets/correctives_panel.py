@@ -250,7 +250,21 @@ class CorrectivesPanel(QtWidgets.QWidget):
         lay.addWidget(self.merge_mirrored)
         self.pairs = QtWidgets.QTreeWidget()
         self.pairs.setHeaderLabels(["#", "Score", "Shape", "Shape", "Sides", "Fixed"])
+        self.pairs.headerItem().setToolTip(4, "both: the row stands for the pair and its mirror image on the other "
+                                              "side (One row for a pair and its mirror)")
         self.pairs.headerItem().setToolTip(5, "Whether the pair already has a corrective (✓), or one side of two")
+        # every column within the dock at the window's default size (1400x900): sized to their contents, the Sides and
+        # Fixed columns sat past the list's right edge, behind a horizontal scroll bar. The numbers, Sides and Fixed
+        # keep their contents' width; the two shape names share the rest, elided in the middle (the row's tooltip
+        # names them whole)
+        header = self.pairs.header()
+        header.setStretchLastSection(False)
+        header.setMinimumSectionSize(20)
+        for c, mode in enumerate((QtWidgets.QHeaderView.ResizeToContents, QtWidgets.QHeaderView.ResizeToContents,
+                                  QtWidgets.QHeaderView.Stretch, QtWidgets.QHeaderView.Stretch,
+                                  QtWidgets.QHeaderView.ResizeToContents, QtWidgets.QHeaderView.ResizeToContents)):
+            header.setSectionResizeMode(c, mode)
+        self.pairs.setTextElideMode(QtCore.Qt.ElideMiddle)
         self.pairs.setRootIsDecorated(False)
         self.pairs.setAlternatingRowColors(True)
         self.pairs.setToolTip("Shape pairs that interfere most, best first; select one to see where (the "
@@ -452,8 +466,6 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.set_pair_names(names)
         self.set_pair_correctives([r[4] if len(r) > 4 else "" for r in rows])
         self.set_pair_action(False)
-        for c in range(self.pairs.columnCount()):
-            self.pairs.resizeColumnToContents(c)
         self.create_pair_button.setEnabled(False)
 
     def set_pair_names(self, rows) -> None:
@@ -464,8 +476,8 @@ class CorrectivesPanel(QtWidgets.QWidget):
             if item is not None:
                 item.setText(2, a)
                 item.setText(3, b)
-                for c in range(5):
-                    item.setToolTip(c, f"{a} × {b}, and its mirror image {twin}" if twin else "")
+                for c in range(6):   # the names whole (the list may elide them)
+                    item.setToolTip(c, f"{a} × {b}, and its mirror image {twin}" if twin else f"{a} × {b}")
 
     def set_pair_action(self, has_corrective: bool) -> None:
         """The pair button creates the selected pair's corrective, or edits the one it has."""
