@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import copy
+import time
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,7 @@ class PersonalizeController(QtCore.QObject):
     failed = QtCore.Signal(str)
     cancelled = QtCore.Signal()
     heat_map_changed = QtCore.Signal(str)  # the shape the heat map shows ("" when off)
+    progress_changed = QtCore.Signal(str)  # the progress window's text (the stage reached, the time so far)
 
     def __init__(self, window) -> None:
         super().__init__(window)
@@ -43,6 +45,8 @@ class PersonalizeController(QtCore.QObject):
         self.busy = False
         self.job = None                      # the running app.personalize_job.PersonalizeJob
         self.progress: QtWidgets.QProgressDialog | None = None
+        self._started = 0.0                  # time.monotonic() when the running job started
+        self._rig_name = ""
         self._timer = QtCore.QTimer(self)    # polls the job's child process
         self._timer.setInterval(200)
         self._timer.timeout.connect(self._poll)
@@ -156,8 +160,8 @@ class PersonalizeController(QtCore.QObject):
         self.busy = True
         self.action.setEnabled(False)
         self.window.show_status(f"Personalising {template.name} to the actor in the background…", 0)
-        dlg = QtWidgets.QProgressDialog(f"Personalising {template.name} to the actor…\nIt runs on its own: the window "
-                                        "stays usable. Cancel stops it and writes nothing.", "Cancel", 0, 0, self.window)
+        self._started, self._rig_name = time.monotonic(), template.name
+        dlg = QtWidgets.QProgressDialog(self._progress_text(), "Cancel", 0, 0, self.window)
         dlg.setWindowTitle("Personalize to Actor")
         dlg.setWindowModality(QtCore.Qt.NonModal)
         dlg.setMinimumDuration(0)
@@ -166,6 +170,22 @@ class PersonalizeController(QtCore.QObject):
         dlg.show()
         self._timer.start()
         return True
+
+    def _progress_text(self) -> str:
+        """The progress window's text: the stage the job reported last and the time it has run."""
+        stage = self.job.stage if self.job is not None and self.job.stage else "starting"
+        seconds = int(time.monotonic() - self._started)
+        took = f"{seconds} s" if seconds < 60 else f"{seconds // 60} min {seconds % 60:02d} s"
+        return (f"Personalising {self._rig_name} to the actor: {stage}… ({took})\nIt runs on its own: the window "
+                "stays usable. Cancel stops it and writes nothing.")
+
+    def _show_progress(self) -> None:
+        if self.progress is None:
+            return
+        text = self._progress_text()
+        if text != self.progress.labelText():
+            self.progress.setLabelText(text)
+            self.progress_changed.emit(text)
 
     def cancel(self) -> None:
         """Stop the running personalisation (Cancel in its progress dialog): nothing is written."""
@@ -189,6 +209,7 @@ class PersonalizeController(QtCore.QObject):
             return
         result = job.poll()
         if result is None:
+            self._show_progress()
             return
         self._finish()
         kind, value = result

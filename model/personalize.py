@@ -129,10 +129,14 @@ def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int = 30,
 
 def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, marker_map=None, *,
                              calibration_frames: int = 30, neutral_frames=None, name: str | None = None,
-                             **options) -> tuple[Rig, PersonalizeResult, dict]:
+                             progress=None, **options) -> tuple[Rig, PersonalizeResult, dict]:
     """``personalize_rig`` returning also the solver's result and a JSON-able summary. A take's neutral is the mean of
     its frames ``neutral_frames`` ('A:B' or (first, last), inclusive, counted from 0; the summary's
-    ``neutral_frames``), or of its first ``calibration_frames``."""
+    ``neutral_frames``), or of its first ``calibration_frames``. ``progress``: called with each stage reached (the
+    actor's neutral, shape k/K of the solve, the correctives), one short phrase."""
+    def say(stage: str) -> None:
+        if progress is not None:
+            progress(stage)
     scans = list(scans or [])
     if neutral_scan is None and not scans and take is None:
         raise RigInputError("personalize needs measurements of the actor: a neutral scan, pose scans or a "
@@ -142,17 +146,21 @@ def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, m
                             "actor without pose scans.")
     if rig.n_shapes == 0:
         raise RigInputError(f"{rig.source or rig.name}: the rig has no shapes to personalise.")
+    n_scans = len(scans) + (neutral_scan is not None)
+    if n_scans:
+        say(f"reading {n_scans} scan{'s' if n_scans != 1 else ''}")
     neutral = None if neutral_scan is None else read_scan(neutral_scan, rig, "the neutral scan")
     poses = np.stack([read_scan(s, rig, f"scan {i + 1}") for i, s in enumerate(scans)]) if scans \
         else np.zeros((0, rig.n_vertices, 3))
     summary: dict = {"scans": len(scans), "neutral": "scan" if neutral is not None else "template"}
     if take is not None and neutral is None:
+        say("the actor's neutral from the take's markers")
         neutral, info = _marker_neutral(rig, take, marker_map, calibration_frames, neutral_frames)
         summary.update(neutral="warped to the take's neutral markers", **info)
     elif neutral is None:
         summary["neutral"] = "re-estimated from the pose scans"
     triangles = rig.triangles()
-    result = personalize(rig.neutral, rig.deltas, triangles, poses, neutral, **options)
+    result = personalize(rig.neutral, rig.deltas, triangles, poses, neutral, progress=progress, **options)
 
     def carried(deltas: list) -> np.ndarray:
         """Offsets that are not fitted to scans (correctives, in-betweens) carried onto the actor's face."""
@@ -161,6 +169,7 @@ def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, m
     correctives = []
     live = [c for c in rig.correctives]
     if live:
+        say(f"carrying {len(live)} corrective{'s' if len(live) != 1 else ''} onto the actor")
         correctives = [dataclasses.replace(c, delta=d) for c, d in zip(live, carried([c.delta for c in live]))]
     inbetweens = {}
     items = [(n, ib) for n, v in rig.inbetweens.items() for ib in v]

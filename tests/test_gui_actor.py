@@ -550,3 +550,34 @@ def test_personalize_from_a_take_uses_the_frame_chosen_as_neutral(qtbot, tmp_pat
     actor = np.asarray(w.document.rig.neutral, dtype=np.float64)
     assert np.abs(actor - at_120).max() < 1e-4                     # cm: what the model gives for frame 120
     assert np.abs(at_120 - at_start).max() > 0.05 and np.abs(actor - at_start).max() > 0.05
+
+
+def test_the_personalize_progress_says_the_stage_and_the_time_so_far(qtbot, tmp_path, ict_dir):
+    """The progress window said "Personalising … to the actor…" from start to end, for up to minutes: it now says the
+    stage the job reached (the actor's neutral, shape k/K of the solve, the shapes' deltas, writing) and the time so
+    far, and changes as the job goes on. A real run: ICT FaceKit from mocap/actor_take alone (about 10 s)."""
+    import re
+
+    from tests.conftest import DATA, require_data
+    take_dir = require_data(DATA / "mocap" / "actor_take")
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    assert w.mocap.load_take(take_dir / "take.c3d") and w.mocap.load_map(take_dir / "marker_map.json")
+    seen = []
+    w.actor.progress_changed.connect(lambda text: seen.append((text, w.actor.progress.labelText())))
+    _key(qtbot, w, QtCore.Qt.Key_P, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    dlg = w.actor.dialog
+    _type(dlg.output_edit, str(tmp_path / "actor.bsproj"))
+    with qtbot.waitSignal(w.actor.personalized, timeout=300000):
+        _click(dlg.ok_button)
+    texts = [t for t, _ in seen]
+    assert all(t == shown for t, shown in seen)          # what the progress window showed
+    stages = [re.match(r"Personalising \S+ to the actor: (.*)… \((\d+) s\)\n", t) for t in texts]
+    assert all(stages), texts
+    said = [m.group(1) for m in stages]
+    assert len(set(said)) >= 3, said
+    K = w.document.rig.n_shapes
+    assert any(re.fullmatch(rf"shape \d+/{K}: its transferred gradients", s) for s in said), said
+    assert any(s.startswith(f"the {K} shapes' deltas (") for s in said), said
+    assert [int(m.group(2)) for m in stages] == sorted(int(m.group(2)) for m in stages)
+    assert int(stages[-1].group(2)) >= 2                 # the time so far, counted on
