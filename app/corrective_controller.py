@@ -20,8 +20,9 @@ from app.commands import SetEditOffsetCommand, SetWeightsCommand
 from app.corrective_commands import SetCorrectivesCommand
 from app.interference_finder import InterferenceFinder
 from app.sculpt_tool import SculptTool
-from model.correctives import (Corrective, activation_for, corrective_activation, corrective_activations, find_corrective,
-                               mirrored_corrective, symmetrized_corrective, validate_correctives)
+from model.correctives import (Corrective, activation_for, corrective_activation, corrective_activations,
+                               find_corrective, mirrored_corrective, symmetrized_corrective, validate_correctives,
+                               why_not_mirrored)
 from model.corrective_authoring import authoring_surface, corrective_from_scan, driver_pose
 from model.errors import RigInputError
 from model.sides import mirror_drivers
@@ -41,6 +42,7 @@ class CorrectiveController(QtCore.QObject):
         self.authoring: list[str] | None = None   # drivers being sculpted (sculpt mode on when not None)
         self.new_rule = "product"
         self.sculpt_actions: dict = {}            # the Correctives menu's Save, Discard Sculpt and Stop Sculpting
+        self.mirror_action = self.symmetrize_action = None   # the menu's Mirror and Symmetrize Corrective (install)
         self.sculpt = SculptTool(window.viewport, window.document, panel, lambda: self.authoring is not None)
         self.finder = InterferenceFinder(window, panel, self.start_authoring)
         d = self.document
@@ -60,6 +62,7 @@ class CorrectiveController(QtCore.QObject):
         p.drivers_requested.connect(self.edit_drivers)
         p.delete_requested.connect(self.delete)
         p.mirror_requested.connect(self.mirror)
+        p.table.itemSelectionChanged.connect(self.show_mirror_state)   # after the panel's own buttons
         p.mute_requested.connect(self.set_muted)
         p.rule_requested.connect(self.set_rule)
         p.tab_changed.connect(self.finder.on_tab_change)
@@ -119,6 +122,25 @@ class CorrectiveController(QtCore.QObject):
         rig = self.document.rig
         rows = [(c.name, list(c.drivers), c.rule, c.muted) for c in rig.correctives]
         self.panel.set_correctives(rows, self.activations())
+        self.show_mirror_state()
+
+    MIRROR_TIP = "Add the other side's version of the selected corrective (drivers _L↔_R, reflected across x = 0)"
+    SYMMETRIZE_TIP = "Make the selected two-sided corrective (drivers that mirror onto themselves) exactly symmetric"
+
+    def show_mirror_state(self) -> None:
+        """Mirror (the menu's and the panel's) and Symmetrize enabled only for a selected corrective they can act on
+        (``model.correctives.why_not_mirrored``); disabled, their tooltips say why. They were always enabled and
+        answered with a message box."""
+        rig = self.document.rig
+        c = self.corrective(self.panel.selected_name()) if rig is not None else None
+        no_mirror, no_symmetry = why_not_mirrored(c, rig.shape_names if rig is not None else [])
+        self.panel.set_mirror_allowed(no_mirror is None, no_mirror)
+        for action, why, tip in ((self.mirror_action, no_mirror, self.MIRROR_TIP),
+                                 (self.symmetrize_action, no_symmetry, self.SYMMETRIZE_TIP)):
+            if action is not None:
+                action.setEnabled(why is None)
+                action.setToolTip(tip if why is None else why)
+                action.setStatusTip(tip if why is None else why)
 
     # --- helpers -----------------------------------------------------------------------------------
     def _error(self, message: str) -> None:
@@ -500,12 +522,11 @@ def install(window) -> CorrectiveController:
         "discard": act("&Discard Sculpt", ctrl.discard_sculpt, None, "Drop the pending sculpt (undoable)"),
         "stop": act("S&top Sculpting", ctrl.stop_sculpting, None, "Leave sculpt mode")}
     ctrl._show_sculpting()
-    act("&Mirror Corrective", ctrl.mirror, "Ctrl+Shift+M",
-        "Add the other side's version of the selected corrective (drivers _L↔_R, reflected across x = 0)")
+    ctrl.mirror_action = act("&Mirror Corrective", ctrl.mirror, "Ctrl+Shift+M", ctrl.MIRROR_TIP)
     act("Mirror &All Correctives", ctrl.mirror_all, None,
         "Add the other side's version of every corrective that lacks one (one undoable edit)")
-    act("Symmetri&ze Corrective", ctrl.symmetrize, None,
-        "Make the selected two-sided corrective (drivers that mirror onto themselves) exactly symmetric")
+    ctrl.symmetrize_action = act("Symmetri&ze Corrective", ctrl.symmetrize, None, ctrl.SYMMETRIZE_TIP)
+    ctrl.show_mirror_state()
     window.add_separator("correctives")
 
     def _find():

@@ -42,15 +42,19 @@ DEFAULTS = {"interpolation": "smooth", "fps": 24.0, "duration": 2.0}
 
 class _KeyEditCommand(SetSectionArraysCommand):
     """A key edit whose undo and redo also show the animation's pose at the current time again (the Graph
-    Editor's moves and deletes, one-shape keys): the viewport follows the curves."""
+    Editor's moves and deletes, Set Key, Remove Key): the viewport follows the curves, as Maya and Blender
+    re-evaluate. ``follow_first``: its first redo too (a key set of the pose shown leaves that pose as it is)."""
 
-    def __init__(self, controller: "KeyframeController", *args) -> None:
+    def __init__(self, controller: "KeyframeController", *args, follow_first: bool = True) -> None:
         super().__init__(controller.document, *args)
         self.controller = controller
+        self._follow = follow_first
 
     def redo(self) -> None:
         super().redo()
-        self.controller.scrub(self.controller.time)
+        if self._follow:
+            self.controller.scrub(self.controller.time)
+        self._follow = True
 
     def undo(self) -> None:
         super().undo()
@@ -196,10 +200,12 @@ class KeyframeController(QtCore.QObject):
                            "keyframes/blend_indptr": b.indptr})
         return sec, arrays
 
-    def _push(self, new: tuple, text: str, follow: bool = False) -> None:
-        """One undo step to the keyframes ``new``; ``follow``: the viewport shows the new animation's pose."""
+    def _push(self, new: tuple, text: str, follow: bool | str = False) -> None:
+        """One undo step to the keyframes ``new``; ``follow``: the viewport shows the animation's pose after it, its
+        undo and its redo ('undo': after its undo and a later redo only, the pose shown kept when it is done)."""
         if follow:
-            self.document.undo_stack.push(_KeyEditCommand(self, SECTION, self._stored(), new, text))
+            self.document.undo_stack.push(_KeyEditCommand(self, SECTION, self._stored(), new, text,
+                                                          follow_first=follow != "undo"))
         else:
             self.document.undo_stack.push(SetSectionArraysCommand(self.document, SECTION, self._stored(), new, text))
 
@@ -258,7 +264,8 @@ class KeyframeController(QtCore.QObject):
             what = "the pose"
         if t > self.duration:
             self.duration = t
-        self._push(self._snapshot(tl, blend, level), f"Key {what} at {t:.3g} s")
+        # undone, the face shows what the animation gives at this time without the key (it stayed at the key's pose)
+        self._push(self._snapshot(tl, blend, level), f"Key {what} at {t:.3g} s", follow="undo")
         self.window.show_status(f"Keyed {what} at {t:.3f} s{note}.", 4000)
 
     def set_shape_key(self, k: int) -> None:
@@ -316,7 +323,7 @@ class KeyframeController(QtCore.QObject):
         tl.remove_key(t)
         keep = tl.keys and self.blend is not None
         self._push(self._snapshot(tl, self.blend if keep else None, self.level if keep else None),
-                   f"Remove key at {t:.3g} s")
+                   f"Remove key at {t:.3g} s", follow=True)
         return True
 
     def set_settings(self, *, interpolation: str | None = None, fps: float | None = None,

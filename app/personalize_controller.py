@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import copy
+import time
 from pathlib import Path
 
 import numpy as np
@@ -36,6 +37,7 @@ class PersonalizeController(QtCore.QObject):
     failed = QtCore.Signal(str)
     cancelled = QtCore.Signal()
     heat_map_changed = QtCore.Signal(str)  # the shape the heat map shows ("" when off)
+    progress_changed = QtCore.Signal(str)  # the progress window's text (the stage reached, the time so far)
 
     def __init__(self, window) -> None:
         super().__init__(window)
@@ -43,6 +45,8 @@ class PersonalizeController(QtCore.QObject):
         self.busy = False
         self.job = None                      # the running app.personalize_job.PersonalizeJob
         self.progress: QtWidgets.QProgressDialog | None = None
+        self._started = 0.0                  # time.monotonic() when the running job started
+        self._rig_name = ""
         self._timer = QtCore.QTimer(self)    # polls the job's child process
         self._timer.setInterval(200)
         self._timer.timeout.connect(self._poll)
@@ -87,14 +91,26 @@ class PersonalizeController(QtCore.QObject):
         take = str(ws.take_path) if ws.marker_take is not None and ws.take_path else ""
         mm = ws.marker_map.source if ws.marker_map is not None and Path(ws.marker_map.source or "").is_file() else ""
         dlg = PersonalizeDialog(self.window, rig_name=doc.rig.name, output=str(folder / f"{base}_actor.bsproj"),
-                                take=take, marker_map=mm, folder=str(folder),   # the take's calibration as solved
-                                calibration_frames=self.window.mocap.panel.settings()["calibration_frames"])
+                                take=take, marker_map=mm, folder=str(folder),   # the take's neutral as solved
+                                calibration_frames=self.window.mocap.panel.settings()["calibration_frames"],
+                                neutral_frames=self._chosen_neutral() if take else "")
         dlg.setAttribute(QtCore.Qt.WA_DeleteOnClose)
         dlg.accepted.connect(lambda: self.personalize(dlg.request()))
         dlg.destroyed.connect(lambda *_: setattr(self, "dialog", None))
         self.dialog = dlg
         dlg.open()
         return dlg
+
+    def _chosen_neutral(self) -> str:
+        """The actor's neutral frames chosen in the Mocap panel ("Use This Frame as Neutral", typed, or 'auto' as the
+        last solve found them) as 'A:B', or "" for the first calibration frames."""
+        mocap = self.window.mocap
+        chosen = mocap.panel.settings()["neutral_frames"]
+        if chosen is not None and chosen.strip().lower() == "auto":
+            solution = mocap.workspace.solution
+            found = getattr(solution, "neutral_frames", None)
+            return f"{int(found[0])}:{int(found[1])}" if found is not None else ""
+        return chosen or ""
 
     def personalize(self, request: dict) -> bool:
         """Start the personalisation of the open rig with ``request`` (``PersonalizeDialog.request``) in the
@@ -116,6 +132,11 @@ class PersonalizeController(QtCore.QObject):
             if not (request.get("neutral_scan") or request.get("scans") or request.get("take")):
                 raise RigInputError("Personalising needs measurements of the actor: a neutral scan, pose scans "
                                     "or a marker take.")
+            if request.get("neutral_frames") and request.get("take"):
+                from model.take_workspace import parse_neutral_frames
+                if parse_neutral_frames(request["neutral_frames"], "Neutral frames") == "auto":
+                    raise RigInputError("Neutral frames: personalising takes the actor's neutral as a frame range "
+                                        "A:B, not 'auto'.")
         except RigInputError as exc:
             self._fail(str(exc))
             return False
@@ -139,8 +160,8 @@ class PersonalizeController(QtCore.QObject):
         self.busy = True
         self.action.setEnabled(False)
         self.window.show_status(f"Personalising {template.name} to the actor in the background…", 0)
-        dlg = QtWidgets.QProgressDialog(f"Personalising {template.name} to the actor…\nIt runs on its own: the window "
-                                        "stays usable. Cancel stops it and writes nothing.", "Cancel", 0, 0, self.window)
+        self._started, self._rig_name = time.monotonic(), template.name
+        dlg = QtWidgets.QProgressDialog(self._progress_text(), "Cancel", 0, 0, self.window)
         dlg.setWindowTitle("Personalize to Actor")
         dlg.setWindowModality(QtCore.Qt.NonModal)
         dlg.setMinimumDuration(0)
@@ -149,6 +170,22 @@ class PersonalizeController(QtCore.QObject):
         dlg.show()
         self._timer.start()
         return True
+
+    def _progress_text(self) -> str:
+        """The progress window's text: the stage the job reported last and the time it has run."""
+        stage = self.job.stage if self.job is not None and self.job.stage else "starting"
+        seconds = int(time.monotonic() - self._started)
+        took = f"{seconds} s" if seconds < 60 else f"{seconds // 60} min {seconds % 60:02d} s"
+        return (f"Personalising {self._rig_name} to the actor: {stage}… ({took})\nIt runs on its own: the window "
+                "stays usable. Cancel stops it and writes nothing.")
+
+    def _show_progress(self) -> None:
+        if self.progress is None:
+            return
+        text = self._progress_text()
+        if text != self.progress.labelText():
+            self.progress.setLabelText(text)
+            self.progress_changed.emit(text)
 
     def cancel(self) -> None:
         """Stop the running personalisation (Cancel in its progress dialog): nothing is written."""
@@ -172,6 +209,7 @@ class PersonalizeController(QtCore.QObject):
             return
         result = job.poll()
         if result is None:
+            self._show_progress()
             return
         self._finish()
         kind, value = result

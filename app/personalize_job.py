@@ -3,8 +3,9 @@ process can be stopped, a thread cannot) and never waits for it when it closes.
 
 Qt-free: the child imports only this module and the model. ``start(template, state, request)`` spawns the process
 and returns a ``PersonalizeJob``; the child runs ``app.personalize_controller.personalize_project`` (which writes the
-project atomically, so a cancelled job leaves the previous file, or none) and sends back one message:
-``("done", (path, summary, rows))`` or ``("failed", message)``.
+project atomically, so a cancelled job leaves the previous file, or none) and sends back ``("stage", phrase)`` for
+each stage it reaches (the actor's neutral, shape k/K of the solve, ...: ``stage`` after ``poll``), then one
+message: ``("done", (path, summary, rows))`` or ``("failed", message)``.
 """
 from __future__ import annotations
 
@@ -15,9 +16,15 @@ import traceback
 
 def _run(conn, template, state: dict, request: dict) -> None:
     from model.errors import RigInputError
+
+    def progress(stage: str) -> None:
+        try:
+            conn.send(("stage", stage))
+        except OSError:       # the window stopped listening (it cancels the job next)
+            pass
     try:
         from model.actor_project import personalize_project
-        result = personalize_project(template, state, request)
+        result = personalize_project(template, state, request, progress=progress)
     except RigInputError as exc:
         conn.send(("failed", str(exc)))
     except MemoryError:
@@ -40,6 +47,7 @@ class PersonalizeJob:
         self.process = ctx.Process(target=_run, args=(child, template, state, request), daemon=True,
                                    name="blendshape-studio personalize")
         self.result: tuple | None = None
+        self.stage = ""                 # the last stage the child reported
         self._start_error: OSError | None = None
         # Started on a thread of its own: ``start`` pickles the rig (tens of MB on ICT FaceKit) into a pipe the new
         # interpreter reads only once it is up, which held the window 0.3-0.45 s when the job was started from it
@@ -67,14 +75,12 @@ class PersonalizeJob:
             self._conn.close()
             return self.result
         try:
-            if self._conn.poll():
-                self.result = self._conn.recv()
+            self._read()
         except (EOFError, OSError):
             self.result = ("failed", f"The personalisation stopped unexpectedly (exit code {self.process.exitcode}).")
         if self.result is None and not self.process.is_alive():
             try:
-                if self._conn.poll():
-                    self.result = self._conn.recv()
+                self._read()
             except (EOFError, OSError):
                 pass
             if self.result is None:
@@ -83,6 +89,15 @@ class PersonalizeJob:
         if self.result is not None:
             self.process.join(5)
         return self.result
+
+    def _read(self) -> None:
+        """The child's messages waiting in the pipe: its stages (the last kept as ``stage``), then its result."""
+        while self.result is None and self._conn.poll():
+            message = self._conn.recv()
+            if message[0] == "stage":
+                self.stage = str(message[1])
+            else:
+                self.result = message
 
     @property
     def running(self) -> bool:

@@ -20,10 +20,15 @@ SECTION = "personalize"          # project section: {"template", "shapes", "unit
 CHANGE = "personalize/change"    # project array: (K, V) float32 change per vertex, rig units
 
 
-def personalize_project(template, project_state: dict, request: dict):
+def personalize_project(template, project_state: dict, request: dict, progress=None):
     """The actor's project from ``template`` (a Rig, not the live one) and the dialog's ``request`` (Qt-free: runs on
     a worker thread). ``project_state``: {weights, sections, arrays, antagonists, template} carried into the new
-    project. Writes ``request['output']`` and returns (path, summary, rows of ``shape_change_report`` in mm)."""
+    project. Writes ``request['output']`` and returns (path, summary, rows of ``shape_change_report`` in mm).
+    ``progress``: called with each stage reached, one short phrase (``personalize_rig_detailed``'s and the
+    writing's)."""
+    def say(stage: str) -> None:
+        if progress is not None:
+            progress(stage)
     from .personalize import personalize_rig_detailed, scan_paths
     from .project import Project, save_project
 
@@ -31,6 +36,7 @@ def personalize_project(template, project_state: dict, request: dict):
     scans = scan_paths(request.get("scans") or [])
     take = marker_map = None
     if request.get("take"):
+        say("reading the take")
         from .take_workspace import read_take
         from .takes import MarkerTake
         take = read_take(request["take"])
@@ -43,7 +49,9 @@ def personalize_project(template, project_state: dict, request: dict):
         raise RigInputError("A marker map needs a marker take to go with it.")
     actor, _, summary = personalize_rig_detailed(template, request.get("neutral_scan"), scans, take, marker_map,
                                                  calibration_frames=int(request.get("calibration_frames") or 30),
-                                                 name=out.stem)
+                                                 neutral_frames=request.get("neutral_frames") if take else None,
+                                                 name=out.stem, progress=progress)
+    say("writing the actor's project")
     sections = copy.deepcopy(project_state.get("sections") or {})
     arrays = dict(project_state.get("arrays") or {})
     rows = record_change(sections, arrays, template, actor, summary, project_state.get("template") or template.name)

@@ -340,6 +340,29 @@ def mirrored_corrective(corrective: Corrective, shape_names, neutral, mirror=Non
     return Corrective(name=name, drivers=drivers, rule=c.rule, delta=mirror_delta(c.delta, m))
 
 
+def why_not_mirrored(corrective: Corrective | None, shape_names) -> tuple[str | None, str | None]:
+    """(why Mirror cannot act on ``corrective``, why Symmetrize cannot), each one sentence or None when it can, from
+    its drivers alone (the rig's symmetry where it acts is checked when it is done): Mirror needs drivers of one side
+    whose other side the rig has, Symmetrize drivers that mirror onto themselves."""
+    from .sides import mirror_drivers
+
+    if corrective is None:
+        none = "Select a corrective in the list first."
+        return none, none
+    c = corrective
+    drivers = mirror_drivers(c.drivers)
+    if set(drivers) == set(c.drivers):
+        return (f"{c.name} is its own mirror image (its drivers mirror onto themselves): Symmetrize makes it "
+                "symmetric.", None)
+    one_side = (f"{c.name} acts on one side: Mirror makes its other side; only a corrective whose drivers mirror "
+                "onto themselves can be made symmetric.")
+    missing = [d for d in drivers if d not in set(shape_names)]
+    if missing:
+        return (f"Cannot mirror {c.name}: the rig has no shape named {', '.join(repr(d) for d in missing)}.",
+                one_side)
+    return None, one_side
+
+
 def symmetrized_corrective(corrective: Corrective, neutral, mirror=None, *, units: str = "") -> Corrective:
     """A corrective whose drivers mirror onto themselves (browInnerUp_L+browInnerUp_R, mouthFunnel+jawOpen) made
     exactly symmetric across x = 0: e' = (e + M e∘m) / 2, the mean of the shape and its mirror image (Maya's

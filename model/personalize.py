@@ -75,19 +75,46 @@ def read_scan(scan, rig: Rig, label: str = "scan") -> np.ndarray:
     return _checked_scan(scan, label, rig)
 
 
-def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tuple[np.ndarray, dict]:
-    """The template neutral rigidly aligned, scaled and surface-warped onto the actor's neutral markers."""
+def neutral_frames_of(take, calibration_frames: int = 30, neutral_frames=None,
+                      where: str = "--neutral-frames") -> tuple[int, int]:
+    """(first, last), counted from 0 and inclusive: the take's frames the actor's neutral is read from -- the chosen
+    range ``neutral_frames`` ('A:B' or a pair, as the solve's ``--neutral-frames``; the Mocap panel's "Use This
+    Frame as Neutral") or else the first ``calibration_frames``. RigInputError (one sentence) for 'auto' or a range
+    outside the take."""
+    from .take_workspace import parse_neutral_frames
+    neutral = parse_neutral_frames(neutral_frames, where)
+    name, F = take.source or "The take", take.n_frames
+    if neutral == "auto":
+        raise RigInputError(f"{where}: personalising takes the actor's neutral as a frame range A:B, not 'auto'.")
+    if neutral is None:
+        if not 1 <= calibration_frames <= F:
+            raise RigInputError(f"{name}: has {F} frames; --calibration-frames {calibration_frames} must be 1 to {F} "
+                                "(the actor's neutral frames at its start).")
+        return 0, int(calibration_frames) - 1
+    a, b = neutral
+    if not 0 <= a <= b < F:
+        raise RigInputError(f"{name}: the neutral frames {a}:{b} ({where}) are outside the take, which has frames 0 "
+                            f"to {F - 1}.")
+    return a, b
+
+
+def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int = 30,
+                    neutral_frames=None) -> tuple[np.ndarray, dict]:
+    """The template neutral rigidly aligned, scaled and surface-warped onto the actor's neutral markers (the mean of
+    the frames ``neutral_frames_of`` gives)."""
     from solvers.rigid import kabsch, umeyama
     from solvers.surface_warp import biharmonic_warp
 
     from .marker_map import auto_marker_map, calibration_cloud
 
+    first, last = neutral_frames_of(take, calibration_frames, neutral_frames)
+    frames = slice(first, last + 1)
     if marker_map is None:
-        marker_map, _ = auto_marker_map(rig, take, calibration_frames=calibration_frames)
+        marker_map, _ = auto_marker_map(rig, take, calibration_frames=frames)
     marker_map.validate(rig, take)
     labels, cols = marker_map.match(take)
     binding = marker_map.binding(rig, labels)
-    cloud = calibration_cloud(take, calibration_frames, rig.units)[cols]
+    cloud = calibration_cloud(take, frames, rig.units)[cols]
     rest = binding @ rig.neutral
     R, t = kabsch(cloud, rest)                       # rest ≈ R cloud + t
     aligned = cloud @ R.T + t                        # the actor's markers placed rigidly on the rig's, size kept
@@ -97,13 +124,19 @@ def _marker_neutral(rig: Rig, take, marker_map, calibration_frames: int) -> tupl
     neutral = base + biharmonic_warp(base, rig.triangles(), binding, aligned - moved,
                                      length=s * length(WARP_LENGTH, rig.units))
     fit = float(np.sqrt(((binding @ neutral - aligned) ** 2).sum(axis=1).mean()))
-    return neutral, {"markers": len(labels), "marker_fit": fit, "scale": float(s)}
+    return neutral, {"markers": len(labels), "marker_fit": fit, "scale": float(s), "neutral_frames": [first, last]}
 
 
 def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, marker_map=None, *,
-                             calibration_frames: int = 30, name: str | None = None,
-                             **options) -> tuple[Rig, PersonalizeResult, dict]:
-    """``personalize_rig`` returning also the solver's result and a JSON-able summary."""
+                             calibration_frames: int = 30, neutral_frames=None, name: str | None = None,
+                             progress=None, **options) -> tuple[Rig, PersonalizeResult, dict]:
+    """``personalize_rig`` returning also the solver's result and a JSON-able summary. A take's neutral is the mean of
+    its frames ``neutral_frames`` ('A:B' or (first, last), inclusive, counted from 0; the summary's
+    ``neutral_frames``), or of its first ``calibration_frames``. ``progress``: called with each stage reached (the
+    actor's neutral, shape k/K of the solve, the correctives), one short phrase."""
+    def say(stage: str) -> None:
+        if progress is not None:
+            progress(stage)
     scans = list(scans or [])
     if neutral_scan is None and not scans and take is None:
         raise RigInputError("personalize needs measurements of the actor: a neutral scan, pose scans or a "
@@ -113,17 +146,21 @@ def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, m
                             "actor without pose scans.")
     if rig.n_shapes == 0:
         raise RigInputError(f"{rig.source or rig.name}: the rig has no shapes to personalise.")
+    n_scans = len(scans) + (neutral_scan is not None)
+    if n_scans:
+        say(f"reading {n_scans} scan{'s' if n_scans != 1 else ''}")
     neutral = None if neutral_scan is None else read_scan(neutral_scan, rig, "the neutral scan")
     poses = np.stack([read_scan(s, rig, f"scan {i + 1}") for i, s in enumerate(scans)]) if scans \
         else np.zeros((0, rig.n_vertices, 3))
     summary: dict = {"scans": len(scans), "neutral": "scan" if neutral is not None else "template"}
     if take is not None and neutral is None:
-        neutral, info = _marker_neutral(rig, take, marker_map, calibration_frames)
+        say("the actor's neutral from the take's markers")
+        neutral, info = _marker_neutral(rig, take, marker_map, calibration_frames, neutral_frames)
         summary.update(neutral="warped to the take's neutral markers", **info)
     elif neutral is None:
         summary["neutral"] = "re-estimated from the pose scans"
     triangles = rig.triangles()
-    result = personalize(rig.neutral, rig.deltas, triangles, poses, neutral, **options)
+    result = personalize(rig.neutral, rig.deltas, triangles, poses, neutral, progress=progress, **options)
 
     def carried(deltas: list) -> np.ndarray:
         """Offsets that are not fitted to scans (correctives, in-betweens) carried onto the actor's face."""
@@ -132,6 +169,7 @@ def personalize_rig_detailed(rig: Rig, neutral_scan=None, scans=(), take=None, m
     correctives = []
     live = [c for c in rig.correctives]
     if live:
+        say(f"carrying {len(live)} corrective{'s' if len(live) != 1 else ''} onto the actor")
         correctives = [dataclasses.replace(c, delta=d) for c, d in zip(live, carried([c.delta for c in live]))]
     inbetweens = {}
     items = [(n, ib) for n, v in rig.inbetweens.items() for ib in v]

@@ -382,7 +382,7 @@ def personalize(template_neutral: np.ndarray, template_deltas: np.ndarray, trian
                 lam_sparsity: float = LAM_S, iterations: int = ITERATIONS, rigid: bool = True,
                 mean_data: bool = True, gauge: bool = False, weights: np.ndarray | None = None,
                 tol: float = 1e-5, maxiter: int = 300,
-                neutral_rounds: int = NEUTRAL_ROUNDS) -> PersonalizeResult:
+                neutral_rounds: int = NEUTRAL_ROUNDS, progress=None) -> PersonalizeResult:
     """Ma et al. 2016 §3 personalisation (module docstring). poses (N, V, 3) in actor space; ``neutral``
     the actor's neutral (a scan), or None to start from the template's and re-estimate it (the row of
     ones in W). ``observed`` (V,) bool: vertices the poses measure (default all; e.g. marker vertices).
@@ -390,8 +390,13 @@ def personalize(template_neutral: np.ndarray, template_deltas: np.ndarray, trian
     solve). ``neutral_rounds``: without ``neutral``, the alternations of ``_neutral_from_poses`` that make the
     neutral's first guess (0: the template's neutral). ``mean_data``: the data term is averaged over the poses
     (so λ_r and λ_d keep their weight whatever the number of scans). With no poses the result is the pure
-    deformation transfer of the template onto ``neutral``."""
+    deformation transfer of the template onto ``neutral``. ``progress``: called with the stage reached, one short
+    phrase ("shape 12/53: its transferred gradients", "round 2/3: the scans' weights"), for a progress display."""
     t0 = time.perf_counter()
+
+    def say(stage: str) -> None:
+        if progress is not None:
+            progress(stage)
     b0t = np.asarray(template_neutral, dtype=np.float64)
     Dt = np.asarray(template_deltas, dtype=np.float64)
     K, V = Dt.shape[0], b0t.shape[0]
@@ -404,6 +409,7 @@ def personalize(template_neutral: np.ndarray, template_deltas: np.ndarray, trian
     T = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
 
     if reestimate_neutral and neutral is None and weights is None and neutral_rounds:
+        say("the actor's neutral from the pose scans")
         b0 = _neutral_from_poses(b0t, Dt, P, neutral_rounds, lam_sparsity=lam_sparsity, rigid=rigid,
                                  observed=observed)
     G, area = gradient_operator(b0, T)
@@ -414,6 +420,7 @@ def personalize(template_neutral: np.ndarray, template_deltas: np.ndarray, trian
     tri_of_vertex = sp.csr_matrix((np.ones(T.size), (T.ravel(), np.repeat(np.arange(T.shape[0]), 3))),
                                   shape=(V, T.shape[0]))
     for k, s in enumerate(supports):
+        say(f"shape {k + 1}/{K}: its transferred gradients")
         tris = np.unique(tri_of_vertex[s].indices)
         rows = (3 * tris[:, None] + np.arange(3)).ravel()
         Gk = G[:, s][rows]
@@ -454,9 +461,11 @@ def personalize(template_neutral: np.ndarray, template_deltas: np.ndarray, trian
         return float(np.sqrt(((X - P[:, oi]) ** 2).sum(axis=2).mean()))
 
     rounds = iterations if N and weights is None else 1
-    for _ in range(rounds):
+    for i in range(rounds):
+        said = f"round {i + 1}/{rounds}: " if rounds > 1 else ""
         if N:
             if weights is None:
+                say(f"{said}the scans' weights")
                 W, R, t = solve_pose_weights(nb, D, P, lam_sparsity=lam_sparsity, rigid=rigid, observed=obs,
                                              weights0=W, head0=(R, t))
             result.fit_rms.append(fit_rms(D, nb, W, R, t))
@@ -470,6 +479,7 @@ def personalize(template_neutral: np.ndarray, template_deltas: np.ndarray, trian
         else:
             C = np.zeros((system.K, system.K))
             data_rhs = 0.0
+        say(f"{said}the {K} shapes' deltas ({3 * system.n:,} unknowns)")
         ts, tc = time.perf_counter(), time.process_time()
         x, its = system.solve(C, obs, reg_rhs + data_rhs, x, tol=tol, maxiter=maxiter)
         result.delta_seconds.append(time.perf_counter() - ts)
@@ -477,6 +487,7 @@ def personalize(template_neutral: np.ndarray, template_deltas: np.ndarray, trian
         result.cg_iterations.append(its)
         D, nb = unpack(x)
     if N and weights is None:
+        say("the scans' final weights")
         W, R, t = solve_pose_weights(nb, D, P, lam_sparsity=lam_sparsity, rigid=rigid, observed=obs, weights0=W,
                                      head0=(R, t))
     if N and weights is None and gauge:

@@ -509,3 +509,75 @@ def test_the_personalize_dialog_takes_the_mocap_panels_calibration_length(qtbot,
     dlg = w.actor.dialog
     assert dlg.take_edit.text() == str(take_dir / "take.c3d") and dlg.calibration_spin.value() == 12
     dlg.reject()
+
+
+def test_personalize_from_a_take_uses_the_frame_chosen_as_neutral(qtbot, tmp_path, ict_dir):
+    """The actor's neutral chosen on the take (right-click the slider ▸ Use This Frame as Neutral) is the neutral a
+    personalisation from that take warps the template to: the dialog showed only the neutral frames at the take's
+    start and the job read the first 30 frames, whatever frame the user had chosen."""
+    from model.marker_map import load_marker_map
+    from model.personalize import _marker_neutral
+    from model.takes import load_take
+    from tests.conftest import DATA, require_data
+    take_dir = require_data(DATA / "mocap" / "actor_take")
+    w = make_window(qtbot, tmp_path, size=(1400, 1000))
+    open_and_wait(qtbot, w, ict_dir)
+    template = w.document.rig.copy()
+    mc = w.mocap
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    with qtbot.waitSignal(mc.solved, timeout=180000):
+        _click(mc.panel.solve_button)
+    mc.dock.raise_()
+    mc.panel.slider.setValue(120)
+    QtWidgets.QApplication.processEvents()
+    _context_menu(mc.panel.slider)
+    qtbot.waitUntil(lambda: getattr(mc.panel, "last_menu", None) is not None and mc.panel.last_menu.isVisible())
+    _menu_click(mc.panel.last_menu, "Use This Frame as Neutral")
+    assert mc.panel.settings()["neutral_frames"] == "120:120"
+    _key(qtbot, w, QtCore.Qt.Key_P, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    dlg = w.actor.dialog
+    assert dlg.take_edit.text() == str(take_dir / "take.c3d") and dlg.neutral_frames_edit.text() == "120:120"
+    assert not dlg.calibration_spin.isEnabled()     # the chosen frame is the neutral, not the frames at the start
+    out = tmp_path / "from_frame_120.bsproj"
+    _type(dlg.output_edit, str(out))
+    with qtbot.waitSignal(w.actor.personalized, timeout=300000):
+        _click(dlg.ok_button)
+    qtbot.waitUntil(lambda: w.document.path == out and not w.is_loading, timeout=60000)
+    assert w.actor.last_summary["neutral_frames"] == [120, 120]
+    take, mm = load_take(take_dir / "take.c3d"), load_marker_map(take_dir / "marker_map.json")
+    at_120, _ = _marker_neutral(template, take, mm, neutral_frames=(120, 120))
+    at_start, _ = _marker_neutral(template, take, mm, 30)
+    actor = np.asarray(w.document.rig.neutral, dtype=np.float64)
+    assert np.abs(actor - at_120).max() < 1e-4                     # cm: what the model gives for frame 120
+    assert np.abs(at_120 - at_start).max() > 0.05 and np.abs(actor - at_start).max() > 0.05
+
+
+def test_the_personalize_progress_says_the_stage_and_the_time_so_far(qtbot, tmp_path, ict_dir):
+    """The progress window said "Personalising … to the actor…" from start to end, for up to minutes: it now says the
+    stage the job reached (the actor's neutral, shape k/K of the solve, the shapes' deltas, writing) and the time so
+    far, and changes as the job goes on. A real run: ICT FaceKit from mocap/actor_take alone (about 10 s)."""
+    import re
+
+    from tests.conftest import DATA, require_data
+    take_dir = require_data(DATA / "mocap" / "actor_take")
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    assert w.mocap.load_take(take_dir / "take.c3d") and w.mocap.load_map(take_dir / "marker_map.json")
+    seen = []
+    w.actor.progress_changed.connect(lambda text: seen.append((text, w.actor.progress.labelText())))
+    _key(qtbot, w, QtCore.Qt.Key_P, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    dlg = w.actor.dialog
+    _type(dlg.output_edit, str(tmp_path / "actor.bsproj"))
+    with qtbot.waitSignal(w.actor.personalized, timeout=300000):
+        _click(dlg.ok_button)
+    texts = [t for t, _ in seen]
+    assert all(t == shown for t, shown in seen)          # what the progress window showed
+    stages = [re.match(r"Personalising \S+ to the actor: (.*)… \((\d+) s\)\n", t) for t in texts]
+    assert all(stages), texts
+    said = [m.group(1) for m in stages]
+    assert len(set(said)) >= 3, said
+    K = w.document.rig.n_shapes
+    assert any(re.fullmatch(rf"shape \d+/{K}: its transferred gradients", s) for s in said), said
+    assert any(s.startswith(f"the {K} shapes' deltas (") for s in said), said
+    assert [int(m.group(2)) for m in stages] == sorted(int(m.group(2)) for m in stages)
+    assert int(stages[-1].group(2)) >= 2                 # the time so far, counted on

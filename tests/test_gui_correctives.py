@@ -720,3 +720,83 @@ def test_use_posed_shapes_shows_the_drivers_it_ticked(qtbot, win):
     assert sorted(ctrl.panel.ticked_drivers()) == late
     first = next(drivers.item(i) for i in range(drivers.count()) if drivers.item(i).text() in late)
     assert drivers.viewport().rect().contains(drivers.visualItemRect(first))
+
+
+def test_mirror_and_symmetrize_are_enabled_only_for_a_corrective_they_can_act_on(qtbot, win):
+    """Correctives ▸ Mirror Corrective, Symmetrize Corrective and the panel's Mirror were enabled with no corrective
+    selected, or one they cannot act on, and answered with an error box: they are enabled only when they can act,
+    and their tooltips say why not. Selected by clicks in the list; Ctrl+Shift+M on a two-sided corrective does
+    nothing (no box)."""
+    w, ctrl = win
+    doc, panel = w.document, ctrl.panel
+    mirror, symmetrize = (next(a for a in w.actions() if a.text() == t)       # the Correctives menu's
+                          for t in ("&Mirror Corrective", "Symmetri&ze Corrective"))
+    button = panel.mirror_button
+
+    def state():
+        return mirror.isEnabled(), symmetrize.isEnabled(), button.isEnabled()
+    assert state() == (False, False, False)                 # no corrective yet
+    assert mirror.toolTip() == symmetrize.toolTip() == "Select a corrective in the list first."
+    two_sided, one_sided = "+".join(PAIR), "browInnerUp_L+browOuterUp_L"
+    for drivers in (PAIR, one_sided.split("+")):
+        assert ctrl.start_authoring(drivers)
+        doc.set_edit_offset(np.full((doc.rig.n_vertices, 3), 0.01))
+        assert ctrl.save()
+    table = panel.table
+
+    def click_row(name):
+        item = next(table.topLevelItem(i) for i in range(table.topLevelItemCount())
+                    if table.topLevelItem(i).data(0, QtCore.Qt.UserRole) == name)
+        rect = table.visualItemRect(item)
+        qtbot.mouseClick(table.viewport(), QtCore.Qt.LeftButton, pos=rect.center())
+        QtWidgets.QApplication.processEvents()
+        assert panel.selected_name() == name
+    click_row(two_sided)
+    assert state() == (False, True, False)
+    assert mirror.toolTip() == button.toolTip() == (f"{two_sided} is its own mirror image (its drivers mirror onto "
+                                                    "themselves): Symmetrize makes it symmetric.")
+    assert symmetrize.toolTip() == ("Make the selected two-sided corrective (drivers that mirror onto themselves) "
+                                    "exactly symmetric")
+    w.activateWindow()
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=5000)
+    steps, w.last_error = doc.undo_stack.count(), None
+    qtbot.keyClick(table, QtCore.Qt.Key_M, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    QtWidgets.QApplication.processEvents()
+    assert doc.undo_stack.count() == steps and w.last_error is None
+    click_row(one_sided)
+    assert state() == (True, False, True)
+    assert mirror.toolTip().startswith("Add the other side's version of the selected corrective")
+    assert symmetrize.toolTip().startswith(f"{one_sided} acts on one side: Mirror makes its other side")
+    qtbot.keyClick(table, QtCore.Qt.Key_M, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)   # Mirror: acts
+    assert doc.undo_stack.count() == steps + 1 and doc.undo_stack.undoText().startswith("Mirror corrective")
+    # the other side exists now; undone, the corrective is mirrorable again
+    doc.undo_stack.undo()
+    click_row(one_sided)
+    assert state() == (True, False, True)
+
+
+def test_every_interference_column_fits_the_list_at_the_default_window_size(qtbot, tmp_path, ict_dir):
+    """At the default window size (1400x900) on ICT FaceKit, the Interference list's Sides and Fixed columns sat past
+    its right edge (sized to their contents: 409 px of columns in a 338 px list), behind a horizontal scroll bar:
+    every column now ends within the list, the shape names elided in the middle with the pair whole in the tooltip."""
+    from tests.gui_helpers import open_and_wait
+    w = make_window(qtbot, tmp_path, size=(1400, 900), sample=False)
+    open_and_wait(qtbot, w, ict_dir)
+    ctrl = w.correctives
+    ctrl.dock.show()
+    ctrl.dock.raise_()
+    tabs = ctrl.panel.tabs
+    qtbot.mouseClick(tabs.tabBar(), QtCore.Qt.LeftButton, pos=tabs.tabBar().tabRect(1).center())   # Interference
+    assert tabs.currentIndex() == 1
+    qtbot.mouseClick(ctrl.panel.find_button, QtCore.Qt.LeftButton)
+    table = ctrl.panel.pairs
+    qtbot.waitUntil(lambda: table.topLevelItemCount() > 0, timeout=60000)
+    qtbot.wait(50)
+    header, width = table.header(), table.viewport().width()
+    edges = [header.sectionViewportPosition(c) + header.sectionSize(c) for c in range(table.columnCount())]
+    assert all(e <= width for e in edges), (edges, width)
+    assert not table.horizontalScrollBar().isVisible()
+    for c in (0, 1, 4, 5):      # the numbers and marks are shown whole
+        assert header.sectionSize(c) >= table.sizeHintForColumn(c), c
+    item = table.topLevelItem(0)
+    assert item.toolTip(2).startswith(f"{item.text(2)} × {item.text(3)}")

@@ -241,3 +241,36 @@ def test_the_shapes_panels_controls_are_whole_at_its_narrowest(qtbot, tmp_path):
     controls = [panel.grouping, panel.active_only, panel.apply_preset, panel.reset, *panel.buttons.values()]
     assert all(c.width() >= c.sizeHint().width() for c in controls), \
         [(type(c).__name__, c.width(), c.sizeHint().width()) for c in controls]
+
+
+def test_the_preset_list_shows_no_preset_until_one_is_chosen(qtbot, tmp_path):
+    """The preset list showed its first preset ("afraid") as chosen on a rig just opened, so choosing it was no
+    change at all (no currentIndexChanged) and the list claimed a preset nobody had chosen: it says "Choose a preset…"
+    until the user picks one. Apply with none chosen opens the list and changes nothing."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    panel, doc = w.shapes_panel, w.document
+    box = panel.presets
+    assert box.count() > 0 and box.isEnabled()
+    assert box.currentIndex() == -1 and box.currentText() == "" and box.placeholderText() == "Choose a preset…"
+    steps, before = doc.undo_stack.count(), doc.weights.copy()
+    qtbot.mouseClick(panel.apply_preset, QtCore.Qt.LeftButton)      # nothing chosen: the list opens
+    qtbot.waitUntil(lambda: box.view().isVisible(), timeout=3000)
+    assert doc.undo_stack.count() == steps and np.array_equal(doc.weights, before)
+    qtbot.keyClick(box.view(), QtCore.Qt.Key_Escape)
+    qtbot.waitUntil(lambda: not box.view().isVisible(), timeout=3000)
+    assert box.currentIndex() == -1
+    first = box.itemText(0)
+    box.setFocus()
+    with qtbot.waitSignal(box.currentIndexChanged, timeout=3000) as sig:
+        qtbot.keyClick(box, QtCore.Qt.Key_Down)                      # the first preset: a change
+    assert sig.args == [0] and box.currentText() == first
+    qtbot.mouseClick(panel.apply_preset, QtCore.Qt.LeftButton)
+    rig = doc.rig
+    expected = np.zeros(rig.n_shapes)
+    for name, value in rig.presets[first].items():
+        expected[rig.shape_index(name)] = value
+    np.testing.assert_allclose(doc.weights, expected)
+    assert doc.undo_stack.count() == steps + 1
+    # the shape list changing (a rename) keeps the chosen preset
+    panel.set_shapes(rig.shape_names, [box.itemText(i) for i in range(box.count())] + ["new one"])
+    assert box.currentText() == first

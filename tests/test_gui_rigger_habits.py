@@ -602,3 +602,44 @@ def test_export_and_open_dialogs_start_where_the_last_such_file_went_not_in_the_
         qtbot.mouseClick(w2.mocap.panel.load_take_button, QtCore.Qt.LeftButton)
     assert opened[0] != started_in and opened[1] == take_dir
     assert w2.mocap.workspace.take_path == take_dir / "take.c3d"
+
+
+# --- undoing a key ----------------------------------------------------------------------------------------------------
+def test_undoing_a_key_shows_what_the_animation_gives_without_it(qtbot, tmp_path):
+    """Set Key at 1 s between keys at 0 s and 2 s, then Ctrl+Z: the face showed the removed key's pose, which the
+    animation no longer gives anywhere; now it shows the animation's pose at 1 s (as Maya and Blender re-evaluate),
+    and Ctrl+Shift+Z the key's again. Remove key and its undo follow the animation the same way."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    kf, doc = w.keyframes, w.document
+    ruler, canvas = kf.panel.ruler, w.viewport.canvas
+
+    def scrub_to(t):
+        qtbot.mouseClick(ruler, QtCore.Qt.LeftButton, pos=QtCore.QPoint(round(ruler.x_of(t)), ruler.height() // 2))
+        QtWidgets.QApplication.processEvents()
+        assert kf.time == pytest.approx(t, abs=0.03)
+
+    _key(qtbot, canvas, QtCore.Qt.Key_S)                      # the neutral at 0 s
+    scrub_to(2.0)
+    _pose(w, jawOpen=1.0)
+    _key(qtbot, canvas, QtCore.Qt.Key_S)                      # the jaw open at 2 s
+    scrub_to(1.0)
+    between = kf.timeline.evaluate(kf.time)
+    assert np.allclose(doc.weights, between) and 0.2 < between[doc.rig.shape_index("jawOpen")] < 0.8
+    keyed = _pose(w, mouthSmile_L=0.9)
+    qtbot.mouseClick(kf.panel.set_key, QtCore.Qt.LeftButton)  # Set key at 1 s: the face keeps the pose it keys
+    assert len(kf.timeline.keys) == 3 and np.allclose(doc.weights, keyed)
+    _key(qtbot, canvas, QtCore.Qt.Key_Z, QtCore.Qt.ControlModifier)
+    assert len(kf.timeline.keys) == 2
+    assert np.allclose(doc.weights, kf.timeline.evaluate(kf.time)) and np.allclose(doc.weights, between)
+    _key(qtbot, canvas, QtCore.Qt.Key_Z, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    assert len(kf.timeline.keys) == 3 and np.allclose(doc.weights, keyed)
+    # Remove key at 1 s: the animation's pose without it; undone, the key's
+    qtbot.mouseClick(kf.panel.remove_key, QtCore.Qt.LeftButton)
+    assert len(kf.timeline.keys) == 2 and np.allclose(doc.weights, between)
+    _key(qtbot, canvas, QtCore.Qt.Key_Z, QtCore.Qt.ControlModifier)
+    assert len(kf.timeline.keys) == 3 and np.allclose(doc.weights, keyed)
+    # the viewport shows the document's pose
+    _key(qtbot, canvas, QtCore.Qt.Key_Z, QtCore.Qt.ControlModifier)   # the key set: the animation without it
+    w.redraw_now()
+    assert np.allclose(doc.weights, between)
+    assert np.allclose(w.viewport.points(), doc.surface(), atol=1e-5)

@@ -401,3 +401,48 @@ def test_personalize_refuses_calibration_frames_the_take_cannot_give(ict_dir, ta
         f"error: {take_dir / 'take.c3d'}: has 358 frames; --calibration-frames {count} must be 1 to 358 (the "
         "actor's neutral frames at its start).\n"), proc.stderr
     assert not (tmp_path / "actor.bsproj").exists()
+
+
+def test_a_takes_chosen_neutral_frames_are_the_actors_neutral(ict_rig, ict_dir, actor_dir, tmp_path):
+    """``neutral_frames`` (the solve's ``--neutral-frames A:B``; the Mocap panel's Use This Frame as Neutral) is the
+    frames the actor's neutral markers are read from: personalising read only the first calibration frames. The
+    command line's ``--neutral-frames 120:120`` writes the neutral the model gives for frame 120, not the one of the
+    first 30 frames."""
+    from model.marker_map import load_marker_map
+    from model.personalize import _marker_neutral
+    from model.project import load_project
+    from model.takes import load_take
+    take, mm = load_take(actor_dir / "take.c3d"), load_marker_map(actor_dir / "marker_map.json")
+    at_120, info = _marker_neutral(ict_rig, take, mm, neutral_frames=(120, 120))
+    assert info["neutral_frames"] == [120, 120]
+    assert np.array_equal(_marker_neutral(ict_rig, take, mm, neutral_frames="120:120")[0], at_120)
+    at_start, info = _marker_neutral(ict_rig, take, mm, 30)
+    assert info["neutral_frames"] == [0, 29] and np.abs(at_120 - at_start).max() > 0.05
+    out = tmp_path / "actor.bsproj"
+    proc = run_cli("personalize", ict_dir, "--take", actor_dir / "take.c3d", "--map", actor_dir / "marker_map.json",
+                   "--neutral-frames", "120:120", "-o", out)
+    assert "neutral: warped to the take's neutral markers of frames 120:120" in proc.stdout
+    assert np.abs(load_project(out).rig.neutral - at_120).max() < 1e-5
+
+
+@pytest.mark.parametrize("value, message", [
+    ("1-5", "--neutral-frames: '1-5' is not a frame range A:B or 'auto'."),
+    ("9:3", "--neutral-frames: the neutral range 9:3 ends before it starts."),
+    ("auto", "--neutral-frames: personalize takes the actor's neutral as a frame range A:B, not 'auto'."),
+    ("350:400", "{take}: the neutral frames 350:400 (--neutral-frames) are outside the take, which has frames 0 to "
+                "357."),
+    ("-1:2", "{take}: the neutral frames -1:2 (--neutral-frames) are outside the take, which has frames 0 to 357."),
+])
+def test_personalize_refuses_neutral_frames_the_take_cannot_give(ict_dir, take_dir, tmp_path, value, message):
+    """``personalize --neutral-frames`` is checked as ``solve``'s is: one sentence, exit code 2, nothing written."""
+    proc = run_cli("personalize", ict_dir, "--take", take_dir / "take.c3d", "--map", take_dir / "marker_map.json",
+                   f"--neutral-frames={value}", "-o", tmp_path / "actor.bsproj", check=False)
+    assert proc.returncode == 2 and proc.stderr == f"error: {message.format(take=take_dir / 'take.c3d')}\n", \
+        proc.stderr
+    assert not (tmp_path / "actor.bsproj").exists()
+
+
+def test_personalize_neutral_frames_need_a_take(ict_dir, tmp_path):
+    proc = run_cli("personalize", ict_dir, "--neutral-frames", "3:5", "-o", tmp_path / "actor.bsproj", check=False)
+    assert proc.returncode == 2 and proc.stderr == (
+        "error: --neutral-frames: the actor's neutral frames are a marker take's; give --take too.\n"), proc.stderr

@@ -35,6 +35,10 @@ def _button(text: str, tip: str, signal=None) -> QtWidgets.QPushButton:
     return b
 
 
+MIRROR_TIP = ("Add the other side's version of the selected corrective: drivers _L↔_R, shape reflected across x = 0 "
+              "(undoable)")
+
+
 class CorrectivesPanel(QtWidgets.QWidget):
     new_requested = QtCore.Signal()            # new corrective from the ticked drivers
     use_pose_requested = QtCore.Signal()       # tick the shapes whose weight is > 0
@@ -99,8 +103,7 @@ class CorrectivesPanel(QtWidgets.QWidget):
                                       self.drivers_requested)
         self.edit_button = _button("Sculpt", "Set the selected corrective's drivers to 1 and sculpt it again",
                                    self.edit_shape_requested)
-        self.mirror_button = _button("Mirror", "Add the other side's version of the selected corrective: "
-                                     "drivers _L↔_R, shape reflected across x = 0 (undoable)", self.mirror_requested)
+        self.mirror_button = _button("Mirror", MIRROR_TIP, self.mirror_requested)
         self.delete_button = _button("Delete", "Delete the selected corrective (undoable; Delete key in the list)",
                                      self.delete_requested)
         # two rows of buttons: five in one made the panel wider than its dock at the default window size
@@ -247,7 +250,21 @@ class CorrectivesPanel(QtWidgets.QWidget):
         lay.addWidget(self.merge_mirrored)
         self.pairs = QtWidgets.QTreeWidget()
         self.pairs.setHeaderLabels(["#", "Score", "Shape", "Shape", "Sides", "Fixed"])
+        self.pairs.headerItem().setToolTip(4, "both: the row stands for the pair and its mirror image on the other "
+                                              "side (One row for a pair and its mirror)")
         self.pairs.headerItem().setToolTip(5, "Whether the pair already has a corrective (✓), or one side of two")
+        # every column within the dock at the window's default size (1400x900): sized to their contents, the Sides and
+        # Fixed columns sat past the list's right edge, behind a horizontal scroll bar. The numbers, Sides and Fixed
+        # keep their contents' width; the two shape names share the rest, elided in the middle (the row's tooltip
+        # names them whole)
+        header = self.pairs.header()
+        header.setStretchLastSection(False)
+        header.setMinimumSectionSize(20)
+        for c, mode in enumerate((QtWidgets.QHeaderView.ResizeToContents, QtWidgets.QHeaderView.ResizeToContents,
+                                  QtWidgets.QHeaderView.Stretch, QtWidgets.QHeaderView.Stretch,
+                                  QtWidgets.QHeaderView.ResizeToContents, QtWidgets.QHeaderView.ResizeToContents)):
+            header.setSectionResizeMode(c, mode)
+        self.pairs.setTextElideMode(QtCore.Qt.ElideMiddle)
         self.pairs.setRootIsDecorated(False)
         self.pairs.setAlternatingRowColors(True)
         self.pairs.setToolTip("Shape pairs that interfere most, best first; select one to see where (the "
@@ -386,6 +403,11 @@ class CorrectivesPanel(QtWidgets.QWidget):
             self.rule.setCurrentIndex(max(0, self.rule.findData(key)))
             self._updating = False
 
+    def set_mirror_allowed(self, allowed: bool, why: str | None = None) -> None:
+        """Enable Mirror for a selected corrective it can act on; disabled, its tooltip says ``why``."""
+        self.mirror_button.setEnabled(allowed)
+        self.mirror_button.setToolTip(MIRROR_TIP if allowed or not why else why)
+
     def _on_rule(self, _index: int) -> None:
         if not self._updating and self.selected_name() is not None:
             self.rule_requested.emit(self.rule.currentData())
@@ -444,8 +466,6 @@ class CorrectivesPanel(QtWidgets.QWidget):
         self.set_pair_names(names)
         self.set_pair_correctives([r[4] if len(r) > 4 else "" for r in rows])
         self.set_pair_action(False)
-        for c in range(self.pairs.columnCount()):
-            self.pairs.resizeColumnToContents(c)
         self.create_pair_button.setEnabled(False)
 
     def set_pair_names(self, rows) -> None:
@@ -456,8 +476,8 @@ class CorrectivesPanel(QtWidgets.QWidget):
             if item is not None:
                 item.setText(2, a)
                 item.setText(3, b)
-                for c in range(5):
-                    item.setToolTip(c, f"{a} × {b}, and its mirror image {twin}" if twin else "")
+                for c in range(6):   # the names whole (the list may elide them)
+                    item.setToolTip(c, f"{a} × {b}, and its mirror image {twin}" if twin else f"{a} × {b}")
 
     def set_pair_action(self, has_corrective: bool) -> None:
         """The pair button creates the selected pair's corrective, or edits the one it has."""

@@ -27,7 +27,7 @@ class PersonalizeDialog(QtWidgets.QDialog):
     """The actor's neutral scan, pose scans or a marker take (+ its map), and the project to write."""
 
     def __init__(self, parent=None, *, rig_name: str = "rig", output: str = "", take: str = "", marker_map: str = "",
-                 folder: str = "", calibration_frames: int = 30) -> None:
+                 folder: str = "", calibration_frames: int = 30, neutral_frames: str = "") -> None:
         super().__init__(parent)
         self.setWindowTitle("Personalize to Actor")
         self._folder = folder
@@ -73,10 +73,19 @@ class PersonalizeDialog(QtWidgets.QDialog):
         self.calibration_spin = QtWidgets.QSpinBox()
         self.calibration_spin.setRange(1, 100000)
         self.calibration_spin.setValue(calibration_frames)
-        self.calibration_spin.setToolTip("The take's neutral frames at its start")
+        self.calibration_spin.setToolTip("The take's neutral frames at its start (used when no neutral frames are "
+                                         "chosen below)")
+        self.neutral_frames_edit = QtWidgets.QLineEdit(neutral_frames)
+        self.neutral_frames_edit.setPlaceholderText("the frames at its start")
+        self.neutral_frames_edit.setToolTip("The actor's neutral: frames A:B of the take (inclusive, counted from 0), "
+                                            "as chosen in the Mocap panel (Use This Frame as Neutral); empty: the "
+                                            "neutral frames at its start")
+        self.neutral_frames_edit.textChanged.connect(self._on_neutral_frames)
         form.addRow("Take", _file_row(self.take_edit, "Browse…", self._pick_take))
         form.addRow("Marker map", _file_row(self.map_edit, "Browse…", self._pick_map))
         form.addRow("Neutral frames at its start", self.calibration_spin)
+        form.addRow("Or the neutral frames A:B", self.neutral_frames_edit)
+        self._on_neutral_frames(neutral_frames)
         lay.addWidget(mocap)
 
         out = QtWidgets.QFormLayout()
@@ -113,6 +122,9 @@ class PersonalizeDialog(QtWidgets.QDialog):
     def resizeEvent(self, event) -> None:
         super().resizeEvent(event)
         self._hold_intro()
+
+    def _on_neutral_frames(self, text: str) -> None:
+        self.calibration_spin.setEnabled(not text.strip())   # a chosen range is the neutral: the count is unused
 
     # --- choosing files -------------------------------------------------------------------------------
     def _pick_neutral(self) -> None:
@@ -163,11 +175,13 @@ class PersonalizeDialog(QtWidgets.QDialog):
         return [self.scan_list.item(i).text() for i in range(self.scan_list.count())]
 
     def request(self) -> dict:
-        """{neutral_scan, scans, take, marker_map, calibration_frames, output}: paths as typed (None when empty)."""
+        """{neutral_scan, scans, take, marker_map, calibration_frames, neutral_frames, output}: paths and the neutral
+        range as typed (None when empty)."""
         def text(edit):
             return edit.text().strip() or None
         return {"neutral_scan": text(self.neutral_edit), "scans": self.scans(), "take": text(self.take_edit),
                 "marker_map": text(self.map_edit), "calibration_frames": self.calibration_spin.value(),
+                "neutral_frames": text(self.neutral_frames_edit),
                 "output": text(self.output_edit)}
 
 

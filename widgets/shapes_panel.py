@@ -481,9 +481,11 @@ class ShapesPanel(QtWidgets.QWidget):
         lay.addLayout(top)
         row = QtWidgets.QHBoxLayout()
         self.presets = QtWidgets.QComboBox()
-        self.presets.setToolTip("Emotion presets: apply a weight set (undoable)")
+        self.presets.setToolTip("Emotion presets: choose one, then Apply sets its weights (undoable)")
+        # none chosen until the user picks one: the first preset shown as if chosen made picking it no change
+        self.presets.setPlaceholderText("Choose a preset…")
         self.apply_preset = QtWidgets.QPushButton("Apply")
-        self.apply_preset.setToolTip("Set the weights of the selected preset")
+        self.apply_preset.setToolTip("Set the weights of the selected preset (with none chosen, opens the list)")
         self.apply_preset.clicked.connect(self._preset_clicked)
         self.reset = QtWidgets.QPushButton("Reset all")
         self.reset.setToolTip("Set every weight to 0 (undoable)")
@@ -557,8 +559,10 @@ class ShapesPanel(QtWidgets.QWidget):
         names = list(names)
         current = [self.presets.itemText(i) for i in range(self.presets.count())]
         if current != list(presets or []):
+            chosen = self.presets.currentText() if self.presets.currentIndex() >= 0 else ""
             self.presets.clear()
             self.presets.addItems(presets or [])
+            self.presets.setCurrentIndex(self.presets.findText(chosen) if chosen else -1)   # -1: the placeholder
         # enabled only with presets to apply, whatever the list was (a window opened straight on a rig without
         # presets kept the empty list's controls enabled: Apply did nothing)
         self.presets.setEnabled(bool(presets))
@@ -806,8 +810,10 @@ class ShapesPanel(QtWidgets.QWidget):
         return menu
 
     def _preset_clicked(self) -> None:
-        if self.presets.currentText():
+        if self.presets.currentIndex() >= 0 and self.presets.currentText():
             self.pose_edited.emit(PoseEdit("preset", preset=self.presets.currentText()))
+        elif self.presets.count():
+            self.presets.showPopup()     # nothing chosen yet: the list to choose from
 
     def set_target(self, text: str) -> None:
         """Say which weights the sliders edit (the global pose, a region's weights)."""
