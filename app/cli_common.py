@@ -126,7 +126,7 @@ def about(path):
 
 
 RATE_HELP = "frames a second of a take whose file gives no rate (a weights CSV without a time column: default 30 " \
-            "with a warning; a plain marker CSV: 60); a file's own rate is kept"
+            "with a warning; a plain marker CSV: 60 with a warning); a file's own rate is kept"
 
 
 def add_rate_option(sp, help_text: str = "") -> None:
