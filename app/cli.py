@@ -102,8 +102,8 @@ def cmd_export(args) -> int:
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
     animation = load_animation(args.animation, rig, args.rate) if args.animation else None
-    check_free_space({args.output: export_size(rig, args.output, animation.n_frames if animation else 0)},
-                     lower_bounds=[args.output])
+    check_free_space({args.output: export_size(rig, args.output, animation.n_frames if animation else 0,
+                                               units=args.out_units, up=args.up)}, lower_bounds=[args.output])
     export_rig(rig, args.output, weights, animation, units=args.out_units, up=args.up)
     print_warnings(animation.warnings if animation is not None else ())
     frames = f", {animation.n_frames} frames" if animation is not None else ""

@@ -110,3 +110,38 @@ def test_a_batch_take_whose_cache_does_not_fit_fails_before_its_solve(tmp_path, 
     row = solve_take_file(job, str(take), str(tmp_path / "out" / "take"))
     assert row["status"] == "failed" and "cache.pc2: needs 17.3 KB" in row["error"], row
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("suffix, frames", [(".usdc", 0), (".usd", 100), (".usda", 100)])
+def test_export_refuses_a_usd_its_disk_has_no_room_for(tmp_path, tiny_disk, monkeypatch, capsys, suffix, frames):
+    """A USD export was written without a look at the disk (``export_size`` was 0 for USD). Now it is sized as a
+    least (``model.export.usd_size``): a .usdc (and a .usd, crate) holds the points and the offsets of the vertices
+    each shape moves uncompressed, 12 bytes a vector (36 + 2 x 30 here); a .usda writes each at least as
+    ``(0, 0, 0), ``. Refused in one sentence, nothing written; on the real disk the file written is no smaller."""
+    from model.export import export_size
+    from model.readers import load_rig
+    rig, take = _rig_and_weights(tmp_path, frames=frames or 40)
+    out = tmp_path / f"a{suffix}"
+    animation = ["--animation", str(take)] if frames else []
+    least = export_size(load_rig(rig), out, frames)
+    assert least == 12 * (36 + 2 * 30) if suffix != ".usda" else least > 12 * (36 + 2 * 30)
+    code = main(["export", str(rig), "-o", str(out), *animation])
+    assert code == 2 and capsys.readouterr().err == (
+        f"error: {out}: needs at least {human_size(least)}, but the disk of {tmp_path} has 1 KB free; free some space "
+        "or write to another disk.\n")
+    assert not out.exists()
+    monkeypatch.undo()
+    assert main(["export", str(rig), "-o", str(out), *animation]) == 0
+    assert out.stat().st_size >= least
+
+
+def test_the_usd_sizes_are_no_more_than_ict_writes(ict_rig, tmp_path):
+    """The least sizes of ICT's USD exports (in cm, turned z-up) are below what usd-core writes (a crate's arrays
+    compressed by a newer usd-core would show here first)."""
+    from model.export import export_rig, export_size
+    for suffix in (".usdc", ".usda"):
+        out = tmp_path / f"ict{suffix}"
+        least = export_size(ict_rig, out, units="cm", up="z")
+        export_rig(ict_rig, out, units="cm", up="z")
+        assert 0.3 * out.stat().st_size < least <= out.stat().st_size, suffix
+
