@@ -145,3 +145,25 @@ def test_the_usd_sizes_are_no_more_than_ict_writes(ict_rig, tmp_path):
         export_rig(ict_rig, out, units="cm", up="z")
         assert 0.3 * out.stat().st_size < least <= out.stat().st_size, suffix
 
+
+def test_a_batch_whose_caches_do_not_fit_together_is_refused_before_any_take(tmp_path, monkeypatch):
+    """Each batch take's cache was checked alone, before its own solve: with room for one of them (20 KB free, 17.3
+    KB a cache) every take passed, and the takes together filled the disk. The caches of all the takes to solve are
+    summed first: the batch is refused in one sentence before any take is solved, nothing written."""
+    from model.batch import BatchJob, run_batch
+    from model.readers import load_rig
+    rig, take = _rig_and_weights(tmp_path)
+    other = tmp_path / "other.csv"
+    other.write_bytes(take.read_bytes())
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage(10**9, 10**9 - 20_000, 20_000))
+    job = BatchJob.prepare(load_rig(rig), {"mode": "global", "residual": None, "calibration_frames": 30,
+                                           "fixed_head": False}, cache=True)
+    out = tmp_path / "out"
+    with pytest.raises(RigInputError) as err:
+        run_batch(job, [take, other], out, workers=1)
+    assert str(err.value) == (f"{out}: the caches (cache.pc2) of the 2 takes to solve need 34.6 KB together, but the "
+                              f"disk of {tmp_path} has 20 KB free; free some space or write to another disk.")
+    assert not out.exists()
+    check = BatchJob(rig=job.rig, settings={}, cache=False)     # without --cache nothing large is summed
+    from model.batch import check_caches_space
+    check_caches_space(check, [take, other], [out / "take", out / "other"], out)
