@@ -276,6 +276,14 @@ def export_size(rig: Rig, path: str | Path, n_frames: int = 0, *, units: str | N
     return V * 12 + sum(min(V * 12, m * 14) for m in moved) + int(n_frames) * (1 + len(moved)) * 4
 
 
+def check_export_space(rig: Rig, path: str | Path, n_frames: int = 0, *, units: str | None = None,
+                       up: str = "y") -> None:
+    """Refuse (RigInputError, ``model.free_space``) an export of ``rig`` to ``path`` whose least size
+    (``export_size``) its disk has no room for: the ``export`` command and the window's File ▸ Export Rig."""
+    from .free_space import check_free_space
+    check_free_space({path: export_size(rig, path, n_frames, units=units, up=up)}, lower_bounds=[path])
+
+
 def usd_size(content: ExportContent, suffix: str, n_frames: int = 0) -> int:
     """The least ``model.export_usd`` writes for ``content`` as ``suffix``. A .usdc (crate) stores the points and
     each target's offsets (float32 vectors of the vertices it moves) uncompressed, 12 bytes a vector, an array equal
