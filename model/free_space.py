@@ -52,8 +52,9 @@ def check_free_space(sizes: Mapping[str | Path, int], lower_bounds: Collection[s
         if needed <= free:
             continue
         names = named or " and ".join(str(p) for p, _, _ in files) + ":"
-        together = " together" if len(files) > 1 else ""
+        many = named is not None or len(files) > 1
+        together = " together" if many else ""
         at_least = any(str(p) in bounds for p, _, _ in files)
-        raise RigInputError(f"{names} need{'s' if len(files) == 1 else ''}{' at least' if at_least else ''} "
+        raise RigInputError(f"{names} need{'' if many else 's'}{' at least' if at_least else ''} "
                             f"{human_size(needed)}{together}, but the disk of {folder} has {human_size(free)} free; "
                             "free some space or write to another disk.")

@@ -167,3 +167,32 @@ def test_a_batch_whose_caches_do_not_fit_together_is_refused_before_any_take(tmp
     check = BatchJob(rig=job.rig, settings={}, cache=False)     # without --cache nothing large is summed
     from model.batch import check_caches_space
     check_caches_space(check, [take, other], [out / "take", out / "other"], out)
+
+
+def test_a_batch_counts_only_what_its_caches_add_to_the_old_ones_they_replace(tmp_path, monkeypatch):
+    """The old caches of an earlier run are freed as each take's new one replaces it: a batch whose caches are as
+    large as the old ones needs room for one at a time, not for all of them again (it is solved), and one whose new
+    caches outgrow the old is refused for what they add."""
+    from model.batch import BatchJob, check_caches_space, run_batch
+    from model.readers import load_rig
+    rig, take = _rig_and_weights(tmp_path)
+    other = tmp_path / "other.csv"
+    other.write_bytes(take.read_bytes())
+    out = tmp_path / "out"
+    for name in ("take", "other"):
+        (out / name).mkdir(parents=True)
+        (out / name / "cache.pc2").write_bytes(b"\0" * 17_000)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage(10**9, 10**9 - 20_000, 20_000))
+    job = BatchJob.prepare(load_rig(rig), {"mode": "global", "residual": None, "calibration_frames": 30,
+                                           "fixed_head": False}, cache=True)
+    rows = run_batch(job, [take, other], out, workers=1)
+    assert [r["status"] for r in rows] == ["solved", "solved"], rows
+    assert (out / "take" / "cache.pc2").stat().st_size == 17_312
+    for name in ("take", "other"):
+        (out / name / "cache.pc2").write_bytes(b"\0" * 100)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage(10**9, 10**9 - 30_000, 30_000))
+    with pytest.raises(RigInputError) as err:
+        check_caches_space(job, [take, other], [out / "take", out / "other"], out)
+    assert str(err.value) == (f"{out}: the caches (cache.pc2) of the 2 takes to solve, beyond the old ones they "
+                              f"replace, need 34.4 KB together, but the disk of {out / 'take'} has 30 KB free; "
+                              "free some space or write to another disk.")
