@@ -55,7 +55,8 @@ def check_not_in_rig_folder(path: str | Path, rig_source: str | Path | None) -> 
 def gltf_files(path: str | Path) -> list[tuple[str, str, str]]:
     """The files a ``.gltf`` at ``path`` refers to beside it: (kind "buffer" or "image", its ``uri``, its real
     path) for each ``buffers[].uri`` and ``images[].uri`` that is a relative file name (not a ``data:`` URI nor a
-    URL). None for anything else, or for a file that is no glTF JSON: its reader says what is wrong with it."""
+    URL). Nothing for any other file, for a file that is no glTF JSON, or for a uri no file can have (a NUL): the
+    reader says what is wrong with those."""
     path = Path(path)
     if path.suffix.lower() != ".gltf" or not path.is_file():
         return []
@@ -70,7 +71,8 @@ def gltf_files(path: str | Path) -> list[tuple[str, str, str]]:
         items = gltf.get(key) if isinstance(gltf, dict) else None
         for item in items if isinstance(items, list) else []:
             uri = item.get("uri") if isinstance(item, dict) else None
-            if not isinstance(uri, str) or not uri or uri.startswith("data:") or "://" in uri:
+            name = unquote(uri) if isinstance(uri, str) else ""
+            if not name or "\0" in name or uri.startswith("data:") or "://" in uri:
                 continue
-            found.append((kind, uri, os.path.realpath(os.path.join(folder, unquote(uri)))))
+            found.append((kind, uri, os.path.realpath(os.path.join(folder, name))))
     return found

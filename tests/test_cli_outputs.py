@@ -191,3 +191,10 @@ def test_no_command_writes_over_the_files_a_gltf_rig_reads(tmp_path):
     assert {p: p.read_bytes() for p in rig.parent.iterdir()} == before
     run_cli("render", rig, "--size", "32,32", "-o", rig.parent / "preview.png")
     assert (rig.parent / "preview.png").is_file()
+    # a uri no file can have (a NUL) is the reader's to refuse, not a crash of the output check
+    import json
+    gltf = json.loads(rig.read_text())
+    gltf["buffers"][0]["uri"] = "bad%00name.bin"
+    rig.write_text(json.dumps(gltf))
+    _refused(run_cli("render", rig, "--size", "32,32", "-o", rig.parent / "nul.png", check=False),
+             f"{rig}: the glTF is damaged (ValueError: embedded null byte).")
