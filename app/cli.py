@@ -94,16 +94,14 @@ def cmd_render(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from model.export import export_rig, export_size, load_animation
-    from model.free_space import check_free_space
+    from model.export import check_export_space, export_rig, load_animation
     check_rate(args)
     if args.rate is not None and not args.animation:
         raise RigInputError("--rate: gives the frame rate of --animation's weights CSV; no --animation was given.")
     rig = load_rig_arg(args)
     weights = pose_weights(rig, args)
     animation = load_animation(args.animation, rig, args.rate) if args.animation else None
-    check_free_space({args.output: export_size(rig, args.output, animation.n_frames if animation else 0)},
-                     lower_bounds=[args.output])
+    check_export_space(rig, args.output, animation.n_frames if animation else 0, units=args.out_units, up=args.up)
     export_rig(rig, args.output, weights, animation, units=args.out_units, up=args.up)
     print_warnings(animation.warnings if animation is not None else ())
     frames = f", {animation.n_frames} frames" if animation is not None else ""

@@ -13,7 +13,7 @@ import numpy as np
 
 from model.errors import RigInputError
 from model.rig import MAX_WEIGHT
-from model.beside_inputs import check_beside
+from model.beside_inputs import check_beside, gltf_files
 
 EXIT_INPUT = 2        # bad input: one sentence naming the file and the problem
 EXIT_UNEXPECTED = 1   # anything else: one sentence and a crash log with the traceback
@@ -91,8 +91,9 @@ _INPUTS = (("rig", "RIG"), ("take", "TAKE"), ("map", "--map"), ("animation", "--
 
 
 def check_not_an_input(args, path, option: str) -> None:
-    """Refuse an output file that is one of the command's inputs, or a file the reader of an input folder (the rig's,
-    the scans') reads there (``model.beside_inputs.check_beside``). ``corrective`` may write its project over the
+    """Refuse an output file that is one of the command's inputs, a file a ``.gltf`` input refers to (its buffers and
+    images: ``model.beside_inputs.gltf_files``), or a file the reader of an input folder (the rig's, the scans')
+    reads there (``model.beside_inputs.check_beside``). ``corrective`` may write its project over the
     RIG project it adds to (``rig_updated_in_place``)."""
     out = os.path.realpath(path)
     for dest, name in _INPUTS:
@@ -103,6 +104,10 @@ def check_not_an_input(args, path, option: str) -> None:
                 if dest == "rig" and getattr(args, "rig_updated_in_place", False):
                     continue
                 raise RigInputError(f"{path}: is {name} itself, which this command reads; give {option} another file.")
+            for kind, uri, referred in gltf_files(source):   # a .gltf's external buffers and images are input too
+                if referred == out:
+                    raise RigInputError(f"{path}: is the {kind} file '{uri}' that {name} ({value}) reads; give "
+                                        f"{option} another file.")
             folder = source if os.path.isdir(source) else \
                 os.path.dirname(source) if dest == "rig" and source.lower().endswith(".obj") else None
             if folder and os.path.dirname(out) == folder:
@@ -126,7 +131,7 @@ def about(path):
 
 
 RATE_HELP = "frames a second of a take whose file gives no rate (a weights CSV without a time column: default 30 " \
-            "with a warning; a plain marker CSV: 60); a file's own rate is kept"
+            "with a warning; a plain marker CSV: 60 with a warning); a file's own rate is kept"
 
 
 def add_rate_option(sp, help_text: str = "") -> None:

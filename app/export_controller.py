@@ -10,7 +10,7 @@ from PySide6 import QtCore, QtWidgets
 
 from app import settings as app_settings
 from app.background import BackgroundRunner
-from model.export import WeightAnimation, animation_from_timeline, export_rig
+from model.export import WeightAnimation, animation_from_timeline, check_export_space, export_rig
 
 FILTERS = ("glTF binary (*.glb);;glTF (*.gltf);;USD (*.usd *.usda *.usdc);;OBJ, the posed surface (*.obj)")
 UNITS = ("m", "cm", "mm")
@@ -105,15 +105,18 @@ class ExportController(QtCore.QObject):
 
     def export_to(self, path: str | Path, animation: str | None = None, *, units: str | None = None,
                   up: str = "y") -> None:
-        """Export in the background: the rig and pose are copied now, so edits made meanwhile do not leak in."""
+        """Export in the background: the rig and pose are copied now, so edits made meanwhile do not leak in. A file
+        its disk has no room for is refused first (``model.export.check_export_space``, as ``export`` refuses it)."""
         doc = self.window.document
         rig = copy.deepcopy(doc.rig)
         weights = self.current_weights()
         anim = self.animations()[animation]() if animation else None
         path = Path(path)
         self.window.show_status(f"Exporting {path.name}…", 0)
-        self.runner.submit(lambda: export_rig(rig, path, weights, anim, units=units, up=up),
-                           lambda p: self._done(path, anim), self._failed)
+        def job():
+            check_export_space(rig, path, anim.n_frames if anim is not None else 0, units=units, up=up)
+            return export_rig(rig, path, weights, anim, units=units, up=up)
+        self.runner.submit(job, lambda p: self._done(path, anim), self._failed)
 
     def _done(self, path: Path, anim) -> None:
         frames = f" with {anim.n_frames} animated frames" if anim is not None else ""

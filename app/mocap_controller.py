@@ -177,6 +177,10 @@ class MocapController(QtCore.QObject):
         else:
             self.panel.take_label.setText(self._weight_take_text(take, path))
             self._start_weight_playback()
+        if take.warnings:   # what the reader decided (a rate assumed, labels renamed, ...), in the model's words
+            said = self.panel.status_label.text()
+            self.panel.set_status(" ".join(["Warning:", *take.warnings] + ([said] if said else [])))
+        self.panel.take_label.setToolTip("\n".join(take.warnings))
         self._sync_panel()
         return True
 

@@ -643,6 +643,34 @@ def _forked_scheduler_cluster(*, n_workers: int, threads_per_worker: int, host: 
                        silence_logs=silence_logs)
 
 
+def check_caches_space(job: BatchJob, takes: list[Path], take_dirs: list[Path], out_dir: Path) -> None:
+    """Refuse a batch with ``--cache`` (``job.cache``) before any take is solved when the caches of all the
+    ``takes`` to solve (each its frames × the rig's vertices × 12 bytes, ``model.pc2``), written into ``take_dirs``,
+    do not fit on their disk together: each take's own check (``check_solve_output_space``) passed while the disk
+    had room for any one of them, and the takes then filled it. A take's old cache (an earlier run's) is freed when
+    its new one replaces it: only what a take's cache adds to it counts. A take that cannot be read is left to fail
+    alone."""
+    if not job.cache or len(takes) < 2:
+        return
+    from .free_space import check_free_space
+    from .pc2 import pc2_size
+    from .takes import load_take
+    sizes, replaced = {}, False
+    for take, folder in zip(takes, take_dirs):
+        try:
+            frames = load_take(take, rate=job.settings.get("rate")).n_frames
+        except RigInputError:
+            continue
+        cache = folder / OUTPUTS["cache"]
+        old = cache.stat().st_size if cache.is_file() else 0
+        replaced |= old > 0
+        sizes[cache] = pc2_size(frames, job.rig.n_vertices) - old
+    if len(sizes) < 2:      # one take's cache: its own check says it, naming it
+        return
+    check_free_space(sizes, named=f"{out_dir}: the caches ({OUTPUTS['cache']}) of the {len(sizes)} takes to solve"
+                                  + (", beyond the old ones they replace," if replaced else ""))
+
+
 def longest_first(indices: list[int], takes: list[Path]) -> list[int]:
     """``indices`` of ``takes`` in the order to submit them: the largest files (the longest takes) first, ties in the
     given order. The workers take the submitted takes in order, so the last ones to start are the shortest, and a
@@ -774,6 +802,7 @@ def run_batch(job: BatchJob, takes: list[Path], out_dir: str | Path, *, names: l
         if not force:
             rows[i] = completed_row(job, path, out_dir / name, name)
     pending = longest_first([i for i, r in enumerate(rows) if r is None], takes)
+    check_caches_space(job, [takes[i] for i in pending], [out_dir / names[i] for i in pending], out_dir)
     started = time.time()
     done = len(takes) - len(pending)
     outcome = ClusterOutcome()

@@ -1,11 +1,15 @@
 """Outputs that would land among what an input folder's reader reads (``check_beside``): a posed OBJ written into
 the rig's OBJ folder is read as one more shape the next time the rig is opened (and an existing one there is
-overwritten), an OBJ among the scans as one more scan. One rule, without Qt, for the command line's output checks
-(``app.cli_common.check_not_an_input``) and the window's File ▸ Export Pose as OBJ (``check_not_in_rig_folder``)."""
+overwritten), an OBJ among the scans as one more scan; and the files a ``.gltf`` input refers to (``gltf_files``: its
+external buffers and images), which an output written over would destroy. One rule, without Qt, for the command
+line's output checks (``app.cli_common.check_not_an_input``) and the window's File ▸ Export Pose as OBJ
+(``check_not_in_rig_folder``)."""
 from __future__ import annotations
 
+import json
 import os
 from pathlib import Path
+from urllib.parse import unquote
 
 from .errors import RigInputError
 from .textures import MASK_NAME, NORMAL_SUFFIX, SUFFIXES as IMAGE_SUFFIXES
@@ -46,3 +50,29 @@ def check_not_in_rig_folder(path: str | Path, rig_source: str | Path | None) -> 
     if os.path.dirname(out) == folder:
         check_beside(out, folder, "rig", f"{path}: is in {rig_source}, the folder the rig is read from, and would",
                      "; choose a file elsewhere.")
+
+
+def gltf_files(path: str | Path) -> list[tuple[str, str, str]]:
+    """The files a ``.gltf`` at ``path`` refers to beside it: (kind "buffer" or "image", its ``uri``, its real
+    path) for each ``buffers[].uri`` and ``images[].uri`` that is a relative file name (not a ``data:`` URI nor a
+    URL). Nothing for any other file, for a file that is no glTF JSON, or for a uri no file can have (a NUL): the
+    reader says what is wrong with those."""
+    path = Path(path)
+    if path.suffix.lower() != ".gltf" or not path.is_file():
+        return []
+    try:
+        with open(path, "rb") as f:
+            gltf = json.loads(f.read().decode("utf-8-sig"))
+    except (OSError, ValueError):
+        return []
+    folder = os.path.dirname(os.path.realpath(path))
+    found = []
+    for kind, key in (("buffer", "buffers"), ("image", "images")):
+        items = gltf.get(key) if isinstance(gltf, dict) else None
+        for item in items if isinstance(items, list) else []:
+            uri = item.get("uri") if isinstance(item, dict) else None
+            name = unquote(uri) if isinstance(uri, str) else ""
+            if not name or "\0" in name or uri.startswith("data:") or "://" in uri:
+                continue
+            found.append((kind, uri, os.path.realpath(os.path.join(folder, name))))
+    return found

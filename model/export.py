@@ -258,19 +258,53 @@ def _smooth_unless_said(corners, normals: bool):
 EXPORT_SUFFIXES = (".glb", ".gltf", ".usd", ".usda", ".usdc", ".obj")
 
 
-def export_size(rig: Rig, path: str | Path, n_frames: int = 0) -> int:
-    """The least a glTF export of ``rig`` to ``path`` with an animation of ``n_frames`` frames takes (bytes, known
-    before writing), for ``model.free_space``: the neutral's float32 positions, each shape's and corrective's
-    offsets (float32 for every vertex, or for the vertices it moves with at least a 2-byte index each, whichever is
-    less), and a key time and a float32 weight per frame for each; in-betweens, normals and a .gltf's base64 take
-    more (ICT: at least 9.6 MB, written 27 MB). 0 for anything else: an OBJ is one surface, and USD promises no
-    least size (a .usdc compresses its arrays: ICT's is 8.9 MB, a .usda writes a zero in one digit)."""
-    if Path(path).suffix.lower() not in (".glb", ".gltf"):
+def export_size(rig: Rig, path: str | Path, n_frames: int = 0, *, units: str | None = None, up: str = "y") -> int:
+    """The least an export of ``rig`` to ``path`` with an animation of ``n_frames`` frames takes (bytes, known before
+    writing), for ``model.free_space``. glTF: the neutral's float32 positions, each shape's and corrective's offsets
+    (float32 for every vertex, or for the vertices it moves with at least a 2-byte index each, whichever is less),
+    and a key time and a float32 weight per frame for each; in-betweens, normals and a .gltf's base64 take more
+    (ICT: at least 9.6 MB, written 27 MB). USD: ``usd_size`` (``units`` and ``up`` as ``export_rig``'s). 0 for an
+    OBJ: it is one surface."""
+    suffix = Path(path).suffix.lower()
+    if suffix in (".usd", ".usda", ".usdc"):
+        return usd_size(export_content(rig, units=units or "m", up=up), suffix, n_frames)
+    if suffix not in (".glb", ".gltf"):
         return 0
     V = rig.n_vertices
     moved = [int(np.count_nonzero(np.any(np.asarray(d, dtype=np.float32) != 0, axis=1)))
              for d in [*rig.deltas, *(c.delta for c in rig.correctives)]]
     return V * 12 + sum(min(V * 12, m * 14) for m in moved) + int(n_frames) * (1 + len(moved)) * 4
+
+
+def check_export_space(rig: Rig, path: str | Path, n_frames: int = 0, *, units: str | None = None,
+                       up: str = "y") -> None:
+    """Refuse (RigInputError, ``model.free_space``) an export of ``rig`` to ``path`` whose least size
+    (``export_size``) its disk has no room for: the ``export`` command and the window's File ▸ Export Rig."""
+    from .free_space import check_free_space
+    check_free_space({path: export_size(rig, path, n_frames, units=units, up=up)}, lower_bounds=[path])
+
+
+def usd_size(content: ExportContent, suffix: str, n_frames: int = 0) -> int:
+    """The least ``model.export_usd`` writes for ``content`` as ``suffix``. A .usdc (crate) stores the points and
+    each target's offsets (float32 vectors of the vertices it moves) uncompressed, 12 bytes a vector, an array equal
+    to one already written once (its integer and float arrays it compresses: not counted). A .usda writes every
+    value as text: a vector at least ``(0, 0, 0)`` and a number at least one digit, each with ``, `` between them:
+    the points, the offsets, the targets' point indices, the faces, and a weight per target and frame. A .usd is
+    crate unless usd-core is set to write text: the lesser of the two."""
+    points = np.asarray(content.neutral, dtype=np.float32)
+    offsets = []
+    for d in content.deltas:
+        moved = np.abs(d).max(axis=1) > 0 if len(d) else np.zeros(0, dtype=bool)
+        offsets.append(np.asarray(d[moved], dtype=np.float32))
+
+    def text(n: int, each: int) -> int:   # n values of at least ``each`` characters, ", " between them
+        return n * (each + 2) - 2 if n else 0
+    usda = (text(len(points), 9) + sum(text(len(o), 9) + text(len(o), 1) for o in offsets)
+            + text(len(content.face_counts), 1) + text(len(content.face_indices), 1)
+            + int(n_frames) * text(len(content.names), 1))
+    distinct = {(a + np.float32(0)).tobytes() for a in [points, *offsets] if len(a)}   # -0.0 as 0.0: equal arrays
+    usdc = 12 * sum(len(b) // 12 for b in distinct)
+    return {".usda": usda, ".usdc": usdc}.get(suffix, min(usda, usdc))
 
 
 def export_rig(rig: Rig, path: str | Path, weights: np.ndarray | None = None,

@@ -32,11 +32,12 @@ def _existing_folder(path: Path) -> Path:
     return folder
 
 
-def check_free_space(sizes: Mapping[str | Path, int], lower_bounds: Collection[str | Path] = ()) -> None:
+def check_free_space(sizes: Mapping[str | Path, int], lower_bounds: Collection[str | Path] = (),
+                     named: str | None = None) -> None:
     """Refuse (RigInputError) outputs ``{path: bytes}`` that do not fit in the free space of their disk: the files
     on one disk together, each written whole beside any old one before replacing it (``model.atomic``), so an old
     file frees nothing. ``lower_bounds``: the outputs whose sizes are the least they will be (the sentence says
-    "at least")."""
+    "at least"). ``named``: what the sentence calls the files ("OUTDIR: the caches of ..."), else their paths."""
     bounds = {str(p) for p in lower_bounds}
     by_disk: dict[int, list[tuple[Path, int, Path]]] = {}
     for path, size in sizes.items():
@@ -50,9 +51,10 @@ def check_free_space(sizes: Mapping[str | Path, int], lower_bounds: Collection[s
         needed = sum(size for _, size, _ in files)
         if needed <= free:
             continue
-        names = " and ".join(str(p) for p, _, _ in files)
-        together = " together" if len(files) > 1 else ""
+        names = named or " and ".join(str(p) for p, _, _ in files) + ":"
+        many = named is not None or len(files) > 1
+        together = " together" if many else ""
         at_least = any(str(p) in bounds for p, _, _ in files)
-        raise RigInputError(f"{names}: need{'s' if len(files) == 1 else ''}{' at least' if at_least else ''} "
+        raise RigInputError(f"{names} need{'' if many else 's'}{' at least' if at_least else ''} "
                             f"{human_size(needed)}{together}, but the disk of {folder} has {human_size(free)} free; "
                             "free some space or write to another disk.")

@@ -31,10 +31,15 @@ import numpy as np
 
 from .errors import RigInputError
 from .input_files import read_input_bytes
+from .rig import UNIT_IN_METRES
 from .take_data import MarkerTake, unique_labels, units_from_text
 
 BLOCK = 512
 SHORT_FILE_FRACTION = 0.5   # a short file holding less than this share of its declared frames is refused
+# No optical capture volume is a kilometre across: points spreading further (in the file's own units) were sized by
+# damaged parameters (an integer file's POINT:SCALE, POINT:UNITS) or read from damaged data. The 77 real files of
+# ../shared/data/thirdparty span at most 8.7 m (a Codamotion gait-wand trial).
+MAX_SPAN_METRES = 1000.0
 _TYPES = {-1: 1, 1: 1, 2: 2, 4: 4}   # parameter data type -> bytes per element
 
 
@@ -443,8 +448,24 @@ def read_c3d(path: str | Path) -> MarkerTake:
         xyz[origin] = np.nan
         warnings.append(f"{path}: {int(origin.sum())} samples at exactly (0, 0, 0) were read as missing, the way "
                         "many writers mark a gap.")
+    _check_span(xyz, units, scale, lay.is_float, path)
     return MarkerTake(positions=xyz, labels=labels, rate=float(rate), units=units, source=str(path),
                       first_frame=hdr["first"], warnings=warnings, model_outputs=model_outputs)
+
+
+def _check_span(xyz: np.ndarray, units: str, scale: float, is_float: bool, path: Path) -> None:
+    """Refuse points (F, M, 3), NaN where missing, in ``units`` spreading more than ``MAX_SPAN_METRES`` on an axis:
+    no capture volume is that large (coordinates under the ±1e9 a take may hold otherwise loaded as a marker
+    take kilometres wide)."""
+    seen = xyz[np.isfinite(xyz).all(axis=2)]
+    if not seen.size:
+        return
+    span = float((seen.max(axis=0) - seen.min(axis=0)).max())
+    if span * UNIT_IN_METRES[units] > MAX_SPAN_METRES:
+        sized = "its float points" if is_float else f"its integer points at POINT:SCALE {abs(scale):.6g}"
+        raise RigInputError(f"{path}: its markers spread over {span:.4g} {units} ({sized}), "
+                            f"{span * UNIT_IN_METRES[units] / 1000:.3g} km: no capture volume is that large, so its "
+                            "scale, units or point data are damaged.")
 
 
 # --- writer --------------------------------------------------------------------------------------

@@ -1,7 +1,7 @@
 """Marker trajectories in CSV: three layouts, told apart by their first rows.
 
 - Plain (this application's own export): ``frame, A_X, A_Y, A_Z, B_X, ...``. Units and frame rate are not
-  in the file; pass them.
+  in the file; pass them (without a rate it is read at ``PLAIN_RATE``, with a warning naming ``--rate``).
 - Vicon Nexus export, its ``Trajectories`` section::
 
       Trajectories
@@ -36,6 +36,8 @@ import numpy as np
 
 from .errors import RigInputError, shown
 from .take_data import MarkerTake, check_row_cells, text_table, unique_labels, units_from_text
+
+PLAIN_RATE = 60.0   # frames a second of a plain marker CSV read without a rate (it has none of its own)
 
 
 def _rows(path: Path) -> list[list[str]]:
@@ -143,7 +145,7 @@ def _read_motive(path: Path, rows: list[list[str]]) -> MarkerTake:
     return _take(path, data, xyz, raw, rate, units, warnings)
 
 
-def _read_plain(path: Path, rows: list[list[str]], rate: float, units: str) -> MarkerTake:
+def _read_plain(path: Path, rows: list[list[str]], rate: float | None, units: str) -> MarkerTake:
     rows = [(i + 1, r) for i, r in enumerate(rows) if any(r)]
     head = rows[0][1]
     cols = head[1:]
@@ -162,7 +164,12 @@ def _read_plain(path: Path, rows: list[list[str]], rate: float, units: str) -> M
         if len(r) > len(head) and any(r[len(head):]):
             raise RigInputError(f"{path}: line {line_no} has more columns than the header.")
     xyz = [(1 + 3 * k, 2 + 3 * k, 3 + 3 * k) for k in range(len(raw))]
-    return _take(path, rows[1:], xyz, raw, rate, units, [])
+    warnings = []
+    if rate is None:
+        rate = PLAIN_RATE
+        warnings.append(f"{path}: a plain marker CSV gives no frame rate; {PLAIN_RATE:g} frames a second assumed "
+                        "(--rate FPS gives its rate).")
+    return _take(path, rows[1:], xyz, raw, rate, units, warnings)
 
 
 def check_is_csv(path: Path, sample: int = 1 << 16) -> None:
@@ -185,9 +192,9 @@ def check_is_csv(path: Path, sample: int = 1 << 16) -> None:
                             "semicolons.")
 
 
-def read_marker_csv(path: str | Path, *, rate: float = 60.0, units: str = "mm") -> MarkerTake:
+def read_marker_csv(path: str | Path, *, rate: float | None = None, units: str = "mm") -> MarkerTake:
     """Read a marker CSV: a Vicon Nexus or OptiTrack Motive export (rate and units from the file), or the
-    plain ``frame, A_X, A_Y, A_Z, ...`` layout (``rate`` fps, ``units``)."""
+    plain ``frame, A_X, A_Y, A_Z, ...`` layout (``rate`` fps; None: ``PLAIN_RATE``, with a warning; ``units``)."""
     path = Path(path)
     check_is_csv(path)
     rows = _rows(path)

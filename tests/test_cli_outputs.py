@@ -153,3 +153,48 @@ def test_corrective_may_add_to_the_project_it_reads(tmp_path):
     run_cli("corrective", tmp_path / "p.bsproj", "--drivers", "raise,push", "--target", rig / "raise.obj",
             "-o", tmp_path / "p.bsproj")
     assert [c.name for c in load_project(tmp_path / "p.bsproj").rig.correctives] == ["raise+push"]
+
+
+def _gltf_with_files_beside(folder):
+    """The third-party MorphStressTest.gltf with its buffer in 'Morph Stress.bin' (the uri percent-encoded, as glTF
+    writes a space) and its TinyGrid image in 'tiny grid.png' beside it, in ``folder``."""
+    import base64
+    import json
+    from tests.conftest import DATA, require_data
+    gltf = json.loads(require_data(DATA / "thirdparty" / "gltf" / "MorphStressTest.gltf").read_text())
+    blob = base64.b64decode(gltf["buffers"][0]["uri"].split(",", 1)[1])
+    folder.mkdir()
+    (folder / "Morph Stress.bin").write_bytes(blob)
+    gltf["buffers"][0]["uri"] = "Morph%20Stress.bin"
+    image = next(i for i in gltf["images"] if i["name"] == "TinyGrid")
+    view = gltf["bufferViews"][image.pop("bufferView")]
+    start = view.get("byteOffset", 0)
+    (folder / "tiny grid.png").write_bytes(blob[start:start + view["byteLength"]])
+    image["uri"] = "tiny%20grid.png"
+    (folder / "stress.gltf").write_text(json.dumps(gltf))
+    return folder / "stress.gltf"
+
+
+def test_no_command_writes_over_the_files_a_gltf_rig_reads(tmp_path):
+    """A .gltf rig's external buffers and images are read with it, but only the .gltf itself was guarded: `segment
+    rig.gltf -o rig.bin` wrote the regions over the rig's geometry and `render rig.gltf -o its_texture.png` the
+    picture over its texture. Each is refused before any work, one sentence naming both, exit 2, every file as it
+    was; an output beside them that the glTF does not name is written."""
+    rig = _gltf_with_files_beside(tmp_path / "rig")
+    before = {p: p.read_bytes() for p in rig.parent.iterdir()}
+    _refused(run_cli("segment", rig, "-o", rig.parent / "Morph Stress.bin", check=False),
+             f"{rig.parent}/Morph Stress.bin: is the buffer file 'Morph%20Stress.bin' that RIG ({rig}) reads; give -o "
+             "another file.")
+    _refused(run_cli("render", rig, "--size", "32,32", "-o", rig.parent / "tiny grid.png", check=False),
+             f"{rig.parent}/tiny grid.png: is the image file 'tiny%20grid.png' that RIG ({rig}) reads; give -o "
+             "another file.")
+    assert {p: p.read_bytes() for p in rig.parent.iterdir()} == before
+    run_cli("render", rig, "--size", "32,32", "-o", rig.parent / "preview.png")
+    assert (rig.parent / "preview.png").is_file()
+    # a uri no file can have (a NUL) is the reader's to refuse, not a crash of the output check
+    import json
+    gltf = json.loads(rig.read_text())
+    gltf["buffers"][0]["uri"] = "bad%00name.bin"
+    rig.write_text(json.dumps(gltf))
+    _refused(run_cli("render", rig, "--size", "32,32", "-o", rig.parent / "nul.png", check=False),
+             f"{rig}: the glTF is damaged (ValueError: embedded null byte).")

@@ -133,3 +133,21 @@ def test_a_weights_csv_of_a_header_alone_holds_no_frames(tmp_path):
                      ("export", rig, "-o", tmp_path / "a.glb", "--animation", take)):
             proc = run_cli(*args, check=False)
             assert (proc.returncode, proc.stdout, proc.stderr) == (2, "", f"error: {take}: holds no frames.\n"), args
+
+
+def test_a_plain_marker_csv_read_without_a_rate_says_the_rate_it_assumed(tmp_path):
+    """A plain marker CSV (`frame,NAME_X,NAME_Y,NAME_Z`) has no frame rate of its own; read without `--rate` it was
+    taken at 60 fps with no word. Now one warning sentence names the file, the 60 fps assumed and `--rate`, on
+    take-info's stderr and in its JSON `warnings`; `--rate` gives the rate, and no warning."""
+    from model.takes import load_take
+    take = tmp_path / "plain.csv"
+    take.write_text("frame,A_X,A_Y,A_Z\n0,1,2,3\n1,1,2,4\n")
+    proc = run_cli("take-info", take)
+    assert "2 frames at 60 fps" in proc.stdout
+    said = [line for line in proc.stderr.splitlines() if line.startswith("warning:")]
+    assert len(said) == 1 and str(take) in said[0] and "60 frames a second" in said[0] and "--rate" in said[0]
+    info = json.loads(run_cli("take-info", take, "--json").stdout)
+    assert info["rate"] == 60.0 and info["warnings"] == [said[0].removeprefix("warning: ")]
+    assert load_take(take).warnings == info["warnings"]
+    info = json.loads(run_cli("take-info", take, "--json", "--rate", "120").stdout)
+    assert info["rate"] == 120.0 and info["warnings"] == []

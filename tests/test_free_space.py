@@ -110,3 +110,89 @@ def test_a_batch_take_whose_cache_does_not_fit_fails_before_its_solve(tmp_path, 
     row = solve_take_file(job, str(take), str(tmp_path / "out" / "take"))
     assert row["status"] == "failed" and "cache.pc2: needs 17.3 KB" in row["error"], row
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("suffix, frames", [(".usdc", 0), (".usd", 100), (".usda", 100)])
+def test_export_refuses_a_usd_its_disk_has_no_room_for(tmp_path, tiny_disk, monkeypatch, capsys, suffix, frames):
+    """A USD export was written without a look at the disk (``export_size`` was 0 for USD). Now it is sized as a
+    least (``model.export.usd_size``): a .usdc (and a .usd, crate) holds the points and the offsets of the vertices
+    each shape moves uncompressed, 12 bytes a vector (36 + 2 x 30 here); a .usda writes each at least as
+    ``(0, 0, 0), ``. Refused in one sentence, nothing written; on the real disk the file written is no smaller."""
+    from model.export import export_size
+    from model.readers import load_rig
+    rig, take = _rig_and_weights(tmp_path, frames=frames or 40)
+    out = tmp_path / f"a{suffix}"
+    animation = ["--animation", str(take)] if frames else []
+    least = export_size(load_rig(rig), out, frames)
+    assert least == 12 * (36 + 2 * 30) if suffix != ".usda" else least > 12 * (36 + 2 * 30)
+    code = main(["export", str(rig), "-o", str(out), *animation])
+    assert code == 2 and capsys.readouterr().err == (
+        f"error: {out}: needs at least {human_size(least)}, but the disk of {tmp_path} has 1 KB free; free some space "
+        "or write to another disk.\n")
+    assert not out.exists()
+    monkeypatch.undo()
+    assert main(["export", str(rig), "-o", str(out), *animation]) == 0
+    assert out.stat().st_size >= least
+
+
+def test_the_usd_sizes_are_no_more_than_ict_writes(ict_rig, tmp_path):
+    """The least sizes of ICT's USD exports (in cm, turned z-up) are below what usd-core writes (a crate's arrays
+    compressed by a newer usd-core would show here first)."""
+    from model.export import export_rig, export_size
+    for suffix in (".usdc", ".usda"):
+        out = tmp_path / f"ict{suffix}"
+        least = export_size(ict_rig, out, units="cm", up="z")
+        export_rig(ict_rig, out, units="cm", up="z")
+        assert 0.3 * out.stat().st_size < least <= out.stat().st_size, suffix
+
+
+def test_a_batch_whose_caches_do_not_fit_together_is_refused_before_any_take(tmp_path, monkeypatch):
+    """Each batch take's cache was checked alone, before its own solve: with room for one of them (20 KB free, 17.3
+    KB a cache) every take passed, and the takes together filled the disk. The caches of all the takes to solve are
+    summed first: the batch is refused in one sentence before any take is solved, nothing written."""
+    from model.batch import BatchJob, run_batch
+    from model.readers import load_rig
+    rig, take = _rig_and_weights(tmp_path)
+    other = tmp_path / "other.csv"
+    other.write_bytes(take.read_bytes())
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage(10**9, 10**9 - 20_000, 20_000))
+    job = BatchJob.prepare(load_rig(rig), {"mode": "global", "residual": None, "calibration_frames": 30,
+                                           "fixed_head": False}, cache=True)
+    out = tmp_path / "out"
+    with pytest.raises(RigInputError) as err:
+        run_batch(job, [take, other], out, workers=1)
+    assert str(err.value) == (f"{out}: the caches (cache.pc2) of the 2 takes to solve need 34.6 KB together, but the "
+                              f"disk of {tmp_path} has 20 KB free; free some space or write to another disk.")
+    assert not out.exists()
+    check = BatchJob(rig=job.rig, settings={}, cache=False)     # without --cache nothing large is summed
+    from model.batch import check_caches_space
+    check_caches_space(check, [take, other], [out / "take", out / "other"], out)
+
+
+def test_a_batch_counts_only_what_its_caches_add_to_the_old_ones_they_replace(tmp_path, monkeypatch):
+    """The old caches of an earlier run are freed as each take's new one replaces it: a batch whose caches are as
+    large as the old ones needs room for one at a time, not for all of them again (it is solved), and one whose new
+    caches outgrow the old is refused for what they add."""
+    from model.batch import BatchJob, check_caches_space, run_batch
+    from model.readers import load_rig
+    rig, take = _rig_and_weights(tmp_path)
+    other = tmp_path / "other.csv"
+    other.write_bytes(take.read_bytes())
+    out = tmp_path / "out"
+    for name in ("take", "other"):
+        (out / name).mkdir(parents=True)
+        (out / name / "cache.pc2").write_bytes(b"\0" * 17_000)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage(10**9, 10**9 - 20_000, 20_000))
+    job = BatchJob.prepare(load_rig(rig), {"mode": "global", "residual": None, "calibration_frames": 30,
+                                           "fixed_head": False}, cache=True)
+    rows = run_batch(job, [take, other], out, workers=1)
+    assert [r["status"] for r in rows] == ["solved", "solved"], rows
+    assert (out / "take" / "cache.pc2").stat().st_size == 17_312
+    for name in ("take", "other"):
+        (out / name / "cache.pc2").write_bytes(b"\0" * 100)
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage(10**9, 10**9 - 30_000, 30_000))
+    with pytest.raises(RigInputError) as err:
+        check_caches_space(job, [take, other], [out / "take", out / "other"], out)
+    assert str(err.value) == (f"{out}: the caches (cache.pc2) of the 2 takes to solve, beyond the old ones they "
+                              f"replace, need 34.4 KB together, but the disk of {out / 'take'} has 30 KB free; "
+                              "free some space or write to another disk.")

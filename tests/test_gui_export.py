@@ -54,3 +54,25 @@ def test_a_failed_export_is_one_sentence_and_keeps_the_window(qtbot, tmp_path):
         w.exports.export_to(blocker / "face.glb")                   # a folder that is a file
     assert "\n" not in sig.args[0]
     assert w.document.project is not None
+
+
+def test_an_export_its_disk_has_no_room_for_is_refused_in_a_dialog(qtbot, tmp_path, monkeypatch):
+    """File ▸ Export Rig wrote a glTF or USD file without a look at the disk (the `export` command refused it): now
+    the same check (``model.export.check_export_space``) refuses it in one sentence before anything is written."""
+    import shutil
+    from collections import namedtuple
+    from model.export import export_size
+    w = make_window(qtbot, tmp_path)
+    usage = namedtuple("Usage", "total used free")
+    monkeypatch.setattr(shutil, "disk_usage", lambda path: usage(10**9, 10**9 - 1000, 1000))
+    for name in ("face.usdc", "face.glb"):
+        out = tmp_path / name
+        with qtbot.waitSignal(w.exports.failed, timeout=60000) as sig:
+            w.exports.export_to(out)
+        least = export_size(w.document.rig, out, units=None)
+        assert least > 1000 and sig.args[0].startswith(f"{out}: needs at least ") and "1 KB free" in sig.args[0]
+        assert "\n" not in sig.args[0] and not out.exists()
+    monkeypatch.undo()
+    with qtbot.waitSignal(w.exports.exported, timeout=60000):
+        w.exports.export_to(tmp_path / "face.usdc")
+    assert (tmp_path / "face.usdc").stat().st_size >= export_size(w.document.rig, tmp_path / "face.usdc")

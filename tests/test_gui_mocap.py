@@ -536,3 +536,19 @@ def test_a_take_the_new_rig_drops_leaves_no_frame_shown(qtbot, tmp_path, llf_csv
     assert mc.take is None and mc.panel.take_label.text() == "no take"
     assert mc.panel.frame_label.text() == "frame –" and mc.panel.slider.maximum() == 0
     assert "The weight take does not fit this rig" in mc.panel.status_label.text()
+
+
+def test_a_take_loaded_in_the_mocap_panel_shows_its_readers_warnings(qtbot, tmp_path):
+    """A plain marker CSV loaded in the Mocap panel is read at 60 fps, which its file does not say: the panel said
+    nothing of it (nor of any reader's warning). The model's sentence is now in the panel's status, before the next
+    step, and on the take's label as a tooltip."""
+    from model.takes import load_take
+    w, mc = _install(qtbot, tmp_path)
+    take = tmp_path / "plain.csv"
+    take.write_text("frame,A_X,A_Y,A_Z\n0,1,2,3\n1,1,2,4\n")
+    assert mc.load_take(take)
+    said = load_take(take).warnings
+    assert len(said) == 1 and "60 frames a second" in said[0]
+    status = mc.panel.status_label.text()
+    assert said[0] in status and status.endswith("Load or build a marker map, then Solve.")
+    assert mc.panel.take_label.toolTip() == said[0] and "at 60 fps" in mc.panel.take_label.text()

@@ -216,3 +216,25 @@ def test_the_source_uvs_and_groups_survive_a_project(ict_rig, tmp_path):
     write_posed_obj(rig, tmp_path / "out.obj")
     back = read_obj(tmp_path / "out.obj")
     assert len(back.vertices) == 26719 and np.array_equal(back.corners.corner_uv, ict_rig.corners.corner_uv)
+
+
+def test_a_project_whose_every_shape_was_deleted_reopens(small_project, tmp_path):
+    """Every shape deleted (the corrective driven by them goes with them), with a regional pose, presets and edited
+    antagonist pairs: the project of no shapes is saved, reopens in the model with the same surface and no shapes,
+    and `info` reads it (exit 0, `"shapes": []`)."""
+    from model.correctives import Corrective, add_corrective
+    from model.shape_edits import delete_shapes
+    from tests.cli_runner import run_cli
+    p = _regional(small_project)
+    p.antagonists = [("raise", "push")]
+    add_corrective(p.rig, Corrective(drivers=["raise", "push"], delta=np.ones((p.rig.n_vertices, 3))))
+    delete_shapes(p, list(p.rig.shape_names))
+    assert p.rig.n_shapes == 0 and p.rig.correctives == []
+    path = tmp_path / "none.bsproj"
+    save_project(p, path)
+    back = load_project(path)
+    assert back.rig.n_shapes == 0 and back.rig.deltas.shape == (0, p.rig.n_vertices, 3)
+    assert np.array_equal(back.rig.neutral, p.rig.neutral) and back.weights.shape == (0,)
+    assert back.region_weights is None or back.region_weights.shape[1] == 0
+    info = json.loads(run_cli("info", path, "--json").stdout)
+    assert info["shapes"] == [] and info["vertices"] == p.rig.n_vertices and info["correctives"] == []

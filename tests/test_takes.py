@@ -558,3 +558,27 @@ def test_c3d_gaps_written_as_the_origin_are_read_as_missing(tmp_path, integer):
     assert [w for w in back.warnings if "exactly (0, 0, 0)" in w] == \
         [f"{tmp_path / 'zeros.c3d'}: {int(gaps.sum())} samples at exactly (0, 0, 0) were read as missing, the way many "
          "writers mark a gap."]
+
+
+def test_a_c3d_whose_markers_spread_over_kilometres_is_refused(c3d, tmp_path):
+    """Coordinates under the ±1e9 a take may hold loaded however absurd: an integer C3D whose POINT:SCALE (and the
+    header's) was damaged from 0.01 to 100 read the shared face take kilometres wide, a float file with one sample 5 km
+    off likewise. No capture volume is a kilometre across (the 77 real files span at most 8.7 m): refused in one
+    sentence naming the file, the spread and the scale."""
+    good = tmp_path / "int.c3d"
+    write_c3d(good, c3d, integer=True, scale=0.01)
+    raw = good.read_bytes()
+    assert raw.count(struct.pack("<f", 0.01)) == 2            # the header's scale and POINT:SCALE
+    damaged = tmp_path / "damaged.c3d"
+    damaged.write_bytes(raw.replace(struct.pack("<f", 0.01), struct.pack("<f", 100.0)))
+    with pytest.raises(RigInputError) as err:
+        read_c3d(damaged)
+    said = str(err.value)
+    assert said.startswith(f"{damaged}: its markers spread over ") and "POINT:SCALE 100" in said and " km:" in said
+    far = c3d.positions.copy()
+    far[10, 3] = [5e6, 0.0, 0.0]          # 5 km from the face, in mm
+    write_c3d(tmp_path / "far.c3d", MarkerTake(far, c3d.labels, c3d.rate, units="mm"))
+    with pytest.raises(RigInputError, match=r"far\.c3d: its markers spread over 5e\+06 mm \(its float points\), 5 km"):
+        read_c3d(tmp_path / "far.c3d")
+    write_c3d(tmp_path / "near.c3d", MarkerTake(far / 10.0, c3d.labels, c3d.rate, units="mm"))   # 500 m: read
+    assert read_c3d(tmp_path / "near.c3d").n_frames == c3d.n_frames
