@@ -215,3 +215,19 @@ def test_the_proxy_frame_looks_like_the_full_frame_of_the_same_pose(qtbot, tmp_p
     # the proxy draws that pose, lit and coloured as the surface is (coarser: a proxy left at the neutral pose
     # would differ by about ``moved``, one without the colours or normals by far more)
     assert off < 0.5 * moved, (off, moved)
+
+
+def test_only_the_decimation_runs_at_the_lowest_priority():
+    import os
+    import sys
+    import threading
+
+    from widgets.lod import _run_at_low_priority
+    if not sys.platform.startswith("linux"):
+        pytest.skip("a thread's own priority is Linux's")
+    seen = []
+    before = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    _run_at_low_priority(lambda: seen.append(os.getpriority(os.PRIO_PROCESS, threading.get_native_id())))
+    assert seen == [19]
+    # the caller (the thread running the numpy around the filter, holding the GIL) keeps its priority
+    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == before

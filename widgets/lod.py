@@ -110,7 +110,7 @@ def proxy_faces(points: np.ndarray, face_counts: np.ndarray, face_indices: np.nd
     decimate.BoundaryVertexDeletionOff()
     if on_filter is not None:
         on_filter(decimate)
-    decimate.Update()
+    _run_at_low_priority(decimate.Update)
     if decimate.GetAbortExecute():
         return None
     out = decimate.GetOutput()
@@ -193,7 +193,6 @@ class SurfaceDetail(QtCore.QObject):
 
         def make() -> None:
             try:
-                _yield_to_other_threads()
                 proxy = proxy_faces(*args, on_filter=lambda f: running.__setitem__(1, f))
             except Exception:   # no proxy: everything is drawn in full, as before
                 traceback.print_exc()
@@ -303,10 +302,18 @@ class SurfaceDetail(QtCore.QObject):
             thread.join(timeout=5)
 
 
-def _yield_to_other_threads() -> None:
-    """Lower this thread's scheduling priority (Linux: a thread's own nice value), so that making a proxy (6 s of a
-    core at 422k vertices) slows neither the window nor the new rig's segmentation running beside it."""
-    try:
-        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
-    except (AttributeError, OSError):   # not Linux: the thread runs at the process's priority
-        pass
+def _run_at_low_priority(fn: Callable[[], None]) -> None:
+    """Run ``fn`` (a VTK filter's ``Update``, which releases the GIL) on a thread of the lowest scheduling priority
+    (Linux: a thread's own nice value) and wait for it, so that making a proxy (6 s of a core at 422k vertices) slows
+    neither the window nor the new rig's segmentation running beside it. Only the filter runs so: a thread that
+    holds the GIL (the numpy around it) at that priority could keep the window waiting for the GIL while the
+    scheduler runs the others, and a thread's priority cannot be raised back without privileges."""
+    def low() -> None:
+        try:
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), 19)
+        except (AttributeError, OSError):   # not Linux: the process's priority
+            pass
+        fn()
+    thread = threading.Thread(target=low, name="surface-proxy-decimation", daemon=True)
+    thread.start()
+    thread.join()
