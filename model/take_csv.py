@@ -64,7 +64,7 @@ def _names(raw: list[str], path: Path, warnings: list[str]) -> list[str]:
     return labels
 
 
-def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings) -> MarkerTake:
+def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings, rate_from_file=True) -> MarkerTake:
     if not data_rows:
         raise RigInputError(f"{path}: holds no frames.")
     if not xyz_columns:
@@ -76,7 +76,8 @@ def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings) -> Mar
     pos[~np.isfinite(pos).all(axis=2)] = np.nan
     first = text_table(path, data_rows[:1], [0])[0, 0]
     return MarkerTake(positions=pos, labels=labels, rate=rate, units=units, source=str(path),
-                      first_frame=int(first) if np.isfinite(first) else 1, warnings=warnings)
+                      first_frame=int(first) if np.isfinite(first) else 1, warnings=warnings,
+                      rate_from_file=rate_from_file)
 
 
 def _units(text: str, path: Path, what: str) -> str:
@@ -169,7 +170,7 @@ def _read_plain(path: Path, rows: list[list[str]], rate: float | None, units: st
         rate = PLAIN_RATE
         warnings.append(f"{path}: a plain marker CSV gives no frame rate; {PLAIN_RATE:g} frames a second assumed "
                         "(--rate FPS gives its rate).")
-    return _take(path, rows[1:], xyz, raw, rate, units, warnings)
+    return _take(path, rows[1:], xyz, raw, rate, units, warnings, rate_from_file=False)
 
 
 def check_is_csv(path: Path, sample: int = 1 << 16) -> None:
