@@ -298,7 +298,7 @@ class MocapController(QtCore.QObject):
 
     def save_map(self, path) -> bool:
         """Write the marker map (with the points moved on the rig) as JSON, as ``solve --map`` reads it."""
-        return self._write("marker map", path, lambda: self.marker_map.save(path))
+        return self._write("marker map", path, lambda: self.marker_map.save(path), rewrites="the marker map")
 
     def auto_map(self) -> bool:
         """Auto Map: the take's markers mapped onto the rig in the background (a few seconds: the registration,
@@ -657,7 +657,12 @@ class MocapController(QtCore.QObject):
         path = self.workspace.take_path
         self.window.save_dialog(title, (path.stem if path else "take") + suffix, filt, fn)
 
-    def _write(self, what: str, path, writer) -> bool:
+    def _write(self, what: str, path, writer, rewrites: str | None = None) -> bool:
+        """Write an export (``writer()``), refused over a file the window has open (the take, the rig, the project;
+        but ``rewrites``: Save Map may save the marker map over the file it came from)."""
+        if self.window.refuses_export_over_inputs(path, f"Could not export the {what}", rewrites=rewrites):
+            self.panel.set_status(self.window.last_error)
+            return False
         try:
             writer()
         except RigInputError as exc:
