@@ -611,3 +611,23 @@ def test_the_rate_of_a_take_whose_file_gives_none_is_typed_in_the_mocap_panel(qt
     w.open_sample()                                  # the weight take read again on the new rig keeps its rate
     QtWidgets.QApplication.processEvents()
     assert mc.take.rate == 25.0 and spin.isVisibleTo(panel) and spin.value() == 25.0
+
+
+def test_save_map_may_write_over_its_own_map_but_no_export_over_the_take_or_map(qtbot, tmp_path, ict_dir, take_dir):
+    """The window's exports refuse the files it has open (``model.beside_inputs``): the Mocap panel's report or weights
+    over the take or its marker map are refused in one sentence, nothing written; Save Map writes the map (with the
+    points moved on the rig) over the file it came from, as before."""
+    import shutil
+    take, mapping = tmp_path / "take.c3d", tmp_path / "map.json"
+    shutil.copy(take_dir / "take.c3d", take)
+    shutil.copy(take_dir / "marker_map.json", mapping)
+    w, mc = _install(qtbot, tmp_path)
+    open_and_wait(qtbot, w, ict_dir)
+    assert mc.load_take(take) and mc.load_map(mapping)
+    before = take.read_bytes(), mapping.read_bytes()
+    assert not mc.export_report(mapping)
+    assert w.last_error == f"{mapping}: is the marker map itself, which the window has open; choose another file."
+    assert not mc.export_weights_csv(take)
+    assert w.last_error == f"{take}: is the take itself, which the window has open; choose another file."
+    assert (take.read_bytes(), mapping.read_bytes()) == before
+    assert mc.save_map(mapping) and json.loads(mapping.read_text())["markers"] == mc.marker_map.markers
