@@ -202,7 +202,10 @@ class MocapController(QtCore.QObject):
             return False
         if abs(rate - take.rate) <= 1e-9 * rate:
             return True
-        return self.load_take(path, rate)
+        if not self.load_take(path, rate):          # the file gone or changed: the take and its rate stay
+            self.panel.set_take_rate(take.rate)
+            return False
+        return True
 
     @staticmethod
     def _weight_take_text(take: WeightTake, path: Path) -> str:

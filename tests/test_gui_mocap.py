@@ -611,6 +611,9 @@ def test_the_rate_of_a_take_whose_file_gives_none_is_typed_in_the_mocap_panel(qt
     w.open_sample()                                  # the weight take read again on the new rig keeps its rate
     QtWidgets.QApplication.processEvents()
     assert mc.take.rate == 25.0 and spin.isVisibleTo(panel) and spin.value() == 25.0
+    untimed.unlink()                                 # a file gone: said, and the take and the field keep 25
+    _type_rate(qtbot, spin, "50")
+    assert str(untimed) in w.last_error and mc.take.rate == 25.0 and spin.value() == 25.0
 
 
 def test_save_map_may_write_over_its_own_map_but_no_export_over_the_take_or_map(qtbot, tmp_path, ict_dir, take_dir):
