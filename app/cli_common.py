@@ -13,7 +13,7 @@ import numpy as np
 
 from model.errors import RigInputError
 from model.rig import MAX_WEIGHT
-from model.beside_inputs import check_beside, gltf_files
+from model.beside_inputs import check_not_input
 
 EXIT_INPUT = 2        # bad input: one sentence naming the file and the problem
 EXIT_UNEXPECTED = 1   # anything else: one sentence and a crash log with the traceback
@@ -95,26 +95,12 @@ def check_not_an_input(args, path, option: str) -> None:
     images: ``model.beside_inputs.gltf_files``), or a file the reader of an input folder (the rig's, the scans')
     reads there (``model.beside_inputs.check_beside``). ``corrective`` may write its project over the
     RIG project it adds to (``rig_updated_in_place``)."""
-    out = os.path.realpath(path)
     for dest, name in _INPUTS:
         values = getattr(args, dest, None)
         for value in values if isinstance(values, list) else [] if values is None else [values]:
-            source = os.path.realpath(value)
-            if source == out:
-                if dest == "rig" and getattr(args, "rig_updated_in_place", False):
-                    continue
-                raise RigInputError(f"{path}: is {name} itself, which this command reads; give {option} another file.")
-            for kind, uri, referred in gltf_files(source):   # a .gltf's external buffers and images are input too
-                if referred == out:
-                    raise RigInputError(f"{path}: is the {kind} file '{uri}' that {name} ({value}) reads; give "
-                                        f"{option} another file.")
-            folder = source if os.path.isdir(source) else \
-                os.path.dirname(source) if dest == "rig" and source.lower().endswith(".obj") else None
-            if folder and os.path.dirname(out) == folder:
-                shown_folder = value if folder == source else os.path.dirname(value) or "."
-                check_beside(out, folder, "rig" if dest == "rig" else "scans",
-                             f"{path}: is in {shown_folder}, which {name} reads, and would", f"; give {option} a file "
-                             "elsewhere.")
+            check_not_input(path, value, name, "this command reads", f"give {option} {{}}",
+                            reads="rig" if dest == "rig" else "scans",
+                            same_ok=dest == "rig" and getattr(args, "rig_updated_in_place", False))
 
 
 @contextmanager

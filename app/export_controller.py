@@ -10,6 +10,7 @@ from PySide6 import QtCore, QtWidgets
 
 from app import settings as app_settings
 from app.background import BackgroundRunner
+from model.errors import RigInputError
 from model.export import WeightAnimation, animation_from_timeline, check_export_space, export_rig
 
 FILTERS = ("glTF binary (*.glb);;glTF (*.gltf);;USD (*.usd *.usda *.usdc);;OBJ, the posed surface (*.obj)")
@@ -108,6 +109,12 @@ class ExportController(QtCore.QObject):
         """Export in the background: the rig and pose are copied now, so edits made meanwhile do not leak in. A file
         its disk has no room for is refused first (``model.export.check_export_space``, as ``export`` refuses it)."""
         doc = self.window.document
+        try:   # not over a file the window has open (the rig's, the project, a .gltf's buffers), as `export` refuses
+            from model.beside_inputs import check_not_inputs
+            check_not_inputs(path, self.window.export_inputs())
+        except RigInputError as exc:
+            self._failed(str(exc))
+            return
         rig = copy.deepcopy(doc.rig)
         weights = self.current_weights()
         anim = self.animations()[animation]() if animation else None

@@ -467,6 +467,8 @@ class KeyframeController(QtCore.QObject):
 
     def _export_dialog(self, title: str, suffix: str, filt: str, make_job) -> None:
         def write(path: str) -> None:
+            if self.window.refuses_export_over_inputs(path):   # not over the rig's own files, the project, ...
+                return
             try:
                 job = make_job(path)
             except RigInputError as exc:

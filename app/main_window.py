@@ -733,6 +733,33 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
     def remember_export_folder(path: str | Path) -> None:
         app_settings.settings().setValue("export/folder", str(Path(path).parent))
 
+    def export_inputs(self) -> list[tuple[str, str | None]]:
+        """The files the window has open, which no export may write over: the project's, the rig's (an OBJ folder,
+        a glTF with its buffers and images, a project), the Mocap panel's take and marker map."""
+        doc = self.document
+        if doc.project is None:
+            return []
+        inputs = [("the project", str(doc.path) if doc.path else None), ("the rig", doc.rig.source)]
+        mocap = getattr(self, "mocap", None)
+        if mocap is not None:
+            mm = mocap.workspace.marker_map
+            inputs += [("the take", str(mocap.workspace.take_path or "") or None),
+                       ("the marker map", mm.source if mm is not None else None)]
+        return inputs
+
+    def refuses_export_over_inputs(self, path: str | Path, title: str = "Could not export", *,
+                                   rewrites: str | None = None) -> bool:
+        """True, after one sentence in a dialog, when an export's ``path`` is one of the files the window has open
+        (``export_inputs``; but ``rewrites``, the one this export saves again, e.g. "the marker map"), by the rule of
+        the command line's outputs (``model.beside_inputs.check_not_inputs``); nothing is written then."""
+        from model.beside_inputs import check_not_inputs
+        try:
+            check_not_inputs(path, [(name, source) for name, source in self.export_inputs() if name != rewrites])
+        except RigInputError as exc:
+            self.show_error(title, str(exc))
+            return True
+        return False
+
     def export_pose(self) -> None:
         if self.document.project is not None:
             self.save_dialog("Export Pose as OBJ", f"{self.document.rig.name}_pose.obj", "OBJ (*.obj)",
@@ -742,14 +769,10 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         """Write the posed surface as an OBJ in the background (control returns at once; 1.6 s on ICT), with the
         rig's UVs, groups and materials as ``export`` writes them (``model.export.write_surface_obj``); a file the
         rig's own OBJ folder would read is refused in a dialog, as the command line refuses it."""
-        from model.beside_inputs import check_not_in_rig_folder
         from model.export import write_surface_obj
         from model.pose import PoseEvaluator
         rig, state = self.document.rig, self.document.pose_state()
-        try:        # the rule of the command line's outputs: not into the rig's own OBJ folder, as one more shape
-            check_not_in_rig_folder(path, rig.source)
-        except RigInputError as exc:
-            self.show_error("Could not export", str(exc))
+        if self.refuses_export_over_inputs(path):   # e.g. into the rig's own OBJ folder, as one more shape
             return
 
         def job() -> None:
@@ -810,6 +833,8 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
 
         def unwritable(exc: OSError) -> str:
             return f"{path}: could not be written ({exc.strerror or exc})."
+        if self.refuses_export_over_inputs(path, "Could not save the image"):
+            return False
         try:
             check_output_file(path).parent.mkdir(parents=True, exist_ok=True)
         except (OSError, RigInputError) as exc:   # OutputPathError is both: its own sentence

@@ -92,6 +92,7 @@ class MocapController(QtCore.QObject):
                                                                       "_report.json", self.export_report))
         p.frame_requested.connect(self.set_frame)
         p.neutral_frames_requested.connect(self.use_neutral_frames)
+        p.rate_requested.connect(self.set_take_rate)
         from app.marker_map_editor import MarkerMapEditor
         self.map_editor = MarkerMapEditor(window, self)   # the map shown on the rig, its points dragged
         p.map_shown.connect(self.map_editor.show)
@@ -157,16 +158,24 @@ class MocapController(QtCore.QObject):
         if path:
             self.load_take(path)
 
-    def load_take(self, path: str | Path) -> bool:
-        """Open a take; on failure keep whatever was loaded and say why."""
+    def load_take(self, path: str | Path, rate: float | None = None) -> bool:
+        """Open a take; on failure keep whatever was loaded and say why. ``rate``: the frame rate of a take whose
+        file gives none (None: the rate last given for this file, ``app.settings.take_rate``, else the reader's
+        assumed one); remembered for the file."""
         ws = self.workspace
         try:
-            take = ws.load_take(path)
+            take = ws.load_take(path, rate)
+            kept = app_settings.take_rate(path) if rate is None and not take.rate_from_file else None
+            if kept is not None and kept != take.rate:
+                take = ws.load_take(path, kept)
         except RigInputError as exc:
             self._error("Could not load the take", str(exc))
             return False
+        if rate is not None and not take.rate_from_file:
+            app_settings.remember_take_rate(path, take.rate)
         self._drop_solution()
         path = Path(path)
+        self.panel.set_take_rate(None if take.rate_from_file else take.rate)
         if isinstance(take, MarkerTake):
             self.panel.take_label.setText(f"{path.name}: {take.n_frames} frames at {take.rate:g} fps, "
                                           f"{take.n_markers} markers ({take.units}), "
@@ -182,6 +191,20 @@ class MocapController(QtCore.QObject):
             self.panel.set_status(" ".join(["Warning:", *take.warnings] + ([said] if said else [])))
         self.panel.take_label.setToolTip("\n".join(take.warnings))
         self._sync_panel()
+        return True
+
+    def set_take_rate(self, rate: float) -> bool:
+        """Read the take again at ``rate`` frames a second (the Mocap panel's Frame rate field): only a take whose
+        file gives no rate (a plain marker CSV, a weights CSV without times); its solve goes, as with any take
+        loaded (loading a take is not an undo step, nor is this). False when refused (said) or not such a take."""
+        take, path = self.workspace.take, self.workspace.take_path
+        if take is None or take.rate_from_file or path is None:
+            return False
+        if abs(rate - take.rate) <= 1e-9 * rate:
+            return True
+        if not self.load_take(path, rate):          # the file gone or changed: the take and its rate stay
+            self.panel.set_take_rate(take.rate)
+            return False
         return True
 
     @staticmethod
@@ -278,7 +301,7 @@ class MocapController(QtCore.QObject):
 
     def save_map(self, path) -> bool:
         """Write the marker map (with the points moved on the rig) as JSON, as ``solve --map`` reads it."""
-        return self._write("marker map", path, lambda: self.marker_map.save(path))
+        return self._write("marker map", path, lambda: self.marker_map.save(path), rewrites="the marker map")
 
     def auto_map(self) -> bool:
         """Auto Map: the take's markers mapped onto the rig in the background (a few seconds: the registration,
@@ -622,6 +645,7 @@ class MocapController(QtCore.QObject):
             self.panel.set_status(message)
         if self.workspace.take is None:   # none, or a weight take the new rig dropped: its frame went with it
             self.panel.take_label.setText("no take")
+            self.panel.set_take_rate(None)
             self.panel.set_frames(0, 1.0)
         if self.workspace.marker_map is None:
             self.panel.map_label.setText("no marker map")
@@ -636,7 +660,12 @@ class MocapController(QtCore.QObject):
         path = self.workspace.take_path
         self.window.save_dialog(title, (path.stem if path else "take") + suffix, filt, fn)
 
-    def _write(self, what: str, path, writer) -> bool:
+    def _write(self, what: str, path, writer, rewrites: str | None = None) -> bool:
+        """Write an export (``writer()``), refused over a file the window has open (the take, the rig, the project;
+        but ``rewrites``: Save Map may save the marker map over the file it came from)."""
+        if self.window.refuses_export_over_inputs(path, f"Could not export the {what}", rewrites=rewrites):
+            self.panel.set_status(self.window.last_error)
+            return False
         try:
             writer()
         except RigInputError as exc:

@@ -4,8 +4,8 @@ is saved, applied when it is opened; view state, not an edit (no undo step, the 
 
 ``sections['view']``: ``{"view": "segmentation", "level": 1, "time": 1.25}`` (the time: the timeline's playhead).
 ``sections['take']``: ``{"path": "/takes/take.c3d", "map": {<marker map JSON>, "source": "..."}, "neutral_frames":
-"A:B"}`` -- the map is stored whole, so an automatic map (no file) comes back too; the neutral frames only when
-chosen.
+"A:B", "rate": 30.0}`` -- the map is stored whole, so an automatic map (no file) comes back too; the neutral frames
+only when chosen; the rate only for a take whose file gives none.
 """
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ from pathlib import Path
 
 from model.errors import RigInputError
 from model.marker_map import MarkerMap
+from model.take_data import given_rate
 
 VIEWS = ("shaded", "deformation", "deformation-rgb", "segmentation")
 
@@ -30,6 +31,8 @@ def store(window) -> None:
     neutral = window.mocap.panel.settings().get("neutral_frames")
     if neutral:
         take["neutral_frames"] = neutral   # the actor's neutral chosen on the take (Use This Frame as Neutral)
+    if ws.take is not None and not ws.take.rate_from_file:
+        take["rate"] = float(ws.take.rate)   # given in the Mocap panel for a file that gives none
     if ws.marker_map is not None:
         take["map"] = dict(ws.marker_map.to_json(), source=ws.marker_map.source)
     sections["take"] = take
@@ -57,7 +60,12 @@ def restore(window) -> None:
         window.show_status(f"The project's take {path} is not there any more; load it again (Mocap panel).", 10000)
         return
     mocap = window.mocap
-    if not mocap.load_take(path):
+    rate = take.get("rate")
+    try:
+        rate = given_rate(rate) if isinstance(rate, (int, float)) and not isinstance(rate, bool) else None
+    except RigInputError:
+        rate = None
+    if not mocap.load_take(path, rate):
         return
     neutral = take.get("neutral_frames")
     mocap.panel.set_neutral_frames(neutral[:40] if isinstance(neutral, str) else None)

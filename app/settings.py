@@ -1,6 +1,9 @@
 """Remembered settings: recent files, window layout, last folders, tool options (QSettings, INI format)."""
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 from PySide6 import QtCore, QtWidgets
 
 MAX_RECENT = 10
@@ -46,6 +49,37 @@ def open_file(parent, key: str, title: str, file_filter: str) -> str:
     if path:
         settings().setValue(key, QtCore.QFileInfo(path).absolutePath())
     return path
+
+
+MAX_TAKE_RATES = 200   # files whose frame rate is remembered (the last given)
+
+
+def _take_rates() -> dict:
+    try:
+        value = json.loads(str(settings().value("mocap/takeRates", "{}")))
+    except ValueError:
+        return {}
+    return value if isinstance(value, dict) else {}
+
+
+def take_rate(path) -> float | None:
+    """The frame rate last given in the Mocap panel for the take file ``path`` (one whose file gives none), or None:
+    none given, or one that is no frame rate (``model.take_data.given_rate``)."""
+    from model.errors import RigInputError
+    from model.take_data import given_rate
+    rate = _take_rates().get(str(Path(path).resolve()))
+    try:
+        return given_rate(rate) if isinstance(rate, (int, float)) and not isinstance(rate, bool) else None
+    except RigInputError:
+        return None
+
+
+def remember_take_rate(path, rate: float) -> None:
+    """Remember ``rate`` for the take file ``path`` (the last ``MAX_TAKE_RATES`` files)."""
+    key = str(Path(path).resolve())
+    rates = {k: v for k, v in _take_rates().items() if k != key}
+    rates[key] = float(rate)
+    settings().setValue("mocap/takeRates", json.dumps(dict(list(rates.items())[-MAX_TAKE_RATES:])))
 
 
 def _combo_value(combo: QtWidgets.QComboBox):

@@ -2,8 +2,7 @@
 the rig's OBJ folder is read as one more shape the next time the rig is opened (and an existing one there is
 overwritten), an OBJ among the scans as one more scan; and the files a ``.gltf`` input refers to (``gltf_files``: its
 external buffers and images), which an output written over would destroy. One rule, without Qt, for the command
-line's output checks (``app.cli_common.check_not_an_input``) and the window's File ▸ Export Pose as OBJ
-(``check_not_in_rig_folder``)."""
+line's output checks (``app.cli_common.check_not_an_input``) and the window's exports (``check_not_inputs``)."""
 from __future__ import annotations
 
 import json
@@ -41,15 +40,40 @@ def check_beside(out: str, folder: str, reads: str, start: str, end: str) -> Non
     raise RigInputError(f"{start} {'overwrite a file it reads' if exists else f'be read there as {read_as}'}{end}")
 
 
-def check_not_in_rig_folder(path: str | Path, rig_source: str | Path | None) -> None:
-    """The window's exports: refuse ``path`` when it is in the OBJ folder the rig was read from (``rig_source``, a
-    folder; anything else, a glTF or a project, has no folder of shapes) and that folder's reader reads it."""
-    if not rig_source or not os.path.isdir(rig_source):
+def check_not_input(path: str | Path, source: str | Path, name: str, reader: str, fix: str, *, reads: str = "rig",
+                    same_ok: bool = False, where: str = "which {name} reads") -> None:
+    """Refuse an output ``path`` that is the input ``source`` (a file or a folder; ``same_ok``: that one is allowed),
+    a file a ``.gltf`` source refers to (``gltf_files``), or a file the reader of a folder source (``reads``: "rig"
+    or "scans"; for a rig, an ``.obj`` source's folder too) reads there (``check_beside``). The one rule of the
+    command line's outputs (``app.cli_common.check_not_an_input``) and of the window's exports (``check_not_inputs``).
+    The sentence names ``path`` and the input as ``name`` (``reader``: who reads it; ``where``: what the folder is
+    to it); ``fix`` says what to do, formatted with "another file" or "a file elsewhere"."""
+    out, real = os.path.realpath(path), os.path.realpath(source)
+    if real == out:
+        if not same_ok:
+            raise RigInputError(f"{path}: is {name} itself, which {reader}; {fix.format('another file')}.")
         return
-    folder, out = os.path.realpath(rig_source), os.path.realpath(path)
-    if os.path.dirname(out) == folder:
-        check_beside(out, folder, "rig", f"{path}: is in {rig_source}, the folder the rig is read from, and would",
-                     "; choose a file elsewhere.")
+    for kind, uri, referred in gltf_files(real):   # a .gltf's external buffers and images are input too
+        if referred == out:
+            raise RigInputError(f"{path}: is the {kind} file '{uri}' that {name} ({source}) reads; "
+                                f"{fix.format('another file')}.")
+    folder = real if os.path.isdir(real) else \
+        os.path.dirname(real) if reads == "rig" and real.lower().endswith(".obj") else None
+    if folder and os.path.dirname(out) == folder:
+        shown_folder = source if folder == real else os.path.dirname(str(source)) or "."
+        check_beside(out, folder, reads, f"{path}: is in {shown_folder}, {where.format(name=name)}, and would",
+                     f"; {fix.format('a file elsewhere')}.")
+
+
+def check_not_inputs(path: str | Path, inputs: list[tuple[str, str | Path | None]]) -> None:
+    """The window's exports (File ▸ Export Rig, Export Pose as OBJ, Export Image, the keyed animation's and the Mocap
+    panel's): refuse ``path`` when it is one of the files the window has open, ``inputs`` as (what it is: "the rig",
+    "the project", ...; its path, None for none), by ``check_not_input``: the file itself, a ``.gltf``'s buffers and
+    images, what an OBJ folder's reader reads there (a posed OBJ would be read as one more shape)."""
+    for name, source in inputs:
+        if source and os.path.exists(source):    # the bundled sample rig, a take since deleted: nothing to keep
+            check_not_input(path, source, name, "the window has open", "choose {}",
+                            where="the folder {name} is read from")
 
 
 def gltf_files(path: str | Path) -> list[tuple[str, str, str]]:

@@ -1,7 +1,6 @@
 """Marker trajectories in CSV: three layouts, told apart by their first rows.
 
-- Plain (this application's own export): ``frame, A_X, A_Y, A_Z, B_X, ...``. Units and frame rate are not
-  in the file; pass them (without a rate it is read at ``PLAIN_RATE``, with a warning naming ``--rate``).
+- Plain: ``frame, A_X, A_Y, A_Z, B_X, ...``. Units and frame rate are not in the file; pass them (without a rate it is read at ``PLAIN_RATE``, with a warning naming ``--rate``).
 - Vicon Nexus export, its ``Trajectories`` section::
 
       Trajectories
@@ -11,7 +10,8 @@
       ,,mm,mm,mm,mm,mm,mm
       1,0,-391.9,-6180.0,1734.4,...
 
-  (other sections, such as Devices or Model Outputs, may come before or after it, each ended by a blank line).
+  (also this application's own export, ``write_marker_csv``; other sections, such as Devices or Model Outputs, may
+  come before or after it, each ended by a blank line).
 - OptiTrack Motive export (format 1.2x)::
 
       Format Version,1.23,...,Export Frame Rate,120.000000,...,Length Units,Millimeters,...
@@ -64,7 +64,7 @@ def _names(raw: list[str], path: Path, warnings: list[str]) -> list[str]:
     return labels
 
 
-def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings) -> MarkerTake:
+def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings, rate_from_file=True) -> MarkerTake:
     if not data_rows:
         raise RigInputError(f"{path}: holds no frames.")
     if not xyz_columns:
@@ -76,7 +76,8 @@ def _take(path, data_rows, xyz_columns, raw_names, rate, units, warnings) -> Mar
     pos[~np.isfinite(pos).all(axis=2)] = np.nan
     first = text_table(path, data_rows[:1], [0])[0, 0]
     return MarkerTake(positions=pos, labels=labels, rate=rate, units=units, source=str(path),
-                      first_frame=int(first) if np.isfinite(first) else 1, warnings=warnings)
+                      first_frame=int(first) if np.isfinite(first) else 1, warnings=warnings,
+                      rate_from_file=rate_from_file)
 
 
 def _units(text: str, path: Path, what: str) -> str:
@@ -169,7 +170,7 @@ def _read_plain(path: Path, rows: list[list[str]], rate: float | None, units: st
         rate = PLAIN_RATE
         warnings.append(f"{path}: a plain marker CSV gives no frame rate; {PLAIN_RATE:g} frames a second assumed "
                         "(--rate FPS gives its rate).")
-    return _take(path, rows[1:], xyz, raw, rate, units, warnings)
+    return _take(path, rows[1:], xyz, raw, rate, units, warnings, rate_from_file=False)
 
 
 def check_is_csv(path: Path, sample: int = 1 << 16) -> None:
@@ -209,10 +210,25 @@ def read_marker_csv(path: str | Path, *, rate: float | None = None, units: str =
 
 
 def write_marker_csv(path: str | Path, take: MarkerTake) -> None:
-    """Write a MarkerTake as ``frame, name_X, name_Y, name_Z, ...`` (empty cells where missing)."""
+    """Write a MarkerTake as a Vicon Nexus ``Trajectories`` section (the layout ``read_marker_csv`` reads with its
+    rate and units): ``Trajectories``, the frame rate, the labels (one over each X, Y, Z), ``Frame, Sub Frame, X, Y,
+    Z, ...``, the units, then one row per frame from ``take.first_frame`` (empty cells where missing). The plain
+    ``frame, name_X, ...`` layout has no place for either: read back, a take written in it was at 60 fps and in mm
+    whatever it had been."""
+    import io
+
     from .atomic import atomic_write
-    lines = ["frame," + ",".join(f"{n}_{a}" for n in take.labels for a in "XYZ")]
+    if any(not n for n in take.labels):
+        raise RigInputError(f"{path}: a marker with no label cannot be written in a marker CSV.")
+    out = io.StringIO()
+    w = csv.writer(out, lineterminator="\n")
+    w.writerow(["Trajectories"])
+    w.writerow([repr(float(take.rate))])   # the shortest text that reads back as the same number
+    w.writerow(["", ""] + [c for n in take.labels for c in (n, "", "")])
+    w.writerow(["Frame", "Sub Frame"] + ["X", "Y", "Z"] * take.n_markers)
+    w.writerow(["", ""] + [take.units] * (3 * take.n_markers))
+    lines = [out.getvalue().rstrip("\n")]
     flat = take.positions.reshape(take.n_frames, -1)
     for i, row in enumerate(flat):
-        lines.append(str(i) + "," + ",".join("" if not np.isfinite(v) else f"{v:.6f}" for v in row))
+        lines.append(f"{take.first_frame + i},0," + ",".join("" if not np.isfinite(v) else f"{v:.6f}" for v in row))
     atomic_write(path, ("\n".join(lines) + "\n").encode())

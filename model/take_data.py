@@ -53,6 +53,7 @@ class MarkerTake:
     first_frame: int = 1
     warnings: list[str] = field(default_factory=list)
     model_outputs: list[str] = field(default_factory=list)   # labels of points the reader left out (not markers)
+    rate_from_file: bool = True   # False: the file gives no rate (a plain marker CSV): ``rate`` was given or assumed
 
     def __post_init__(self) -> None:
         self.positions = np.ascontiguousarray(self.positions, dtype=np.float64)
@@ -120,6 +121,7 @@ class WeightTake:
     source: str = ""
     warnings: list[str] = field(default_factory=list)
     filled: np.ndarray | None = None   # (F,) bool: frames the recording dropped, interpolated in time
+    rate_from_file: bool = True   # False: the file gives no rate (a weights CSV without times): given or assumed
 
     def __post_init__(self) -> None:
         self.weights = np.ascontiguousarray(self.weights, dtype=np.float64)

@@ -482,8 +482,9 @@ class TakeWorkspace:
         self.rig, self.solution = rig, None
         dropped = []
         if isinstance(self.take, WeightTake) and self.take_path is not None:
+            given = None if self.take.rate_from_file else self.take.rate   # a rate given for an untimed file stays
             try:
-                self.take = read_take(self.take_path, rig)
+                self.take = read_take(self.take_path, rig, rate=given)
             except RigInputError as exc:
                 self.take = self.take_path = None
                 dropped.append(f"The weight take does not fit this rig: {exc}")

@@ -201,4 +201,5 @@ def read_weights_take(path: str | Path, shape_names: list[str] | None, *, rate: 
     pos = {n: k for k, n in enumerate(shape_names)}
     full = np.zeros((W.shape[0], len(shape_names)))
     full[:, [pos[n] for n in names]] = W
-    return WeightTake(weights=full, names=list(shape_names), rate=rate, source=str(path), warnings=warnings)
+    return WeightTake(weights=full, names=list(shape_names), rate=rate, source=str(path), warnings=warnings,
+                      rate_from_file=times is not None and frames.size > 1)

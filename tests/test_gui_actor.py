@@ -581,3 +581,34 @@ def test_the_personalize_progress_says_the_stage_and_the_time_so_far(qtbot, tmp_
     assert any(s.startswith(f"the {K} shapes' deltas (") for s in said), said
     assert [int(m.group(2)) for m in stages] == sorted(int(m.group(2)) for m in stages)
     assert int(stages[-1].group(2)) >= 2                 # the time so far, counted on
+
+
+def test_the_personalize_dialogs_neutral_frames_go_with_the_mocap_panels_take(qtbot, tmp_path):
+    """The dialog fills in the Mocap panel's take and the neutral frames chosen on it; typing another take's path
+    kept those frames, frames of a different recording, which the job then read as that take's neutral. They are
+    cleared now when the path names another take (the calibration frames at its start count again) and come back
+    when it names the panel's take again; a range the user typed stays."""
+    from model.take_csv import write_marker_csv
+    from model.take_data import MarkerTake
+    from model.takes import load_take
+    from tests.conftest import DATA, require_data
+    real = load_take(require_data(DATA / "mocap" / "actor_take" / "take.trc"))
+    w = make_window(qtbot, tmp_path)
+    take, other = tmp_path / "actor.csv", tmp_path / "other.csv"
+    for path in (take, other):
+        write_marker_csv(path, MarkerTake(real.positions[:40], real.labels, real.rate, real.units))
+    assert w.mocap.load_take(take)
+    _type(w.mocap.panel.neutral_edit, "12:14")
+    _key(qtbot, w, QtCore.Qt.Key_P, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    dlg = w.actor.dialog
+    assert dlg.take_edit.text() == str(take) and dlg.neutral_frames_edit.text() == "12:14"
+    assert not dlg.calibration_spin.isEnabled()
+    _type(dlg.take_edit, str(other))
+    assert dlg.neutral_frames_edit.text() == "" and dlg.calibration_spin.isEnabled()
+    assert dlg.request()["take"] == str(other) and dlg.request()["neutral_frames"] is None
+    _type(dlg.take_edit, str(take))                   # the panel's take again: its chosen frames again
+    assert dlg.neutral_frames_edit.text() == "12:14" and not dlg.calibration_spin.isEnabled()
+    _type(dlg.neutral_frames_edit, "3:5")             # a range typed for the take is the user's: it stays
+    _type(dlg.take_edit, str(other))
+    assert dlg.request()["take"] == str(other) and dlg.request()["neutral_frames"] == "3:5"
+    dlg.reject()

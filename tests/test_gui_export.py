@@ -76,3 +76,64 @@ def test_an_export_its_disk_has_no_room_for_is_refused_in_a_dialog(qtbot, tmp_pa
     with qtbot.waitSignal(w.exports.exported, timeout=60000):
         w.exports.export_to(tmp_path / "face.usdc")
     assert (tmp_path / "face.usdc").stat().st_size >= export_size(w.document.rig, tmp_path / "face.usdc")
+
+
+def test_no_export_of_the_window_writes_over_the_files_it_has_open(qtbot, tmp_path, monkeypatch):
+    """The command line refuses an output that is one of its inputs (the rig, a .gltf's buffers and images, ...); the
+    window's exports checked only Export Pose's OBJ against the rig's OBJ folder: Export Rig wrote over the open
+    .gltf or its buffer, Export Image over its texture, Export Keyed Animation over the open project, the Mocap
+    panel's weights over the take it plays. Each is refused now in one sentence (the same rule,
+    ``model.beside_inputs``), nothing written; a file elsewhere is written as before."""
+    from PySide6 import QtCore, QtWidgets
+    from tests.gui_helpers import open_and_wait
+    from tests.test_cli_outputs import _gltf_with_files_beside
+    rig = _gltf_with_files_beside(tmp_path / "rig")
+    buffer, texture = rig.parent / "Morph Stress.bin", rig.parent / "tiny grid.png"
+    w = make_window(qtbot, tmp_path, sample=False)
+    open_and_wait(qtbot, w, rig)
+    project = tmp_path / "stress.bsproj"
+    assert w.save_to(project)
+    take = tmp_path / "take.csv"          # a weights CSV on the rig's shapes, played by the Mocap panel
+    take.write_text(f"frame,time,{w.document.rig.shape_names[0]}\n0,0,0\n1,0.033333,0.5\n2,0.066667,1\n")
+    assert w.mocap.load_take(take)
+
+    def files() -> dict:
+        return {p: p.read_bytes() for p in (rig, buffer, texture, project, take)}
+    before = files()
+    for path, sentence in ((rig, f"{rig}: is the rig itself, which the window has open; choose another file."),
+                           (buffer, f"{buffer}: is the buffer file 'Morph%20Stress.bin' that the rig ({rig}) reads; "
+                                    "choose another file."),
+                           (project, f"{project}: is the project itself, which the window has open; choose another "
+                                     "file.")):
+        with qtbot.waitSignal(w.exports.failed, timeout=10000) as sig:
+            w.exports.export_to(path)
+        assert sig.args == [sentence] and w.last_error == sentence
+    assert not w.save_image(texture, (32, 32))
+    assert w.last_error == (f"{texture}: is the image file 'tiny%20grid.png' that the rig ({rig}) reads; choose "
+                            "another file.")
+    w.export_pose_to(rig)
+    assert w.last_error.startswith(f"{rig}: is the rig itself")
+    # through the window's own dialogs: the keyed animation as PC2 over the project, the take's weights over the take
+    weights = w.document.weights
+    w.keyframes.set_key(0.0)
+    weights[0] = 1.0
+    w.set_pose(weights, "raise")
+    w.keyframes.set_key(1.0)
+    answer = {"path": project}
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName",
+                        staticmethod(lambda *a, **k: (str(answer["path"]), "")))
+    w.keyframes.export_pc2_dialog()
+    assert w.last_error == f"{project}: is the project itself, which the window has open; choose another file."
+    answer["path"] = take
+    w.last_error = None
+    qtbot.mouseClick(w.mocap.panel.export_weights_button, QtCore.Qt.LeftButton)
+    assert w.last_error == f"{take}: is the take itself, which the window has open; choose another file."
+    assert w.mocap.panel.status_label.text() == w.last_error
+    w.jobs.wait()
+    assert files() == before
+    answer["path"] = tmp_path / "weights.csv"                    # elsewhere: written
+    qtbot.mouseClick(w.mocap.panel.export_weights_button, QtCore.Qt.LeftButton)
+    assert (tmp_path / "weights.csv").is_file()
+    with qtbot.waitSignal(w.exports.exported, timeout=60000):
+        w.exports.export_to(tmp_path / "out.gltf")
+    assert (tmp_path / "out.gltf").is_file() and files() == before

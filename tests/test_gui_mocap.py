@@ -552,3 +552,85 @@ def test_a_take_loaded_in_the_mocap_panel_shows_its_readers_warnings(qtbot, tmp_
     status = mc.panel.status_label.text()
     assert said[0] in status and status.endswith("Load or build a marker map, then Solve.")
     assert mc.panel.take_label.toolTip() == said[0] and "at 60 fps" in mc.panel.take_label.text()
+
+
+def _type_rate(qtbot, spin, text: str) -> None:
+    """Select the Frame rate field's text and type ``text`` and Enter, as a user does."""
+    from PySide6.QtTest import QTest
+    from PySide6 import QtCore
+    spin.setFocus()
+    QTest.keyClick(spin, QtCore.Qt.Key_A, QtCore.Qt.ControlModifier)
+    QTest.keyClicks(spin, text)
+    QTest.keyClick(spin, QtCore.Qt.Key_Return)
+    QtWidgets.QApplication.processEvents()
+
+
+def test_the_rate_of_a_take_whose_file_gives_none_is_typed_in_the_mocap_panel(qtbot, tmp_path, take_dir):
+    """The command line gives a plain marker CSV or an untimed weights CSV its rate (--rate); the Mocap panel read
+    them at 60 and 30 fps with no way to say otherwise. A Frame rate field now shows for such a take only; a rate
+    typed there reads the take again at it (no 'assumed' warning), and is remembered for the file."""
+    from PySide6 import QtCore
+    from PySide6.QtTest import QTest
+    from model.takes import load_take
+    actor = load_take(take_dir.parent / "actor_take" / "take.trc")   # a real take, written as a plain marker CSV
+    plain = tmp_path / "actor.csv"
+    flat = actor.positions[:40].reshape(40, -1)
+    plain.write_text("frame," + ",".join(f"{n}_{a}" for n in actor.labels for a in "XYZ") + "\n" + "".join(
+        f"{i}," + ",".join("" if not np.isfinite(v) else f"{v:.4f}" for v in row) + "\n" for i, row in enumerate(flat)))
+    w, mc = _install(qtbot, tmp_path)
+    panel, spin = mc.panel, mc.panel.rate_spin
+    assert mc.load_take(take_dir / "take.c3d")
+    assert not spin.isVisibleTo(panel)               # a rate the file gives is not editable
+    assert mc.load_take(plain)
+    assert spin.isVisibleTo(panel) and spin.value() == 60.0 and "assumed" in panel.status_label.text()
+    before = mc.take.positions.copy()
+    _type_rate(qtbot, spin, "30")
+    assert mc.take.rate == 30.0 and mc.take.warnings == [] and mc.workspace.take_path == plain
+    assert np.array_equal(mc.take.positions, before, equal_nan=True)
+    assert "at 30 fps" in panel.take_label.text() and "assumed" not in panel.status_label.text()
+    assert w.document.undo_stack.count() == 0        # loading a take is no undo step; giving its rate neither
+    assert mc.load_take(take_dir / "take.c3d") and not spin.isVisibleTo(panel) and mc.take.rate == 60.0
+    assert mc.load_take(plain)                       # remembered for the file
+    assert mc.take.rate == 30.0 and spin.value() == 30.0 and mc.take.warnings == []
+    project = tmp_path / "with_take.bsproj"          # and kept with the project, for another machine
+    assert w.save_to(project)
+    from app import settings as app_settings
+    app_settings.settings().remove("mocap/takeRates")
+    assert mc.load_take(take_dir / "take.c3d")
+    open_and_wait(qtbot, w, project)
+    qtbot.waitUntil(lambda: mc.workspace.take_path == plain, timeout=30000)
+    assert mc.take.rate == 30.0 and spin.value() == 30.0 and spin.isVisibleTo(panel)
+    untimed = tmp_path / "weights.csv"               # a weights CSV without times plays at the rate given
+    untimed.write_text("frame,eyeBlink_L,eyeBlink_R\n" + "".join(f"{i},{i / 20:.2f},0\n" for i in range(20)))
+    assert mc.load_take(untimed) and mc.take.rate == 30.0 and spin.value() == 30.0
+    _type_rate(qtbot, spin, "24")
+    assert mc.take.rate == 24.0 and mc.playback.rate == 24.0 and mc.n_frames == 20
+    QTest.keyClick(spin, QtCore.Qt.Key_Up)
+    QtWidgets.QApplication.processEvents()
+    assert mc.take.rate == 25.0 and mc.playback.rate == 25.0
+    w.open_sample()                                  # the weight take read again on the new rig keeps its rate
+    QtWidgets.QApplication.processEvents()
+    assert mc.take.rate == 25.0 and spin.isVisibleTo(panel) and spin.value() == 25.0
+    untimed.unlink()                                 # a file gone: said, and the take and the field keep 25
+    _type_rate(qtbot, spin, "50")
+    assert str(untimed) in w.last_error and mc.take.rate == 25.0 and spin.value() == 25.0
+
+
+def test_save_map_may_write_over_its_own_map_but_no_export_over_the_take_or_map(qtbot, tmp_path, ict_dir, take_dir):
+    """The window's exports refuse the files it has open (``model.beside_inputs``): the Mocap panel's report or weights
+    over the take or its marker map are refused in one sentence, nothing written; Save Map writes the map (with the
+    points moved on the rig) over the file it came from, as before."""
+    import shutil
+    take, mapping = tmp_path / "take.c3d", tmp_path / "map.json"
+    shutil.copy(take_dir / "take.c3d", take)
+    shutil.copy(take_dir / "marker_map.json", mapping)
+    w, mc = _install(qtbot, tmp_path)
+    open_and_wait(qtbot, w, ict_dir)
+    assert mc.load_take(take) and mc.load_map(mapping)
+    before = take.read_bytes(), mapping.read_bytes()
+    assert not mc.export_report(mapping)
+    assert w.last_error == f"{mapping}: is the marker map itself, which the window has open; choose another file."
+    assert not mc.export_weights_csv(take)
+    assert w.last_error == f"{take}: is the take itself, which the window has open; choose another file."
+    assert (take.read_bytes(), mapping.read_bytes()) == before
+    assert mc.save_map(mapping) and json.loads(mapping.read_text())["markers"] == mc.marker_map.markers

@@ -119,6 +119,21 @@ def test_trc_unknown_units_and_empty(take_dir, tmp_path):
         read_trc(empty)
 
 
+def test_a_marker_csv_the_application_writes_reads_back_at_its_rate_and_units(c3d, tmp_path):
+    """write_marker_csv wrote the plain ``frame,A_X,...`` layout, which has no place for a rate or units: a take
+    written at 30 fps read back at 60 with the 'assumed' warning, and one in cm was read as mm. It writes a Vicon
+    Nexus Trajectories section now (rate and units in the file), which every version's reader reads."""
+    for rate, units, scale in ((30.0, "mm", 1.0), (29.97002997002997, "cm", 0.1)):
+        take = MarkerTake(c3d.positions[:50] * scale, c3d.labels, rate, units=units, first_frame=7)
+        path = tmp_path / f"at_{rate:.0f}.csv"
+        write_marker_csv(path, take)
+        back = load_take(path)
+        assert back.rate == rate and back.units == units and back.warnings == [] and back.rate_from_file
+        assert back.labels == take.labels and back.first_frame == 7
+        assert np.array_equal(np.isnan(back.positions), np.isnan(take.positions))
+        assert np.nanmax(np.abs(back.positions - take.positions)) < 1e-6
+
+
 def test_marker_csv_round_trip_and_dispatch(c3d, tmp_path):
     path = tmp_path / "traj.csv"
     write_marker_csv(path, c3d)

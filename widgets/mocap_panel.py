@@ -6,6 +6,7 @@ from __future__ import annotations
 
 from PySide6 import QtCore, QtWidgets
 
+from model.take_data import MAX_RATE, MIN_RATE
 from model.units import unit_scale
 from solvers.take_solve import DEFAULTS
 from widgets.length_box import length_units, show_length_in
@@ -58,6 +59,7 @@ class MocapPanel(QtWidgets.QWidget):
     neutral_frames_requested = QtCore.Signal(int, int)
     map_shown = QtCore.Signal(bool)        # show the marker map on the rig (and let its points be dragged)
     save_map_requested = QtCore.Signal()
+    rate_requested = QtCore.Signal(float)  # the frame rate of a take whose file gives none (fps)
 
     def __init__(self, parent=None) -> None:
         super().__init__(parent)
@@ -95,6 +97,20 @@ class MocapPanel(QtWidgets.QWidget):
         self.save_map_button.setToolTip("Write the marker map (with your corrections) as JSON, for `solve --map`")
         fl.addWidget(self.show_map_button, 3, 0, 1, 2)
         fl.addWidget(self.save_map_button, 3, 2)
+        # a take whose file gives no frame rate (a plain marker CSV, a weights CSV without times) is read at an
+        # assumed one: its rate is given here; a rate the file gives is not editable (the row is hidden)
+        self.rate_label = QtWidgets.QLabel("Frame rate")
+        self.rate_spin = QtWidgets.QDoubleSpinBox()
+        self.rate_spin.setDecimals(3)
+        self.rate_spin.setRange(MIN_RATE, MAX_RATE)
+        self.rate_spin.setSuffix(" fps")
+        self.rate_spin.setKeyboardTracking(False)   # one re-read when the typed rate is entered, not per digit
+        self.rate_spin.setToolTip("The take's file gives no frame rate: the rate its frames were recorded at "
+                                  "(the take is read again at it; remembered for this file)")
+        self.rate_label.setBuddy(self.rate_spin)
+        fl.addWidget(self.rate_label, 4, 0)
+        fl.addWidget(self.rate_spin, 4, 1, 1, 2)
+        self.set_take_rate(None)
         lay.addWidget(files)
 
         solve = QtWidgets.QGroupBox("Solve")
@@ -228,6 +244,7 @@ class MocapPanel(QtWidgets.QWidget):
         self.curve_list.itemChanged.connect(lambda _item: self.curves_changed.emit())
         self.show_map_button.toggled.connect(self.map_shown)
         self.save_map_button.clicked.connect(self.save_map_requested)
+        self.rate_spin.valueChanged.connect(self.rate_requested)
         for w in (self.slider, self.frame_label):   # right-click the transport: this frame as the actor's neutral
             w.setContextMenuPolicy(QtCore.Qt.CustomContextMenu)
             w.customContextMenuRequested.connect(lambda pos, w=w: self.neutral_menu(w.mapToGlobal(pos)))
@@ -321,6 +338,15 @@ class MocapPanel(QtWidgets.QWidget):
         self.save_map_button.setEnabled(markers)
         self.export_pc2_button.setEnabled(solved)
         self.export_report_button.setEnabled(solved and markers)
+
+    def set_take_rate(self, rate: float | None) -> None:
+        """Show the frame rate of a take whose file gives none, to be changed (None: no such take, no field)."""
+        for w in (self.rate_label, self.rate_spin):
+            w.setVisible(rate is not None)
+        if rate is not None and self.rate_spin.value() != rate:
+            self.rate_spin.blockSignals(True)
+            self.rate_spin.setValue(rate)
+            self.rate_spin.blockSignals(False)
 
     def set_weights_exportable(self, on: bool) -> None:
         self.export_weights_button.setEnabled(on)

@@ -6,6 +6,7 @@ given and emits the shape the user picks. ``app.personalize_controller`` does th
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 from PySide6 import QtCore, QtWidgets
@@ -21,6 +22,13 @@ def _file_row(edit: QtWidgets.QLineEdit, button_text: str, pick) -> QtWidgets.QH
     button.clicked.connect(pick)
     row.addWidget(button)
     return row
+
+
+def _same_file(a: str, b: str) -> bool:
+    """Whether two typed paths name the same file (``~``, ``..``, links and a trailing space aside)."""
+    def real(text: str) -> str:
+        return os.path.realpath(os.path.expanduser(text.strip()))
+    return real(a) == real(b)
 
 
 class PersonalizeDialog(QtWidgets.QDialog):
@@ -81,6 +89,10 @@ class PersonalizeDialog(QtWidgets.QDialog):
                                             "as chosen in the Mocap panel (Use This Frame as Neutral); empty: the "
                                             "neutral frames at its start")
         self.neutral_frames_edit.textChanged.connect(self._on_neutral_frames)
+        # the neutral frames given with the take (the Mocap panel's) are frames of that take only
+        self._given_take, self._given_neutral, self._neutral_cleared = take, neutral_frames, False
+        self.neutral_frames_edit.textEdited.connect(lambda _text: setattr(self, "_neutral_cleared", False))
+        self.take_edit.textChanged.connect(self._on_take)
         form.addRow("Take", _file_row(self.take_edit, "Browse…", self._pick_take))
         form.addRow("Marker map", _file_row(self.map_edit, "Browse…", self._pick_map))
         form.addRow("Neutral frames at its start", self.calibration_spin)
@@ -125,6 +137,21 @@ class PersonalizeDialog(QtWidgets.QDialog):
 
     def _on_neutral_frames(self, text: str) -> None:
         self.calibration_spin.setEnabled(not text.strip())   # a chosen range is the neutral: the count is unused
+
+    def _on_take(self, text: str) -> None:
+        """The neutral frames filled in with the take are frames of that take (the one the Mocap panel has): another
+        take's path clears them (its neutral: the frames at its start, or a range typed for it), the given take's
+        path brings them back. A range the user typed is left as it is."""
+        if not self._given_neutral:
+            return
+        same = bool(text.strip()) and _same_file(text, self._given_take)
+        shown = self.neutral_frames_edit.text()
+        if not same and shown == self._given_neutral:
+            self.neutral_frames_edit.setText("")
+            self._neutral_cleared = True
+        elif same and self._neutral_cleared and not shown.strip():
+            self.neutral_frames_edit.setText(self._given_neutral)
+            self._neutral_cleared = False
 
     # --- choosing files -------------------------------------------------------------------------------
     def _pick_neutral(self) -> None:

@@ -156,7 +156,14 @@ def build_targets(work: Path) -> dict[str, Target]:
     if not csv_seed.exists():
         t = load_take(takes / "take.trc")
         t.positions = t.positions[:40]
-        write_marker_csv(csv_seed, t)
+        write_marker_csv(csv_seed, t)   # a Vicon Trajectories section
+    plain_seed = work / "plain_take.csv"
+    if not plain_seed.exists():         # the plain layout, frame,A_X,A_Y,A_Z,...
+        t = load_take(takes / "take.trc")
+        rows = ["frame," + ",".join(f"{n}_{a}" for n in t.labels for a in "XYZ")]
+        rows += [f"{i}," + ",".join("" if v != v else f"{v:.4f}" for v in row)
+                 for i, row in enumerate(t.positions[:40].reshape(40, -1))]
+        plain_seed.write_text("\n".join(rows) + "\n")
 
     weights_seed = work / "weights.csv"
     if not weights_seed.exists():
@@ -188,7 +195,7 @@ def build_targets(work: Path) -> dict[str, Target]:
         "bsproj": Target("bsproj", [proj, proj_shapes], M.BINARY, load_project, check_project),
         "c3d": Target("c3d", [takes / "take.c3d"] + c3d_small, M.BINARY, load_take, check_take),
         "trc": Target("trc", trc_small + [takes / "take.trc"], M.TEXT, load_take, check_take),
-        "marker-csv": Target("marker-csv", [csv_seed], M.TEXT, load_take, check_take),
+        "marker-csv": Target("marker-csv", [csv_seed, plain_seed], M.TEXT, load_take, check_take),
         "livelink": Target("livelink", [DATA / "livelinkface" / "MySlate_3_iPhone.csv"], M.TEXT,
                            lambda p: read_livelink_csv(p), check_take),
         "weights-csv": Target("weights-csv", [weights_seed], M.TEXT, load_weights_take, check_take),
