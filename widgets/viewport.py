@@ -27,6 +27,7 @@ from model.parts import subset_faces
 from model.rig_prep import framed_points
 
 from .lod import SurfaceDetail
+from .picking import FacePicker
 from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, drop_cached_background, fit_overlays, \
     overlay_room, rig_mesh, set_camera, style_plotter, surface_face
 
@@ -145,6 +146,7 @@ class Viewport(QtWidgets.QWidget):
         self._owner: ViewportTool | None = None      # the tool whose gesture is under way
         self._press: tuple | None = None             # that gesture's (start, button, anchor)
         self._click: tuple[int, int] | None = None   # a left press no tool took: a click if released near it
+        self._picker = None    # widgets.picking.FacePicker, made at the first pick
         self.plotter.interactor.installEventFilter(self)
         # a studio-scale surface is drawn by fewer faces while it keeps changing (``widgets.lod``)
         self.detail = SurfaceDetail(self.plotter.ren_win, self.render,
@@ -325,20 +327,19 @@ class Viewport(QtWidgets.QWidget):
     # --- picking -----------------------------------------------------------------------------------
     def pick(self, x: int, y: int) -> SurfacePoint | None:
         """The surface point under display pixel (x, y from the bottom-left), or None."""
-        from vtkmodules.vtkRenderingCore import vtkCellPicker
         if self.mesh is None:
             return None
         self.detail.show_full()   # picked on the surface's own faces, not a proxy's
-        picker = vtkCellPicker()
-        picker.SetTolerance(0.0005)
-        if not picker.Pick(x, y, 0, self.plotter.renderer) or picker.GetCellId() < 0:
+        if self._picker is None:
+            self._picker = FacePicker()
+        hit = self._picker.pick(self.plotter.renderer, x, y)   # VTK's cell picker, over the faces near the ray
+        if hit is None:
             return None
+        data, cell, point = hit
         shown = self._textured.mesh if self.textured else self.mesh
-        if picker.GetDataSet() is None or picker.GetDataSet().GetNumberOfPoints() != shown.n_points:
+        if data is None or data.GetNumberOfPoints() != shown.n_points:
             return None
-        point = np.array(picker.GetPickPosition())
-        face = int(picker.GetCellId()) if shown is not self.mesh else \
-            surface_face(self.mesh, picker.GetDataSet(), picker.GetCellId())   # the back of a two-sided part
+        face = cell if shown is not self.mesh else surface_face(self.mesh, data, cell)   # a two-sided part's back
         ids = np.asarray(shown.get_cell(face).point_ids)
         pts = np.asarray(shown.points)[ids]
         nearest = int(ids[np.argmin(np.linalg.norm(pts - point, axis=1))])
@@ -564,6 +565,7 @@ class Viewport(QtWidgets.QWidget):
         self.detail.stop()
         self._tools.clear()
         self._owner = None
+        self._picker = None
         if not self.plotter._closed:
             drop_cached_background(self.plotter.renderer)   # its frame buffer, while the window is open
         self.plotter.close()
