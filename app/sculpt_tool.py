@@ -139,7 +139,7 @@ class SculptTool(ViewportTool):
         sphere, actor, unit = self._cursor
         sphere.points = (unit * r + np.asarray(center, dtype=np.float64)).astype(np.float32)
         actor.visibility = True
-        self.viewport.render()
+        self.viewport.request_render()   # a stroke's move changes the surface too: one render draws both
 
     def update_cursor_radius(self) -> None:
         if self._cursor is not None and self._cursor[1].visibility:
@@ -149,4 +149,4 @@ class SculptTool(ViewportTool):
     def _hide_cursor(self) -> None:
         if self._cursor is not None and self._cursor[1].visibility:
             self._cursor[1].visibility = False
-            self.viewport.render()
+            self.viewport.request_render()

@@ -12,6 +12,8 @@ sculpt brushes) use its gesture API and never its VTK internals:
   (``SurfacePoint``: vertex, face, world position; picked only when read) and the view-plane ``motion`` since
   the press (the world-space displacement in the plane through the gesture's anchor facing the camera).
 - Overlays (``add_overlay`` / ``remove_overlay``): meshes drawn over the surface, never picked, never reframed.
+  A tool that moves one asks for a render (``request_render``): one render on the event loop's next turn, or none
+  if the view renders before then (a pose change the same mouse move made, redrawn by the window).
 - Camera and conversions: ``camera_frame()``, ``world_to_display``, ``display_to_world``, ``display_to_qt``,
   ``view_plane_point``; ``canvas`` is the Qt widget that receives the mouse.
 """
@@ -147,6 +149,7 @@ class Viewport(QtWidgets.QWidget):
         self._press: tuple | None = None             # that gesture's (start, button, anchor)
         self._click: tuple[int, int] | None = None   # a left press no tool took: a click if released near it
         self._picker = None    # widgets.picking.FacePicker, made at the first pick
+        self._render_requested = False   # request_render
         self.plotter.interactor.installEventFilter(self)
         # a studio-scale surface is drawn by fewer faces while it keeps changing (``widgets.lod``)
         self.detail = SurfaceDetail(self.plotter.ren_win, self.render,
@@ -521,7 +524,20 @@ class Viewport(QtWidgets.QWidget):
         return True
 
     def render(self) -> None:
+        self._render_requested = False    # this render draws what a request was for
         self.plotter.render()
+
+    def request_render(self) -> None:
+        """Render on the event loop's next turn, unless a render comes first: what changes until then is drawn by one
+        render (the brush cursor moved in a sculpt stroke's move, whose new surface the window redraws then)."""
+        if not self._render_requested:
+            self._render_requested = True
+            QtCore.QTimer.singleShot(0, self, lambda: self.render() if self._render_requested else None)
+
+    @property
+    def render_pending(self) -> bool:
+        """Whether a requested render (``request_render``) has not happened yet."""
+        return self._render_requested
 
     def picture(self, size: tuple[int, int] | None = None) -> np.ndarray:
         """The view as shown (camera, colour map and bar, wireframe) as (h, w, 3) uint8 pixels at ``size`` (w, h)

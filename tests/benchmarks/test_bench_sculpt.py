@@ -20,7 +20,7 @@ import time
 
 import numpy as np
 import pytest
-from PySide6 import QtCore
+from PySide6 import QtCore, QtWidgets
 
 from tests.gui_helpers import make_window, mouse
 
@@ -58,13 +58,21 @@ def sculpting(qtbot, tmp_path, ict_rig):
     return w, vp.canvas, vp.display_to_qt(xd, yd), frames
 
 
+def _until_drawn(w) -> None:
+    """Run the event loop until the renders the move asked for are done (the window's coalesced redraw, the view's
+    requested render: on the loop's next turn), without qtbot.waitUntil's 10 ms sleeps between its looks."""
+    deadline = time.perf_counter() + 5.0
+    while w.redraw_pending or getattr(w.viewport, "render_pending", False):
+        QtWidgets.QApplication.processEvents()
+        assert time.perf_counter() < deadline, "the move's render never came"
+
+
 def _timed_moves(qtbot, w, widget, positions, frames, buttons):
     wall, cpu, drawn = [], [], []
     for pos in positions:
         n0, t0, c0 = frames[0], time.perf_counter(), time.process_time()
-        mouse(widget, "move", pos, buttons=buttons)
-        if w.redraw_pending:
-            qtbot.waitUntil(lambda: not w.redraw_pending, timeout=5000)
+        mouse(widget, "move", pos, buttons=buttons)   # sends the move, then runs the event loop once
+        _until_drawn(w)
         cpu.append(time.process_time() - c0)
         wall.append(time.perf_counter() - t0)
         drawn.append(frames[0] - n0)
