@@ -10,9 +10,14 @@ browInnerUp pair being authored, symmetric strokes).
   cursor, a render).
 Printed: the min / median wall and CPU time a move, and the frames drawn a move.
 
-Before (the code as it was, 2026-12-05, 2-core VM, llvmpipe): grab move 54.8 / 66.5 ms (two frames a move: the
-cursor's render, then the window's redraw of the stroke), hover move 25.6 / 36.8 ms (a brute-force vtkCellPicker
-pass over the surface's 26k faces, then a render).
+Before (the code as it was, 2026-12-05, 2-core shared VM, llvmpipe; min / median): a grab move 44-56 / 45-74 ms,
+CPU 65-94 ms (two frames a move: the cursor's render, then the window's redraw of the pulled surface; the
+Correctives panel restyled at each offset change; ``sculpt.grab`` on the whole surface each move; each frame with
+the translucent cursor through VTK's order-independent translucency, ~9 ms), a hover move 25-30 / 27-43 ms, CPU
+37-50 ms (VTK's cell picker intersecting every one of the surface's 26k faces, ~15 ms, then the render).
+After (the same, three runs alternated with the code before, 2026-12-06): a grab move 16-24 / 21-36 ms, CPU 24-35
+ms (one frame); a hover move 17-25 / 21-34 ms, CPU 24-34 ms (the pick ~1 ms: ``widgets.picking``). What is left is
+VTK's render of the surface (13-20 ms by the minute on this VM) and the normals (~2 ms).
 """
 from __future__ import annotations
 
