@@ -12,14 +12,28 @@ def face_boxes(points: np.ndarray, offsets: np.ndarray, connectivity: np.ndarray
     """(lo, hi), each (F, 3) float64: the bounding box of each face of a cell array (``offsets`` (F + 1,),
     ``connectivity``: VTK's layout, ``solvers.mesh.cell_layout``) over (V, 3) ``points``. Faces have ≥ 1 vertex."""
     p = np.asarray(points)
-    starts = np.asarray(offsets, dtype=np.int64)[:-1]
+    offsets = np.asarray(offsets, dtype=np.int64)
+    starts = offsets[:-1]
     ids = np.asarray(connectivity, dtype=np.int64)
     lo = np.empty((starts.size, 3))
     hi = np.empty((starts.size, 3))
+    counts = np.diff(offsets)
+    sizes = np.unique(counts)
+    # faces of a few sizes (triangles and quads): their i-th vertices compared a size at a time, half the time of
+    # reduceat (4.6 ms on ICT)
+    groups = [(np.flatnonzero(counts == n), int(n)) for n in sizes] if len(sizes) <= 8 else None
     for k in range(3):          # column by column (``solvers.mesh.bounds``)
         c = p[:, k][ids]
-        lo[:, k] = np.minimum.reduceat(c, starts)
-        hi[:, k] = np.maximum.reduceat(c, starts)
+        if groups is None:
+            lo[:, k] = np.minimum.reduceat(c, starts)
+            hi[:, k] = np.maximum.reduceat(c, starts)
+            continue
+        for faces, n in groups:
+            first = starts[faces]
+            low = high = c[first]
+            for i in range(1, n):
+                low, high = np.minimum(low, c[first + i]), np.maximum(high, c[first + i])
+            lo[faces, k], hi[faces, k] = low, high
     return lo, hi
 
 

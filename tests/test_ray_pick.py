@@ -28,6 +28,17 @@ def test_face_boxes_of_mixed_polygons():
     lo, hi = face_boxes(pts, *cell_layout(counts, idx))
     np.testing.assert_array_equal(lo, [[0, 0, 0], [-1, 0, 0]])
     np.testing.assert_array_equal(hi, [[1, 2, 0], [1, 5, 3]])
+    # faces of many sizes (one face each of 3 to 12 vertices), against each face's own min and max
+    rng = np.random.default_rng(1)
+    pts = rng.normal(size=(60, 3))
+    counts = np.arange(3, 13)
+    idx = rng.integers(0, 60, counts.sum())
+    offsets, connectivity = cell_layout(counts, idx)
+    lo, hi = face_boxes(pts, offsets, connectivity)
+    for f in range(len(counts)):
+        own = pts[connectivity[offsets[f]:offsets[f + 1]]]
+        np.testing.assert_array_equal(lo[f], own.min(axis=0))
+        np.testing.assert_array_equal(hi[f], own.max(axis=0))
 
 
 def test_every_face_the_ray_meets_is_returned_in_order():
