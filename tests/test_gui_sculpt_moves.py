@@ -190,3 +190,24 @@ def test_the_brush_cursor_looks_as_with_vtks_order_independent_translucency(qtbo
     bare = vp.picture().astype(int)
     assert (np.abs(reference - bare).max(axis=2) > 20).sum() > 200      # the cursor shows
     assert np.abs(drawn - reference).max() <= 3
+
+
+@pytest.mark.parametrize("brush", ["smooth", "inflate"])
+def test_a_dab_stroke_draws_one_frame_a_move(qtbot, sculpting, brush):
+    """The smooth and inflate brushes dab under the cursor at each move (a pick of the surface the last dab left):
+    one frame a move (the cursor's render and the window's redraw were two), one undo step for the stroke, the
+    surface changed under the cursor's path only."""
+    w, frames = sculpting
+    ctrl, doc, vp = w.correctives, w.document, w.viewport
+    ctrl.set_brush(brush)
+    start = _forehead(w)
+    steps = doc.undo_stack.count()
+    mouse(vp.canvas, "press", start)
+    path = [start + QtCore.QPointF(2.0 * i, 0.5 * i) for i in range(1, 9)]
+    drawn = _moves(qtbot, w, vp.canvas, path, frames, QtCore.Qt.LeftButton)
+    mouse(vp.canvas, "release", path[-1])
+    assert drawn == [1] * len(path), drawn
+    assert doc.undo_stack.count() == steps + 1
+    moved = np.linalg.norm(doc.edit_offset, axis=1)
+    assert 0 < np.count_nonzero(moved) < doc.rig.n_vertices // 20
+    np.testing.assert_allclose(vp.points(), doc.surface(), atol=1e-6)
