@@ -30,7 +30,7 @@ class FacePicker:
         from vtkmodules.vtkRenderingCore import vtkCellPicker
         self.picker = vtkCellPicker()
         self.picker.SetTolerance(TOLERANCE)
-        self._boxes: dict[int, tuple] = {}    # id(data set) → (data set, its MTime, lo, hi, offsets, connectivity)
+        self._boxes: dict[int, tuple] = {}    # id(data set shown) → (it, its MTime, lo, hi, offsets, connectivity)
         self._copies: list = []               # pick-only actors, reused
 
     def pick(self, renderer, x: int, y: int):
@@ -41,6 +41,8 @@ class FacePicker:
             if not picker.Pick(x, y, 0, renderer) or picker.GetCellId() < 0:
                 return None
             return picker.GetDataSet(), int(picker.GetCellId()), np.array(picker.GetPickPosition())
+        for key in [k for k, v in self._boxes.items() if all(v[0] is not d for d in surfaces)]:
+            del self._boxes[key]              # a surface no longer shown (a new rig, parts hidden): let it go
         origin, direction, margin = self._ray(renderer, x, y)
         picker.InitializePickList()
         picker.PickFromListOn()
@@ -60,6 +62,8 @@ class FacePicker:
                     hit = (data, int(ids[cell]), np.array(picker.GetPickPosition()))
         picker.InitializePickList()
         picker.PickFromListOff()
+        for actor, _data, _ids in chosen:
+            actor.GetMapper().SetInputData(None)   # the copies hold no surface's points between picks
         return hit
 
     def _surfaces(self, renderer) -> list | None:
@@ -111,10 +115,7 @@ class FacePicker:
             connectivity = vtk_to_numpy(polys.GetConnectivityArray()).astype(np.int64, copy=False)
             points = vtk_to_numpy(data.GetPoints().GetData())
             cached = (data, mtime, *face_boxes(points, offsets, connectivity), offsets, connectivity)
-            self._boxes.pop(id(data), None)
             self._boxes[id(data)] = cached
-            while len(self._boxes) > 4:      # the surfaces picked lately, no more
-                del self._boxes[next(iter(self._boxes))]
         return cached[2:]
 
     def _copy(self, k: int, data, ids: np.ndarray, offsets: np.ndarray, connectivity: np.ndarray):
