@@ -77,7 +77,10 @@ class SculptTool(ViewportTool):
         old = None if doc.edit_offset is None else doc.edit_offset.copy()
         center = np.asarray(g.point.position, dtype=np.float64)
         self._stroke = {"settings": s, "old": old, "base": base, "center": center, "changed": False}
-        if s["brush"] != "grab":
+        if s["brush"] == "grab":   # the brush's weights about the press, once for the stroke
+            self._stroke["grab"] = sculpt.GrabStroke(base, center, s["radius"], s["falloff"], s["strength"],
+                                                     mesh=self.mesh, symmetric=s["symmetric"])
+        else:
             self._dab(center)
         self._show_cursor(center)
         return True
@@ -90,10 +93,8 @@ class SculptTool(ViewportTool):
         s = st["settings"]
         if s["brush"] == "grab":
             drag = g.motion
-            new = sculpt.grab(st["base"], st["center"], drag, s["radius"], s["falloff"], s["strength"],
-                              mesh=self.mesh, symmetric=s["symmetric"], reference=st["base"])
-            base_offset = np.zeros_like(st["base"]) if st["old"] is None else st["old"]
-            self.document.set_edit_offset(base_offset + (new - st["base"]))
+            # the offset at the press plus sculpt.grab's pull of the surface as pressed by the drag
+            self.document.set_edit_offset(st["grab"].offset(drag, st["old"], len(st["base"])))
             st["changed"] = True
             self._show_cursor(st["center"] + drag)
         elif g.point is not None:
@@ -139,7 +140,7 @@ class SculptTool(ViewportTool):
         sphere, actor, unit = self._cursor
         sphere.points = (unit * r + np.asarray(center, dtype=np.float64)).astype(np.float32)
         actor.visibility = True
-        self.viewport.render()
+        self.viewport.request_render()   # a stroke's move changes the surface too: one render draws both
 
     def update_cursor_radius(self) -> None:
         if self._cursor is not None and self._cursor[1].visibility:
@@ -149,4 +150,4 @@ class SculptTool(ViewportTool):
     def _hide_cursor(self) -> None:
         if self._cursor is not None and self._cursor[1].visibility:
             self._cursor[1].visibility = False
-            self.viewport.render()
+            self.viewport.request_render()

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from model.errors import RigInputError
-from solvers.sculpt import (FALLOFFS, SculptMesh, brush_weights, deflate, falloff, grab, inflate,
+from solvers.sculpt import (FALLOFFS, GrabStroke, SculptMesh, brush_weights, deflate, falloff, grab, inflate,
                             laplacian_energy, mirror_map, smooth)
 
 R = np.array([-1.0, 1.0, 1.0])
@@ -77,6 +77,35 @@ def test_symmetric_grab_mirrors_the_stroke(face):
     up = np.array([0.0, 0.0, 0.5])
     across = grab(neutral, neutral[mid], up, 1.0, mesh=mesh, symmetric=True) - neutral
     assert np.linalg.norm(across, axis=1).max() <= 0.5 + 1e-9
+
+
+def test_a_grab_stroke_gives_exactly_what_grab_gives_at_each_drag(face):
+    """GrabStroke (the weights found once at the press, the reached vertices only at each move) against ``grab`` on
+    the whole surface as the sculpt tool called it every move: the same numbers, bit for bit, one-sided and
+    symmetric, across the mirror plane, every falloff, with and without an offset before the stroke."""
+    neutral, mesh, cheek = face
+    rng = np.random.default_rng(5)
+    points = neutral + rng.normal(0, 0.01, neutral.shape)          # a sculpted surface, not the neutral
+    mid = int(np.argmin(np.abs(neutral[:, 0]) + 10 * (neutral[:, 2] < neutral[:, 2].max() - 1)))
+    before = np.zeros_like(points)
+    before[rng.integers(0, len(points), 500)] = rng.normal(0, 0.1, (500, 3))
+    before[:3] = -0.0
+    for centre in (points[cheek], points[mid]):
+        for symmetric in (False, True):
+            for kind, strength in zip(FALLOFFS, (1.0, 0.35, -0.6)):
+                stroke = GrabStroke(points, centre, 1.7, kind, strength, mesh=mesh, symmetric=symmetric)
+                assert 0 < stroke.reach.size < len(points) // 10
+                for drag in (np.array([0.3, -0.2, 0.05]), np.array([-1e-3, 0.0, 2.5]), np.zeros(3)):
+                    pulled = grab(points, centre, drag, 1.7, kind, strength, mesh=mesh, symmetric=symmetric,
+                                  reference=points)
+                    for old in (None, before):
+                        want = (np.zeros_like(points) if old is None else old) + (pulled - points)
+                        got = stroke.offset(drag, old, len(points))
+                        assert got.dtype == want.dtype and np.array_equal(got, want)
+                        assert np.array_equal(np.signbit(got), np.signbit(want))
+    with pytest.raises(RigInputError, match="mirror map"):
+        GrabStroke(points, points[cheek], 1.0, mesh=SculptMesh.build(neutral, mesh.triangles, symmetric=False),
+                   symmetric=True)
 
 
 def test_smooth_reduces_laplacian_energy_inside_the_brush_only(face):

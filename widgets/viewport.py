@@ -12,6 +12,8 @@ sculpt brushes) use its gesture API and never its VTK internals:
   (``SurfacePoint``: vertex, face, world position; picked only when read) and the view-plane ``motion`` since
   the press (the world-space displacement in the plane through the gesture's anchor facing the camera).
 - Overlays (``add_overlay`` / ``remove_overlay``): meshes drawn over the surface, never picked, never reframed.
+  A tool that moves one asks for a render (``request_render``): one render on the event loop's next turn, or none
+  if the view renders before then (a pose change the same mouse move made, redrawn by the window).
 - Camera and conversions: ``camera_frame()``, ``world_to_display``, ``display_to_world``, ``display_to_qt``,
   ``view_plane_point``; ``canvas`` is the Qt widget that receives the mouse.
 """
@@ -27,6 +29,7 @@ from model.parts import subset_faces
 from model.rig_prep import framed_points
 
 from .lod import SurfaceDetail
+from .picking import FacePicker
 from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, drop_cached_background, fit_overlays, \
     overlay_room, rig_mesh, set_camera, style_plotter, surface_face
 
@@ -121,6 +124,10 @@ class Viewport(QtWidgets.QWidget):
         self.plotter.resized = self._fit_to_size
         style_plotter(self.plotter)
         copy_cached_background(self.plotter.renderer)   # the gradient copied into each frame, not drawn anew
+        # Translucent overlays (the sculpt brush's cursor, a wireframe at 30% opacity) blended as drawn, not by VTK's
+        # order-independent translucency: its extra full-window passes cost ~9 ms a frame of ICT on llvmpipe, for a
+        # picture within 2 of 255 levels of the same (one translucent layer over the opaque surface).
+        self.plotter.renderer.SetUseOIT(False)
         self.plotter.enable_trackball_style()
         lay = QtWidgets.QVBoxLayout(self)
         lay.setContentsMargins(0, 0, 0, 0)
@@ -145,6 +152,8 @@ class Viewport(QtWidgets.QWidget):
         self._owner: ViewportTool | None = None      # the tool whose gesture is under way
         self._press: tuple | None = None             # that gesture's (start, button, anchor)
         self._click: tuple[int, int] | None = None   # a left press no tool took: a click if released near it
+        self._picker = None    # widgets.picking.FacePicker, made at the first pick
+        self._render_requested = False   # request_render
         self.plotter.interactor.installEventFilter(self)
         # a studio-scale surface is drawn by fewer faces while it keeps changing (``widgets.lod``)
         self.detail = SurfaceDetail(self.plotter.ren_win, self.render,
@@ -325,20 +334,19 @@ class Viewport(QtWidgets.QWidget):
     # --- picking -----------------------------------------------------------------------------------
     def pick(self, x: int, y: int) -> SurfacePoint | None:
         """The surface point under display pixel (x, y from the bottom-left), or None."""
-        from vtkmodules.vtkRenderingCore import vtkCellPicker
         if self.mesh is None:
             return None
         self.detail.show_full()   # picked on the surface's own faces, not a proxy's
-        picker = vtkCellPicker()
-        picker.SetTolerance(0.0005)
-        if not picker.Pick(x, y, 0, self.plotter.renderer) or picker.GetCellId() < 0:
+        if self._picker is None:
+            self._picker = FacePicker()
+        hit = self._picker.pick(self.plotter.renderer, x, y)   # VTK's cell picker, over the faces near the ray
+        if hit is None:
             return None
+        data, cell, point = hit
         shown = self._textured.mesh if self.textured else self.mesh
-        if picker.GetDataSet() is None or picker.GetDataSet().GetNumberOfPoints() != shown.n_points:
+        if data is None or data.GetNumberOfPoints() != shown.n_points:
             return None
-        point = np.array(picker.GetPickPosition())
-        face = int(picker.GetCellId()) if shown is not self.mesh else \
-            surface_face(self.mesh, picker.GetDataSet(), picker.GetCellId())   # the back of a two-sided part
+        face = cell if shown is not self.mesh else surface_face(self.mesh, data, cell)   # a two-sided part's back
         ids = np.asarray(shown.get_cell(face).point_ids)
         pts = np.asarray(shown.points)[ids]
         nearest = int(ids[np.argmin(np.linalg.norm(pts - point, axis=1))])
@@ -520,7 +528,20 @@ class Viewport(QtWidgets.QWidget):
         return True
 
     def render(self) -> None:
+        self._render_requested = False    # this render draws what a request was for
         self.plotter.render()
+
+    def request_render(self) -> None:
+        """Render on the event loop's next turn, unless a render comes first: what changes until then is drawn by one
+        render (the brush cursor moved in a sculpt stroke's move, whose new surface the window redraws then)."""
+        if not self._render_requested:
+            self._render_requested = True
+            QtCore.QTimer.singleShot(0, self, lambda: self.render() if self._render_requested else None)
+
+    @property
+    def render_pending(self) -> bool:
+        """Whether a requested render (``request_render``) has not happened yet."""
+        return self._render_requested
 
     def picture(self, size: tuple[int, int] | None = None) -> np.ndarray:
         """The view as shown (camera, colour map and bar, wireframe) as (h, w, 3) uint8 pixels at ``size`` (w, h)
@@ -564,6 +585,7 @@ class Viewport(QtWidgets.QWidget):
         self.detail.stop()
         self._tools.clear()
         self._owner = None
+        self._picker = None
         if not self.plotter._closed:
             drop_cached_background(self.plotter.renderer)   # its frame buffer, while the window is open
         self.plotter.close()
