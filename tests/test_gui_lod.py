@@ -215,3 +215,40 @@ def test_the_proxy_frame_looks_like_the_full_frame_of_the_same_pose(qtbot, tmp_p
     # the proxy draws that pose, lit and coloured as the surface is (coarser: a proxy left at the neutral pose
     # would differ by about ``moved``, one without the colours or normals by far more)
     assert off < 0.5 * moved, (off, moved)
+
+
+def test_quitting_while_the_proxy_is_started_stops_it_at_once(qtbot, tmp_path, ict_dir, small_lod, monkeypatch):
+    """File ▸ Quit (Ctrl+Q) in the moment after a rig opens, before the decimation filter exists (the surface's
+    arrays are copied first: 0.4 s at 422k vertices): the window closes at once and no decimation runs after it (it
+    waited 5 s for a stopped decimation that then ran to its end, 6 s at 422k)."""
+    import threading
+    import time
+
+    from PySide6.QtTest import QTest
+
+    import widgets.lod as lod
+    copying, never = threading.Event(), threading.Event()
+    monkeypatch.setattr(lod, "_yield_to_other_threads", lambda: (copying.set(), never.wait(0.5)))   # the arrays' copy
+    decimated = []
+    real = lod.proxy_faces
+
+    def recorded(*args, **kwargs):
+        decimated.append(time.monotonic())
+        return real(*args, **kwargs)
+    monkeypatch.setattr(lod, "proxy_faces", recorded)
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    assert copying.wait(10)
+    making = [t for t in threading.enumerate() if t.name == "surface-proxy" and t.is_alive()]
+    assert making and w.viewport.detail._running[1] is None      # no filter yet
+    w.activateWindow()
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=5000)
+    t0 = time.monotonic()
+    QTest.keyClick(QtWidgets.QApplication.focusWidget() or w, QtCore.Qt.Key_Q, QtCore.Qt.ControlModifier)
+    QtWidgets.QApplication.processEvents()
+    closed = time.monotonic() - t0
+    assert not w.isVisible()
+    assert closed < 1.0, closed
+    for t in making:
+        t.join(timeout=10)
+    assert not decimated, "the stopped proxy's decimation ran after the window closed"

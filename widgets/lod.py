@@ -82,8 +82,8 @@ def proxy_faces(points: np.ndarray, face_counts: np.ndarray, face_indices: np.nd
     Decimation by vertex removal (Schroeder, Zarge & Lorensen 1992, "Decimation of triangle meshes";
     ``vtkDecimatePro`` with topology preserved, no splitting and boundary vertices kept): a kept vertex is an
     input vertex, unmoved, found by an id array carried through the filter. Thread-safe (no rendering); 1-6 s
-    at 106k-422k vertices, run on a worker thread. ``target`` defaults to ``LOD_TARGET_TRIANGLES``. ``on_filter`` is given the filter before
-    it runs, to stop it from another thread (``SetAbortExecute(1)``): None then."""
+    at 106k-422k vertices, run on a worker thread. ``target`` defaults to ``LOD_TARGET_TRIANGLES``. ``on_filter``
+    is given the filter before it runs, to stop it from another thread (``SetAbortExecute(1)``): None then."""
     from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray, vtk_to_numpy
     from vtkmodules.vtkCommonCore import vtkPoints
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
@@ -159,7 +159,7 @@ class SurfaceDetail(QtCore.QObject):
         self._full = None           # while the proxy is shown: the (mapper, the dataset it drew) pairs swapped
         self._last: float | None = None   # when the last render started
         self._still_render = False
-        self._running: list = [None, None]   # the proxy being made: its thread and decimation filter
+        self._running: list = [None, None, None]   # the proxy being made: its thread, decimation filter, stop event
         self._timer = QtCore.QTimer(self, singleShot=True, interval=int(STILL_AFTER_S * 1000))
         self._timer.timeout.connect(self._when_still)
         self._made.connect(self._adopt)
@@ -181,24 +181,29 @@ class SurfaceDetail(QtCore.QObject):
         enough (the last mesh's, if still being made, stops)."""
         self.show_full()
         self._timer.stop()
-        if self._running[1] is not None:
-            self._running[1].SetAbortExecute(1)
+        _stop(self._running)
         self._generation += 1
         self._mesh, self._arrays, self._proxy = mesh, arrays, None
         if mesh is None or not wants_proxy(face_counts):
             return
         generation = self._generation
         args = (np.array(points, dtype=np.float64), np.array(face_counts), np.array(face_indices))
-        running: list = [None, None]
+        running: list = [None, None, threading.Event()]
+
+        def on_filter(decimate) -> None:
+            running[1] = decimate
+            if running[2].is_set():     # stopped before the filter existed (``_stop``): it returns at once
+                decimate.SetAbortExecute(1)
 
         def make() -> None:
             try:
                 _yield_to_other_threads()
-                proxy = proxy_faces(*args, on_filter=lambda f: running.__setitem__(1, f))
+                proxy = None if running[2].is_set() else proxy_faces(*args, on_filter=on_filter)
             except Exception:   # no proxy: everything is drawn in full, as before
                 traceback.print_exc()
                 proxy = None
-            self._made.emit(generation, proxy)
+            if not running[2].is_set():
+                self._made.emit(generation, proxy)
 
         running[0] = threading.Thread(target=make, name="surface-proxy", daemon=True)
         self._running = running
@@ -296,11 +301,21 @@ class SurfaceDetail(QtCore.QObject):
         self.show_full()
         self._generation += 1
         self._mesh, self._arrays, self._proxy = None, None, None
-        thread, running = self._running
-        if running is not None:
-            running.SetAbortExecute(1)
-        if thread is not None:
-            thread.join(timeout=5)
+        _stop(self._running)
+        if self._running[0] is not None:
+            self._running[0].join(timeout=5)
+
+
+def _stop(running: list) -> None:
+    """Stop the proxy being made by ``running`` ([thread, its decimation filter once made, its stop event]): the
+    filter aborted if it runs, else it aborts as it is made, and the thread emits nothing. Before the filter exists
+    (the surface's arrays still being copied: 0.4 s at 422k vertices) the flag alone stops it; aborting the filter
+    alone missed that, and the stopped decimation then ran to its end (6 s at 422k: a window closed meanwhile waited
+    5 s for it, a rig opened meanwhile had it beside its own)."""
+    if running[2] is not None:
+        running[2].set()
+    if running[1] is not None:
+        running[1].SetAbortExecute(1)
 
 
 def _yield_to_other_threads() -> None:
