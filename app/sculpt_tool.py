@@ -139,7 +139,7 @@ class SculptTool(ViewportTool):
         sphere, actor, unit = self._cursor
         sphere.points = (unit * r + np.asarray(center, dtype=np.float64)).astype(np.float32)
         actor.visibility = True
-        self.viewport.render()
+        self._render()
 
     def update_cursor_radius(self) -> None:
         if self._cursor is not None and self._cursor[1].visibility:
@@ -149,4 +149,12 @@ class SculptTool(ViewportTool):
     def _hide_cursor(self) -> None:
         if self._cursor is not None and self._cursor[1].visibility:
             self._cursor[1].visibility = False
+            self._render()
+
+    def _render(self) -> None:
+        """Show the cursor: now (a hover), or by the window's redraw of the stroke's new surface when one is coming
+        (``render_pending``). Rendering here too drew each stroke move twice, the old surface and then the new: at
+        422k vertices 0.1-0.16 s more a move, and with the level of detail (``widgets.lod``) the second frame, close
+        after the first, drew the proxy: the face flickered between it and the full surface at every dab."""
+        if not self.viewport.plotter.render_pending():
             self.viewport.render()
