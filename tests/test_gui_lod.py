@@ -252,3 +252,42 @@ def test_quitting_while_the_proxy_is_started_stops_it_at_once(qtbot, tmp_path, i
     for t in making:
         t.join(timeout=10)
     assert not decimated, "the stopped proxy's decimation ran after the window closed"
+
+
+def _sculpting(qtbot, w):
+    """Sculpt mode on ICT (the brow pair posed), the proxy ready and the view still; the canvas and the display
+    (Qt) position of a forehead vertex."""
+    ctrl = w.correctives
+    assert ctrl.start_authoring(["browInnerUp_L", "browInnerUp_R"])
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready and not w.redraw_pending, timeout=60000)
+    qtbot.wait(500)
+    vp = w.viewport
+    surface = w.document.surface()
+    front = np.flatnonzero(np.abs(surface[:, 0]) < 1.0)
+    v = int(front[np.argmax(surface[front, 2] + 0.2 * surface[front, 1])])   # the forehead, towards the camera
+    xd, yd, _ = vp.world_to_display(surface[[v]])[0]
+    return vp.canvas, vp.display_to_qt(xd, yd)
+
+
+def test_a_brush_hover_leaving_the_face_ends_on_the_full_surface(qtbot, tmp_path, ict_dir, small_lod):
+    """Sculpt mode: the brush cursor follows the mouse over the face (each hover picks the surface, then draws the
+    cursor: frames close together, the proxy's), then the mouse leaves the face: the cursor is hidden, and the
+    next hovers pick nothing and draw nothing. Once still, the full surface is drawn: the hover's pick had put the
+    surface's own faces back without a render, and the still render, going by the actors' inputs, never came: the
+    proxy's picture stayed on screen."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    canvas, at = _sculpting(qtbot, w)
+    drawn = _drawn_faces(w)
+    n_faces = w.viewport.mesh.GetNumberOfPolys()
+    for dx in range(0, 40, 4):
+        mouse(canvas, "move", at + QtCore.QPointF(dx, 0), buttons=QtCore.Qt.NoButton)
+        qtbot.wait(20)
+    assert min(drawn) < n_faces, drawn           # the hovers over the face drew the proxy
+    for k in range(4):                           # off the face: the viewport's corner
+        mouse(canvas, "move", QtCore.QPointF(6 + 3 * k, 6), buttons=QtCore.Qt.NoButton)
+        qtbot.wait(20)
+    assert not w.viewport.plotter.actors["brush_cursor"].GetVisibility()
+    qtbot.wait(800)
+    assert drawn[-1] == n_faces, drawn[-6:]
+    assert not w.viewport.detail.proxy_shown

@@ -157,6 +157,7 @@ class SurfaceDetail(QtCore.QObject):
         self._generation = 0
         self._proxy: tuple | None = None   # once made: (kept vertex ids, front vtkPolyData, backs or None)
         self._full = None           # while the proxy is shown: the (mapper, the dataset it drew) pairs swapped
+        self._drawn_proxy = False   # whether the last render drew the proxy (a pick may have swapped back since)
         self._last: float | None = None   # when the last render started
         self._still_render = False
         self._running: list = [None, None, None]   # the proxy being made: its thread, decimation filter, stop event
@@ -172,8 +173,8 @@ class SurfaceDetail(QtCore.QObject):
 
     @property
     def proxy_shown(self) -> bool:
-        """Whether the last render (or the next, if nothing changes) draws the proxy's faces."""
-        return self._full is not None
+        """Whether the last render drew the proxy's faces (the picture shown; until the still render)."""
+        return self._drawn_proxy
 
     def set_mesh(self, mesh, face_counts=None, face_indices=None, points=None, arrays=None) -> None:
         """Draw ``mesh`` (a ``scene.rig_mesh`` of these polygons at ``points``, updated through ``arrays``, its
@@ -278,16 +279,21 @@ class SurfaceDetail(QtCore.QObject):
         now = time.monotonic()
         busy = self._last is not None and now - self._last < STILL_AFTER_S
         self._last = now
-        if busy and self._proxy is not None and not self._still_render and not self.full_only and self._allowed():
+        self._drawn_proxy = busy and self._proxy is not None and not self._still_render and not self.full_only \
+            and self._allowed()
+        if self._drawn_proxy:
             self._show_proxy(window)
             self._timer.start()
         else:
             self.show_full()
 
     def _when_still(self) -> None:
-        if self._full is None:
+        # by what the last render drew, not by the actors' inputs: a pick since (a sculpt brush's hover off the face,
+        # no render after it) puts the surface's own faces back without a render, and the proxy's picture stayed
+        if not self._drawn_proxy:
             return
-        self.show_full()            # a change VTK sees: the window renders (``NativePlotter.render``)
+        self.show_full()            # a change VTK sees (now, or at the pick): the window renders
+        #                             (``NativePlotter.render``)
         self._still_render = True
         try:
             self._render()
