@@ -291,3 +291,32 @@ def test_a_brush_hover_leaving_the_face_ends_on_the_full_surface(qtbot, tmp_path
     qtbot.wait(800)
     assert drawn[-1] == n_faces, drawn[-6:]
     assert not w.viewport.detail.proxy_shown
+
+
+def test_a_brush_stroke_on_the_proxy_computes_no_normals_of_the_whole_surface(qtbot, tmp_path, ict_dir, small_lod):
+    """An inflate stroke: each mouse move picks the surface under the brush (on its own faces) and dabs; its frames,
+    close together, are the proxy's, lit by the proxy's normals. The pick needs only the faces: it computed the
+    whole surface's normals at each move all the same (47 ms a move at 422k vertices), for frames that never drew
+    them. Once still, the surface is drawn in full with its normals for the pose."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    canvas, at = _sculpting(qtbot, w)
+    w.correctives.set_brush("inflate")
+    vp = w.viewport
+    whole = []
+    normals_of = vp._arrays._normals_of
+    vp._arrays._normals_of = lambda points: (whole.append(1), normals_of(points))[1]
+    drawn = _drawn_faces(w)
+    mouse(canvas, "press", at)
+    counts = []
+    for dx in range(2, 26, 2):
+        mouse(canvas, "move", at + QtCore.QPointF(dx, 0))
+        qtbot.waitUntil(lambda: not w.redraw_pending, timeout=5000)
+        counts.append(len(whole))
+    mouse(canvas, "release", at + QtCore.QPointF(24, 0))
+    n_faces = vp.mesh.GetNumberOfPolys()
+    assert sum(1 for n in drawn if n < n_faces) >= 8, drawn       # the stroke drawn by the proxy
+    assert counts[-1] - counts[2] == 0, counts
+    qtbot.waitUntil(lambda: drawn[-1] == n_faces and not vp.detail.proxy_shown, timeout=3000)
+    mesh = vp.mesh
+    np.testing.assert_allclose(mesh.point_data["Normals"], vp.normals_function()(mesh.points), atol=1e-6)

@@ -220,9 +220,11 @@ class SurfaceDetail(QtCore.QObject):
         return (self._proxy is not None and self._last is not None and not self.full_only and self._allowed()
                 and time.monotonic() - self._last < STILL_AFTER_S)
 
-    def show_full(self) -> None:
-        """The surface drawn by its own mesh again from now on (no render), its normals brought up to date."""
-        if self._arrays is not None:
+    def show_full(self, normals: bool = True) -> None:
+        """The surface drawn by its own mesh again from now on (no render), its normals brought up to date
+        (``normals`` False: left for the next render that draws it in full, ``_on_start``; a pick needs only the
+        faces, and a sculpt brush's dab picks at every mouse move: 47 ms of normals a move at 422k vertices)."""
+        if normals and self._arrays is not None:
             self._arrays.refresh_normals()
         if self._full is None:
             return

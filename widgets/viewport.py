@@ -328,7 +328,7 @@ class Viewport(QtWidgets.QWidget):
         from vtkmodules.vtkRenderingCore import vtkCellPicker
         if self.mesh is None:
             return None
-        self.detail.show_full()   # picked on the surface's own faces, not a proxy's
+        self.detail.show_full(normals=False)   # picked on the surface's own faces, not a proxy's
         picker = vtkCellPicker()
         picker.SetTolerance(0.0005)
         if not picker.Pick(x, y, 0, self.plotter.renderer) or picker.GetCellId() < 0:
