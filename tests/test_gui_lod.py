@@ -320,3 +320,41 @@ def test_a_brush_stroke_on_the_proxy_computes_no_normals_of_the_whole_surface(qt
     qtbot.waitUntil(lambda: drawn[-1] == n_faces and not vp.detail.proxy_shown, timeout=3000)
     mesh = vp.mesh
     np.testing.assert_allclose(mesh.point_data["Normals"], vp.normals_function()(mesh.points), atol=1e-6)
+
+
+def test_export_image_right_after_a_drag_draws_the_full_surface_and_leaves_it(qtbot, tmp_path, ict_dir, small_lod,
+                                                                             monkeypatch):
+    """File ▸ Export Image (Ctrl+Shift+E, the size dialog's OK clicked) right after a slider drag drawn by
+    the proxy: the picture is of the full surface, and so is the view the export leaves. The render putting the view
+    back after the picture came close after it: it drew the proxy, and the full surface again 0.3 s later (a full
+    and a proxy frame more, and the view flickering to the proxy and back)."""
+    from PIL import Image
+    from PySide6.QtTest import QTest
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
+    qtbot.wait(500)
+    vp = w.viewport
+    path = tmp_path / "after_drag.png"
+    monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", lambda *a, **k: (str(path), ""))
+    _drag_jaw(qtbot, w, moves=6)
+    assert vp.detail.proxy_shown
+    drawn = _drawn_faces(w)
+    w.activateWindow()
+    qtbot.waitUntil(lambda: QtWidgets.QApplication.activeWindow() is w, timeout=3000)
+    vp.canvas.setFocus()
+    QTest.keyClick(vp.canvas, QtCore.Qt.Key_E, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
+    qtbot.waitUntil(lambda: w.image_size_dialog is not None and w.image_size_dialog.isVisible(), timeout=3000)
+    ok = w.image_size_dialog.findChild(QtWidgets.QDialogButtonBox).button(QtWidgets.QDialogButtonBox.Ok)
+    QTest.mouseClick(ok, QtCore.Qt.LeftButton)
+    w.jobs.wait()
+    qtbot.waitUntil(path.exists, timeout=5000)
+    n_faces = vp.mesh.GetNumberOfPolys()
+    assert drawn and set(drawn) == {n_faces}, drawn        # the picture's frames and the view's after it
+    assert not vp.detail.proxy_shown
+    qtbot.wait(500)
+    assert set(drawn) == {n_faces}, drawn                  # and no still render: the view was drawn in full
+    still = vp.picture()
+    picture = np.asarray(Image.open(path).convert("RGB"))
+    assert picture.shape == still.shape
+    assert np.abs(picture.astype(float) - still).mean() < 0.5

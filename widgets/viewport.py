@@ -545,11 +545,13 @@ class Viewport(QtWidgets.QWidget):
             window_size = [int(w), int(h)] if size else None
             return np.asarray(self.plotter.screenshot(None, return_img=True, window_size=window_size))[:, :, :3]
         finally:
-            self.detail.full_only = False
-            fit_overlays(self.plotter)
-            cam.view_angle = angle
-            self.plotter.camera_position = saved
-            self.render()
+            try:
+                fit_overlays(self.plotter)
+                cam.view_angle = angle
+                self.plotter.camera_position = saved
+                self.render()       # the view back as it was: in full too (the proxy's, close after the picture's)
+            finally:
+                self.detail.full_only = False
 
     def _fit_to_size(self) -> None:
         """The render window took a new size (``NativePlotter.resized``): the legend and bar laid out for it, and an
