@@ -358,3 +358,32 @@ def test_export_image_right_after_a_drag_draws_the_full_surface_and_leaves_it(qt
     picture = np.asarray(Image.open(path).convert("RGB"))
     assert picture.shape == still.shape
     assert np.abs(picture.astype(float) - still).mean() < 0.5
+
+
+def test_a_click_adding_a_marker_draws_one_full_frame(qtbot, tmp_path, ict_dir, small_lod):
+    """Marker Mode: a click on the face adds a marker, drawn by the click's own frame (VTK renders as the button is
+    released). The window's redraw of the unchanged pose drew it again close after: that second frame was the
+    proxy's, and the full surface came back 0.3 s later (three frames, the face flickering coarse at every click)."""
+    from PySide6.QtTest import QTest
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
+    QTest.mouseClick(w.marker_mode_button, QtCore.Qt.LeftButton)
+    mc = w.markers
+    assert mc.mode
+    qtbot.waitUntil(lambda: not mc.unfinished_jobs(patience=0.0) and not w.redraw_pending, timeout=30000)
+    qtbot.wait(500)
+    vp = w.viewport
+    drawn = _drawn_faces(w)
+    n_faces = vp.mesh.GetNumberOfPolys()
+    surface = w.document.surface()
+    for k, v in enumerate((964, 1500)):             # ICT's chin, then a second marker on the face
+        xd, yd, _ = vp.world_to_display(surface[[v]])[0]
+        at = vp.display_to_qt(xd, yd)
+        before = len(drawn)
+        mouse(vp.canvas, "press", at)
+        mouse(vp.canvas, "release", at)
+        qtbot.waitUntil(lambda: len(mc.markers) == k + 1, timeout=3000)
+        qtbot.wait(600)
+        assert drawn[before:] == [n_faces], drawn[before:]
+    assert not vp.detail.proxy_shown
