@@ -377,13 +377,58 @@ def test_a_click_adding_a_marker_draws_one_full_frame(qtbot, tmp_path, ict_dir, 
     drawn = _drawn_faces(w)
     n_faces = vp.mesh.GetNumberOfPolys()
     surface = w.document.surface()
+    import time
+
+    import vtk
+    last = [time.monotonic()]
+    vp.plotter.ren_win.AddObserver(vtk.vtkCommand.EndEvent, lambda *_: last.__setitem__(0, time.monotonic()))
     for k, v in enumerate((964, 1500)):             # ICT's chin, then a second marker on the face
         xd, yd, _ = vp.world_to_display(surface[[v]])[0]
         at = vp.display_to_qt(xd, yd)
+        qtbot.waitUntil(lambda: time.monotonic() - last[0] > 0.5, timeout=5000)   # nothing drawn a moment before
         before = len(drawn)
         mouse(vp.canvas, "press", at)
         mouse(vp.canvas, "release", at)
         qtbot.waitUntil(lambda: len(mc.markers) == k + 1, timeout=3000)
         qtbot.wait(600)
-        assert drawn[before:] == [n_faces], drawn[before:]
+        assert drawn[before:] == [n_faces], ("click", k, drawn[before:])
     assert not vp.detail.proxy_shown
+
+
+def test_an_orbit_ends_on_the_full_surface_as_the_button_is_released(qtbot, tmp_path, ict_dir, small_lod):
+    """The camera turned with the mouse (VTK's trackball renders each move: the proxy's frames), then the button
+    released: VTK's frame for the release, the end of the interaction, draws the full surface at once, and no still
+    render follows. It drew the proxy, and the full surface 0.3 s later."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
+    qtbot.wait(500)
+    vp = w.viewport
+    drawn = _drawn_faces(w)
+    n_faces = vp.mesh.GetNumberOfPolys()
+    camera = vp.camera_frame().position
+    at = QtCore.QPointF(vp.canvas.width() * 0.3, vp.canvas.height() * 0.5)     # beside the face: the camera turns
+    mouse(vp.canvas, "press", at)
+    for dx in range(8, 120, 8):
+        mouse(vp.canvas, "move", at + QtCore.QPointF(dx, 0))
+    assert sum(1 for n in drawn if n < n_faces) >= 8, drawn          # the orbit drawn by the proxy
+    before = len(drawn)
+    mouse(vp.canvas, "release", at + QtCore.QPointF(112, 0))
+    assert drawn[before:] == [n_faces], ("orbit", drawn[before:])
+    assert not vp.detail.proxy_shown
+    qtbot.wait(600)
+    assert len(drawn) == before + 1
+    assert not np.allclose(vp.camera_frame().position, camera)
+    # a zoom with the right button and a pan with the middle one end so too, and end (the camera stays after them)
+    for button in (QtCore.Qt.RightButton, QtCore.Qt.MiddleButton):
+        camera = vp.camera_frame().position
+        mouse(vp.canvas, "press", at, buttons=button, button=button)
+        for dy in range(6, 60, 6):
+            mouse(vp.canvas, "move", at + QtCore.QPointF(0, dy), buttons=button, button=button)
+        before = len(drawn)
+        mouse(vp.canvas, "release", at + QtCore.QPointF(0, 54), buttons=button, button=button)
+        assert drawn[before:] == [n_faces], (button, drawn[before:])
+        moved = vp.camera_frame().position
+        assert not np.allclose(moved, camera)
+        mouse(vp.canvas, "move", at + QtCore.QPointF(30, 90), buttons=QtCore.Qt.NoButton)
+        np.testing.assert_allclose(vp.camera_frame().position, moved)      # the button's interaction is over

@@ -166,6 +166,21 @@ class SurfaceDetail(QtCore.QObject):
         self._made.connect(self._adopt)
         from vtkmodules.vtkCommonCore import vtkCommand
         render_window.AddObserver(vtkCommand.StartEvent, self._on_start)
+        # VTK's camera styles render once more as the button that turned, panned or zoomed is released: the end of
+        # the interaction, drawn in full at once (it drew the proxy, the full surface 0.3 s later)
+        self._releasing = False
+        interactor = render_window.GetInteractor()
+        style = interactor.GetInteractorStyle() if interactor is not None else None
+        if style is not None:
+            # a style with observers of a button's event hands it to them instead of its own handler: pyvista's
+            # observe the left button (and call the handler); for the others the handler is called here
+            for event, handler in ((vtkCommand.LeftButtonReleaseEvent, None),
+                                   (vtkCommand.MiddleButtonReleaseEvent, style.OnMiddleButtonUp),
+                                   (vtkCommand.RightButtonReleaseEvent, style.OnRightButtonUp)):
+                style.AddObserver(event, lambda *_: setattr(self, "_releasing", True), 1.0)    # before the handler
+                if handler is not None:
+                    style.AddObserver(event, lambda *_, h=handler: h(), 0.0)
+                style.AddObserver(event, lambda *_: setattr(self, "_releasing", False), -1.0)  # after it
 
     @property
     def proxy_ready(self) -> bool:
@@ -282,7 +297,7 @@ class SurfaceDetail(QtCore.QObject):
         busy = self._last is not None and now - self._last < STILL_AFTER_S
         self._last = now
         self._drawn_proxy = busy and self._proxy is not None and not self._still_render and not self.full_only \
-            and self._allowed()
+            and not self._releasing and self._allowed()
         if self._drawn_proxy:
             self._show_proxy(window)
             self._timer.start()
