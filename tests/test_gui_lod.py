@@ -432,3 +432,32 @@ def test_an_orbit_ends_on_the_full_surface_as_the_button_is_released(qtbot, tmp_
         assert not np.allclose(moved, camera)
         mouse(vp.canvas, "move", at + QtCore.QPointF(30, 90), buttons=QtCore.Qt.NoButton)
         np.testing.assert_allclose(vp.camera_frame().position, moved)      # the button's interaction is over
+
+
+def test_a_texture_shown_again_after_a_drag_under_a_colour_map_is_lit_for_the_pose(qtbot, tmp_path, monkeypatch):
+    """The sample's texture chosen, then a colour map (the deformation view) over it: the surface is the plain mesh
+    again, and a slider drag is drawn by the proxy, its frames leaving the surface's normals for later. The Shaded
+    view back: the textured surface is drawn lit by the normals of the pose it shows. It took the surface's normals
+    at each frame of the drag, the deferred ones: lit for the pose before the drag until the next pose change."""
+    import widgets.lod as lod
+    from tests.test_textures_gui import _choose
+    monkeypatch.setattr(lod, "LOD_MIN_TRIANGLES", 10_000)     # the sample's 25k triangles take a proxy
+    monkeypatch.setattr(lod, "LOD_TARGET_TRIANGLES", 6_000)
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    _choose(qtbot, w, "band-pass")
+    vp = w.viewport
+    assert vp.textured
+    sp = w.segmentation_panel
+    sp.view.setCurrentIndex(sp.view.findData("deformation"))
+    w.segmentation.wait()
+    qtbot.waitUntil(lambda: vp.colormap is not None and vp.detail.proxy_ready, timeout=60000)
+    assert not vp.textured
+    qtbot.wait(500)
+    drawn = _drawn_faces(w)
+    _drag_jaw(qtbot, w, moves=12)
+    assert sum(1 for n in drawn if n < vp.mesh.GetNumberOfPolys()) >= 6, drawn
+    sp.view.setCurrentIndex(sp.view.findData("shaded"))
+    qtbot.waitUntil(lambda: vp.textured and not w.redraw_pending, timeout=10000)
+    textured = vp._textured.mesh
+    expected = vp.normals_function()(vp.mesh.points)[vp._textured.vertex]
+    np.testing.assert_allclose(textured.point_data["Normals"], expected, atol=1e-5)

@@ -225,8 +225,10 @@ class Viewport(QtWidgets.QWidget):
             return
         given, self._given_normals = self._given_normals, None
         given = given[1] if given is not None and given[0] is points else None
-        # a frame the proxy will draw computes only the proxy's normals (``widgets.lod``)
-        self._arrays.update(points, given, defer_normals=given is None and self.detail.expects_proxy())
+        # a frame the proxy will draw computes only the proxy's normals (``widgets.lod``); a texture, even one a colour
+        # map covers now, takes the surface's at each update: they are computed
+        self._arrays.update(points, given, defer_normals=given is None and self._textured is None
+                            and self.detail.expects_proxy())
         if self._textured is not None:
             self._textured.update_points(self._arrays.points, self._arrays.normals)
         self.render()
