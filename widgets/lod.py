@@ -175,11 +175,11 @@ class SurfaceDetail(QtCore.QObject):
             # a style with observers of a button's event hands it to them instead of its own handler: pyvista's
             # observe the left button (and call the handler); for the others the handler is called here
             for event, handler in ((vtkCommand.LeftButtonReleaseEvent, None),
-                                   (vtkCommand.MiddleButtonReleaseEvent, style.OnMiddleButtonUp),
-                                   (vtkCommand.RightButtonReleaseEvent, style.OnRightButtonUp)):
+                                   (vtkCommand.MiddleButtonReleaseEvent, "OnMiddleButtonUp"),
+                                   (vtkCommand.RightButtonReleaseEvent, "OnRightButtonUp")):
                 style.AddObserver(event, lambda *_: setattr(self, "_releasing", True), 1.0)    # before the handler
-                if handler is not None:
-                    style.AddObserver(event, lambda *_, h=handler: h(), 0.0)
+                if handler is not None:     # the style as the caller: no reference from its observer back to it
+                    style.AddObserver(event, lambda caller, _event, h=handler: getattr(caller, h)(), 0.0)
                 style.AddObserver(event, lambda *_: setattr(self, "_releasing", False), -1.0)  # after it
 
     @property
