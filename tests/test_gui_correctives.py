@@ -800,3 +800,39 @@ def test_every_interference_column_fits_the_list_at_the_default_window_size(qtbo
         assert header.sectionSize(c) >= table.sizeHintForColumn(c), c
     item = table.topLevelItem(0)
     assert item.toolTip(2).startswith(f"{item.text(2)} × {item.text(3)}")
+
+
+def test_each_stroke_move_draws_one_frame_and_a_hover_one(qtbot, win):
+    """A dab or a grab move changes the surface and moves the brush cursor: one frame shows both (the window's
+    redraw). The cursor drew its own frame first, of the surface before the move: two renders a move (0.1-0.16 s
+    more at 422k vertices, and a full and a proxy frame in turn with the level of detail)."""
+    import vtk
+    w, ctrl = win
+    doc = w.document
+    assert ctrl.start_authoring(PAIR)
+    _settle(qtbot, w)
+    v = _forehead_vertex(doc.rig, doc.surface())
+    start, _ = _display_xy(w, doc.surface()[v])
+    widget = w.viewport.canvas
+    frames = []
+    w.viewport.plotter.ren_win.AddObserver(vtk.vtkCommand.EndEvent, lambda *_: frames.append(1))
+    for brush in ("inflate", "grab"):
+        ctrl.set_brush(brush)
+        mouse(widget, "press", start)
+        _settle(qtbot, w)
+        per_move = []
+        for dx in (2, 4, 6, 8):
+            n = len(frames)
+            mouse(widget, "move", start + QtCore.QPointF(dx, -dx), buttons=QtCore.Qt.LeftButton)
+            _settle(qtbot, w)
+            per_move.append(len(frames) - n)
+        mouse(widget, "release", start + QtCore.QPointF(8, -8))
+        _settle(qtbot, w)
+        assert per_move == [1, 1, 1, 1], (brush, per_move)
+    np.testing.assert_allclose(w.viewport.points(), doc.surface())     # the last frame drew the last move
+    # a hover moves the cursor alone: drawn at once, one frame
+    n = len(frames)
+    mouse(widget, "move", start + QtCore.QPointF(-6, 3), buttons=QtCore.Qt.NoButton)
+    assert len(frames) == n + 1
+    cursor = w.viewport.plotter.actors["brush_cursor"]
+    assert cursor.GetVisibility()

@@ -82,8 +82,8 @@ def proxy_faces(points: np.ndarray, face_counts: np.ndarray, face_indices: np.nd
     Decimation by vertex removal (Schroeder, Zarge & Lorensen 1992, "Decimation of triangle meshes";
     ``vtkDecimatePro`` with topology preserved, no splitting and boundary vertices kept): a kept vertex is an
     input vertex, unmoved, found by an id array carried through the filter. Thread-safe (no rendering); 1-6 s
-    at 106k-422k vertices, run on a worker thread. ``target`` defaults to ``LOD_TARGET_TRIANGLES``. ``on_filter`` is given the filter before
-    it runs, to stop it from another thread (``SetAbortExecute(1)``): None then."""
+    at 106k-422k vertices, run on a worker thread. ``target`` defaults to ``LOD_TARGET_TRIANGLES``. ``on_filter``
+    is given the filter before it runs, to stop it from another thread (``SetAbortExecute(1)``): None then."""
     from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray, vtk_to_numpy
     from vtkmodules.vtkCommonCore import vtkPoints
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
@@ -157,14 +157,30 @@ class SurfaceDetail(QtCore.QObject):
         self._generation = 0
         self._proxy: tuple | None = None   # once made: (kept vertex ids, front vtkPolyData, backs or None)
         self._full = None           # while the proxy is shown: the (mapper, the dataset it drew) pairs swapped
+        self._drawn_proxy = False   # whether the last render drew the proxy (a pick may have swapped back since)
         self._last: float | None = None   # when the last render started
         self._still_render = False
-        self._running: list = [None, None]   # the proxy being made: its thread and decimation filter
+        self._running: list = [None, None, None]   # the proxy being made: its thread, decimation filter, stop event
         self._timer = QtCore.QTimer(self, singleShot=True, interval=int(STILL_AFTER_S * 1000))
         self._timer.timeout.connect(self._when_still)
         self._made.connect(self._adopt)
         from vtkmodules.vtkCommonCore import vtkCommand
         render_window.AddObserver(vtkCommand.StartEvent, self._on_start)
+        # VTK's camera styles render once more as the button that turned, panned or zoomed is released: the end of
+        # the interaction, drawn in full at once (it drew the proxy, the full surface 0.3 s later)
+        self._releasing = False
+        interactor = render_window.GetInteractor()
+        style = interactor.GetInteractorStyle() if interactor is not None else None
+        if style is not None:
+            # a style with observers of a button's event hands it to them instead of its own handler: pyvista's
+            # observe the left button (and call the handler); for the others the handler is called here
+            for event, handler in ((vtkCommand.LeftButtonReleaseEvent, None),
+                                   (vtkCommand.MiddleButtonReleaseEvent, "OnMiddleButtonUp"),
+                                   (vtkCommand.RightButtonReleaseEvent, "OnRightButtonUp")):
+                style.AddObserver(event, lambda *_: setattr(self, "_releasing", True), 1.0)    # before the handler
+                if handler is not None:     # the style as the caller: no reference from its observer back to it
+                    style.AddObserver(event, lambda caller, _event, h=handler: getattr(caller, h)(), 0.0)
+                style.AddObserver(event, lambda *_: setattr(self, "_releasing", False), -1.0)  # after it
 
     @property
     def proxy_ready(self) -> bool:
@@ -172,8 +188,8 @@ class SurfaceDetail(QtCore.QObject):
 
     @property
     def proxy_shown(self) -> bool:
-        """Whether the last render (or the next, if nothing changes) draws the proxy's faces."""
-        return self._full is not None
+        """Whether the last render drew the proxy's faces (the picture shown; until the still render)."""
+        return self._drawn_proxy
 
     def set_mesh(self, mesh, face_counts=None, face_indices=None, points=None, arrays=None) -> None:
         """Draw ``mesh`` (a ``scene.rig_mesh`` of these polygons at ``points``, updated through ``arrays``, its
@@ -181,23 +197,28 @@ class SurfaceDetail(QtCore.QObject):
         enough (the last mesh's, if still being made, stops)."""
         self.show_full()
         self._timer.stop()
-        if self._running[1] is not None:
-            self._running[1].SetAbortExecute(1)
+        _stop(self._running)
         self._generation += 1
         self._mesh, self._arrays, self._proxy = mesh, arrays, None
         if mesh is None or not wants_proxy(face_counts):
             return
         generation = self._generation
         args = (np.array(points, dtype=np.float64), np.array(face_counts), np.array(face_indices))
-        running: list = [None, None]
+        running: list = [None, None, threading.Event()]
+
+        def on_filter(decimate) -> None:
+            running[1] = decimate
+            if running[2].is_set():     # stopped before the filter existed (``_stop``): it returns at once
+                decimate.SetAbortExecute(1)
 
         def make() -> None:
             try:
-                proxy = proxy_faces(*args, on_filter=lambda f: running.__setitem__(1, f))
+                proxy = None if running[2].is_set() else proxy_faces(*args, on_filter=on_filter)
             except Exception:   # no proxy: everything is drawn in full, as before
                 traceback.print_exc()
                 proxy = None
-            self._made.emit(generation, proxy)
+            if not running[2].is_set():
+                self._made.emit(generation, proxy)
 
         running[0] = threading.Thread(target=make, name="surface-proxy", daemon=True)
         self._running = running
@@ -213,9 +234,11 @@ class SurfaceDetail(QtCore.QObject):
         return (self._proxy is not None and self._last is not None and not self.full_only and self._allowed()
                 and time.monotonic() - self._last < STILL_AFTER_S)
 
-    def show_full(self) -> None:
-        """The surface drawn by its own mesh again from now on (no render), its normals brought up to date."""
-        if self._arrays is not None:
+    def show_full(self, normals: bool = True) -> None:
+        """The surface drawn by its own mesh again from now on (no render), its normals brought up to date
+        (``normals`` False: left for the next render that draws it in full, ``_on_start``; a pick needs only the
+        faces, and a sculpt brush's dab picks at every mouse move: 47 ms of normals a move at 422k vertices)."""
+        if normals and self._arrays is not None:
             self._arrays.refresh_normals()
         if self._full is None:
             return
@@ -272,16 +295,21 @@ class SurfaceDetail(QtCore.QObject):
         now = time.monotonic()
         busy = self._last is not None and now - self._last < STILL_AFTER_S
         self._last = now
-        if busy and self._proxy is not None and not self._still_render and not self.full_only and self._allowed():
+        self._drawn_proxy = busy and self._proxy is not None and not self._still_render and not self.full_only \
+            and not self._releasing and self._allowed()
+        if self._drawn_proxy:
             self._show_proxy(window)
             self._timer.start()
         else:
             self.show_full()
 
     def _when_still(self) -> None:
-        if self._full is None:
+        # by what the last render drew, not by the actors' inputs: a pick since (a sculpt brush's hover off the face,
+        # no render after it) puts the surface's own faces back without a render, and the proxy's picture stayed
+        if not self._drawn_proxy:
             return
-        self.show_full()            # a change VTK sees: the window renders (``NativePlotter.render``)
+        self.show_full()            # a change VTK sees (now, or at the pick): the window renders
+        #                             (``NativePlotter.render``)
         self._still_render = True
         try:
             self._render()
@@ -295,11 +323,21 @@ class SurfaceDetail(QtCore.QObject):
         self.show_full()
         self._generation += 1
         self._mesh, self._arrays, self._proxy = None, None, None
-        thread, running = self._running
-        if running is not None:
-            running.SetAbortExecute(1)
-        if thread is not None:
-            thread.join(timeout=5)
+        _stop(self._running)
+        if self._running[0] is not None:
+            self._running[0].join(timeout=5)
+
+
+def _stop(running: list) -> None:
+    """Stop the proxy being made by ``running`` ([thread, its decimation filter once made, its stop event]): the
+    filter aborted if it runs, else it aborts as it is made, and the thread emits nothing. Before the filter exists
+    (the surface's arrays still being copied: 0.4 s at 422k vertices) the flag alone stops it; aborting the filter
+    alone missed that, and the stopped decimation then ran to its end (6 s at 422k: a window closed meanwhile waited
+    5 s for it, a rig opened meanwhile had it beside its own)."""
+    if running[2] is not None:
+        running[2].set()
+    if running[1] is not None:
+        running[1].SetAbortExecute(1)
 
 
 def _run_at_low_priority(fn: Callable[[], None]) -> None:

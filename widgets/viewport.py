@@ -234,8 +234,10 @@ class Viewport(QtWidgets.QWidget):
             return
         given, self._given_normals = self._given_normals, None
         given = given[1] if given is not None and given[0] is points else None
-        # a frame the proxy will draw computes only the proxy's normals (``widgets.lod``)
-        self._arrays.update(points, given, defer_normals=given is None and self.detail.expects_proxy())
+        # a frame the proxy will draw computes only the proxy's normals (``widgets.lod``); a texture, even one a colour
+        # map covers now, takes the surface's at each update: they are computed
+        self._arrays.update(points, given, defer_normals=given is None and self._textured is None
+                            and self.detail.expects_proxy())
         if self._textured is not None:
             self._textured.update_points(self._arrays.points, self._arrays.normals)
         self.render()
@@ -336,7 +338,7 @@ class Viewport(QtWidgets.QWidget):
         """The surface point under display pixel (x, y from the bottom-left), or None."""
         if self.mesh is None:
             return None
-        self.detail.show_full()   # picked on the surface's own faces, not a proxy's
+        self.detail.show_full(normals=False)   # picked on the surface's own faces, not a proxy's
         if self._picker is None:
             self._picker = FacePicker()
         hit = self._picker.pick(self.plotter.renderer, x, y)   # VTK's cell picker, over the faces near the ray
@@ -422,7 +424,18 @@ class Viewport(QtWidgets.QWidget):
             hit = self.pick(x, y)
             if hit is not None:
                 self.picked.emit(hit.vertex, hit.position)
+                self._without_vtk_render()
         return False
+
+    def _without_vtk_render(self) -> None:
+        """VTK's interactor does not render for the event it is given next (the release of a click: its camera
+        style renders as the button is released). What a click on the surface changes (a marker added, a region
+        selected) is drawn by its owner's render, on the event loop's next turn; the interactor's render before it
+        was one full frame more of the same picture (0.1-0.16 s at 422k vertices), and with the level of detail the
+        owner's frame, close after it, was the proxy's: the face flickered coarse at every click for 0.3 s."""
+        iren = self.plotter.iren.interactor
+        iren.EnableRenderOff()
+        QtCore.QTimer.singleShot(0, self, lambda: None if self.plotter._closed else iren.EnableRenderOn())
 
     # --- coordinates -------------------------------------------------------------------------------
     def pixel_ratio(self) -> float:
@@ -566,11 +579,13 @@ class Viewport(QtWidgets.QWidget):
             window_size = [int(w), int(h)] if size else None
             return np.asarray(self.plotter.screenshot(None, return_img=True, window_size=window_size))[:, :, :3]
         finally:
-            self.detail.full_only = False
-            fit_overlays(self.plotter)
-            cam.view_angle = angle
-            self.plotter.camera_position = saved
-            self.render()
+            try:
+                fit_overlays(self.plotter)
+                cam.view_angle = angle
+                self.plotter.camera_position = saved
+                self.render()       # the view back as it was: in full too (the proxy's, close after the picture's)
+            finally:
+                self.detail.full_only = False
 
     def _fit_to_size(self) -> None:
         """The render window took a new size (``NativePlotter.resized``): the legend and bar laid out for it, and an
