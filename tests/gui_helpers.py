@@ -24,6 +24,45 @@ def make_window(qtbot, tmp_path, size=(1200, 800), sample: bool = True):
     return w
 
 
+def slider_handle_centre(slider) -> QtCore.QPoint:
+    """The centre of a QSlider's handle, in the slider's coordinates."""
+    opt = QtWidgets.QStyleOptionSlider()
+    slider.initStyleOption(opt)
+    return slider.style().subControlRect(QtWidgets.QStyle.CC_Slider, opt, QtWidgets.QStyle.SC_SliderHandle,
+                                         slider).center()
+
+
+def press_shape_slider(qtbot, window, row) -> tuple[QtWidgets.QSlider, QtCore.QPoint]:
+    """A real press on the handle of the Shapes panel's ``row``'s slider, scrolled into view first: (the slider, where
+    it was pressed); the caller moves and releases it with ``mouse``."""
+    window.shapes_panel.scroll.ensureWidgetVisible(row)
+    slider = row.slider
+    qtbot.waitUntil(lambda: slider.isVisible() and slider.width() > 30, timeout=5000)
+    QtWidgets.QApplication.processEvents()
+    start = slider_handle_centre(slider)
+    mouse(slider, "press", start)
+    return slider, start
+
+
+def sculpting_on_ict(qtbot, tmp_path, rig, drivers, brush: str = "grab", radius: float = 2.0):
+    """The main window at its default size (1400x900) on ``rig`` (ICT FaceKit), segmented, authoring the corrective of
+    ``drivers`` with ``brush`` at ``radius``, nothing left to draw."""
+    from model.project import Project
+    w = make_window(qtbot, tmp_path, size=(1400, 900), sample=False)
+    w.document.set_project(Project(rig=rig.copy()), None)
+    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=30000)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=120000)   # its colour map drawn
+    w.segmentation.wait()
+    ctrl = w.correctives
+    ctrl.dock.show()
+    assert ctrl.start_authoring(drivers)
+    ctrl.set_brush(brush)
+    ctrl.panel.radius.setValue(radius)
+    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=30000)
+    QtCore.QCoreApplication.processEvents()
+    return w
+
+
 def shapes_panel_alone(qtbot, tmp_path, size=(420, 700)):
     """A Shapes panel on its own, shown at ``size``, settings kept in a temp folder (no window, no rig)."""
     from widgets.shapes_panel import ShapesPanel

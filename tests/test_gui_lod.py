@@ -11,7 +11,7 @@ import pytest
 from PySide6 import QtCore, QtWidgets
 
 from solvers.mesh import fan_triangulate
-from tests.gui_helpers import make_window, mouse, open_and_wait
+from tests.gui_helpers import make_window, mouse, open_and_wait, press_shape_slider
 
 
 def _areas(points, tris):
@@ -54,13 +54,6 @@ def test_the_proxy_is_a_decimation_of_the_surface_over_its_own_vertices(ict_rig)
     np.testing.assert_allclose(proxy.normals(posed), whole[proxy.vertices], atol=1e-6)
 
 
-def _handle_centre(slider) -> QtCore.QPoint:
-    opt = QtWidgets.QStyleOptionSlider()
-    slider.initStyleOption(opt)
-    return slider.style().subControlRect(QtWidgets.QStyle.CC_Slider, opt, QtWidgets.QStyle.SC_SliderHandle,
-                                         slider).center()
-
-
 @pytest.fixture
 def small_lod(monkeypatch):
     import widgets.lod as lod
@@ -79,13 +72,7 @@ def _drawn_faces(w):
 
 
 def _drag_jaw(qtbot, w, moves=12):
-    row = w.shapes_panel.row("jawOpen")
-    w.shapes_panel.scroll.ensureWidgetVisible(row)
-    slider = row.slider
-    qtbot.waitUntil(lambda: slider.isVisible() and slider.width() > 30, timeout=5000)
-    QtWidgets.QApplication.processEvents()
-    start = _handle_centre(slider)
-    mouse(slider, "press", start)
+    slider, start = press_shape_slider(qtbot, w, w.shapes_panel.row("jawOpen"))
     x = start.x()
     for _ in range(moves):
         x += 2

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from tests.gui_helpers import make_window, mouse
+from tests.gui_helpers import mouse, sculpting_on_ict
 
 PAIR = ["browInnerUp_L", "browInnerUp_R"]
 
@@ -16,18 +16,7 @@ PAIR = ["browInnerUp_L", "browInnerUp_R"]
 def sculpting(qtbot, tmp_path, ict_rig):
     """The window on ICT sculpting the browInnerUp pair with the grab brush: (window, frame counter)."""
     import vtk
-    from model.project import Project
-    w = make_window(qtbot, tmp_path, size=(1400, 900), sample=False)
-    w.document.set_project(Project(rig=ict_rig.copy()), None)
-    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=30000)
-    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=120000)   # its colour map drawn
-    w.segmentation.wait()
-    ctrl = w.correctives
-    ctrl.dock.show()
-    assert ctrl.start_authoring(PAIR)
-    ctrl.set_brush("grab")
-    ctrl.panel.radius.setValue(2.0)
-    _settle(qtbot, w)
+    w = sculpting_on_ict(qtbot, tmp_path, ict_rig, PAIR)
     frames = [0]
     w.viewport.plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent,
                                            lambda *_: frames.__setitem__(0, frames[0] + 1))

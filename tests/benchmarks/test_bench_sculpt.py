@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 from PySide6 import QtCore, QtWidgets
 
-from tests.gui_helpers import make_window, mouse
+from tests.gui_helpers import mouse, sculpting_on_ict
 
 PAIR = ["browInnerUp_L", "browInnerUp_R"]
 
@@ -37,19 +37,7 @@ def sculpting(qtbot, tmp_path, ict_rig):
     """The main window at its default size on ICT, segmented, sculpting the browInnerUp pair with the grab brush:
     (window, the canvas, the Qt position of a forehead vertex, a frame counter)."""
     import vtk
-    from model.project import Project
-    w = make_window(qtbot, tmp_path, size=(1400, 900))   # the main window's default size
-    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
-    w.document.set_project(Project(rig=ict_rig.copy()), None)
-    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=30000)
-    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=120000)
-    w.segmentation.wait()
-    ctrl = w.correctives
-    ctrl.dock.show()
-    assert ctrl.start_authoring(PAIR)
-    ctrl.set_brush("grab")
-    ctrl.panel.radius.setValue(2.0)
-    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=30000)
+    w = sculpting_on_ict(qtbot, tmp_path, ict_rig, PAIR)
     qtbot.wait(300)
     rig, vp = w.document.rig, w.viewport
     surface = w.document.surface()

@@ -15,16 +15,9 @@ from __future__ import annotations
 import time
 
 import numpy as np
-from PySide6 import QtCore, QtWidgets
+from PySide6 import QtCore
 
-from tests.gui_helpers import make_window, mouse, open_and_wait
-
-
-def _handle_centre(slider) -> QtCore.QPoint:
-    opt = QtWidgets.QStyleOptionSlider()
-    slider.initStyleOption(opt)
-    rect = slider.style().subControlRect(QtWidgets.QStyle.CC_Slider, opt, QtWidgets.QStyle.SC_SliderHandle, slider)
-    return rect.center()
+from tests.gui_helpers import make_window, mouse, open_and_wait, press_shape_slider
 
 
 def test_bench_slider_drag_step(benchmark, qtbot, tmp_path, ict_dir):
@@ -39,12 +32,7 @@ def test_bench_slider_drag_step(benchmark, qtbot, tmp_path, ict_dir):
     vp.plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: renders.__setitem__(0, renders[0] + 1))
     k = rig.shape_index("jawOpen")
     row = w.shapes_panel.row("jawOpen")
-    w.shapes_panel.scroll.ensureWidgetVisible(row)
-    slider = row.slider
-    qtbot.waitUntil(lambda: slider.isVisible() and slider.width() > 30, timeout=5000)
-    QtWidgets.QApplication.processEvents()
-    start = _handle_centre(slider)
-    mouse(slider, "press", start)
+    slider, start = press_shape_slider(qtbot, w, row)
     assert row._dragging, "the press missed the slider's handle"
     travel = slider.width() - 2 * start.x()      # pixels the handle can travel from value 0
     there = list(range(start.x() + 2, start.x() + travel, 2))   # the default layout's slider is ~66 px wide

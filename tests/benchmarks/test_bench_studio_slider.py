@@ -16,9 +16,8 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from tests.benchmarks.test_bench_slider import _handle_centre
 from tests.benchmarks.test_bench_studio_memory import studio_project
-from tests.gui_helpers import make_window, mouse
+from tests.gui_helpers import make_window, mouse, press_shape_slider
 
 
 @pytest.mark.parametrize("levels", [1, 2])
@@ -42,11 +41,7 @@ def test_bench_studio_slider_drag_step(benchmark, qtbot, tmp_path, levels):
     if not all(r.built for r in panel.rows):
         panel.finish_rows()
     row = panel.rows[5]     # s005 (the studio shapes are named s000-s227), which moves the mouth and jaw
-    w.shapes_panel.scroll.ensureWidgetVisible(row)
-    slider = row.slider
-    qtbot.waitUntil(lambda: slider.isVisible() and slider.width() > 30, timeout=5000)
-    start = _handle_centre(slider)
-    mouse(slider, "press", start)
+    slider, start = press_shape_slider(qtbot, w, row)
     travel = slider.width() - 2 * start.x()
     there = list(range(start.x() + 2, start.x() + travel, 2))
     xs = there + there[-2:0:-1]
