@@ -302,6 +302,16 @@ def _menu_click(menu: QtWidgets.QMenu, text_start: str):
     QtWidgets.QApplication.processEvents()
 
 
+def _use_frame_as_neutral(qtbot, mc, frame: int) -> None:
+    """The Mocap panel's slider at ``frame``, then right-click it ▸ Use This Frame as Neutral."""
+    mc.dock.raise_()
+    mc.panel.slider.setValue(frame)
+    QtWidgets.QApplication.processEvents()
+    _context_menu(mc.panel.slider)
+    qtbot.waitUntil(lambda: getattr(mc.panel, "last_menu", None) is not None and mc.panel.last_menu.isVisible())
+    _menu_click(mc.panel.last_menu, "Use This Frame as Neutral")
+
+
 def test_use_this_frame_as_neutral_and_drag_a_map_point(qtbot, tmp_path, ict_dir, take_dir):
     import json
     w = make_window(qtbot, tmp_path, size=(1400, 1000))
@@ -312,12 +322,7 @@ def test_use_this_frame_as_neutral_and_drag_a_map_point(qtbot, tmp_path, ict_dir
         _click(mc.panel.solve_button)
     assert mc.workspace.report()["neutral_frames"] == [0, 29]
     # right-click the take's slider at frame 120: Use This Frame as Neutral
-    mc.dock.raise_()
-    mc.panel.slider.setValue(120)
-    QtWidgets.QApplication.processEvents()
-    _context_menu(mc.panel.slider)
-    qtbot.waitUntil(lambda: getattr(mc.panel, "last_menu", None) is not None and mc.panel.last_menu.isVisible())
-    _menu_click(mc.panel.last_menu, "Use This Frame as Neutral")
+    _use_frame_as_neutral(qtbot, mc, 120)
     assert mc.panel.settings()["neutral_frames"] == "120:120"
     assert w.document.undo_stack.undoText() == "Use frame 120 as neutral"
     _undo(qtbot, w)
@@ -527,12 +532,7 @@ def test_personalize_from_a_take_uses_the_frame_chosen_as_neutral(qtbot, tmp_pat
     assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
     with qtbot.waitSignal(mc.solved, timeout=180000):
         _click(mc.panel.solve_button)
-    mc.dock.raise_()
-    mc.panel.slider.setValue(120)
-    QtWidgets.QApplication.processEvents()
-    _context_menu(mc.panel.slider)
-    qtbot.waitUntil(lambda: getattr(mc.panel, "last_menu", None) is not None and mc.panel.last_menu.isVisible())
-    _menu_click(mc.panel.last_menu, "Use This Frame as Neutral")
+    _use_frame_as_neutral(qtbot, mc, 120)
     assert mc.panel.settings()["neutral_frames"] == "120:120"
     _key(qtbot, w, QtCore.Qt.Key_P, QtCore.Qt.ControlModifier | QtCore.Qt.ShiftModifier)
     dlg = w.actor.dialog

@@ -118,14 +118,20 @@ def test_real_sculpt_stroke_saved_as_corrective_and_undone(qtbot, win):
     np.testing.assert_array_equal(w.viewport.points(), before)
 
 
-def test_smooth_and_inflate_strokes_are_one_step_each(qtbot, win):
-    w, ctrl = win
+def _sculpting_the_pair(qtbot, w, ctrl):
+    """Sculpt the browInnerUp pair: (the Qt position of a forehead vertex, the viewport's canvas)."""
     doc = w.document
     assert ctrl.start_authoring(PAIR)
     _settle(qtbot, w)
     v = _forehead_vertex(doc.rig, doc.surface())
     start, _ = _display_xy(w, doc.surface()[v])
-    widget = w.viewport.canvas
+    return start, w.viewport.canvas
+
+
+def test_smooth_and_inflate_strokes_are_one_step_each(qtbot, win):
+    w, ctrl = win
+    doc = w.document
+    start, widget = _sculpting_the_pair(qtbot, w, ctrl)
     n0 = doc.undo_stack.count()
     ctrl.set_brush("inflate")
     mouse(widget, "press", start)
@@ -809,11 +815,7 @@ def test_each_stroke_move_draws_one_frame_and_a_hover_one(qtbot, win):
     import vtk
     w, ctrl = win
     doc = w.document
-    assert ctrl.start_authoring(PAIR)
-    _settle(qtbot, w)
-    v = _forehead_vertex(doc.rig, doc.surface())
-    start, _ = _display_xy(w, doc.surface()[v])
-    widget = w.viewport.canvas
+    start, widget = _sculpting_the_pair(qtbot, w, ctrl)
     frames = []
     w.viewport.plotter.ren_win.AddObserver(vtk.vtkCommand.EndEvent, lambda *_: frames.append(1))
     for brush in ("inflate", "grab"):
