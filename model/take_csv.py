@@ -106,7 +106,8 @@ def _read_vicon(path: Path, rows: list[list[str]], start: int) -> MarkerTake:
             raw.append(name)
     units = {u for trip in xyz for u in (unit_row[k] if k < len(unit_row) else "" for k in trip)}
     if len(units) != 1:
-        raise RigInputError(f"{path}: the Trajectories section mixes units ({', '.join(sorted(units))}).")
+        named = [f"'{shown(u, 20)}'" for u in sorted(units)[:4]] + ([f"{len(units) - 4} more"] if len(units) > 4 else [])
+        raise RigInputError(f"{path}: the Trajectories section mixes units ({', '.join(named)}).")
     data = []
     for i in range(start + 5, len(rows)):
         if not any(rows[i]):

@@ -263,3 +263,20 @@ def test_a_c3d_parameter_whose_dimensions_overflow_64_bits_is_skipped(tmp_path):
     params = _Params(data, 512, tmp_path / "take.c3d", [])
     assert params.number("POINT", "USED") == 1.0          # the parameters around it are read
     assert params.strings("POINT", "LABELS") is None      # it holds 128^10 bytes: not in a 1 kB file
+
+
+def test_a_trajectories_units_row_of_numbers_is_refused_in_one_short_sentence(tmp_path):
+    """The fuzzer's finding (a Vicon seed, 2026-12-06): a units row replaced by a data row listed every distinct cell
+    in the sentence, 600 characters and more."""
+    from model.errors import RigInputError
+    from model.take_csv import read_marker_csv
+    n = 40
+    names = ",".join(f"M{i},," for i in range(n))
+    rows = ["Trajectories", "100", f",,{names}", "Frame,Sub Frame," + ",".join("X,Y,Z" for _ in range(n)),
+            ",," + ",".join(f"{-i * 1.37:.6f}" for i in range(3 * n)), "1,0," + ",".join("1.0" for _ in range(3 * n))]
+    path = tmp_path / "take.csv"
+    path.write_text("\n".join(rows) + "\n")
+    with pytest.raises(RigInputError) as exc:
+        read_marker_csv(path)
+    msg = str(exc.value)
+    assert "mixes units" in msg and "\n" not in msg and len(msg) < 300, msg

@@ -54,6 +54,23 @@ def test_the_proxy_is_a_decimation_of_the_surface_over_its_own_vertices(ict_rig)
     np.testing.assert_allclose(proxy.normals(posed), whole[proxy.vertices], atol=1e-6)
 
 
+def _still(qtbot, w, quiet: float = 0.5) -> None:
+    """Wait until the window is still: its segmentation shown (its colour map's render comes when it is done, later
+    on a slow machine) and no render started for ``quiet`` seconds, so that the next change is the first after a
+    still moment (a fixed wait could end just after a late render)."""
+    import time
+
+    import vtk
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None and not w.redraw_pending, timeout=120000)
+    last = [time.monotonic()]
+    window = w.viewport.plotter.ren_win
+    tag = window.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: last.__setitem__(0, time.monotonic()))
+    try:
+        qtbot.waitUntil(lambda: time.monotonic() - last[0] >= quiet and not w.redraw_pending, timeout=30000)
+    finally:
+        window.RemoveObserver(tag)
+
+
 @pytest.fixture
 def small_lod(monkeypatch):
     import widgets.lod as lod
@@ -85,7 +102,7 @@ def test_a_slider_drag_draws_the_proxy_then_the_full_surface_once_still(qtbot, t
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
-    qtbot.wait(500)                         # still: the next change is drawn in full
+    _still(qtbot, w)                        # the next change is drawn in full
     n_faces = w.viewport.mesh.GetNumberOfPolys()      # the faces shown (ICT hides some parts)
     drawn = _drawn_faces(w)
     _drag_jaw(qtbot, w)
@@ -116,7 +133,7 @@ def test_the_wireframe_is_drawn_with_the_surfaces_own_faces_while_dragging(qtbot
     open_and_wait(qtbot, w, ict_dir)
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
     w.viewport.set_wireframe(True)
-    qtbot.wait(500)
+    _still(qtbot, w)
     drawn = _drawn_faces(w)
     _drag_jaw(qtbot, w, moves=6)
     assert len(drawn) >= 6 and set(drawn) == {len(w.viewport.shown_faces)}
@@ -126,7 +143,7 @@ def test_a_click_right_after_a_drag_picks_the_surfaces_own_vertex(qtbot, tmp_pat
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
-    qtbot.wait(500)
+    _still(qtbot, w)
     vp = w.viewport
     _drag_jaw(qtbot, w, moves=3)
     assert vp.detail.proxy_shown            # the last frame of the drag drew the proxy
@@ -183,7 +200,7 @@ def test_the_proxy_frame_looks_like_the_full_frame_of_the_same_pose(qtbot, tmp_p
         sp.shape.setCurrentIndex(sp.shape.findText("jawOpen"))
         w.segmentation.wait()
         qtbot.waitUntil(lambda: vp.colormap is not None, timeout=10000)
-    qtbot.wait(500)
+    _still(qtbot, w)
 
     def picture():
         return np.asarray(vp.plotter.screenshot(None, return_img=True), dtype=np.float64)
@@ -267,7 +284,7 @@ def _sculpting(qtbot, w):
     ctrl = w.correctives
     assert ctrl.start_authoring(["browInnerUp_L", "browInnerUp_R"])
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready and not w.redraw_pending, timeout=60000)
-    qtbot.wait(500)
+    _still(qtbot, w)
     vp = w.viewport
     surface = w.document.surface()
     front = np.flatnonzero(np.abs(surface[:, 0]) < 1.0)
@@ -340,7 +357,7 @@ def test_export_image_right_after_a_drag_draws_the_full_surface_and_leaves_it(qt
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
-    qtbot.wait(500)
+    _still(qtbot, w)
     vp = w.viewport
     path = tmp_path / "after_drag.png"
     monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", lambda *a, **k: (str(path), ""))
@@ -359,7 +376,7 @@ def test_export_image_right_after_a_drag_draws_the_full_surface_and_leaves_it(qt
     n_faces = vp.mesh.GetNumberOfPolys()
     assert drawn and set(drawn) == {n_faces}, drawn        # the picture's frames and the view's after it
     assert not vp.detail.proxy_shown
-    qtbot.wait(500)
+    _still(qtbot, w)
     assert set(drawn) == {n_faces}, drawn                  # and no still render: the view was drawn in full
     still = vp.picture()
     picture = np.asarray(Image.open(path).convert("RGB"))
@@ -379,7 +396,7 @@ def test_a_click_adding_a_marker_draws_one_full_frame(qtbot, tmp_path, ict_dir, 
     mc = w.markers
     assert mc.mode
     qtbot.waitUntil(lambda: not mc.unfinished_jobs(patience=0.0) and not w.redraw_pending, timeout=30000)
-    qtbot.wait(500)
+    _still(qtbot, w)
     vp = w.viewport
     drawn = _drawn_faces(w)
     n_faces = vp.mesh.GetNumberOfPolys()
@@ -409,7 +426,7 @@ def test_an_orbit_ends_on_the_full_surface_as_the_button_is_released(qtbot, tmp_
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
-    qtbot.wait(500)
+    _still(qtbot, w)
     vp = w.viewport
     drawn = _drawn_faces(w)
     n_faces = vp.mesh.GetNumberOfPolys()
@@ -459,7 +476,7 @@ def test_a_texture_shown_again_after_a_drag_under_a_colour_map_is_lit_for_the_po
     w.segmentation.wait()
     qtbot.waitUntil(lambda: vp.colormap is not None and vp.detail.proxy_ready, timeout=60000)
     assert not vp.textured
-    qtbot.wait(500)
+    _still(qtbot, w)
     drawn = _drawn_faces(w)
     _drag_jaw(qtbot, w, moves=12)
     assert sum(1 for n in drawn if n < vp.mesh.GetNumberOfPolys()) >= 6, drawn
