@@ -155,7 +155,7 @@ class SurfaceDetail(QtCore.QObject):
         self._mesh = None
         self._arrays = None
         self._generation = 0
-        self._proxy: tuple | None = None   # once made: (kept vertex ids, front vtkPolyData, backs or None)
+        self._proxy: tuple | None = None   # once made: (ProxyFaces, its front vtkPolyData, its backs or None)
         self._full = None           # while the proxy is shown: the (mapper, the dataset it drew) pairs swapped
         self._drawn_proxy = False   # whether the last render drew the proxy (a pick may have swapped back since)
         self._last: float | None = None   # when the last render started
@@ -226,7 +226,7 @@ class SurfaceDetail(QtCore.QObject):
 
     def _adopt(self, generation: int, proxy: ProxyFaces | None) -> None:
         if generation == self._generation and proxy is not None and self._mesh is not None:
-            self._proxy = ((proxy.vertices, proxy), *proxy.meshes())
+            self._proxy = (proxy, *proxy.meshes())
 
     def expects_proxy(self) -> bool:
         """Whether a render now would draw the proxy: the surface's own normals may then wait
@@ -250,7 +250,8 @@ class SurfaceDetail(QtCore.QObject):
         """The proxy's points and point data gathered from the surface's now; the actors drawing the surface (its
         front, and the backs of its two-sided parts: ``scene.add_surface``) made to draw the proxy."""
         from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
-        (kept, proxy), front, backs = self._proxy
+        proxy, front, backs = self._proxy
+        kept = proxy.vertices
         mesh = self._mesh
         points = vtk_to_numpy(mesh.GetPoints().GetData())
         front.GetPoints().SetData(numpy_to_vtk(points[kept], deep=True))

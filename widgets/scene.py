@@ -101,10 +101,9 @@ class SurfaceArrays:
         ``widgets.lod``)."""
         self.points[:] = points
         self.normals_stale = normals is None and defer_normals
-        if self.normals_stale:
-            pass
-        elif normals is None:
-            self.normals[:] = self._normals_of(self.points)
+        if normals is None:
+            if not self.normals_stale:
+                self.normals[:] = self._normals_of(self.points)
         elif normals.dtype == np.int8:
             dequantise(normals, out=self.normals)
         else:
