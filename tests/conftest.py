@@ -12,12 +12,13 @@ from pathlib import Path
 
 import pytest
 
-# Autosaves and crash logs of the windows and commands the tests start go to a private folder, never into the
-# user's home (model.recovery, app.crash).
+# Autosaves, crash logs and cached level-of-detail proxies of the windows and commands the tests start go to a
+# private folder, never into the user's home (model.recovery, app.crash, widgets.lod.cache_folder).
 _PRIVATE = tempfile.mkdtemp(prefix="bs-tests-")
 atexit.register(shutil.rmtree, _PRIVATE, ignore_errors=True)
 os.environ.setdefault("XDG_DATA_HOME", os.path.join(_PRIVATE, "data"))
 os.environ.setdefault("BLENDSHAPE_STUDIO_LOGS", os.path.join(_PRIVATE, "crashes"))
+os.environ.setdefault("XDG_CACHE_HOME", os.path.join(_PRIVATE, "cache"))
 
 from app.runtime import limit_blas_threads
 

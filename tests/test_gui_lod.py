@@ -71,9 +71,56 @@ def _still(qtbot, w, quiet: float = 0.5) -> None:
         window.RemoveObserver(tag)
 
 
-@pytest.fixture
-def small_lod(monkeypatch):
+def test_a_proxy_made_once_is_read_back_from_the_cache_the_same(ict_rig, tmp_path, monkeypatch):
+    """A studio rig opened again has its proxy at once: the decimation's triangles are kept in the cache folder,
+    keyed by the points, faces and target, and give the same ProxyFaces; another pose or target makes its own."""
     import widgets.lod as lod
+    rig, folder = ict_rig, tmp_path / "lod"
+    made = lod.proxy_faces(rig.neutral, rig.face_counts, rig.face_indices, target=20_000, cache=folder)
+    assert len(list(folder.glob("*.npy"))) == 1
+
+    def no_decimation(*args):
+        raise AssertionError("decimated again")
+    monkeypatch.setattr(lod, "_decimate", no_decimation)
+    read = lod.proxy_faces(rig.neutral, rig.face_counts, rig.face_indices, target=20_000, cache=folder)
+    for name in ("vertices", "triangles", "back_faces", "ring", "kept_in_ring"):
+        np.testing.assert_array_equal(getattr(read, name), getattr(made, name))
+    np.testing.assert_array_equal(read.normals(rig.neutral), made.normals(rig.neutral))
+    with pytest.raises(AssertionError, match="decimated again"):     # another target: not the cached one
+        lod.proxy_faces(rig.neutral, rig.face_counts, rig.face_indices, target=19_000, cache=folder)
+    moved = rig.neutral.copy()
+    moved[0, 0] += 0.5
+    with pytest.raises(AssertionError, match="decimated again"):     # another pose: not the cached one
+        lod.proxy_faces(moved, rig.face_counts, rig.face_indices, target=20_000, cache=folder)
+
+
+@pytest.mark.parametrize("damage", ["truncated", "ids beyond the surface", "not triangles", "not an array"])
+def test_a_damaged_cache_entry_is_made_again_and_an_unwritable_cache_is_no_error(ict_rig, tmp_path, damage):
+    import widgets.lod as lod
+    rig, folder = ict_rig, tmp_path / "lod"
+    made = lod.proxy_faces(rig.neutral, rig.face_counts, rig.face_indices, target=20_000, cache=folder)
+    entry = next(folder.glob("*.npy"))
+    if damage == "truncated":
+        entry.write_bytes(entry.read_bytes()[:1000])
+    elif damage == "ids beyond the surface":
+        np.save(entry, np.full((10, 3), rig.n_vertices, np.int32))
+    elif damage == "not triangles":
+        np.save(entry, np.zeros((10, 4), np.int32))
+    else:
+        entry.write_bytes(b"not a numpy file at all")
+    again = lod.proxy_faces(rig.neutral, rig.face_counts, rig.face_indices, target=20_000, cache=folder)
+    np.testing.assert_array_equal(again.triangles, made.triangles)
+    np.testing.assert_array_equal(np.load(entry), lod._cached_triangles(folder, entry.stem, rig.n_vertices))
+    blocked = tmp_path / "a file"
+    blocked.write_text("")
+    unwritable = lod.proxy_faces(rig.neutral, rig.face_counts, rig.face_indices, target=20_000, cache=blocked / "lod")
+    np.testing.assert_array_equal(unwritable.vertices, made.vertices)
+
+
+@pytest.fixture
+def small_lod(monkeypatch, tmp_path):
+    import widgets.lod as lod
+    monkeypatch.setattr(lod, "cache_folder", lambda: tmp_path / "lod-cache")   # every test makes its proxy
     monkeypatch.setattr(lod, "LOD_MIN_TRIANGLES", 30_000)     # ICT's 53k triangles take a proxy
     monkeypatch.setattr(lod, "LOD_TARGET_TRIANGLES", 12_000)
 
@@ -485,3 +532,26 @@ def test_a_texture_shown_again_after_a_drag_under_a_colour_map_is_lit_for_the_po
     textured = vp._textured.mesh
     expected = vp.normals_function()(vp.mesh.points)[vp._textured.vertex]
     np.testing.assert_allclose(textured.point_data["Normals"], expected, atol=1e-5)
+
+
+def test_a_rig_opened_again_draws_its_proxy_without_decimating_again(qtbot, tmp_path, ict_dir, small_lod,
+                                                                     monkeypatch):
+    """The window's proxies go through the cache (``widgets.lod.cache_folder``): ICT opened a second time drags with
+    its proxy from the first move, no decimation run (7-14 s at 422k vertices)."""
+    import widgets.lod as lod
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
+    decimated = []
+    real = lod._decimate
+    monkeypatch.setattr(lod, "_decimate", lambda *a: decimated.append(1) or real(*a))
+    open_and_wait(qtbot, w, ict_dir)
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=10000)
+    assert decimated == []
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=60000)
+    _still(qtbot, w)
+    n_faces = w.viewport.mesh.GetNumberOfPolys()
+    drawn = _drawn_faces(w)
+    _drag_jaw(qtbot, w, moves=4)
+    triangles = int((w.document.rig.face_counts[w.viewport.shown_faces] - 2).sum())
+    assert drawn[0] == n_faces and drawn[1] < 0.35 * triangles, drawn   # the second move on: the proxy's faces

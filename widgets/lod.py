@@ -13,11 +13,13 @@ the full surface's, shading included; the surface itself, its vertex order and i
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import threading
 import time
 import traceback
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable
 
 import numpy as np
@@ -76,21 +78,41 @@ class ProxyFaces:
 
 
 def proxy_faces(points: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
-                target: int | None = None, on_filter: Callable | None = None) -> ProxyFaces | None:
+                target: int | None = None, on_filter: Callable | None = None,
+                cache: Path | None | bool = True) -> ProxyFaces | None:
     """About ``target`` triangles over a subset of the surface's vertices (their ids), shaped like the surface.
 
     Decimation by vertex removal (Schroeder, Zarge & Lorensen 1992, "Decimation of triangle meshes";
     ``vtkDecimatePro`` with topology preserved, no splitting and boundary vertices kept): a kept vertex is an
-    input vertex, unmoved, found by an id array carried through the filter. Thread-safe (no rendering); 1-6 s
+    input vertex, unmoved, found by an id array carried through the filter. Thread-safe (no rendering); 1-7 s
     at 106k-422k vertices, run on a worker thread. ``target`` defaults to ``LOD_TARGET_TRIANGLES``. ``on_filter``
-    is given the filter before it runs, to stop it from another thread (``SetAbortExecute(1)``): None then."""
+    is given the filter before it runs, to stop it from another thread (``SetAbortExecute(1)``): None then.
+
+    The decimation's triangles are kept in a cache folder (``cache``: True for the user's, ``cache_folder()``;
+    None or False for none), keyed by the points, faces and target: a studio rig opened again has its proxy at
+    once instead of after 7-14 s of full renders."""
+    target = LOD_TARGET_TRIANGLES if target is None else target
+    folder = cache_folder() if cache is True else (cache or None)
+    pts = np.ascontiguousarray(points, dtype=np.float64)
+    key = _cache_key(pts, face_counts, face_indices, target) if folder is not None else ""
+    triangles = _cached_triangles(folder, key, len(pts)) if folder is not None else None
+    if triangles is None:
+        triangles = _decimate(pts, face_counts, face_indices, target, on_filter)
+        if triangles is None:
+            return None
+        if folder is not None:
+            _store_triangles(folder, key, triangles)
+    return _proxy_over(pts, face_counts, face_indices, triangles)
+
+
+def _decimate(pts: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray, target: int,
+              on_filter: Callable | None) -> np.ndarray | None:
+    """(T, 3) int64 triangles over the surface's vertex ids (``proxy_faces``), None when stopped."""
     from vtkmodules.util.numpy_support import numpy_to_vtk, numpy_to_vtkIdTypeArray, vtk_to_numpy
     from vtkmodules.vtkCommonCore import vtkPoints
     from vtkmodules.vtkCommonDataModel import vtkCellArray, vtkPolyData
     from vtkmodules.vtkFiltersCore import vtkDecimatePro
-    target = LOD_TARGET_TRIANGLES if target is None else target
     tris = fan_triangulate(face_counts, face_indices).astype(np.int64)
-    pts = np.ascontiguousarray(points, dtype=np.float64)
     poly = vtkPolyData()
     vpts = vtkPoints()
     vpts.SetData(numpy_to_vtk(pts, deep=True))
@@ -119,7 +141,13 @@ def proxy_faces(points: np.ndarray, face_counts: np.ndarray, face_indices: np.nd
     offsets = vtk_to_numpy(out.GetPolys().GetOffsetsArray())
     if not np.all(np.diff(offsets) == 3):
         raise ValueError("the decimation made polygons other than triangles")
-    triangles = kept[conn].reshape(-1, 3)
+    return kept[conn].reshape(-1, 3)
+
+
+def _proxy_over(pts: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray,
+                triangles: np.ndarray) -> ProxyFaces:
+    """The ``ProxyFaces`` of ``triangles`` (over the surface's vertex ids): the vertices they keep, their faces
+    whose backs show, the ring of the surface's faces around the kept vertices for their normals."""
     vertices, local = np.unique(triangles, return_inverse=True)
     local = local.reshape(-1, 3).astype(np.int64)
     backs = np.flatnonzero(~hidden_back_faces(pts[vertices], np.full(len(local), 3), local.ravel()))
@@ -132,6 +160,58 @@ def proxy_faces(points: np.ndarray, face_counts: np.ndarray, face_indices: np.nd
     ring, ring_local = compact_faces(indices[np.repeat(touching, counts)])
     return ProxyFaces(vertices.astype(np.int64), local, backs, ring,
                       VertexNormals(counts[touching], ring_local, len(ring)), np.searchsorted(ring, vertices))
+
+
+# --- the proxies' cache ----------------------------------------------------------------------------------
+CACHE_VERSION = b"lod-1"    # bump when the decimation's settings change: older entries are then never read
+CACHE_ENTRIES = 24          # the newest this many proxies are kept (~0.6 MB each at the default target)
+
+
+def cache_folder() -> Path:
+    """Where proxies are kept between sessions: ``$XDG_CACHE_HOME/blendshape-studio/lod`` (``~/.cache`` by
+    default), beside the compiled kernels (``solvers.take_kernel``)."""
+    return Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "blendshape-studio" / "lod"
+
+
+def _cache_key(pts: np.ndarray, face_counts: np.ndarray, face_indices: np.ndarray, target: int) -> str:
+    """A digest of what the decimation depends on (~25 ms at 422k vertices, on the worker thread)."""
+    h = hashlib.blake2b(CACHE_VERSION, digest_size=16)
+    for part in (pts, np.asarray(face_counts, dtype=np.int64), np.asarray(face_indices, dtype=np.int64),
+                 np.array([target, len(pts)], dtype=np.int64)):
+        h.update(np.ascontiguousarray(part).view(np.uint8).ravel())
+    return h.hexdigest()
+
+
+def _cached_triangles(folder: Path, key: str, n_points: int) -> np.ndarray | None:
+    """The cached triangles of ``key``, or None when there are none or the entry is not a valid one (any (T, 3)
+    integer array over ids below ``n_points``; a damaged entry is made again)."""
+    path = folder / f"{key}.npy"
+    try:
+        triangles = np.load(path, allow_pickle=False)
+    except (OSError, ValueError, EOFError):
+        return None
+    if (triangles.ndim != 2 or triangles.shape[1] != 3 or not len(triangles)
+            or triangles.dtype.kind not in "iu" or triangles.min() < 0 or triangles.max() >= n_points):
+        return None
+    try:
+        os.utime(path)      # the newest used: the last one pruned
+    except OSError:
+        pass
+    return triangles.astype(np.int64)
+
+
+def _store_triangles(folder: Path, key: str, triangles: np.ndarray) -> None:
+    """Keep ``triangles`` under ``key`` (written whole or not at all) and prune the oldest entries beyond
+    ``CACHE_ENTRIES``; a cache that cannot be written is no cache, never an error."""
+    from model.atomic import atomic_write_with
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        atomic_write_with(folder / f"{key}.npy", lambda f: np.save(f, triangles.astype(np.int32)))
+        entries = sorted(folder.glob("*.npy"), key=lambda p: p.stat().st_mtime, reverse=True)
+        for old in entries[CACHE_ENTRIES:]:
+            old.unlink(missing_ok=True)
+    except OSError:
+        pass
 
 
 class SurfaceDetail(QtCore.QObject):
