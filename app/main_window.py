@@ -78,8 +78,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         self.setAcceptDrops(True)     # files dropped on the window open (open_dropped)
         self._progress: QtWidgets.QProgressDialog | None = None
         self._drag_old: np.ndarray | None = None
-        self._redraw_pending = False
-        self._after_redraw: list = []   # what waits for the pending redraw (``when_drawn``)
+        self._pose_stale = False   # the pose changed since the viewport's points were set (``_show_pose``)
         self._new_surface: np.ndarray | None = None   # the surface a rig change just gave the viewport
         self._menus: dict[str, QtWidgets.QMenu] = {}
         self._menu_ends: dict[str, QtGui.QAction] = {}   # actions added to a menu go before its end (File: Quit)
@@ -89,8 +88,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         self.document.run_edit = lambda label, fn: run_modal(self, "Shapes", f"{label}…", fn)
         self.jobs = JobQueue(self)   # exports and saves off the GUI thread (run_in_background)
         self.viewport = Viewport(self)
-        # an expose while a redraw is pending shows the last picture until that redraw (NativePlotter.paintEvent)
-        self.viewport.plotter.render_pending = lambda: self._redraw_pending
+        self.viewport.before_render = self._show_pose   # every render of the viewport draws the pose of now
         self.setCentralWidget(self.viewport)
         self._build_menus()
         self.shapes_panel = ShapesPanel(self)
@@ -173,49 +171,40 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
 
     def request_render(self, *, after_input: bool = False) -> None:
         """Redraw the viewport with the current pose once this turn of the event loop is over: bursts of pose
-        changes (slider drags, marker drags) coalesce into one render. ``after_input``: after the input and timers
-        that are waiting too (a timer of 1 ms: a call queued for 0 ms runs before them), when this turn was long
-        already and the render will be (a new studio rig: 0.1 s each at 422k vertices)."""
-        if not self._redraw_pending:
-            self._redraw_pending = True
-            QtCore.QTimer.singleShot(1 if after_input else 0, self._redraw_if_pending)
+        changes (slider drags, marker drags) coalesce into one render, the tools' overlays with them
+        (``Viewport.request_render``; ``after_input``: after the input and timers waiting too)."""
+        self._pose_stale = True
+        self.viewport.request_render(after_input=after_input)
 
     def when_drawn(self, fn) -> None:
         """Call ``fn`` once the viewport shows what has changed: after the pending redraw, and after the input and
-        timers waiting then (``request_render(after_input=True)``); at once when none is pending. A new studio
-        rig's segmentation starts so (``app.segmentation_controller``): begun before the rig's first render, its
-        thread made that render wait for the interpreter (0.04-0.15 s more of a frozen window at 422k vertices)."""
-        if self._redraw_pending:
-            self._after_redraw.append(fn)
-        else:
-            fn()
-
-    def _redraw_if_pending(self) -> None:
-        # a redraw_now since the request (playback draws its frame at once) drew this change: never twice
-        if self._redraw_pending:
-            self.redraw_now()
+        timers waiting then (``Viewport.when_drawn``); at once when none is pending. A new studio rig's segmentation
+        starts so (``app.segmentation_controller``): begun before the rig's first render, its thread made that render
+        wait for the interpreter (0.04-0.15 s more of a frozen window at 422k vertices)."""
+        self.viewport.when_drawn(fn)
 
     def redraw_now(self) -> None:
-        """Redraw the viewport with the current pose now (a requested render still to come is then dropped). The
-        very surface a rig change has just given the viewport (``_on_rig_change``) is only rendered: the document
-        announces a new rig and then its pose, and the new surface is drawn once (~50 ms a render at 106k
-        vertices, 0.16 s at 422k)."""
-        self._redraw_pending = False
+        """Redraw the viewport with the current pose now (a requested render still to come is then dropped)."""
+        self._pose_stale = True
+        self.viewport.render()
+
+    def _show_pose(self) -> None:
+        """The viewport's points set to the pose if it changed since (its ``before_render``). The very surface a rig
+        change has just given the viewport (``_on_rig_change``) is only rendered: the document announces a new rig
+        and then its pose, and the new surface is drawn once (~50 ms a render at 106k vertices, 0.16 s at 422k)."""
+        if not self._pose_stale:
+            return
+        self._pose_stale = False
         given, self._new_surface = self._new_surface, None
         if self.document.project is not None:
             surface = self.document.surface()
             if surface is not given:
-                self.viewport.update_points(surface)
-            else:
-                self.viewport.render()
-        waiting, self._after_redraw = self._after_redraw, []
-        for fn in waiting:
-            QtCore.QTimer.singleShot(1, self, fn)
+                self.viewport.update_points(surface, render=False)
 
     @property
     def redraw_pending(self) -> bool:
         """Whether a requested render has not happened yet."""
-        return self._redraw_pending
+        return self.viewport.render_pending
 
     def run_in_background(self, text: str, job, on_done, on_failed=None) -> None:
         """Run ``job()`` off the GUI thread, control returning at once, a busy bar saying ``text`` meanwhile; then

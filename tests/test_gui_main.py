@@ -441,6 +441,30 @@ def test_tool_options_come_back_in_the_next_session(qtbot, tmp_path):
     assert w3.correctives.panel.brush.currentData() == "grab" and w3.correctives.panel.strength.value() == 1.0
 
 
+def test_a_pose_change_and_a_view_change_in_one_turn_draw_one_frame(qtbot, tmp_path):
+    """A slider step and View ▸ Wireframe (W) handled in the same turn of the event loop: the wireframe's render
+    draws the new pose too, and the render the pose change asked for is dropped (it drew the old pose, then the new
+    one a moment later: two frames, the first stale)."""
+    import vtk
+
+    from widgets.shapes_panel import PoseEdit
+    w = make_window(qtbot, tmp_path)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
+    qtbot.wait(100)
+    drawn = []
+    w.viewport.plotter.ren_win.AddObserver(vtk.vtkCommand.EndEvent, lambda *_: drawn.append(w.viewport.points()))
+    wireframe = next(a for a in w.findChildren(QtGui.QAction) if a.text().replace("&", "") == "Wireframe")
+    k = w.document.rig.shape_index("jawOpen")
+    w.shapes_panel.pose_edited.emit(PoseEdit("drag-start", k))
+    w.shapes_panel.pose_edited.emit(PoseEdit("drag", k, 0.7))
+    wireframe.trigger()
+    qtbot.wait(100)
+    w.shapes_panel.pose_edited.emit(PoseEdit("drag-end", k))
+    assert len(drawn) == 1 and not w.redraw_pending and w.viewport.wireframe
+    np.testing.assert_allclose(drawn[0], w.document.surface(), atol=1e-5)
+    assert np.abs(drawn[0] - w.document.rig.neutral).max() > 0.1      # the jaw open in it
+
+
 def test_a_pose_change_draws_one_frame(qtbot, tmp_path):
     """Issue 20: never render twice for one change. A slider drag step renders once, on the event loop's next
     turn; a playback tick renders its frame at once (redraw_now), and the render its pose change had requested
