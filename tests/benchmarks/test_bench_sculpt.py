@@ -8,6 +8,8 @@ browInnerUp pair being authored, symmetric strokes).
   event to the rendered frame (the stroke, the document's edit offset, the cursor, the window's coalesced render).
 - ``test_bench_sculpt_hover_move``: moves with no button over the face, the brush cursor following (a pick, the
   cursor, a render).
+- ``test_bench_studio_sculpt_grab_move``: the grab stroke on the 228-shape studio rigs (ICT subdivided to 106k and
+  422k vertices), the two shapes that overlap most authored; the proxy (``widgets.lod``) draws the stroke's frames.
 Printed: the min / median wall and CPU time a move, and the frames drawn a move.
 
 Before (the code as it was, 2026-12-05, 2-core shared VM, llvmpipe; min / median): a grab move 44-56 / 45-74 ms,
@@ -109,3 +111,52 @@ def test_bench_sculpt_hover_move(benchmark, qtbot, sculpting):
     assert w.correctives.sculpt._cursor[1].visibility
     wall, cpu, drawn = out[0]
     _report(benchmark, "hover move", wall[3:], cpu[3:], drawn)
+
+
+@pytest.mark.parametrize("levels", [1, 2])
+def test_bench_studio_sculpt_grab_move(benchmark, qtbot, tmp_path, levels):
+    import vtk
+
+    from model.project import load_project
+    from tests.benchmarks.test_bench_studio_memory import studio_project
+    from tests.gui_helpers import make_window
+    project = load_project(studio_project(levels))
+    rig = project.rig
+    reach = np.linalg.norm(rig.deltas[:24], axis=2)            # (24, V): the first shapes' displacements
+    moved = reach > 0.2 * reach.max(axis=1, keepdims=True)
+    overlap = moved.astype(np.float32) @ moved.T.astype(np.float32)
+    np.fill_diagonal(overlap, 0)
+    i, j = np.unravel_index(int(np.argmax(overlap)), overlap.shape)
+    w = make_window(qtbot, tmp_path, size=(1400, 900), sample=False)
+    w.document.set_project(project, None)
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=600000)
+    qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=600000)
+    w.segmentation.wait()
+    ctrl = w.correctives
+    ctrl.dock.show()
+    assert ctrl.start_authoring([rig.shape_names[i], rig.shape_names[j]])
+    ctrl.set_brush("grab")
+    ctrl.panel.radius.setValue(2.0)
+    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=60000)
+    qtbot.wait(500)
+    vp = w.viewport
+    surface = w.document.surface()
+    both = np.flatnonzero(moved[i] & moved[j])
+    v = int(both[np.argmax(surface[both, 2])])                 # the one nearest the camera
+    xd, yd, _ = vp.world_to_display(surface[v])[0]
+    start = vp.display_to_qt(xd, yd)
+    frames = [0]
+    vp.plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: frames.__setitem__(0, frames[0] + 1))
+    steps = w.document.undo_stack.count()
+    mouse(vp.canvas, "press", start)
+    path = [start + QtCore.QPointF(0.5 * (k % 20), -(k % 20)) for k in range(1, 31)]
+    out = []
+    benchmark.pedantic(lambda: out.append(_timed_moves(qtbot, w, vp.canvas, path, frames, QtCore.Qt.LeftButton)),
+                       rounds=1, iterations=1)
+    mouse(vp.canvas, "release", path[-1])
+    assert w.document.undo_stack.count() == steps + 1 and np.abs(w.document.edit_offset).max() > 0.01
+    wall, cpu, drawn = out[0]
+    benchmark.extra_info.update(vertices=rig.n_vertices, wall_ms_median=round(float(np.median(wall[3:])), 1))
+    print(f"\ngrab stroke move on the {rig.n_vertices:,}-vertex rig ({rig.shape_names[i]} + {rig.shape_names[j]}): "
+          f"wall {wall[3:].min():.1f} / {np.median(wall[3:]):.1f} ms a move (min / median), CPU "
+          f"{np.median(cpu[3:]):.1f} ms; frames a move {sorted(set(drawn[3:]))}")
