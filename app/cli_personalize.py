@@ -56,8 +56,7 @@ def cmd_personalize(args) -> int:
         from model.takes import MarkerTake, load_take
         take = load_take(args.take)
         if not isinstance(take, MarkerTake):
-            raise RigInputError(f"{args.take}: is a weight take (Live Link Face or weights CSV), not marker "
-                                "trajectories.")
+            raise RigInputError(f"{args.take}: is a weight take ({take.file_format}), not marker trajectories.")
         if args.neutral_frames is not None:
             from model.personalize import neutral_frames_of
             neutral_frames_of(take, args.calibration_frames, args.neutral_frames)   # inside the take, before any work
