@@ -198,3 +198,42 @@ def test_no_command_writes_over_the_files_a_gltf_rig_reads(tmp_path):
     rig.write_text(json.dumps(gltf))
     _refused(run_cli("render", rig, "--size", "32,32", "-o", rig.parent / "nul.png", check=False),
              f"{rig}: the glTF is damaged (ValueError: embedded null byte).")
+
+
+@pytest.mark.parametrize("command, out", [
+    (["export", "{rig}", "-o", "{out}"], "{ro}/posed.glb"),
+    (["export", "{rig}", "-o", "{out}"], "{ro}/new/posed.obj"),          # a folder to make inside it
+    (["solve", "{rig}", "{tmp}/take.csv", "-o", "{tmp}/w.csv", "--report", "{out}"], "{ro}/report.json"),
+    (["segment", "{rig}", "-o", "{out}"], "{ro}/regions.json"),
+    (["personalize", "{rig}", "--scans", "{rig}/raise.obj", "-o", "{out}"], "{ro}/actor.bsproj"),
+    (["sample", "-o", "{out}"], "{ro}/sample"),
+    (["batch", "{rig}", "{tmp}/take.csv", "-o", "{out}"], "{ro}"),
+])
+def test_an_output_in_a_folder_that_takes_no_new_file_is_refused_before_any_work(tmp_path, monkeypatch, capsys,
+                                                                                  command, out):
+    """The audit's case: every command writing into a folder the user may not write in (or on a read-only disk) did
+    all its work, then stopped at the write with an unexpected error (exit 1, "failed unexpectedly", a crash log);
+    `solve -o w.csv --report RO/r.json` had its work done for nothing. Refused before any work: one sentence naming
+    the output and the folder, exit 2, nothing written. (As root a folder's permissions do not stop a write: the
+    folder's answer to ``os.access`` is what the check asks, so it is made to say no.)"""
+    from app import cli
+    rig, ro = tmp_path / "rig", tmp_path / "ro"
+    write_rig_folder(rig)
+    (tmp_path / "take.csv").write_text("frame,raise\n0,0.5\n1,1\n")
+    ro.mkdir()
+    os.chmod(ro, 0o555)
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if os.path.abspath(p) == str(ro) and mode & os.W_OK
+                        else real_access(p, mode, **kw))
+    before = _listing(tmp_path)
+    try:
+        target = out.format(ro=ro)
+        code = cli.main([a.format(rig=rig, out=target, tmp=tmp_path) for a in command])
+    finally:
+        os.chmod(ro, 0o755)
+    err = capsys.readouterr().err
+    where = "" if target == str(ro) else f"cannot be written: {ro} "
+    assert code == 2 and err == f"error: {target}: {where}is a folder you may not write in; nothing was written.\n", \
+        (code, err)
+    assert _listing(tmp_path) == before
+
