@@ -237,3 +237,34 @@ def test_an_output_in_a_folder_that_takes_no_new_file_is_refused_before_any_work
         (code, err)
     assert _listing(tmp_path) == before
 
+
+@pytest.mark.parametrize("takes, options, sentence", [
+    # an earlier batch's weights given as a take: take01.csv's weights went over it (the take in -o is not solved)
+    (["{tmp}/out/take01/weights.csv", "{tmp}/take01.csv"], [],
+     "{tmp}/out/take01/weights.csv: is TAKES itself, which this command reads; give -o another folder."),
+    # the summary among a folder of takes given: it was read there as one more take by the next batch of the folder
+    (["{tmp}/day1", "{tmp}/take01.csv"], [],
+     "{tmp}/day1/batch.csv: is in {tmp}/day1, which TAKES reads, and would be read there as one more take; give -o "
+     "another folder."),
+    (["{tmp}/take01.csv"], ["--map", "{tmp}/day1/batch.json"],
+     "{tmp}/day1/batch.json: is --map itself, which this command reads; give -o another folder."),
+])
+def test_batch_writes_none_of_its_files_over_what_it_reads(tmp_path, takes, options, sentence):
+    """`batch` checked its output folder only as a folder: a take given inside it is left out of the solve, but a
+    file of another take's set could be it (`batch RIG out/take01/weights.csv take01.csv -o out` wrote take01's
+    weights over that take), and its summary could land over the marker map or among a folder of takes given. Each
+    is refused before any work, one sentence, exit 2, every file as it was."""
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    (tmp_path / "take01.csv").write_text("frame,raise\n0,0.5\n1,1\n")
+    (tmp_path / "out" / "take01").mkdir(parents=True)
+    (tmp_path / "out" / "take01" / "weights.csv").write_text("frame,push\n0,0.25\n1,0.75\n")
+    (tmp_path / "day1").mkdir()
+    (tmp_path / "day1" / "a.csv").write_text("frame,push\n0,1\n")
+    (tmp_path / "day1" / "batch.json").write_text('{"markers": {"M00": 0}}')   # a marker map so named
+    out = tmp_path / ("day1" if "day1" in sentence.split(":")[0] else "out")
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    proc = run_cli("batch", rig, *[t.format(tmp=tmp_path) for t in takes], *[o.format(tmp=tmp_path) for o in options],
+                   "-o", out, "--workers", "1", check=False)
+    _refused(proc, sentence.format(tmp=tmp_path))
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
