@@ -100,7 +100,7 @@ def check_not_an_input(args, path, option: str, fix: str | None = None) -> None:
         values = getattr(args, dest, None)
         for value in values if isinstance(values, list) else [] if values is None else [values]:
             check_not_input(path, value, name, "this command reads", fix or f"give {option} {{}}",
-                            reads="rig" if dest == "rig" else "takes" if dest in ("take", "takes") else "scans",
+                            reads="rig" if dest == "rig" else "takes" if dest == "takes" else "scans",
                             same_ok=dest == "rig" and getattr(args, "rig_updated_in_place", False))
 
 

@@ -268,3 +268,28 @@ def test_batch_writes_none_of_its_files_over_what_it_reads(tmp_path, takes, opti
                    "-o", out, "--workers", "1", check=False)
     _refused(proc, sentence.format(tmp=tmp_path))
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+
+
+def test_personalize_writes_its_project_and_report_as_one_set(tmp_path, monkeypatch, capsys):
+    """`personalize -o A.bsproj --report R.json` wrote the project, then the report: a report that failed to be
+    written (here: the disk full as its temporary is written) left the new project behind a failed command. Now both
+    are written as one set (``model.output_set.write_set``, as solve's outputs): neither is there."""
+    import errno
+
+    from app import cli
+    from model import atomic, output_set
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    real = atomic.write_temporary
+
+    def full_disk(path, writer):
+        if path.name == "report.json":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, writer)
+    monkeypatch.setattr(atomic, "write_temporary", full_disk)
+    monkeypatch.setattr(output_set, "write_temporary", full_disk)
+    before = _listing(tmp_path)
+    code = cli.main(["personalize", str(rig), "--scans", str(rig / "raise.obj"), "-o", str(tmp_path / "actor.bsproj"),
+                     "--report", str(tmp_path / "report.json")])
+    assert code != 0 and "No space left on device" in capsys.readouterr().err
+    assert _listing(tmp_path) == before
