@@ -88,9 +88,10 @@ class BatchController(QtCore.QObject):
             if not d.output():
                 raise RigInputError("Choose the output folder first.")
             takes = find_takes(d.takes(), exclude=d.output())
+            args.cache = d.cache_check.isChecked()
+            self._check_not_inputs(d.output(), takes, args)
         except RigInputError as exc:
             return self._refuse(str(exc))
-        args.cache = d.cache_check.isChecked()
         rig = self.window.document.rig.copy()      # a snapshot: the user may go on editing the open rig
         if args.rig_units:
             rig.units = args.rig_units
@@ -112,6 +113,23 @@ class BatchController(QtCore.QObject):
         self.window.show_status(f"Batch solve of {len(takes)} take(s) started.")
         self.runner.submit(job, self._on_done, self._on_failed)
         return True
+
+    def _check_not_inputs(self, out: str, takes: list[Path], args) -> None:
+        """Refuse (RigInputError, one sentence) a batch into ``out`` that would write over, or among, what it reads
+        or the window has open (``model.beside_inputs``): a file of a take's set that is a take given (an earlier
+        batch's ``weights.csv``), the marker map or the Mocap panel's take; a summary among a folder of takes given
+        (read as one more take); a file the rig's OBJ folder reads. Nothing is written then."""
+        from model.batch import batch_files, take_names
+        from model.beside_inputs import check_not_input, check_not_inputs
+        fix = "choose another output folder"
+        given = [(item, Path(item).is_dir()) for item in self.dialog.takes()]
+        for path in batch_files(out, take_names(takes), args.cache):
+            check_not_inputs(path, self.window.export_inputs(), fix)
+            for item, folder in given:
+                check_not_input(path, item, "a folder of takes to solve" if folder else "a take to solve",
+                                "this batch reads", fix, reads="takes", where="{name}")
+            if args.map:
+                check_not_input(path, args.map, "the marker map", "this batch reads", fix, reads="scans")
 
     def _refuse(self, sentence: str) -> bool:
         """Say why the dialog's request cannot be done, in the dialog and the status bar; False."""

@@ -170,7 +170,8 @@ def cmd_take_info(args) -> int:
         return 0
     gaps = sum(info["missing"].values())
     outputs = info.get("model_outputs_left_out")
-    print(f"{Path(args.take).name}: {info['kind']} take, {info['frames']} frames at {info['rate']:g} fps, "
+    kind = f"weights take ({info['format']})" if info["kind"] == "weights" else f"{info['kind']} take"
+    print(f"{Path(args.take).name}: {kind}, {info['frames']} frames at {info['rate']:g} fps, "
           f"{len(info['labels'])} {'markers' if info['kind'] == 'markers' else 'weight columns'}"
           + (f" ({info['units']}), {gaps} missing samples" if info["kind"] == "markers" else "")
           + (f"; {outputs} model outputs left out" if outputs else ""))

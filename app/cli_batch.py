@@ -12,7 +12,7 @@ import sys
 
 from app.batch_preload import BATCH_PRELOAD
 from app.crash import log_unexpected_rows
-from app.cli_common import print_warnings
+from app.cli_common import check_not_an_input, print_warnings
 from app.cli_solve import add_solve_options, announce_solver_build, check_solve_options, load_solve_rig, solve_settings
 from model.errors import RigInputError
 
@@ -166,13 +166,16 @@ class ProgressPrinter:
 
 
 def cmd_batch(args) -> int:
-    from model.batch import (counts_text, find_takes, run_batch, share_job, start_fork_server, status_counts,
-                             take_names)
+    from model.batch import (batch_files, counts_text, find_takes, run_batch, share_job, start_fork_server,
+                             status_counts, take_names)
 
     if args.workers is not None and args.workers < 1:
         raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
     check_solve_options(args)
     takes = find_takes(args.takes, exclude=args.output)
+    names = take_names(takes)
+    for path in batch_files(args.output, names, args.cache):   # none of them over the rig, a take given or the map
+        check_not_an_input(args, path, "-o", "give -o another folder")
     if not args.scheduler:
         start_fork_server(BATCH_PRELOAD)   # running already when the command came through app.launch (a no-op then)
     rig = load_solve_rig(args)
@@ -180,7 +183,6 @@ def cmd_batch(args) -> int:
     if not args.scheduler:      # the local workers map the job's file: this process keeps no copy of its own beside it
         job = share_job(job)
     del rig
-    names = take_names(takes)
     print(f"{len(takes)} take(s) onto {job.rig.name} into {args.output}", flush=True)
     if not args.scheduler:
         announce_solver_build()      # the local workers' fork server compiles it before the first take

@@ -90,16 +90,17 @@ _INPUTS = (("rig", "RIG"), ("take", "TAKE"), ("map", "--map"), ("animation", "--
            ("neutral_scan", "--neutral-scan"), ("target", "--target"), ("scans", "--scans"), ("takes", "TAKES"))
 
 
-def check_not_an_input(args, path, option: str) -> None:
+def check_not_an_input(args, path, option: str, fix: str | None = None) -> None:
     """Refuse an output file that is one of the command's inputs, a file a ``.gltf`` input refers to (its buffers and
-    images: ``model.beside_inputs.gltf_files``), or a file the reader of an input folder (the rig's, the scans')
-    reads there (``model.beside_inputs.check_beside``). ``corrective`` may write its project over the
-    RIG project it adds to (``rig_updated_in_place``)."""
+    images: ``model.beside_inputs.gltf_files``), or a file the reader of an input folder (the rig's, the scans', a
+    folder of takes) reads there (``model.beside_inputs.check_beside``). ``corrective`` may write its project over
+    the RIG project it adds to (``rig_updated_in_place``). ``fix``: what to do instead (default: give ``option``
+    another file)."""
     for dest, name in _INPUTS:
         values = getattr(args, dest, None)
         for value in values if isinstance(values, list) else [] if values is None else [values]:
-            check_not_input(path, value, name, "this command reads", f"give {option} {{}}",
-                            reads="rig" if dest == "rig" else "scans",
+            check_not_input(path, value, name, "this command reads", fix or f"give {option} {{}}",
+                            reads="rig" if dest == "rig" else "takes" if dest == "takes" else "scans",
                             same_ok=dest == "rig" and getattr(args, "rig_updated_in_place", False))
 
 

@@ -35,8 +35,9 @@ def add_parser(sub, rig_arg) -> None:
 
 def cmd_personalize(args) -> int:
     from model.errors import RigInputError
+    from model.output_set import write_set
     from model.personalize import personalize_rig_detailed, scan_paths, shape_change_report
-    from model.project import Project, save_project
+    from model.project import Project, project_writer
 
     if args.map and not args.take:
         raise RigInputError("--map: a marker map needs --take.")
@@ -56,8 +57,7 @@ def cmd_personalize(args) -> int:
         from model.takes import MarkerTake, load_take
         take = load_take(args.take)
         if not isinstance(take, MarkerTake):
-            raise RigInputError(f"{args.take}: is a weight take (Live Link Face or weights CSV), not marker "
-                                "trajectories.")
+            raise RigInputError(f"{args.take}: is a weight take ({take.file_format}), not marker trajectories.")
         if args.neutral_frames is not None:
             from model.personalize import neutral_frames_of
             neutral_frames_of(take, args.calibration_frames, args.neutral_frames)   # inside the take, before any work
@@ -73,12 +73,13 @@ def cmd_personalize(args) -> int:
     actor, _, summary = personalize_rig_detailed(rig, args.neutral_scan, scans, take, marker_map,
                                                  calibration_frames=args.calibration_frames,
                                                  neutral_frames=args.neutral_frames, **options)
-    save_project(Project(rig=actor), args.output)
     _, rows = shape_change_report(rig, actor)
+    writers = {args.output: project_writer(Project(rig=actor))}
     if args.report:
-        from model.atomic import atomic_write
-        atomic_write(args.report, json.dumps({**summary, "rig": str(args.rig), "output": str(args.output),
-                                              "shapes": rows}, indent=1).encode("utf-8"))
+        report = json.dumps({**summary, "rig": str(args.rig), "output": str(args.output), "shapes": rows},
+                            indent=1).encode("utf-8")
+        writers[args.report] = lambda f: f.write(report)
+    write_set(writers)    # the project and its report as one set: both new, or neither (as solve's outputs)
     fit = summary["fit_rms"]
     fit_text = f"; scan fit RMS {fit[0]:.4g} -> {fit[-1]:.4g} {rig.units}" if fit else ""
     print(f"wrote {args.output}: {actor.n_shapes} shapes personalised ({summary['unknowns']:,} unknowns, "

@@ -2,8 +2,8 @@
 (take, marker map, solve, report; Qt-free, shared with the command line). The solve and the filling of the
 per-frame display arrays run on a background runner (``app.background``); ``app.mocap_playback.TakePlayback``
 plays the take; the exports are ``model.take_exports``. Two linked views show the projection with the markers
-and the dense result coloured by residual. Weight takes (Live Link Face CSV) play directly on the rig in the main
-viewport. ``install(window)`` adds the panel and the dock to a MainWindow (ALGORITHMS.md §4, §5, §7).
+and the dense result coloured by residual. Weight takes (a Live Link Face CSV, a weights CSV) play directly on the rig
+in the main viewport. ``install(window)`` adds the panel and the dock to a MainWindow (ALGORITHMS.md §4, §5, §7).
 """
 from __future__ import annotations
 
@@ -210,7 +210,7 @@ class MocapController(QtCore.QObject):
     @staticmethod
     def _weight_take_text(take: WeightTake, path: Path) -> str:
         driven = int((np.abs(take.weights).max(axis=0) > 0).sum())
-        text = (f"{path.name}: Live Link Face, {take.n_frames} frames at {take.rate:g} fps, "
+        text = (f"{path.name}: {take.file_format}, {take.n_frames} frames at {take.rate:g} fps, "
                 f"drives {driven} of {len(take.names)} rig shapes")
         if take.unmapped:
             text += f"; unmapped columns ({len(take.unmapped)}): {', '.join(take.unmapped)}"
@@ -586,7 +586,8 @@ class MocapController(QtCore.QObject):
         self.panel.set_frames(take.n_frames, take.rate)
         self._init_weight_curves(take.weights)
         self.error_plot.set_curves([])
-        self.panel.set_status("Live Link Face take: plays on the rig in the main viewport (no undo steps).")
+        self.panel.set_status(f"{take.file_format[:1].upper()}{take.file_format[1:]} take: plays on the rig in the "
+                              "main viewport (no undo steps).")
         self.playback.set_length(take.n_frames, take.rate)
         self.set_frame(0)
 

@@ -126,9 +126,7 @@ class PersonalizeController(QtCore.QObject):
             out = Path(out)
             if out.suffix.lower() != ".bsproj":
                 out = out.with_name(out.name + ".bsproj")
-            if doc.path is not None and out.resolve() == doc.path.resolve():
-                raise RigInputError(f"{out}: is the open project; write the actor's project under another name, "
-                                    "so that the template stays as it is.")
+            self._check_output(out, request)
             if not (request.get("neutral_scan") or request.get("scans") or request.get("take")):
                 raise RigInputError("Personalising needs measurements of the actor: a neutral scan, pose scans "
                                     "or a marker take.")
@@ -170,6 +168,23 @@ class PersonalizeController(QtCore.QObject):
         dlg.show()
         self._timer.start()
         return True
+
+    def _check_output(self, out: Path, request: dict) -> None:
+        """Refuse (RigInputError, one sentence) before any work an actor's project ``out`` that cannot be written
+        (``model.atomic.check_output_file``: a folder, a read-only folder, ...) or that is a file the window has open
+        (``model.beside_inputs``: the project, the rig's file, which after Save As is another project, the Mocap
+        panel's take and map) or one the request reads (the scans, the take, its map). The job found the first at
+        its very end, and only the open project itself was guarded."""
+        from model.atomic import check_output_file
+        from model.beside_inputs import check_not_input, check_not_inputs
+        fix = "write the actor's project to {}"
+        check_output_file(out)
+        check_not_inputs(out, self.window.export_inputs(), fix)
+        for name, value in (("the neutral scan", request.get("neutral_scan")), ("the take", request.get("take")),
+                            ("the marker map", request.get("marker_map")),
+                            *(("a pose scan", scan) for scan in request.get("scans") or ())):
+            if value:
+                check_not_input(out, value, name, "this personalisation reads", fix, reads="scans")
 
     def _progress_text(self) -> str:
         """The progress window's text: the stage the job reported last and the time it has run."""

@@ -41,7 +41,7 @@ def personalize_project(template, project_state: dict, request: dict, progress=N
         from .takes import MarkerTake
         take = read_take(request["take"])
         if not isinstance(take, MarkerTake):
-            raise RigInputError(f"{request['take']}: is a weight take (Live Link Face), not marker trajectories.")
+            raise RigInputError(f"{request['take']}: is a weight take ({take.file_format}), not marker trajectories.")
         if request.get("marker_map"):
             from .marker_map import load_marker_map
             marker_map = load_marker_map(request["marker_map"])

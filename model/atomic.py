@@ -39,7 +39,8 @@ class OutputPathError(RigInputError, OSError):
 
 def check_output_file(path: str | Path) -> Path:
     """``path`` as a file to write, or RigInputError (one sentence naming it) before anything is written: an
-    existing folder (or a name ending in a slash), a device, pipe or socket, or a path through a file."""
+    existing folder (or a name ending in a slash), a device, pipe or socket, a path through a file, or a folder that
+    takes no new file (``_check_writable``)."""
     text = os.fspath(path)
     if not text:
         raise OutputPathError("An output file name is empty.")
@@ -58,14 +59,17 @@ def check_output_file(path: str | Path) -> Path:
 
 def check_output_folder(path: str | Path) -> Path:
     """``path`` as a folder to write into (made if missing), or RigInputError (one sentence naming it): an
-    existing file, or a path through a file."""
+    existing file, a path through a file, or a folder that takes no new file (``_check_writable``)."""
     text = os.fspath(path)
     if not text:
         raise OutputPathError("An output folder name is empty.")
     p = Path(path)
     if p.exists() and not p.is_dir():
         raise OutputPathError(f"{text}: is a file, not a folder.")
-    _check_folders_above(text, p)
+    if p.is_dir():
+        _check_writable(text, p)
+    else:
+        _check_folders_above(text, p)
     return p
 
 
@@ -74,7 +78,24 @@ def _check_folders_above(text: str, p: Path) -> None:
         if os.path.lexists(parent):
             if not parent.is_dir():
                 raise OutputPathError(f"{text}: {parent} is a file, not a folder.")
+            _check_writable(text, parent)
             return
+
+
+def _check_writable(text: str, folder: Path) -> None:
+    """The folder an output goes into (or the nearest one above it that exists, in which the rest are made) must
+    take new files: one on a read-only disk, or one the user may not write in, is refused before any work (it was
+    found out at the very end, as an unexpected error with a crash log)."""
+    if os.access(folder, os.W_OK | os.X_OK):
+        return
+    shown_folder = "the current folder" if str(folder) == "." else str(folder)
+    try:
+        read_only = bool(os.statvfs(folder).f_flag & os.ST_RDONLY)
+    except (OSError, AttributeError):
+        read_only = False
+    why = "is on a read-only disk" if read_only else "is a folder you may not write in"
+    where = "" if os.path.abspath(text) == os.path.abspath(folder) else f"cannot be written: {shown_folder} "
+    raise OutputPathError(f"{text}: {where}{why}; nothing was written.")
 
 
 def atomic_write(path: str | Path, data: bytes) -> None:

@@ -51,8 +51,8 @@ from .output_set import finish_interrupted_sets, write_set
 from .pose import PoseEvaluator
 from .rig import Rig
 from .rig_prep import focus_vertices, shape_reach
+from .takes import TAKE_SUFFIXES
 
-TAKE_SUFFIXES = (".c3d", ".trc", ".csv")
 DONE = "done.json"                      # the done-marker, written last in a take's set
 OUTPUTS = {"weights": "weights.csv", "report": "report.json", "preview": "preview.png", "cache": "cache.pc2"}
 SUMMARY_JSON, SUMMARY_CSV = "batch.json", "batch.csv"
@@ -178,6 +178,17 @@ def take_names(paths: list[Path]) -> list[str]:
         if k:
             names[i] = f"{n}_{k + 1}"
     return names
+
+
+def batch_files(out_dir: str | Path, names: list[str], cache: bool) -> list[Path]:
+    """Every file a batch into ``out_dir`` writes (``run_batch``) for takes named ``names`` (``take_names``): the
+    summary (``batch.json``, ``batch.csv``) and each take's ``<name>/`` set (``OUTPUTS``, the cache only with
+    ``cache``, ``done.json``). The front ends check each against their inputs before any work
+    (``model.beside_inputs``): a take given in ``out_dir`` is not solved, but a file of another take's set can be it
+    (``out/take01/weights.csv``, a take of an earlier batch, written over by ``take01.c3d``'s weights)."""
+    out = Path(out_dir)
+    per_take = [f for key, f in OUTPUTS.items() if cache or key != "cache"] + [DONE]
+    return [out / SUMMARY_JSON, out / SUMMARY_CSV] + [out / name / f for name in names for f in per_take]
 
 
 # --- what every take shares -------------------------------------------------------------------------

@@ -15,17 +15,23 @@ from .textures import MASK_NAME, NORMAL_SUFFIX, SUFFIXES as IMAGE_SUFFIXES
 
 
 def check_beside(out: str, folder: str, reads: str, start: str, end: str) -> None:
-    """An output ``out`` in the ``folder`` an input is read from (``reads``: "rig" or "scans"): refused, in the
-    sentence ``start`` ... ``end``, if the folder's reader reads it: an OBJ (a shape, or a scan), and for a rig its
-    ``presets.json``, its materials (an existing ``.mtl``) and a picture named after a shape's OBJ or the neutral's
-    (that one's texture, ``model.textures``) or the keep mask. Any other file there (a render's ``preview.png``, a
-    ``regions.json``) is no part of the rig."""
+    """An output ``out`` in the ``folder`` an input is read from (``reads``: "rig", "scans" or "takes"): refused, in
+    the sentence ``start`` ... ``end``, if the folder's reader reads it: an OBJ (a shape, or a scan), a take file
+    (.c3d, .trc, .csv: ``batch`` reads every one in a folder of takes), and for a rig its ``presets.json``, its
+    materials (an existing ``.mtl``) and a picture named after a shape's OBJ or the neutral's (that one's texture,
+    ``model.textures``) or the keep mask. Any other file there (a render's ``preview.png``, a ``regions.json``) is no
+    part of the rig."""
     from .readers import PRESETS_FILE
+    from .takes import TAKE_SUFFIXES
     name = os.path.basename(out)
     stem, suffix = os.path.splitext(name)
     suffix, exists = suffix.lower(), os.path.exists(out)
     shape = stem[:-len(NORMAL_SUFFIX)] if stem.endswith(NORMAL_SUFFIX) else stem
-    if suffix == ".obj":
+    if reads == "takes":
+        if suffix not in TAKE_SUFFIXES:
+            return
+        read_as = "one more take"
+    elif suffix == ".obj":
         read_as = f"one more {'shape' if reads == 'rig' else 'scan'}"
     elif reads != "rig":
         return
@@ -43,8 +49,8 @@ def check_beside(out: str, folder: str, reads: str, start: str, end: str) -> Non
 def check_not_input(path: str | Path, source: str | Path, name: str, reader: str, fix: str, *, reads: str = "rig",
                     same_ok: bool = False, where: str = "which {name} reads") -> None:
     """Refuse an output ``path`` that is the input ``source`` (a file or a folder; ``same_ok``: that one is allowed),
-    a file a ``.gltf`` source refers to (``gltf_files``), or a file the reader of a folder source (``reads``: "rig"
-    or "scans"; for a rig, an ``.obj`` source's folder too) reads there (``check_beside``). The one rule of the
+    a file a ``.gltf`` source refers to (``gltf_files``), or a file the reader of a folder source (``reads``: "rig",
+    "scans" or "takes"; for a rig, an ``.obj`` source's folder too) reads there (``check_beside``). The one rule of the
     command line's outputs (``app.cli_common.check_not_an_input``) and of the window's exports (``check_not_inputs``).
     The sentence names ``path`` and the input as ``name`` (``reader``: who reads it; ``where``: what the folder is
     to it); ``fix`` says what to do, formatted with "another file" or "a file elsewhere"."""
@@ -65,15 +71,15 @@ def check_not_input(path: str | Path, source: str | Path, name: str, reader: str
                      f"; {fix.format('a file elsewhere')}.")
 
 
-def check_not_inputs(path: str | Path, inputs: list[tuple[str, str | Path | None]]) -> None:
+def check_not_inputs(path: str | Path, inputs: list[tuple[str, str | Path | None]], fix: str = "choose {}") -> None:
     """The window's exports (File ▸ Export Rig, Export Pose as OBJ, Export Image, the keyed animation's and the Mocap
-    panel's): refuse ``path`` when it is one of the files the window has open, ``inputs`` as (what it is: "the rig",
-    "the project", ...; its path, None for none), by ``check_not_input``: the file itself, a ``.gltf``'s buffers and
-    images, what an OBJ folder's reader reads there (a posed OBJ would be read as one more shape)."""
+    panel's), its personalised project and its batches' files: refuse ``path`` when it is one of the files the window
+    has open, ``inputs`` as (what it is: "the rig", "the project", ...; its path, None for none), by
+    ``check_not_input``: the file itself, a ``.gltf``'s buffers and images, what an OBJ folder's reader reads there
+    (a posed OBJ would be read as one more shape). ``fix``: what to do instead (as ``check_not_input``'s)."""
     for name, source in inputs:
         if source and os.path.exists(source):    # the bundled sample rig, a take since deleted: nothing to keep
-            check_not_input(path, source, name, "the window has open", "choose {}",
-                            where="the folder {name} is read from")
+            check_not_input(path, source, name, "the window has open", fix, where="the folder {name} is read from")
 
 
 def gltf_files(path: str | Path) -> list[tuple[str, str, str]]:

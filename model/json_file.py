@@ -20,7 +20,8 @@ def parse_json_text(text: str, where: str):
     try:
         return json.loads(text, parse_constant=_no_constants)
     except json.JSONDecodeError as exc:
-        raise RigInputError(f"{where}: is not valid JSON ({exc.msg} at line {exc.lineno}).") from None
+        what = exc.msg.removesuffix(" at")   # "Unterminated string starting at" read "starting at at line 8"
+        raise RigInputError(f"{where}: is not valid JSON ({what} at line {exc.lineno}).") from None
     except RecursionError:
         raise RigInputError(f"{where}: is nested too deeply to be a file this application wrote or reads.") from None
     except ValueError as exc:   # NaN, Infinity, or an integer too long to convert

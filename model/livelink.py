@@ -28,6 +28,7 @@ ROTATION_COLUMNS = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw", "LeftEyePi
                     "RightEyeYaw", "RightEyePitch", "RightEyeRoll")
 
 
+FILE_FORMAT = "Live Link Face CSV"   # what a take this module reads is (``WeightTake.file_format``)
 _TIMECODE = re.compile(r"^(\d+):(\d{1,2}):(\d{1,2})[:;](\d+)(\.\d+)?$")
 _RATES = (24.0, 25.0, 30.0, 48.0, 50.0, 60.0, 120.0)
 
@@ -187,7 +188,8 @@ def read_livelink_csv(path: str | Path, shape_names: list[str] | None = None,
     if shape_names is None:
         idx = [cols.index(c) for c in weight_cols]
         return WeightTake(weights=vals[:, idx], names=weight_cols, rate=rate, timecodes=times,
-                          channels=channels, source=str(path), warnings=warnings, filled=filled)
+                          channels=channels, source=str(path), warnings=warnings, filled=filled,
+                          file_format=FILE_FORMAT)
     shape_names = list(shape_names)
     m = default_arkit_mapping(weight_cols, shape_names)
     for col, tgt in (mapping or {}).items():
@@ -207,4 +209,4 @@ def read_livelink_csv(path: str | Path, shape_names: list[str] | None = None,
     if len(unmapped) == len(weight_cols):
         raise RigInputError(f"{path}: no Live Link Face column matches a shape of the rig.")
     return WeightTake(weights=W, names=shape_names, rate=rate, timecodes=times, unmapped=unmapped,
-                      channels=channels, source=str(path), warnings=warnings, filled=filled)
+                      channels=channels, source=str(path), warnings=warnings, filled=filled, file_format=FILE_FORMAT)

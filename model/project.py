@@ -267,6 +267,12 @@ def _read_shape_settings(rig: Rig, entry, array, declared) -> None:
 
 def save_project(project: Project, path: str | Path) -> None:
     """Write the project to ``path`` atomically."""
+    atomic_write_with(path, project_writer(project))
+
+
+def project_writer(project: Project):
+    """``writer(file)`` writing the project's ``.bsproj`` bytes into an open file: ``save_project``'s, or one file of
+    a set written together (``model.output_set.write_set``: ``personalize``'s project and report)."""
     rig = project.rig
     arrays: dict[str, np.ndarray] = {
         "rig/neutral": rig.neutral,
@@ -318,7 +324,7 @@ def save_project(project: Project, path: str | Path) -> None:
             for key, a in arrays.items():
                 z.writestr(f"{key}.npy", _npy_bytes(a))
 
-    atomic_write_with(path, write)
+    return write
 
 
 def _materials(entry, path) -> dict[str, tuple[float, float, float]]:

@@ -109,7 +109,8 @@ class WeightTake:
     """Per-frame shape weights (F, K) for ``names``; e.g. a Live Link Face recording mapped to a rig.
 
     ``unmapped`` lists source columns that drive no shape of the rig; ``channels`` keeps the other
-    per-frame columns (head and eye rotations) by name.
+    per-frame columns (head and eye rotations) by name; ``file_format`` says what the file is ("Live Link Face
+    CSV", "weights CSV": each reader's ``FILE_FORMAT``), for whoever describes the take.
     """
 
     weights: np.ndarray
@@ -122,6 +123,7 @@ class WeightTake:
     warnings: list[str] = field(default_factory=list)
     filled: np.ndarray | None = None   # (F,) bool: frames the recording dropped, interpolated in time
     rate_from_file: bool = True   # False: the file gives no rate (a weights CSV without times): given or assumed
+    file_format: str = "weight take"   # what the file is, in the user's words: its reader's ``FILE_FORMAT``
 
     def __post_init__(self) -> None:
         self.weights = np.ascontiguousarray(self.weights, dtype=np.float64)
@@ -230,6 +232,7 @@ def take_summary(take: MarkerTake | WeightTake) -> dict:
                 "bounds": bounds, "first_frame": take.first_frame, "model_outputs_left_out": len(take.model_outputs),
                 "warnings": list(take.warnings)}
     filled = take.filled if take.filled is not None else np.zeros(take.n_frames, dtype=bool)
-    return {"path": take.source, "kind": "weights", "frames": take.n_frames, "rate": take.rate, "units": None,
+    return {"path": take.source, "kind": "weights", "format": take.file_format, "frames": take.n_frames,
+            "rate": take.rate, "units": None,
             "labels": list(take.names), "missing": {}, "bounds": None, "dropped_frames": int(filled.sum()),
             "warnings": list(take.warnings)}

@@ -16,7 +16,10 @@ from .errors import RigInputError
 from .input_files import regular_file
 from .take_data import MarkerTake, WeightTake, rate_not_used, take_summary, unique_labels, units_from_text
 
-__all__ = ["MarkerTake", "WeightTake", "load_take", "take_summary", "unique_labels", "units_from_text"]
+TAKE_SUFFIXES = (".c3d", ".trc", ".csv")   # the files a folder of takes holds (``batch``'s TAKES)
+
+__all__ = ["MarkerTake", "TAKE_SUFFIXES", "WeightTake", "load_take", "take_summary", "unique_labels",
+           "units_from_text"]
 
 
 def load_take(path: str | Path, *, rate: float | None = None, **kwargs) -> MarkerTake | WeightTake:

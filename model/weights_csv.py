@@ -16,6 +16,7 @@ from .atomic import atomic_write
 from .errors import RigInputError, shown
 from .input_files import regular_file
 
+FILE_FORMAT = "weights CSV"   # what a take this module reads is (``WeightTake.file_format``): as ``solve`` writes
 UNTIMED_RATE = 30.0      # frames a second of a weights CSV without a time column (as of a one-frame weights CSV)
 _AXIS_SEPARATORS = "_.:- "
 
@@ -202,4 +203,4 @@ def read_weights_take(path: str | Path, shape_names: list[str] | None, *, rate: 
     full = np.zeros((W.shape[0], len(shape_names)))
     full[:, [pos[n] for n in names]] = W
     return WeightTake(weights=full, names=list(shape_names), rate=rate, source=str(path), warnings=warnings,
-                      rate_from_file=times is not None and frames.size > 1)
+                      rate_from_file=times is not None and frames.size > 1, file_format=FILE_FORMAT)

@@ -198,3 +198,98 @@ def test_no_command_writes_over_the_files_a_gltf_rig_reads(tmp_path):
     rig.write_text(json.dumps(gltf))
     _refused(run_cli("render", rig, "--size", "32,32", "-o", rig.parent / "nul.png", check=False),
              f"{rig}: the glTF is damaged (ValueError: embedded null byte).")
+
+
+@pytest.mark.parametrize("command, out", [
+    (["export", "{rig}", "-o", "{out}"], "{ro}/posed.glb"),
+    (["export", "{rig}", "-o", "{out}"], "{ro}/new/posed.obj"),          # a folder to make inside it
+    (["solve", "{rig}", "{tmp}/take.csv", "-o", "{tmp}/w.csv", "--report", "{out}"], "{ro}/report.json"),
+    (["segment", "{rig}", "-o", "{out}"], "{ro}/regions.json"),
+    (["personalize", "{rig}", "--scans", "{rig}/raise.obj", "-o", "{out}"], "{ro}/actor.bsproj"),
+    (["sample", "-o", "{out}"], "{ro}/sample"),
+    (["batch", "{rig}", "{tmp}/take.csv", "-o", "{out}"], "{ro}"),
+])
+def test_an_output_in_a_folder_that_takes_no_new_file_is_refused_before_any_work(tmp_path, monkeypatch, capsys,
+                                                                                  command, out):
+    """The audit's case: every command writing into a folder the user may not write in (or on a read-only disk) did
+    all its work, then stopped at the write with an unexpected error (exit 1, "failed unexpectedly", a crash log);
+    `solve -o w.csv --report RO/r.json` had its work done for nothing. Refused before any work: one sentence naming
+    the output and the folder, exit 2, nothing written. (As root a folder's permissions do not stop a write: the
+    folder's answer to ``os.access`` is what the check asks, so it is made to say no.)"""
+    from app import cli
+    rig, ro = tmp_path / "rig", tmp_path / "ro"
+    write_rig_folder(rig)
+    (tmp_path / "take.csv").write_text("frame,raise\n0,0.5\n1,1\n")
+    ro.mkdir()
+    os.chmod(ro, 0o555)
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if os.path.abspath(p) == str(ro) and mode & os.W_OK
+                        else real_access(p, mode, **kw))
+    before = _listing(tmp_path)
+    try:
+        target = out.format(ro=ro)
+        code = cli.main([a.format(rig=rig, out=target, tmp=tmp_path) for a in command])
+    finally:
+        os.chmod(ro, 0o755)
+    err = capsys.readouterr().err
+    where = "" if target == str(ro) else f"cannot be written: {ro} "
+    assert code == 2 and err == f"error: {target}: {where}is a folder you may not write in; nothing was written.\n", \
+        (code, err)
+    assert _listing(tmp_path) == before
+
+
+@pytest.mark.parametrize("takes, options, sentence", [
+    # an earlier batch's weights given as a take: take01.csv's weights went over it (the take in -o is not solved)
+    (["{tmp}/out/take01/weights.csv", "{tmp}/take01.csv"], [],
+     "{tmp}/out/take01/weights.csv: is TAKES itself, which this command reads; give -o another folder."),
+    # the summary among a folder of takes given: it was read there as one more take by the next batch of the folder
+    (["{tmp}/day1", "{tmp}/take01.csv"], [],
+     "{tmp}/day1/batch.csv: is in {tmp}/day1, which TAKES reads, and would be read there as one more take; give -o "
+     "another folder."),
+    (["{tmp}/take01.csv"], ["--map", "{tmp}/day1/batch.json"],
+     "{tmp}/day1/batch.json: is --map itself, which this command reads; give -o another folder."),
+])
+def test_batch_writes_none_of_its_files_over_what_it_reads(tmp_path, takes, options, sentence):
+    """`batch` checked its output folder only as a folder: a take given inside it is left out of the solve, but a
+    file of another take's set could be it (`batch RIG out/take01/weights.csv take01.csv -o out` wrote take01's
+    weights over that take), and its summary could land over the marker map or among a folder of takes given. Each
+    is refused before any work, one sentence, exit 2, every file as it was."""
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    (tmp_path / "take01.csv").write_text("frame,raise\n0,0.5\n1,1\n")
+    (tmp_path / "out" / "take01").mkdir(parents=True)
+    (tmp_path / "out" / "take01" / "weights.csv").write_text("frame,push\n0,0.25\n1,0.75\n")
+    (tmp_path / "day1").mkdir()
+    (tmp_path / "day1" / "a.csv").write_text("frame,push\n0,1\n")
+    (tmp_path / "day1" / "batch.json").write_text('{"markers": {"M00": 0}}')   # a marker map so named
+    out = tmp_path / ("day1" if "day1" in sentence.split(":")[0] else "out")
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()}
+    proc = run_cli("batch", rig, *[t.format(tmp=tmp_path) for t in takes], *[o.format(tmp=tmp_path) for o in options],
+                   "-o", out, "--workers", "1", check=False)
+    _refused(proc, sentence.format(tmp=tmp_path))
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file()} == before
+
+
+def test_personalize_writes_its_project_and_report_as_one_set(tmp_path, monkeypatch, capsys):
+    """`personalize -o A.bsproj --report R.json` wrote the project, then the report: a report that failed to be
+    written (here: the disk full as its temporary is written) left the new project behind a failed command. Now both
+    are written as one set (``model.output_set.write_set``, as solve's outputs): neither is there."""
+    import errno
+
+    from app import cli
+    from model import atomic, output_set
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    real = atomic.write_temporary
+
+    def full_disk(path, writer):
+        if path.name == "report.json":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(path, writer)
+    monkeypatch.setattr(atomic, "write_temporary", full_disk)
+    monkeypatch.setattr(output_set, "write_temporary", full_disk)
+    before = _listing(tmp_path)
+    code = cli.main(["personalize", str(rig), "--scans", str(rig / "raise.obj"), "-o", str(tmp_path / "actor.bsproj"),
+                     "--report", str(tmp_path / "report.json")])
+    assert code != 0 and "No space left on device" in capsys.readouterr().err
+    assert _listing(tmp_path) == before

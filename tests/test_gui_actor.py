@@ -5,6 +5,7 @@ rig, a map point dragged to correct it."""
 from __future__ import annotations
 
 import json
+import os
 
 import numpy as np
 import pytest
@@ -233,6 +234,38 @@ def test_personalize_refuses_bad_scans_with_one_sentence_and_keeps_the_rig(qtbot
     # no measurement at all: refused before any work
     assert not w.actor.personalize({"neutral_scan": None, "scans": [], "output": str(tmp_path / "o.bsproj")})
     assert "neutral scan, pose scans or a marker take" in w.last_error
+
+
+def test_personalize_refuses_an_output_it_would_lose_before_any_work(qtbot, tmp_path, monkeypatch):
+    """The actor's project may not go over a file the window has open: only the open project itself was guarded, so
+    after File ▸ Save As the project the rig was opened from (the rig's file, which every export refuses) was written
+    over; nor where it cannot be written (a folder of that name, a read-only folder), which the job found out only
+    after the whole solve. Each is one sentence in a dialog before any work, nothing starts, every file as it was."""
+    w = make_window(qtbot, tmp_path)
+    first = tmp_path / "first.bsproj"
+    save_project(Project(rig=w.document.rig.copy()), first)
+    open_and_wait(qtbot, w, first)
+    w.document.save(tmp_path / "second.bsproj")          # Save As: the rig still comes from first.bsproj
+    rig = w.document.rig
+    scan = tmp_path / "scan.obj"
+    write_obj(scan, rig.neutral, rig.face_counts, rig.face_indices)
+    (tmp_path / "folder.bsproj").mkdir()
+    (tmp_path / "ro").mkdir()
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, mode, **kw: False if os.path.abspath(p) == str(tmp_path / "ro") and
+                        mode & os.W_OK else real_access(p, mode, **kw))   # as root, a folder's mode stops no write
+    before = {p: p.read_bytes() for p in tmp_path.glob("*.bsproj") if p.is_file()}
+    for out, sentence in (
+            (first, f"{first}: is the rig itself, which the window has open; write the actor's project to another "
+                    "file."),
+            (tmp_path / "folder.bsproj", f"{tmp_path / 'folder.bsproj'}: is a folder, not a file."),
+            (tmp_path / "ro" / "actor", f"{tmp_path / 'ro' / 'actor.bsproj'}: cannot be written: {tmp_path / 'ro'} "
+                                        "is a folder you may not write in; nothing was written.")):
+        assert not w.actor.personalize({"neutral_scan": str(scan), "scans": [], "output": str(out)})
+        assert w.last_error == sentence and not w.actor.busy and w.actor.job is None
+        _close_error_box(sentence)
+    assert {p: p.read_bytes() for p in tmp_path.glob("*.bsproj") if p.is_file()} == before
+    assert not any((tmp_path / "ro").iterdir())
 
 
 # --- the heat map's picture ---------------------------------------------------------------------------

@@ -202,3 +202,38 @@ def test_batch_results_sort_show_previews_and_open_again_in_a_later_session(qtbo
     _click_row(qtbot, d2.table, 0)                                   # Enter on a row opens it too
     qtbot.keyClick(d2.table, QtCore.Qt.Key_Return)
     assert str(w2.mocap.workspace.take_path) == takes[0]
+
+
+def test_batch_solve_refuses_an_output_folder_where_it_would_write_over_what_it_reads(qtbot, tmp_path):
+    """The output folder was checked only as a folder: a take given in it is left out of the solve, but a file of
+    another take's set could be it (an earlier batch's weights.csv, written over by take01's), or the take the
+    Mocap panel has open; its summary could land among a folder of takes given (read as one more take by the next
+    batch). Each is one sentence in the dialog, nothing starts, every file as it was."""
+    w = make_window(qtbot, tmp_path)
+    name = w.document.rig.shape_names[0]
+    out, day1 = tmp_path / "out", tmp_path / "day1"
+    (out / "take01").mkdir(parents=True)
+    earlier = out / "take01" / "weights.csv"
+    earlier.write_text(f"frame,{name}\n0,0.25\n1,0.75\n")
+    take = tmp_path / "take01.csv"
+    take.write_text(f"frame,{name}\n0,0.5\n1,1\n")
+    day1.mkdir()
+    (day1 / "a.csv").write_text(f"frame,{name}\n0,1\n")
+    bc = w.batch
+    d = bc.show_dialog()
+    before = {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file() and "settings" not in p.parts}
+    fix = "choose another output folder."
+    for takes, folder, open_take, sentence in (
+            ([earlier, take], out, None, f"{earlier}: is a take to solve itself, which this batch reads; {fix}"),
+            ([day1, take], day1, None, f"{day1 / 'batch.csv'}: is in {day1}, a folder of takes to solve, and would "
+                                       f"be read there as one more take; {fix}"),
+            ([take], out, earlier, f"{earlier}: is the take itself, which the window has open; {fix}")):
+        if open_take is not None:
+            assert w.mocap.load_take(open_take)
+        d.take_list.clear()
+        d.add_takes([str(t) for t in takes])
+        d.output_edit.setText(str(folder))
+        qtbot.mouseClick(d.run_button, QtCore.Qt.LeftButton)
+        assert not bc.running and d.status_label.text() == sentence, d.status_label.text()
+    assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file() and "settings" not in p.parts} == before
+    assert not (out / "batch.json").exists() and not (day1 / "batch.json").exists()

@@ -634,3 +634,19 @@ def test_save_map_may_write_over_its_own_map_but_no_export_over_the_take_or_map(
     assert w.last_error == f"{take}: is the take itself, which the window has open; choose another file."
     assert (take.read_bytes(), mapping.read_bytes()) == before
     assert mc.save_map(mapping) and json.loads(mapping.read_text())["markers"] == mc.marker_map.markers
+
+
+def test_the_mocap_panel_says_what_a_weight_take_is(qtbot, tmp_path, ict_dir, take_dir, llf_csv):
+    """A weight take is described by what its file is: the weights CSV ``solve`` writes is a weights CSV (it was
+    labelled "Live Link Face", as every weight take was), the iPhone recording a Live Link Face CSV; both in the
+    take's line and in the panel's status while it plays."""
+    w, mc = _install(qtbot, tmp_path, size=(1100, 800))
+    open_and_wait(qtbot, w, ict_dir)
+    solved = tmp_path / "solved.csv"
+    run_cli("solve", ict_dir, take_dir / "take.c3d", "--map", take_dir / "marker_map.json", "--global",
+            "--residual", "none", "-o", solved)
+    for path, what, other in ((solved, "weights CSV", "Live Link Face"), (llf_csv, "Live Link Face CSV", "weights")):
+        assert mc.load_take(path)
+        line, status = mc.panel.take_label.text(), mc.panel.status_label.text()
+        assert line.startswith(f"{path.name}: {what}, ") and other not in line, line
+        assert f"{what[:1].upper()}{what[1:]} take: plays on the rig" in status and other not in status, status

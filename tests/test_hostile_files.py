@@ -134,3 +134,14 @@ def test_a_project_linked_to_dev_zero_is_refused_unread(tmp_path):
 def test_a_valid_project_still_opens(project_file, sample_rig):
     p = load_project(project_file)
     assert np.array_equal(p.rig.neutral, sample_rig.neutral) and p.rig.shape_names == sample_rig.shape_names
+
+
+def test_a_gltf_cut_inside_a_string_says_where_in_plain_words(tmp_path):
+    """The audit's truncated third-party glTF (SimpleMorph.gltf cut at 500 bytes): the sentence read "Unterminated
+    string starting at at line 8" (Python's message ends in "at", and the line was added after it)."""
+    from tests.conftest import DATA, require_data
+    cut = tmp_path / "cut.gltf"
+    cut.write_bytes(require_data(DATA / "thirdparty" / "gltf" / "SimpleMorph.gltf").read_bytes()[:500])
+    proc = run_cli("info", cut, check=False)
+    sentence = f"{cut}: is not valid JSON (Unterminated string starting at line 8)."
+    assert proc.returncode == 2 and proc.stderr == f"error: {sentence}\n", proc.stderr
