@@ -600,10 +600,15 @@ def test_an_expose_shows_the_last_render_again_unless_something_changed(qtbot, t
     keeps is shown again without a render when nothing changed since the last one (a render is 0.1-0.16 s at 422k
     vertices), and rendered when anything did (here the camera, turned without a render)."""
     import vtk
+    import time
     w = make_window(qtbot, tmp_path)
     plotter = w.viewport.plotter
-    qtbot.waitUntil(lambda: not w.redraw_pending, timeout=5000)
-    qtbot.wait(100)
+    # still: the sample's segmentation shown (its colour map's render comes late on a busy machine), then no render
+    # for 0.3 s
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None and not w.redraw_pending, timeout=30000)
+    last = [time.monotonic()]
+    plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: last.__setitem__(0, time.monotonic()))
+    qtbot.waitUntil(lambda: time.monotonic() - last[0] > 0.3 and not w.redraw_pending, timeout=30000)
     renders = [0]
     plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: renders.__setitem__(0, renders[0] + 1))
     corner = plotter.mapToGlobal(QtCore.QPoint(0, 0))
