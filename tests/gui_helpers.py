@@ -159,3 +159,20 @@ def combo_text_shown_whole(combo: QtWidgets.QComboBox) -> bool:
     field = combo.style().subControlRect(QtWidgets.QStyle.CC_ComboBox, opt, QtWidgets.QStyle.SC_ComboBoxEditField,
                                          combo)
     return combo.fontMetrics().horizontalAdvance(combo.currentText()) <= field.width()
+
+
+def wait_until_still(qtbot, w, quiet: float = 0.5) -> None:
+    """Wait until the window is still: its segmentation shown (its colour map's render comes when it is done, later
+    on a slow machine) and no render started for ``quiet`` seconds, so that the next change is the first after a
+    still moment (a fixed wait could end just after a late render)."""
+    import time
+
+    import vtk
+    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None and not w.redraw_pending, timeout=120000)
+    last = [time.monotonic()]
+    window = w.viewport.plotter.ren_win
+    tag = window.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: last.__setitem__(0, time.monotonic()))
+    try:
+        qtbot.waitUntil(lambda: time.monotonic() - last[0] >= quiet and not w.redraw_pending, timeout=30000)
+    finally:
+        window.RemoveObserver(tag)

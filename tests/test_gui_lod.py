@@ -11,7 +11,7 @@ import pytest
 from PySide6 import QtCore, QtWidgets
 
 from solvers.mesh import fan_triangulate
-from tests.gui_helpers import make_window, mouse, open_and_wait, press_shape_slider
+from tests.gui_helpers import make_window, mouse, open_and_wait, press_shape_slider, wait_until_still
 
 
 def _areas(points, tris):
@@ -52,23 +52,6 @@ def test_the_proxy_is_a_decimation_of_the_surface_over_its_own_vertices(ict_rig)
     posed = rig.neutral + 1.0 * rig.deltas[rig.shape_index("jawOpen")]
     whole = VertexNormals(rig.face_counts, rig.face_indices, rig.n_vertices)(posed)
     np.testing.assert_allclose(proxy.normals(posed), whole[proxy.vertices], atol=1e-6)
-
-
-def _still(qtbot, w, quiet: float = 0.5) -> None:
-    """Wait until the window is still: its segmentation shown (its colour map's render comes when it is done, later
-    on a slow machine) and no render started for ``quiet`` seconds, so that the next change is the first after a
-    still moment (a fixed wait could end just after a late render)."""
-    import time
-
-    import vtk
-    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None and not w.redraw_pending, timeout=120000)
-    last = [time.monotonic()]
-    window = w.viewport.plotter.ren_win
-    tag = window.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: last.__setitem__(0, time.monotonic()))
-    try:
-        qtbot.waitUntil(lambda: time.monotonic() - last[0] >= quiet and not w.redraw_pending, timeout=30000)
-    finally:
-        window.RemoveObserver(tag)
 
 
 def test_a_proxy_made_once_is_read_back_from_the_cache_the_same(ict_rig, tmp_path, monkeypatch):
@@ -149,7 +132,7 @@ def test_a_slider_drag_draws_the_proxy_then_the_full_surface_once_still(qtbot, t
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
-    _still(qtbot, w)                        # the next change is drawn in full
+    wait_until_still(qtbot, w)                        # the next change is drawn in full
     n_faces = w.viewport.mesh.GetNumberOfPolys()      # the faces shown (ICT hides some parts)
     drawn = _drawn_faces(w)
     _drag_jaw(qtbot, w)
@@ -180,7 +163,7 @@ def test_the_wireframe_is_drawn_with_the_surfaces_own_faces_while_dragging(qtbot
     open_and_wait(qtbot, w, ict_dir)
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
     w.viewport.set_wireframe(True)
-    _still(qtbot, w)
+    wait_until_still(qtbot, w)
     drawn = _drawn_faces(w)
     _drag_jaw(qtbot, w, moves=6)
     assert len(drawn) >= 6 and set(drawn) == {len(w.viewport.shown_faces)}
@@ -190,7 +173,7 @@ def test_a_click_right_after_a_drag_picks_the_surfaces_own_vertex(qtbot, tmp_pat
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
-    _still(qtbot, w)
+    wait_until_still(qtbot, w)
     vp = w.viewport
     _drag_jaw(qtbot, w, moves=3)
     assert vp.detail.proxy_shown            # the last frame of the drag drew the proxy
@@ -247,7 +230,7 @@ def test_the_proxy_frame_looks_like_the_full_frame_of_the_same_pose(qtbot, tmp_p
         sp.shape.setCurrentIndex(sp.shape.findText("jawOpen"))
         w.segmentation.wait()
         qtbot.waitUntil(lambda: vp.colormap is not None, timeout=10000)
-    _still(qtbot, w)
+    wait_until_still(qtbot, w)
 
     def picture():
         return np.asarray(vp.plotter.screenshot(None, return_img=True), dtype=np.float64)
@@ -331,7 +314,7 @@ def _sculpting(qtbot, w):
     ctrl = w.correctives
     assert ctrl.start_authoring(["browInnerUp_L", "browInnerUp_R"])
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready and not w.redraw_pending, timeout=60000)
-    _still(qtbot, w)
+    wait_until_still(qtbot, w)
     vp = w.viewport
     surface = w.document.surface()
     front = np.flatnonzero(np.abs(surface[:, 0]) < 1.0)
@@ -404,7 +387,7 @@ def test_export_image_right_after_a_drag_draws_the_full_surface_and_leaves_it(qt
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
-    _still(qtbot, w)
+    wait_until_still(qtbot, w)
     vp = w.viewport
     path = tmp_path / "after_drag.png"
     monkeypatch.setattr(QtWidgets.QFileDialog, "getSaveFileName", lambda *a, **k: (str(path), ""))
@@ -423,7 +406,7 @@ def test_export_image_right_after_a_drag_draws_the_full_surface_and_leaves_it(qt
     n_faces = vp.mesh.GetNumberOfPolys()
     assert drawn and set(drawn) == {n_faces}, drawn        # the picture's frames and the view's after it
     assert not vp.detail.proxy_shown
-    _still(qtbot, w)
+    wait_until_still(qtbot, w)
     assert set(drawn) == {n_faces}, drawn                  # and no still render: the view was drawn in full
     still = vp.picture()
     picture = np.asarray(Image.open(path).convert("RGB"))
@@ -443,7 +426,7 @@ def test_a_click_adding_a_marker_draws_one_full_frame(qtbot, tmp_path, ict_dir, 
     mc = w.markers
     assert mc.mode
     qtbot.waitUntil(lambda: not mc.unfinished_jobs(patience=0.0) and not w.redraw_pending, timeout=30000)
-    _still(qtbot, w)
+    wait_until_still(qtbot, w)
     vp = w.viewport
     drawn = _drawn_faces(w)
     n_faces = vp.mesh.GetNumberOfPolys()
@@ -473,7 +456,7 @@ def test_an_orbit_ends_on_the_full_surface_as_the_button_is_released(qtbot, tmp_
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=60000)
-    _still(qtbot, w)
+    wait_until_still(qtbot, w)
     vp = w.viewport
     drawn = _drawn_faces(w)
     n_faces = vp.mesh.GetNumberOfPolys()
@@ -523,7 +506,7 @@ def test_a_texture_shown_again_after_a_drag_under_a_colour_map_is_lit_for_the_po
     w.segmentation.wait()
     qtbot.waitUntil(lambda: vp.colormap is not None and vp.detail.proxy_ready, timeout=60000)
     assert not vp.textured
-    _still(qtbot, w)
+    wait_until_still(qtbot, w)
     drawn = _drawn_faces(w)
     _drag_jaw(qtbot, w, moves=12)
     assert sum(1 for n in drawn if n < vp.mesh.GetNumberOfPolys()) >= 6, drawn
@@ -549,7 +532,7 @@ def test_a_rig_opened_again_draws_its_proxy_without_decimating_again(qtbot, tmp_
     qtbot.waitUntil(lambda: w.viewport.detail.proxy_ready, timeout=10000)
     assert decimated == []
     qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=60000)
-    _still(qtbot, w)
+    wait_until_still(qtbot, w)
     n_faces = w.viewport.mesh.GetNumberOfPolys()
     drawn = _drawn_faces(w)
     _drag_jaw(qtbot, w, moves=4)

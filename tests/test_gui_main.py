@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6 import QtCore, QtGui, QtWidgets
 
-from tests.gui_helpers import make_window, mouse, open_and_wait
+from tests.gui_helpers import make_window, mouse, open_and_wait, wait_until_still
 from tests.rig_files import write_rig_folder
 
 
@@ -449,8 +449,7 @@ def test_a_pose_change_and_a_view_change_in_one_turn_draw_one_frame(qtbot, tmp_p
 
     from widgets.shapes_panel import PoseEdit
     w = make_window(qtbot, tmp_path)
-    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None, timeout=30000)
-    qtbot.wait(100)
+    wait_until_still(qtbot, w)
     drawn = []
     w.viewport.plotter.ren_win.AddObserver(vtk.vtkCommand.EndEvent, lambda *_: drawn.append(w.viewport.points()))
     wireframe = next(a for a in w.findChildren(QtGui.QAction) if a.text().replace("&", "") == "Wireframe")
@@ -600,15 +599,9 @@ def test_an_expose_shows_the_last_render_again_unless_something_changed(qtbot, t
     keeps is shown again without a render when nothing changed since the last one (a render is 0.1-0.16 s at 422k
     vertices), and rendered when anything did (here the camera, turned without a render)."""
     import vtk
-    import time
     w = make_window(qtbot, tmp_path)
     plotter = w.viewport.plotter
-    # still: the sample's segmentation shown (its colour map's render comes late on a busy machine), then no render
-    # for 0.3 s
-    qtbot.waitUntil(lambda: w.segmentation.segmentation is not None and not w.redraw_pending, timeout=30000)
-    last = [time.monotonic()]
-    plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: last.__setitem__(0, time.monotonic()))
-    qtbot.waitUntil(lambda: time.monotonic() - last[0] > 0.3 and not w.redraw_pending, timeout=30000)
+    wait_until_still(qtbot, w)      # the sample's segmentation shown: its colour map's render comes late when busy
     renders = [0]
     plotter.ren_win.AddObserver(vtk.vtkCommand.StartEvent, lambda *_: renders.__setitem__(0, renders[0] + 1))
     corner = plotter.mapToGlobal(QtCore.QPoint(0, 0))
