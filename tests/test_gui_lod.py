@@ -71,13 +71,6 @@ def _still(qtbot, w, quiet: float = 0.5) -> None:
         window.RemoveObserver(tag)
 
 
-@pytest.fixture
-def small_lod(monkeypatch):
-    import widgets.lod as lod
-    monkeypatch.setattr(lod, "LOD_MIN_TRIANGLES", 30_000)     # ICT's 53k triangles take a proxy
-    monkeypatch.setattr(lod, "LOD_TARGET_TRIANGLES", 12_000)
-
-
 def _drawn_faces(w):
     """The number of faces each render of the viewport drew (its surface actor's), recorded as it ends."""
     import vtk
