@@ -11,7 +11,7 @@ import pytest
 from PySide6 import QtCore, QtWidgets
 
 from solvers.mesh import fan_triangulate
-from tests.gui_helpers import make_window, mouse, open_and_wait, press_shape_slider
+from tests.gui_helpers import decimation_until_stopped, make_window, mouse, open_and_wait, press_shape_slider
 
 
 def _areas(points, tris):
@@ -154,19 +154,11 @@ def test_closing_the_window_stops_a_proxy_being_made(qtbot, tmp_path, ict_dir, s
     import threading
     import time
 
-    import vtk
-
     import widgets.lod as lod
     started = threading.Event()
 
     def slow_proxy(points, counts, indices, target=None, on_filter=None):   # a decimation that runs until stopped
-        f = vtk.vtkDecimatePro()
-        on_filter(f)
-        started.set()
-        end = time.monotonic() + 20
-        while not f.GetAbortExecute() and time.monotonic() < end:
-            time.sleep(0.01)
-        return None
+        decimation_until_stopped(on_filter, started)
     monkeypatch.setattr(lod, "proxy_faces", slow_proxy)
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)

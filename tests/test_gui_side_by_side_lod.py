@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from tests.gui_helpers import make_window, mouse, open_and_wait
+from tests.gui_helpers import decimation_until_stopped, make_window, mouse, open_and_wait
 
 
 def _solved(qtbot, tmp_path, ict_dir, take_dir):
@@ -56,6 +56,20 @@ def _drawn(views) -> list[tuple[int, int]]:
     return drawn
 
 
+def _play(qtbot, mc, views, frames: int = 20) -> tuple[list, list[int]]:
+    """Play the take until ``frames`` frames are shown, then pause: (what each render drew, ``_drawn``, the frames
+    shown); the renders are recorded on, the frames not."""
+    drawn = _drawn(views)
+    shown: list[int] = []
+    record = shown.append
+    mc.frame_shown.connect(record)
+    mc.play()
+    qtbot.waitUntil(lambda: len(shown) >= frames, timeout=10000)
+    mc.pause()
+    mc.frame_shown.disconnect(record)
+    return drawn, shown
+
+
 def _array(dataset, name: str) -> np.ndarray:
     from vtkmodules.util.numpy_support import vtk_to_numpy
     return vtk_to_numpy(dataset.GetPointData().GetArray(name))
@@ -74,12 +88,7 @@ def test_playing_a_take_draws_both_views_by_one_proxy_then_in_full_once_still(qt
     _still(qtbot, views)
     n_faces = views.left_mesh.GetNumberOfPolys()
     triangles = int(np.maximum(np.asarray(views.left_mesh._faces[0]) - 2, 0).sum())
-    drawn = _drawn(views)
-    shown: list[int] = []
-    mc.frame_shown.connect(shown.append)
-    mc.play()
-    qtbot.waitUntil(lambda: len(shown) >= 20, timeout=10000)
-    mc.pause()
+    drawn, shown = _play(qtbot, mc, views)
     playing = list(drawn)
     assert len(playing) == len(shown), (len(playing), len(shown))      # one render a frame, never two
     assert playing[0] == (n_faces, n_faces), "the first frame follows a still moment: drawn in full"
@@ -140,12 +149,7 @@ def test_ict_views_are_drawn_in_full_one_render_a_frame_without_a_proxy(qtbot, t
     assert not [t for t in threading.enumerate() if t.name == "surface-proxy"]   # no decimation made
     _still(qtbot, views)        # the dock's first paint after the solve drawn
     n_faces = views.left_mesh.GetNumberOfPolys()
-    drawn = _drawn(views)
-    shown: list[int] = []
-    mc.frame_shown.connect(shown.append)
-    mc.play()
-    qtbot.waitUntil(lambda: len(shown) >= 20, timeout=10000)
-    mc.pause()
+    drawn, shown = _play(qtbot, mc, views)
     qtbot.wait(600)
     assert len(drawn) == len(shown) and set(drawn) == {(n_faces, n_faces)}, (len(drawn), len(shown), set(drawn))
     assert not views.detail.proxy_ready and not views.detail.proxy_shown
@@ -154,8 +158,6 @@ def test_ict_views_are_drawn_in_full_one_render_a_frame_without_a_proxy(qtbot, t
 @pytest.mark.parametrize("how", ["a new take", "the window closed"])
 def test_a_new_take_or_closing_the_window_stops_the_views_proxy_being_made(qtbot, tmp_path, ict_dir, take_dir,
                                                                            small_lod, monkeypatch, how):
-    import vtk
-
     import widgets.lod as lod
     started = threading.Event()
     aborted, making = [], []
@@ -167,14 +169,7 @@ def test_a_new_take_or_closing_the_window_stops_the_views_proxy_being_made(qtbot
         if len(points) == 26_719:       # ICT's every vertex
             return real(points, counts, indices, target=target, on_filter=on_filter)
         making.append(threading.current_thread())
-        f = vtk.vtkDecimatePro()
-        on_filter(f)
-        started.set()
-        end = time.monotonic() + 20
-        while not f.GetAbortExecute() and time.monotonic() < end:
-            time.sleep(0.01)
-        aborted.append(f.GetAbortExecute())
-        return None
+        aborted.append(decimation_until_stopped(on_filter, started))
     monkeypatch.setattr(lod, "proxy_faces", slow_proxy)
     w, mc = _solved(qtbot, tmp_path, ict_dir, take_dir)
     assert started.wait(10)
