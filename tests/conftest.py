@@ -70,6 +70,17 @@ def sample_rig():
     return build_sample_rig()
 
 
+@pytest.fixture
+def small_lod(monkeypatch, tmp_path):
+    """The level of detail (``widgets.lod``) at ICT FaceKit's size: its 53k triangles in the viewport, and its
+    captured area's 2 x 25k in the Mocap Views, are drawn by a proxy (of 12k triangles in all) while they change.
+    Each test has its own proxy cache: it makes its proxies."""
+    import widgets.lod as lod
+    monkeypatch.setattr(lod, "cache_folder", lambda: tmp_path / "lod-cache")
+    monkeypatch.setattr(lod, "LOD_MIN_TRIANGLES", 30_000)
+    monkeypatch.setattr(lod, "LOD_TARGET_TRIANGLES", 12_000)
+
+
 @pytest.fixture(autouse=True)
 def _settle_qt_between_tests():
     """Delete the previous test's closed windows and collect its Python cycles now, between tests.

@@ -75,6 +75,22 @@ def shapes_panel_alone(qtbot, tmp_path, size=(420, 700)):
     return panel
 
 
+def decimation_until_stopped(on_filter, started=None) -> int:
+    """Stand-in for ``widgets.lod.proxy_faces``'s work: a decimation filter handed to ``on_filter`` that "runs" until
+    it is aborted (20 s at most), ``started`` set once it exists; returns its abort flag (1: stopped)."""
+    import time
+
+    import vtk
+    f = vtk.vtkDecimatePro()
+    on_filter(f)
+    if started is not None:
+        started.set()
+    end = time.monotonic() + 20
+    while not f.GetAbortExecute() and time.monotonic() < end:
+        time.sleep(0.01)
+    return f.GetAbortExecute()
+
+
 def open_and_wait(qtbot, window, path, timeout=60000):
     """Open a rig or project through the window's background loader and wait until it is done."""
     window.open_path(path)

@@ -11,7 +11,8 @@ import pytest
 from PySide6 import QtCore, QtWidgets
 
 from solvers.mesh import fan_triangulate
-from tests.gui_helpers import make_window, mouse, open_and_wait, press_shape_slider, wait_until_still
+from tests.gui_helpers import decimation_until_stopped, make_window, mouse, open_and_wait, press_shape_slider, \
+    wait_until_still
 
 
 def _areas(points, tris):
@@ -100,14 +101,6 @@ def test_a_damaged_cache_entry_is_made_again_and_an_unwritable_cache_is_no_error
     np.testing.assert_array_equal(unwritable.vertices, made.vertices)
 
 
-@pytest.fixture
-def small_lod(monkeypatch, tmp_path):
-    import widgets.lod as lod
-    monkeypatch.setattr(lod, "cache_folder", lambda: tmp_path / "lod-cache")   # every test makes its proxy
-    monkeypatch.setattr(lod, "LOD_MIN_TRIANGLES", 30_000)     # ICT's 53k triangles take a proxy
-    monkeypatch.setattr(lod, "LOD_TARGET_TRIANGLES", 12_000)
-
-
 def _drawn_faces(w):
     """The number of faces each render of the viewport drew (its surface actor's), recorded as it ends."""
     import vtk
@@ -191,19 +184,11 @@ def test_closing_the_window_stops_a_proxy_being_made(qtbot, tmp_path, ict_dir, s
     import threading
     import time
 
-    import vtk
-
     import widgets.lod as lod
     started = threading.Event()
 
     def slow_proxy(points, counts, indices, target=None, on_filter=None):   # a decimation that runs until stopped
-        f = vtk.vtkDecimatePro()
-        on_filter(f)
-        started.set()
-        end = time.monotonic() + 20
-        while not f.GetAbortExecute() and time.monotonic() < end:
-            time.sleep(0.01)
-        return None
+        decimation_until_stopped(on_filter, started)
     monkeypatch.setattr(lod, "proxy_faces", slow_proxy)
     w = make_window(qtbot, tmp_path, size=(1400, 900))
     open_and_wait(qtbot, w, ict_dir)

@@ -33,9 +33,11 @@ LOD_TARGET_TRIANGLES = 50_000   # about ICT FaceKit's 53k: a production face's d
 STILL_AFTER_S = 0.3             # the full surface is drawn once the pose and camera were still this long
 
 
-def wants_proxy(face_counts: np.ndarray) -> bool:
-    """Whether a surface of these polygons is large enough to be drawn by a proxy while it changes."""
-    return int(np.maximum(np.asarray(face_counts) - 2, 0).sum()) > LOD_MIN_TRIANGLES
+def wants_proxy(face_counts: np.ndarray, copies: int = 1) -> bool:
+    """Whether a surface of these polygons, drawn ``copies`` times by each render (the Mocap Views draw the same faces
+    in two views of one window), is large enough to be drawn by a proxy while it changes: the render's cost is its
+    triangles, all copies together."""
+    return copies * int(np.maximum(np.asarray(face_counts) - 2, 0).sum()) > LOD_MIN_TRIANGLES
 
 
 @dataclass(frozen=True)
@@ -218,7 +220,9 @@ class SurfaceDetail(QtCore.QObject):
     """Draws a surface mesh by its proxy's faces while renders come less than ``STILL_AFTER_S`` apart (a slider
     dragged, playback, the camera turned: every render that follows another closely), and by its own faces in the
     first render after a still moment and once the view is still again (one more render then, by this object).
-    A lone change (a preset chosen, a key set) is drawn in full at once.
+    A lone change (a preset chosen, a key set) is drawn in full at once. Several meshes of the same faces drawn in
+    one window (the Mocap Views' projection and dense result, ``set_meshes``) share one proxy, each drawing it with
+    its own points and point data.
 
     The swap happens as each render starts (the render window's StartEvent), so it covers every render: the
     window's, the camera's, playback's. ``full_only`` (a picture for export) and ``allowed()`` False (a texture or
@@ -228,14 +232,14 @@ class SurfaceDetail(QtCore.QObject):
 
     _made = QtCore.Signal(object, object)    # (generation, ProxyFaces or None), from the worker thread
 
-    def __init__(self, render_window, render: Callable[[], None], allowed: Callable[[], bool]) -> None:
+    def __init__(self, render_window, render: Callable[[], None], allowed: Callable[[], bool] = lambda: True) -> None:
         super().__init__()
         self._render, self._allowed = render, allowed
         self.full_only = False
-        self._mesh = None
-        self._arrays = None
+        self._surfaces: list = []   # the (mesh, its SurfaceArrays or None) drawn
         self._generation = 0
-        self._proxy: tuple | None = None   # once made: (ProxyFaces, its front vtkPolyData, its backs or None)
+        # once made: (ProxyFaces, for each surface the (front vtkPolyData, backs or None) drawing it)
+        self._proxy: tuple | None = None
         self._full = None           # while the proxy is shown: the (mapper, the dataset it drew) pairs swapped
         self._drawn_proxy = False   # whether the last render drew the proxy (a pick may have swapped back since)
         self._last: float | None = None   # when the last render started
@@ -267,22 +271,34 @@ class SurfaceDetail(QtCore.QObject):
         return self._proxy is not None
 
     @property
+    def proxy_vertices(self) -> np.ndarray | None:
+        """The ids of the surfaces' vertices the proxy keeps (``ProxyFaces.vertices``), None until it is made."""
+        return None if self._proxy is None else self._proxy[0].vertices
+
+    @property
     def proxy_shown(self) -> bool:
         """Whether the last render drew the proxy's faces (the picture shown; until the still render)."""
         return self._drawn_proxy
 
     def set_mesh(self, mesh, face_counts=None, face_indices=None, points=None, arrays=None) -> None:
         """Draw ``mesh`` (a ``scene.rig_mesh`` of these polygons at ``points``, updated through ``arrays``, its
-        ``scene.SurfaceArrays``) from now on; None: no surface. Its proxy is made on a worker thread when it is large
-        enough (the last mesh's, if still being made, stops)."""
+        ``scene.SurfaceArrays``) from now on; None: no surface (``set_meshes`` of one mesh)."""
+        self.set_meshes([] if mesh is None else [(mesh, arrays)], face_counts, face_indices, points)
+
+    def set_meshes(self, surfaces: list, face_counts=None, face_indices=None, points=None) -> None:
+        """Draw ``surfaces``, (mesh, its ``scene.SurfaceArrays``) pairs of ``scene.rig_mesh`` of the same polygons
+        over the same vertices (the Mocap Views' two), from now on; []: no surface. One proxy of those polygons
+        (shaped as at ``points``) is made for them all on a worker thread when a render of them all is large
+        enough (``wants_proxy``), of ``LOD_TARGET_TRIANGLES`` in all (the last meshes', if still being made, stops)."""
         self.show_full()
         self._timer.stop()
         _stop(self._running)
         self._generation += 1
-        self._mesh, self._arrays, self._proxy = mesh, arrays, None
-        if mesh is None or not wants_proxy(face_counts):
+        self._surfaces, self._proxy = list(surfaces), None
+        if not surfaces or not wants_proxy(face_counts, copies=len(surfaces)):
             return
         generation = self._generation
+        target = max(1, LOD_TARGET_TRIANGLES // len(surfaces))
         args = (np.array(points, dtype=np.float64), np.array(face_counts), np.array(face_indices))
         running: list = [None, None, threading.Event()]
 
@@ -293,7 +309,7 @@ class SurfaceDetail(QtCore.QObject):
 
         def make() -> None:
             try:
-                proxy = None if running[2].is_set() else proxy_faces(*args, on_filter=on_filter)
+                proxy = None if running[2].is_set() else proxy_faces(*args, target=target, on_filter=on_filter)
             except Exception:   # no proxy: everything is drawn in full, as before
                 traceback.print_exc()
                 proxy = None
@@ -305,8 +321,8 @@ class SurfaceDetail(QtCore.QObject):
         running[0].start()
 
     def _adopt(self, generation: int, proxy: ProxyFaces | None) -> None:
-        if generation == self._generation and proxy is not None and self._mesh is not None:
-            self._proxy = (proxy, *proxy.meshes())
+        if generation == self._generation and proxy is not None and self._surfaces:
+            self._proxy = (proxy, [proxy.meshes() for _ in self._surfaces])
 
     def expects_proxy(self) -> bool:
         """Whether a render now would draw the proxy: the surface's own normals may then wait
@@ -315,11 +331,12 @@ class SurfaceDetail(QtCore.QObject):
                 and time.monotonic() - self._last < STILL_AFTER_S)
 
     def show_full(self, normals: bool = True) -> None:
-        """The surface drawn by its own mesh again from now on (no render), its normals brought up to date
-        (``normals`` False: left for the next render that draws it in full, ``_on_start``; a pick needs only the
+        """The surfaces drawn by their own meshes again from now on (no render), their normals brought up to date
+        (``normals`` False: left for the next render that draws them in full, ``_on_start``; a pick needs only the
         faces, and a sculpt brush's dab picks at every mouse move: 47 ms of normals a move at 422k vertices)."""
-        if normals and self._arrays is not None:
-            self._arrays.refresh_normals()
+        for _mesh, arrays in self._surfaces if normals else ():
+            if arrays is not None:
+                arrays.refresh_normals()
         if self._full is None:
             return
         swapped, self._full = self._full, None
@@ -327,37 +344,17 @@ class SurfaceDetail(QtCore.QObject):
             mapper.SetInputData(dataset)
 
     def _show_proxy(self, window) -> None:
-        """The proxy's points and point data gathered from the surface's now; the actors drawing the surface (its
-        front, and the backs of its two-sided parts: ``scene.add_surface``) made to draw the proxy."""
-        from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
-        proxy, front, backs = self._proxy
-        kept = proxy.vertices
-        mesh = self._mesh
-        points = vtk_to_numpy(mesh.GetPoints().GetData())
-        front.GetPoints().SetData(numpy_to_vtk(points[kept], deep=True))
-        source, target = mesh.GetPointData(), front.GetPointData()
-        target.Initialize()
-        stale = self._arrays is not None and self._arrays.normals_stale
-        for i in range(source.GetNumberOfArrays()):
-            array = source.GetAbstractArray(i)
-            if array is None or array.GetNumberOfTuples() != mesh.GetNumberOfPoints():
-                continue
-            if stale and array is source.GetNormals():
-                values = proxy.normals(points)      # the surface's own, not computed for this frame
-            else:
-                values = vtk_to_numpy(array)[kept]
-            copy = numpy_to_vtk(values, deep=True, array_type=array.GetDataType())
-            copy.SetName(array.GetName())
-            target.AddArray(copy)
-        if source.GetNormals() is not None:
-            target.SetActiveNormals(source.GetNormals().GetName())
-        if source.GetScalars() is not None:
-            target.SetActiveScalars(source.GetScalars().GetName())
-        if backs is not None:
-            backs.GetPointData().ShallowCopy(target)
+        """Each surface's proxy given its points and point data now; the actors drawing the surfaces (each one's
+        front, and the backs of its two-sided parts: ``scene.add_surface``) made to draw their proxies."""
+        proxy, meshes = self._proxy
+        mine = {}
+        for (mesh, arrays), (front, backs) in zip(self._surfaces, meshes):
+            _gather(proxy, mesh, arrays, front, backs)
+            mine[id(mesh)] = front
+            if backs is not None and getattr(mesh, "_backs", None) is not None:
+                mine[id(mesh._backs)] = backs
         if self._full is not None:
             return
-        mine = {id(mesh): front, id(getattr(mesh, "_backs", None)): backs}
         swapped = []
         renderers = window.GetRenderers()
         renderers.InitTraversal()
@@ -367,7 +364,7 @@ class SurfaceDetail(QtCore.QObject):
             for _ in range(actors.GetNumberOfItems()):
                 mapper = actors.GetNextActor().GetMapper()
                 drawn = mapper.GetInput() if mapper is not None else None
-                if drawn is not None and mine.get(id(drawn)) is not None:
+                if drawn is not None and id(drawn) in mine:
                     swapped.append((mapper, drawn))
                     mapper.SetInputData(mine[id(drawn)])
         self._full = swapped
@@ -403,10 +400,40 @@ class SurfaceDetail(QtCore.QObject):
         self._timer.stop()
         self.show_full()
         self._generation += 1
-        self._mesh, self._arrays, self._proxy = None, None, None
+        self._surfaces, self._proxy = [], None
         _stop(self._running)
         if self._running[0] is not None:
             self._running[0].join(timeout=5)
+
+
+def _gather(proxy: ProxyFaces, mesh, arrays, front, backs) -> None:
+    """The proxy's ``front`` (and ``backs``, sharing them) given ``mesh``'s points and point data (normals, colour-map
+    scalars, part colours) at the proxy's vertices: each kept vertex drawn exactly as the mesh draws it. Normals that
+    ``arrays`` (the mesh's ``scene.SurfaceArrays``) left for later are the proxy's own, from the faces around it."""
+    from vtkmodules.util.numpy_support import numpy_to_vtk, vtk_to_numpy
+    kept = proxy.vertices
+    points = vtk_to_numpy(mesh.GetPoints().GetData())
+    front.GetPoints().SetData(numpy_to_vtk(points[kept], deep=True))
+    source, target = mesh.GetPointData(), front.GetPointData()
+    target.Initialize()
+    stale = arrays is not None and arrays.normals_stale
+    for i in range(source.GetNumberOfArrays()):
+        array = source.GetAbstractArray(i)
+        if array is None or array.GetNumberOfTuples() != mesh.GetNumberOfPoints():
+            continue
+        if stale and array is source.GetNormals():
+            values = proxy.normals(points)      # the surface's own, not computed for this frame
+        else:
+            values = vtk_to_numpy(array)[kept]
+        copy = numpy_to_vtk(values, deep=True, array_type=array.GetDataType())
+        copy.SetName(array.GetName())
+        target.AddArray(copy)
+    if source.GetNormals() is not None:
+        target.SetActiveNormals(source.GetNormals().GetName())
+    if source.GetScalars() is not None:
+        target.SetActiveScalars(source.GetScalars().GetName())
+    if backs is not None:
+        backs.GetPointData().ShallowCopy(target)
 
 
 def _stop(running: list) -> None:

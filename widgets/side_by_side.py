@@ -4,7 +4,8 @@ vectors (left), and the dense result coloured by residual magnitude (right).
 Both views are two renderers of ONE render window sharing one camera: a frame is one render pass, which
 on software OpenGL is what playback speed hangs on. Topology is uploaded once (``set_surface``), and only the
 vertices the drawn faces use; ``show_frame`` writes points, normals and scalars into the meshes' own arrays
-and renders.
+and renders. Faces of a studio-scale rig are drawn by one decimated proxy in both views while the frames or the
+camera keep changing, and in full once still (``widgets.lod``, as in the main viewport).
 """
 from __future__ import annotations
 
@@ -14,6 +15,7 @@ from vtkmodules.util.numpy_support import vtk_to_numpy
 
 from solvers.normals import VertexNormals, compact_faces
 
+from .lod import SurfaceDetail
 from .scene import ColorMap, SurfaceArrays, add_surface, fit_overlays, rig_mesh, set_camera, style_plotter
 
 MARKER_COLOR = (0.15, 0.85, 0.35)
@@ -33,6 +35,9 @@ class SideBySideView(QtWidgets.QWidget):
             style_plotter(self.plotter, playback=True)  # playback speed: see style_plotter
         self.plotter.enable_trackball_style()
         self.plotter.link_views()  # one camera for both: orbiting either view moves both
+        # both surfaces of a studio-scale rig drawn by one proxy of their faces while they change (``widgets.lod``);
+        # made after the trackball style, whose button releases it watches
+        self.detail = SurfaceDetail(self.plotter.ren_win, self.render)
         self._culled: list = []    # the two surfaces' properties, whose culling follows the camera
         self._forward, self._culling = True, None
         self.plotter.renderers[0].AddObserver("StartEvent", self._update_culling)
@@ -107,6 +112,8 @@ class SideBySideView(QtWidgets.QWidget):
         self._culled = [p.renderers[0].actors["surface_left"].GetProperty(), self._right_actor.GetProperty()]
         self._culling = None
         self._update_culling()
+        self.detail.set_meshes([(self.left_mesh, self._left_arrays), (self.right_mesh, self._right_arrays)],
+                               face_counts, local, shown)
         self._focus = np.asarray(points if focus is None else focus)
         if not keep_camera:
             self.set_camera(self._camera, render=False)
@@ -115,6 +122,7 @@ class SideBySideView(QtWidgets.QWidget):
         """Show nothing: the surfaces, markers, error vectors and residual bar of the last solve go (a new take,
         map or rig was loaded)."""
         p = self.plotter
+        self.detail.set_mesh(None)    # a proxy being made for them stops
         for col, names in ((0, ("surface_left", "markers", "errors")), (1, ("surface_right",))):
             p.subplot(0, col)
             for name in names:
@@ -135,8 +143,10 @@ class SideBySideView(QtWidgets.QWidget):
         if self.left_mesh is None:
             return
         shown = self.shown_vertices
-        self._left_arrays.update(np.take(projection, shown, axis=0), normals[0])
-        self._right_arrays.update(np.take(dense, shown, axis=0), normals[1], np.take(residual, shown))
+        proxy = self.detail.expects_proxy()   # a frame the proxy draws computes only the proxy's normals
+        self._left_arrays.update(np.take(projection, shown, axis=0), normals[0], defer_normals=proxy)
+        self._right_arrays.update(np.take(dense, shown, axis=0), normals[1], np.take(residual, shown),
+                                  defer_normals=proxy)
         if self.marker_cloud is not None and markers is not None:
             m = np.asarray(markers, dtype=np.float32)
             seen = np.isfinite(m).all(axis=1)
@@ -201,23 +211,29 @@ class SideBySideView(QtWidgets.QWidget):
         self.plotter.subplot(0, 0)
 
     def grab_image(self, size: tuple[int, int] | None = None) -> np.ndarray:
-        """Both views side by side as one (H, W, 3) uint8 image; ``size`` renders each view at (w, h)."""
-        self.render()
-        if not size:
-            return np.asarray(self.plotter.screenshot(return_img=True))[:, :, :3]
-        saved = self.plotter.camera_position
-        self._fit_bar(size)
-        self.set_camera(self._camera, size=size)
+        """Both views side by side as one (H, W, 3) uint8 image; ``size`` renders each view at (w, h). Drawn in full
+        (a proxy is for frames that keep changing), and so is the view it leaves."""
+        self.detail.full_only = True
         try:
-            img = self.plotter.screenshot(return_img=True, window_size=[2 * size[0], size[1]])
-            return np.asarray(img)[:, :, :3]
-        finally:
-            self._fit_bar()
-            self.plotter.camera_position = saved
             self.render()
+            if not size:
+                return np.asarray(self.plotter.screenshot(return_img=True))[:, :, :3]
+            saved = self.plotter.camera_position
+            self._fit_bar(size)
+            self.set_camera(self._camera, size=size)
+            try:
+                img = self.plotter.screenshot(return_img=True, window_size=[2 * size[0], size[1]])
+                return np.asarray(img)[:, :, :3]
+            finally:
+                self._fit_bar()
+                self.plotter.camera_position = saved
+                self.render()
+        finally:
+            self.detail.full_only = False
 
     def close_views(self) -> None:
         self._closed = True
+        self.detail.stop()      # a proxy being made is stopped and waited for: no VTK thread left at quit
         self.plotter.close()
 
 
