@@ -23,6 +23,14 @@ TOLERANCE = 0.0005   # VTK's pick tolerance, a fraction of the window's diagonal
 MARGIN = 20.0        # the faces near the ray: their boxes grown by this many tolerances
 
 
+def display_to_world(renderer, x: float, y: float, z: float) -> np.ndarray:
+    """The world point at display pixel (x, y) and depth ``z`` (0 the near plane, 1 the far) of ``renderer``."""
+    renderer.SetDisplayPoint(float(x), float(y), float(z))
+    renderer.DisplayToWorld()
+    p = np.array(renderer.GetWorldPoint())
+    return p[:3] / p[3]
+
+
 class FacePicker:
     """Picks on a renderer: ``pick(renderer, x, y)`` → (the picked data set, its cell, the world point) or None."""
 
@@ -90,10 +98,7 @@ class FacePicker:
     def _ray(renderer, x: int, y: int):
         """The line under display pixel (x, y) (a point on it and its direction) and the margin (world units)."""
         def world(dx, dy, dz):
-            renderer.SetDisplayPoint(float(dx), float(dy), float(dz))
-            renderer.DisplayToWorld()
-            p = np.array(renderer.GetWorldPoint())
-            return p[:3] / p[3]
+            return display_to_world(renderer, dx, dy, dz)
 
         near, far = world(x, y, 0.0), world(x, y, 1.0)
         focal = renderer.GetActiveCamera().GetFocalPoint()

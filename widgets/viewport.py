@@ -31,7 +31,7 @@ from model.parts import subset_faces
 from model.rig_prep import framed_points
 
 from .lod import SurfaceDetail
-from .picking import FacePicker
+from .picking import FacePicker, display_to_world
 from .scene import ColorMap, SurfaceArrays, add_surface, copy_cached_background, drop_cached_background, fit_overlays, \
     overlay_room, rig_mesh, set_camera, style_plotter, surface_face
 
@@ -471,11 +471,8 @@ class Viewport(QtWidgets.QWidget):
         return np.array(out).reshape(-1, 3)
 
     def display_to_world(self, x: float, y: float, z: float) -> np.ndarray:
-        ren = self.plotter.renderer
-        ren.SetDisplayPoint(float(x), float(y), float(z))
-        ren.DisplayToWorld()
-        p = np.array(ren.GetWorldPoint())
-        return p[:3] / p[3]
+        """The world point at display pixel (x, y) and depth ``z`` (0 the near plane, 1 the far)."""
+        return display_to_world(self.plotter.renderer, x, y, z)
 
     def view_plane_point(self, x: float, y: float, origin: np.ndarray) -> np.ndarray:
         """Where the ray under display pixel (x, y) meets the plane through ``origin`` facing the camera."""
