@@ -31,7 +31,7 @@ import numpy as np
 from solvers.mesh import bounds
 from solvers.normals import VertexNormals
 
-from .atomic import atomic_write
+from .atomic import atomic_write_with
 from .errors import RigInputError
 
 GLB_MAGIC = b"glTF"
@@ -136,8 +136,9 @@ def _material(parts) -> dict:
                                      "roughnessFactor": 0.5}}
 
 
-def gltf_document(content) -> tuple[dict, bytes]:
-    """The glTF JSON document and its one binary buffer for an ``ExportContent``."""
+def gltf_document(content) -> tuple[dict, "_Buffer"]:
+    """The glTF JSON document and its one binary buffer (its views' bytes in order: ``_Buffer.blobs``) for an
+    ``ExportContent``."""
     from .rig import fan_triangulate
     buf = _Buffer()
     i_pos = buf.floats(content.neutral, "VEC3", bounds=True, target=ARRAY_BUFFER)
@@ -177,24 +178,35 @@ def gltf_document(content) -> tuple[dict, bytes]:
                                "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}]}]
     gltf.update({"accessors": buf.accessors, "bufferViews": buf.views, "buffers": [{"byteLength": buf.length}]})
     gltf["extras"] = {"units": content.units, "up": content.up}
-    return gltf, buf.blob()
+    return gltf, buf
 
 
 def write_gltf_content(content, path: str | Path) -> None:
-    """Write an ``ExportContent`` as ``.glb`` or ``.gltf`` (buffer embedded as base64), atomically."""
-    atomic_write(path, gltf_bytes(content, path))
+    """Write an ``ExportContent`` as ``.glb`` or ``.gltf`` (buffer embedded as base64), atomically; a ``.glb``'s
+    buffer views are written one after the other, never joined into one more copy of the file in memory (0.64 GB
+    for a 422k-vertex, 228-shape rig, three such copies before)."""
+    chunks = gltf_chunks(content, path)
+    atomic_write_with(path, lambda f: [f.write(chunk) for chunk in chunks])
 
 
 def gltf_bytes(content, path: str | Path) -> bytes:
     """The ``.glb`` or ``.gltf`` file (by ``path``'s extension) of an ``ExportContent``, for writers of file sets."""
+    return b"".join(gltf_chunks(content, path))
+
+
+def gltf_chunks(content, path: str | Path) -> list[bytes]:
+    """The ``.glb`` or ``.gltf`` file (by ``path``'s extension) of an ``ExportContent`` as the byte strings that make
+    it, in order."""
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".gltf", ".glb"):
         raise RigInputError(f"{path}: write glTF to a .gltf or .glb file.")
-    gltf, blob = gltf_document(content)
+    gltf, buf = gltf_document(content)
     if suffix == ".gltf":
-        gltf["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(blob).decode("ascii")
-        return json.dumps(gltf).encode("utf-8")
+        gltf["buffers"][0]["uri"] = "data:application/octet-stream;base64," + base64.b64encode(buf.blob()).decode(
+            "ascii")
+        return [json.dumps(gltf).encode("utf-8")]
     js = _pad4(json.dumps(gltf).encode("utf-8"), b" ")
-    body = struct.pack("<II", len(js), CHUNK_JSON) + js + struct.pack("<II", len(blob), CHUNK_BIN) + blob
-    return struct.pack("<4sII", GLB_MAGIC, 2, 12 + len(body)) + body
+    body_length = 8 + len(js) + 8 + buf.length
+    return [struct.pack("<4sII", GLB_MAGIC, 2, 12 + body_length), struct.pack("<II", len(js), CHUNK_JSON), js,
+            struct.pack("<II", buf.length, CHUNK_BIN), *buf.blobs]

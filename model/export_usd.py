@@ -87,7 +87,11 @@ def usd_stage(content, corners=None):
     mesh.CreateFaceVertexIndicesAttr(_ints(content.face_indices))
     mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
     # The extent covers every pose the blend shapes can reach at weights in [0, 1].
-    reach = points + np.minimum(content.deltas, 0).sum(axis=0), points + np.maximum(content.deltas, 0).sum(axis=0)
+    down, up = np.zeros(points.shape), np.zeros(points.shape)   # summed a shape at a time: no (K, V, 3) temporaries
+    for d in content.deltas:
+        down += np.minimum(d, 0)
+        up += np.maximum(d, 0)
+    reach = points + down, points + up
     lo = np.minimum(points.min(axis=0), reach[0].min(axis=0)) if len(points) else np.zeros(3)
     hi = np.maximum(points.max(axis=0), reach[1].max(axis=0)) if len(points) else np.zeros(3)
     mesh.CreateExtentAttr(Vt.Vec3fArray([Gf.Vec3f(*map(float, lo)), Gf.Vec3f(*map(float, hi))]))
