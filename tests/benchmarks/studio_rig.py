@@ -68,3 +68,18 @@ def studio_rig(levels: int, source=None):
     np.savez(tmp, neutral=x, face_counts=counts, face_indices=idx, deltas=d)
     tmp.replace(path)
     return x, counts, idx, d
+
+
+# The start of a probe run in a fresh process (``python -c``) to measure peak memory (Linux): ``status(key)`` reads
+# /proc/self/status in bytes; ``reset_peak()`` makes the peak (VmHWM) start again from the resident size now and
+# returns that size. (ru_maxrss would not do: a child process starts with its parent's peak.)
+MEMORY_PROBE = """
+import json, sys, time
+def status(key):
+    with open("/proc/self/status") as f:
+        return next(int(line.split()[1]) * 1024 for line in f if line.startswith(key + ":"))
+def reset_peak():
+    with open("/proc/self/clear_refs", "w") as f:
+        f.write("5")
+    return status("VmRSS")
+"""

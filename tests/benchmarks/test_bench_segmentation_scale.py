@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from model.segmentation import segment_rig
-from tests.benchmarks.studio_rig import studio_rig
+from tests.benchmarks.studio_rig import MEMORY_PROBE, studio_rig
 
 _TIMES: dict[int, float] = {}
 
@@ -61,19 +61,13 @@ def test_segmentation_from_scratch_by_size(benchmark, levels):
               f"time ~ V^{exponent:.2f}")
 
 
-_STUDIO = """
-import json, sys, time
+_STUDIO = MEMORY_PROBE + """
 from app.runtime import limit_blas_threads
 limit_blas_threads()                       # as the window and the command line run
 from model.readers import load_rig
 from model.segmentation import SegmentationCache, region_statistics, segment_rig
-def status(key):
-    with open("/proc/self/status") as f:
-        return next(int(line.split()[1]) * 1024 for line in f if line.startswith(key + ":"))
 rig = load_rig(sys.argv[1])
-with open("/proc/self/clear_refs", "w") as f:    # the peak (VmHWM) starts again from the resident size now
-    f.write("5")
-before = status("VmRSS")
+before = reset_peak()
 t0 = time.perf_counter()
 cache = SegmentationCache()
 seg = segment_rig(rig.neutral, rig.face_counts, rig.face_indices, rig.deltas, cache=cache)

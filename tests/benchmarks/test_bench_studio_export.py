@@ -21,19 +21,14 @@ from pathlib import Path
 
 import pytest
 
+from tests.benchmarks.studio_rig import MEMORY_PROBE
 from tests.benchmarks.test_bench_studio_memory import studio_project
 
-_PROBE = """
-import json, sys, time
+_PROBE = MEMORY_PROBE + """
 from model.readers import load_rig
 from model.export import export_rig
-def status(key):
-    with open("/proc/self/status") as f:
-        return next(int(line.split()[1]) * 1024 for line in f if line.startswith(key + ":"))
 rig = load_rig(sys.argv[1])
-with open("/proc/self/clear_refs", "w") as f:    # the peak (VmHWM) starts again from the resident size now
-    f.write("5")
-before = status("VmRSS")
+before = reset_peak()
 t0 = time.perf_counter()
 export_rig(rig, sys.argv[2])
 seconds = time.perf_counter() - t0

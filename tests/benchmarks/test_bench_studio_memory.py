@@ -22,21 +22,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from tests.benchmarks.studio_rig import CACHE, studio_rig
+from tests.benchmarks.studio_rig import CACHE, MEMORY_PROBE, studio_rig
 from tests.benchmarks.studio_shapes import split_shapes
 
 SHAPES = 228
 
-_PROBE = """
-import json, sys
+_PROBE = MEMORY_PROBE + """
 from model.readers import load_rig
 import numpy as np
-def status(key):
-    with open("/proc/self/status") as f:
-        return next(int(line.split()[1]) * 1024 for line in f if line.startswith(key + ":"))
-with open("/proc/self/clear_refs", "w") as f:    # the peak (VmHWM) starts again from the resident size now
-    f.write("5")
-before = status("VmRSS")
+before = reset_peak()
 rig = load_rig(sys.argv[1])
 print(json.dumps({"before": before, "after": status("VmHWM"), "deltas": rig.deltas.nbytes,
                   "shape": list(rig.deltas.shape), "finite": bool(np.isfinite(rig.deltas[-1]).all())}))
