@@ -92,7 +92,7 @@ class BatchController(QtCore.QObject):
             self._check_not_inputs(d.output(), takes, args)
         except RigInputError as exc:
             return self._refuse(str(exc))
-        rig = self.window.document.rig.copy()      # a snapshot: the user may go on editing the open rig
+        rig = self.window.document.rig.snapshot()   # the user may go on editing the open rig
         if args.rig_units:
             rig.units = args.rig_units
         self._units = rig.units

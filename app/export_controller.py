@@ -2,7 +2,6 @@
 the same function as the ``export`` command), written in the background so the window never freezes."""
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 
 import numpy as np
@@ -115,7 +114,7 @@ class ExportController(QtCore.QObject):
         except RigInputError as exc:
             self._failed(str(exc))
             return
-        rig = copy.deepcopy(doc.rig)
+        rig = doc.rig.snapshot()   # not a deep copy: 11 s of a frozen window for a 422k-vertex, 228-shape rig
         weights = self.current_weights()
         anim = self.animations()[animation]() if animation else None
         path = Path(path)

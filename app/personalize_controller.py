@@ -148,7 +148,7 @@ class PersonalizeController(QtCore.QObject):
                  "antagonists": None if p.antagonists is None else list(p.antagonists),
                  "template": str(doc.path) if doc.path else doc.rig.name}
         state["sections"].pop(SECTION, None)
-        template = doc.rig.copy()   # the job never sees the live rig (edits go on meanwhile)
+        template = doc.rig.snapshot()   # the job never sees the live rig (edits go on meanwhile)
         from app.personalize_job import PersonalizeJob
         try:
             self.job = PersonalizeJob(template, state, request)

@@ -309,3 +309,32 @@ class Rig:
     def copy(self) -> "Rig":
         import copy
         return copy.deepcopy(self)
+
+    def snapshot(self) -> "Rig":
+        """The rig as it is now, for a job that runs beside the window (an export, a batch, a personalisation) while
+        the user goes on editing: its own Rig object and its own lists, dicts and correctives, sharing the numpy
+        arrays. The application's edits never change an array in place, they replace it (``model.shape_edits``,
+        ``model.project.DetachedEdit``), so the snapshot's arrays stay what they were. A deep copy made the window
+        wait for 2.15 GiB of deltas to be copied (11 s for the 422k-vertex, 228-shape rig) and doubled its memory."""
+        import copy
+        arrays: dict[int, np.ndarray] = {}
+        _collect_arrays(self, arrays, depth=4)
+        return copy.deepcopy(self, memo=dict(arrays))   # every array found is "already copied" as itself
+
+
+def _collect_arrays(value, into: dict[int, np.ndarray], depth: int) -> None:
+    """The numpy arrays reachable from ``value`` through attributes, lists, tuples and dicts, ``depth`` levels deep,
+    by id (``Rig.snapshot``'s memo: ``copy.deepcopy`` takes each of them as its own copy)."""
+    if isinstance(value, np.ndarray):
+        into[id(value)] = value
+        return
+    if depth <= 0 or isinstance(value, (str, bytes, int, float, bool, type(None))):
+        return
+    if isinstance(value, dict):
+        items = list(value.values())
+    elif isinstance(value, (list, tuple, set, frozenset)):
+        items = list(value)
+    else:
+        items = list(getattr(value, "__dict__", {}).values())
+    for item in items:
+        _collect_arrays(item, into, depth - 1)

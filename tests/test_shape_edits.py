@@ -542,3 +542,26 @@ def test_a_detached_edit_leaves_the_project_as_it_was_until_adopted_then_matches
     p.weights = np.full(p.rig.n_shapes, 0.25)
     job.adopt(p)
     assert p.rig.deltas is deltas and np.all(p.weights == 0.25)
+
+
+def test_a_snapshot_shares_the_arrays_and_keeps_what_the_rig_was_through_every_shape_edit(rig):
+    """``Rig.snapshot`` (an export's, a batch's, a personalisation's copy of the open rig): its arrays are the rig's
+    own (no copy of the deltas), its lists, dicts and correctives its own, and the application's edits after it --
+    which replace arrays, never write into them -- leave it as the rig was."""
+    rig = _rig_with_inbetween_and_corrective(rig)
+    snap = rig.snapshot()
+    assert snap.deltas is rig.deltas and snap.neutral is rig.neutral and snap.face_indices is rig.face_indices
+    assert snap.correctives[0].delta is rig.correctives[0].delta and snap.correctives[0] is not rig.correctives[0]
+    k, inbetween = next((s, ib[0]) for s, ib in snap.inbetweens.items())
+    assert inbetween.delta is rig.inbetweens[k][0].delta and snap.inbetweens is not rig.inbetweens
+    before = {"names": list(rig.shape_names), "deltas": rig.deltas.copy(), "presets": json.dumps(rig.presets)}
+    from model.project import Project
+    project = Project(rig=rig)
+    se.rename_shape(project, rig.shape_names[0], "renamed")
+    se.reorder_shapes(project, list(range(rig.n_shapes))[::-1])
+    rig.presets["new"] = {"jawOpen": 1.0}
+    assert snap.shape_names == before["names"] and json.dumps(snap.presets) == before["presets"]
+    np.testing.assert_array_equal(snap.deltas, before["deltas"])
+    snap.shape_names[0] = "changed in the snapshot"
+    snap.correctives[0].name = "changed in the snapshot"
+    assert rig.shape_names[-1] != "changed in the snapshot" and rig.correctives[0].name != "changed in the snapshot"
