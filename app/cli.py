@@ -183,6 +183,7 @@ def cmd_take_info(args) -> int:
 
 
 def cmd_sample(args) -> int:
+    from model.atomic import disk_error
     from model.readers import PRESETS_FILE
     from resources.sample_rig import write_sample
     from resources.sample_textures import write_sample_textures
@@ -193,8 +194,17 @@ def cmd_sample(args) -> int:
         more = f" and {len(taken) - 1} more" if len(taken) > 1 else ""
         raise RigInputError(f"{folder}: already holds {taken[0]}{more}; write the sample rig into a new or empty "
                             "folder.")
-    out = write_sample(folder)
-    write_sample_textures(out)
+    before = set(folder.iterdir()) if folder.is_dir() else None
+    try:
+        out = write_sample(folder)
+        write_sample_textures(out)
+    except OSError as exc:     # a full disk part-way: the files written so far go too, not half a rig left
+        for p in set(folder.iterdir()) - (before or set()) if folder.is_dir() else ():
+            p.unlink(missing_ok=True)
+        if before is None and folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
+        from model.atomic import write_error
+        raise (disk_error(folder, exc, rename=True) or write_error(folder, exc)) from exc
     print(f"wrote the sample rig to {out}")
     return 0
 
@@ -335,6 +345,11 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except Exception as exc:  # a bug or an input no check foresaw: one sentence, the traceback in a crash log
+        from model.atomic import disk_error
+        full = disk_error(getattr(exc, "filename", None) or getattr(args, "output", None), exc)
+        if full is not None:   # a full disk (or quota, a file too large, an I/O error) under a write: not a bug
+            print(f"error: {full}", file=sys.stderr)
+            return EXIT_INPUT
         from app.crash import describe_unexpected
         print(f"error: {describe_unexpected(exc, f'{args.command!r}')}", file=sys.stderr)
         return EXIT_UNEXPECTED

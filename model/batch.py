@@ -42,7 +42,7 @@ from typing import Callable
 import numpy as np
 
 from . import batch_driver, shared_pickle
-from .atomic import check_output_file, check_output_folder, process_alive
+from .atomic import check_output_file, check_output_folder, disk_error, process_alive
 from .batch_driver import ClusterOutcome
 from .errors import RigInputError
 from .fork_server import start_fork_server
@@ -426,8 +426,10 @@ def solve_and_report(job: BatchJob, take_path: str, out_dir: str, name: str) -> 
         row = solve_take_file(job, take_path, out_dir, name)
     except Exception as exc:      # noqa: BLE001 (not BaseException: a worker shut down mid-take is Dask's to retry)
         import traceback
-        row = _row(name, Path(take_path), None, "failed", _unexpected(Path(take_path), exc),
-                   traceback="".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
+        full = disk_error(Path(out_dir) if getattr(exc, "filename", None) is None else None, exc)
+        row = _row(name, Path(take_path), None, "failed", str(full)) if full is not None else \
+            _row(name, Path(take_path), None, "failed", _unexpected(Path(take_path), exc),
+                 traceback="".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
     try:
         from distributed import get_worker
         worker = get_worker()
