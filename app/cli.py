@@ -14,9 +14,9 @@ import numpy as np
 
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.command_line import opens_window
-from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, add_rate_option, check_outputs,
-                             check_rate, check_rig_options, check_shape_names, check_threshold, join_dash_values,
-                             load_rig_arg, parse_size, pose_weights, print_warnings)
+from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, add_rate_option, check_not_an_input,
+                             check_outputs, check_rate, check_rig_options, check_shape_names, check_threshold,
+                             join_dash_values, load_rig_arg, parse_size, pose_weights, print_warnings)
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -94,11 +94,12 @@ def cmd_render(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from model.export import check_export_space, export_rig, load_animation
+    from model.export import check_export_space, check_files_beside, export_rig, load_animation
     check_rate(args)
     if args.rate is not None and not args.animation:
         raise RigInputError("--rate: gives the frame rate of --animation's weights CSV; no --animation was given.")
     rig = load_rig_arg(args)
+    check_files_beside(rig, args.output, lambda p: check_not_an_input(args, p, "-o"))   # an OBJ's .mtl
     weights = pose_weights(rig, args)
     animation = load_animation(args.animation, rig, args.rate) if args.animation else None
     check_export_space(rig, args.output, animation.n_frames if animation else 0, units=args.out_units, up=args.up)

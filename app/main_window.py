@@ -738,13 +738,18 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         return inputs
 
     def refuses_export_over_inputs(self, path: str | Path, title: str = "Could not export", *,
-                                   rewrites: str | None = None) -> bool:
+                                   rewrites: str | None = None, rig=None) -> bool:
         """True, after one sentence in a dialog, when an export's ``path`` is one of the files the window has open
         (``export_inputs``; but ``rewrites``, the one this export saves again, e.g. "the marker map"), by the rule of
-        the command line's outputs (``model.beside_inputs.check_not_inputs``); nothing is written then."""
+        the command line's outputs (``model.beside_inputs.check_not_inputs``); nothing is written then. ``rig``: an OBJ
+        of it also writes its material library, checked too (``model.export.check_files_beside``)."""
         from model.beside_inputs import check_not_inputs
+        from model.export import check_files_beside
+        inputs = [(name, source) for name, source in self.export_inputs() if name != rewrites]
         try:
-            check_not_inputs(path, [(name, source) for name, source in self.export_inputs() if name != rewrites])
+            check_not_inputs(path, inputs)
+            if rig is not None:
+                check_files_beside(rig, path, lambda p: check_not_inputs(p, inputs))
         except RigInputError as exc:
             self.show_error(title, str(exc))
             return True
@@ -762,7 +767,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         from model.export import write_surface_obj
         from model.pose import PoseEvaluator
         rig, state = self.document.rig, self.document.pose_state()
-        if self.refuses_export_over_inputs(path):   # e.g. into the rig's own OBJ folder, as one more shape
+        if self.refuses_export_over_inputs(path, rig=rig):   # e.g. into the rig's own OBJ folder, as one more shape
             return
 
         def job() -> None:
