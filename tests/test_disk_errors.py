@@ -190,8 +190,9 @@ def test_a_batch_take_on_a_full_disk_fails_in_one_sentence_without_a_crash_log(t
 # --- the window -------------------------------------------------------------------------------------------------
 @pytest.mark.gui
 def test_the_window_on_a_full_disk_shows_the_sentence_and_loses_nothing(qtbot, tmp_path, failing_disk):
-    """Save, Export Rig and Export Pose as OBJ on a disk that fills part-way: an error dialog with the sentence; the
-    project stays open with its edits unsaved and its undo history, its autosave as it was, nothing written."""
+    """Save, Export Rig, Export Pose as OBJ and Export Image on a disk that fills part-way: an error dialog with the
+    sentence; the project stays open with its edits unsaved and its undo history, its autosave as it was, nothing
+    written."""
     from model.recovery import find_recoveries
     from tests.gui_helpers import make_window
     w = make_window(qtbot, tmp_path)
@@ -220,6 +221,10 @@ def test_the_window_on_a_full_disk_shows_the_sentence_and_loses_nothing(qtbot, t
     w.export_pose_to(out / "pose.obj")
     qtbot.waitUntil(lambda: "pose.obj" in w.last_error, timeout=60000)
     assert re.fullmatch(re.escape(f"{out / 'pose.obj'}: ") + FULL, w.last_error), w.last_error
+
+    assert w.save_image(out / "face.png", (64, 64))      # Export Image: the picture is written in the background
+    qtbot.waitUntil(lambda: "face.png" in w.last_error, timeout=60000)
+    assert re.fullmatch(re.escape(f"{out / 'face.png'}: ") + FULL, w.last_error), w.last_error
 
     assert list(out.iterdir()) == []
     assert {r.path: r.path.read_bytes() for r in find_recoveries()} == autosaves
