@@ -397,6 +397,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
                        antagonists=job.antagonists, prepared=job.prepared) if solved else None
     except RigInputError as exc:
         return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
+    made = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
     _sweep_temporaries(out_dir)          # the private folders earlier versions wrote a take into first
     # what ``solve`` writes (``solve_output_writers``), with the preview and done.json, as one set: each file
@@ -423,7 +424,9 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     writers[out_dir / DONE] = lambda f: f.write((json.dumps(done, indent=1) + "\n").encode())
     try:
         write_set(writers)     # refuses, before writing any, a set with a folder where one of its files goes
-    except RigInputError as exc:
+    except RigInputError as exc:   # a full disk too: nothing of the set is left, nor the take's folder made for it
+        if made and not any(out_dir.iterdir()):
+            out_dir.rmdir()
         return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
     return row
 

@@ -39,12 +39,12 @@ class _FailingFile:
         self.f, self.room, self.code = f, room, code
 
     def write(self, data) -> int:
-        view = memoryview(data).cast("B")
-        if view.nbytes > self.room:
+        view = data if isinstance(data, str) else memoryview(data).cast("B")     # text or bytes
+        if len(view) > self.room:
             self.f.write(view[:self.room])
             self.room = 0
             raise OSError(self.code, os.strerror(self.code))
-        self.room -= view.nbytes
+        self.room -= len(view)
         return self.f.write(data)
 
     def __getattr__(self, name):
@@ -184,7 +184,22 @@ def test_a_batch_take_on_a_full_disk_fails_in_one_sentence_without_a_crash_log(t
     row = solve_and_report(job, str(llf_csv), str(out), "llf")
     assert row["status"] == "failed" and "traceback" not in row, row
     assert re.fullmatch(re.escape(f"{out / 'weights.csv'}: ") + FULL, row["error"]), row["error"]
-    assert list(out.iterdir()) == []
+    assert not out.exists()      # nor the take's folder, made for the set
+
+
+def test_a_crash_log_the_disk_has_no_room_for_is_not_left_half_written(tmp_path, monkeypatch):
+    """A crash log written to a full disk: none is named (as before) and no part of one is left behind (the first
+    bytes that fitted were left as a log cut short)."""
+    from app.crash import write_crash_log
+    monkeypatch.setenv("BLENDSHAPE_STUDIO_LOGS", str(tmp_path / "logs"))
+    real = builtins.open
+
+    def open_(file, mode="r", *args, **kwargs):
+        f = real(file, mode, *args, **kwargs)
+        return _FailingFile(f, 40, errno.ENOSPC) if os.path.basename(str(file)).startswith("crash-") else f
+    monkeypatch.setattr(builtins, "open", open_)
+    assert write_crash_log(ValueError("a bug"), "testing") is None
+    assert list((tmp_path / "logs").iterdir()) == []
 
 
 # --- the window -------------------------------------------------------------------------------------------------
