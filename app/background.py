@@ -51,8 +51,11 @@ class _Task(QtCore.QRunnable):
         except RigInputError as exc:
             self.signals.failed.emit(str(exc))
         except Exception as exc:  # reported to the user, never crashes the app
-            traceback.print_exc()
-            self.signals.failed.emit(f"{type(exc).__name__}: {exc}")
+            from model.atomic import disk_error
+            full = disk_error(None, exc)     # a full disk under a write the model did not name: still one sentence
+            if full is None:
+                traceback.print_exc()
+            self.signals.failed.emit(str(full) if full is not None else f"{type(exc).__name__}: {exc}")
         else:
             self.signals.done.emit(result)
 

@@ -40,6 +40,7 @@ class BatchController(QtCore.QObject):
         self.rows: list[dict] = []
         self.running = False
         self._units = ""              # the length unit of the rig the running batch solves
+        self._notes = ""              # what the running batch left out of what was given, said with its end
         self.map_path: str | None = None
         self.runner = BackgroundRunner(self)
         self._cancel = threading.Event()
@@ -87,7 +88,8 @@ class BatchController(QtCore.QObject):
                 raise RigInputError("Add the takes to solve first.")
             if not d.output():
                 raise RigInputError("Choose the output folder first.")
-            takes = find_takes(d.takes(), exclude=d.output())
+            notes: list[str] = []       # a batch's own output added as a take: left out, and said so
+            takes = find_takes(d.takes(), exclude=d.output(), notes=notes)
             args.cache = d.cache_check.isChecked()
             self._check_not_inputs(d.output(), takes, args)
         except RigInputError as exc:
@@ -109,7 +111,8 @@ class BatchController(QtCore.QObject):
         self._progress_text = progress_text
         self.running = True
         d.set_running(True)
-        d.set_status(f"Starting: {len(takes)} take(s) onto {rig.name}…")
+        self._notes = " ".join(notes)
+        d.set_status(f"Starting: {len(takes)} take(s) onto {rig.name}… {self._notes}".rstrip())
         self.window.show_status(f"Batch solve of {len(takes)} take(s) started.")
         self.runner.submit(job, self._on_done, self._on_failed)
         return True
@@ -157,6 +160,7 @@ class BatchController(QtCore.QObject):
         self.running = False
         log_unexpected_rows(rows, "solving the take")
         text = f"Batch: {counts_text(rows)}; summary in {Path(self.dialog.output()) / 'batch.json'}."
+        text = f"{text} {self._notes}".rstrip()
         self.dialog.set_running(False)
         self._show_rows(Path(self.dialog.output()), rows, self._units)   # the RMSE is in the solved rig's units
         self.dialog.set_progress(len(rows), len(rows), text)

@@ -14,9 +14,9 @@ import numpy as np
 
 from app import cli_batch, cli_pairs, cli_personalize, cli_solve
 from app.command_line import opens_window
-from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, add_rate_option, check_outputs,
-                             check_rate, check_rig_options, check_shape_names, check_threshold, join_dash_values,
-                             load_rig_arg, parse_size, pose_weights, print_warnings)
+from app.cli_common import (EXIT_INPUT, EXIT_UNEXPECTED, ArgumentParser, about, add_rate_option, check_not_an_input,
+                             check_outputs, check_rate, check_rig_options, check_shape_names, check_threshold,
+                             join_dash_values, load_rig_arg, parse_size, pose_weights, print_warnings)
 from model.errors import RigInputError
 
 def cmd_info(args) -> int:
@@ -94,11 +94,12 @@ def cmd_render(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from model.export import check_export_space, export_rig, load_animation
+    from model.export import check_export_space, check_files_beside, export_rig, load_animation
     check_rate(args)
     if args.rate is not None and not args.animation:
         raise RigInputError("--rate: gives the frame rate of --animation's weights CSV; no --animation was given.")
     rig = load_rig_arg(args)
+    check_files_beside(rig, args.output, lambda p: check_not_an_input(args, p, "-o"))   # an OBJ's .mtl
     weights = pose_weights(rig, args)
     animation = load_animation(args.animation, rig, args.rate) if args.animation else None
     check_export_space(rig, args.output, animation.n_frames if animation else 0, units=args.out_units, up=args.up)
@@ -183,6 +184,7 @@ def cmd_take_info(args) -> int:
 
 
 def cmd_sample(args) -> int:
+    from model.atomic import disk_error
     from model.readers import PRESETS_FILE
     from resources.sample_rig import write_sample
     from resources.sample_textures import write_sample_textures
@@ -193,8 +195,17 @@ def cmd_sample(args) -> int:
         more = f" and {len(taken) - 1} more" if len(taken) > 1 else ""
         raise RigInputError(f"{folder}: already holds {taken[0]}{more}; write the sample rig into a new or empty "
                             "folder.")
-    out = write_sample(folder)
-    write_sample_textures(out)
+    before = set(folder.iterdir()) if folder.is_dir() else None
+    try:
+        out = write_sample(folder)
+        write_sample_textures(out)
+    except OSError as exc:     # a full disk part-way: the files written so far go too, not half a rig left
+        for p in set(folder.iterdir()) - (before or set()) if folder.is_dir() else ():
+            p.unlink(missing_ok=True)
+        if before is None and folder.is_dir() and not any(folder.iterdir()):
+            folder.rmdir()
+        from model.atomic import write_error
+        raise (disk_error(folder, exc, rename=True) or write_error(folder, exc)) from exc
     print(f"wrote the sample rig to {out}")
     return 0
 
@@ -335,6 +346,11 @@ def main(argv: list[str] | None = None) -> int:
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
     except Exception as exc:  # a bug or an input no check foresaw: one sentence, the traceback in a crash log
+        from model.atomic import disk_error
+        full = disk_error(getattr(exc, "filename", None) or getattr(args, "output", None), exc)
+        if full is not None:   # a full disk (or quota, a file too large, an I/O error) under a write: not a bug
+            print(f"error: {full}", file=sys.stderr)
+            return EXIT_INPUT
         from app.crash import describe_unexpected
         print(f"error: {describe_unexpected(exc, f'{args.command!r}')}", file=sys.stderr)
         return EXIT_UNEXPECTED

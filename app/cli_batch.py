@@ -172,10 +172,12 @@ def cmd_batch(args) -> int:
     if args.workers is not None and args.workers < 1:
         raise RigInputError(f"--workers: {args.workers} workers is fewer than one.")
     check_solve_options(args)
-    takes = find_takes(args.takes, exclude=args.output)
+    notes: list[str] = []
+    takes = find_takes(args.takes, exclude=args.output, notes=notes)
     names = take_names(takes)
     for path in batch_files(args.output, names, args.cache):   # none of them over the rig, a take given or the map
         check_not_an_input(args, path, "-o", "give -o another folder")
+    print_warnings(notes)       # a batch's own output named as a take: left out, and said so
     if not args.scheduler:
         start_fork_server(BATCH_PRELOAD)   # running already when the command came through app.launch (a no-op then)
     rig = load_solve_rig(args)

@@ -52,8 +52,12 @@ def _write_log(traceback_lines: list[str], context: str) -> Path | None:
                  f"python {sys.version.split()[0]} on {platform.platform()}",
                  f"command: {' '.join(sys.argv)}", ""]
         lines += traceback_lines
-        with open(path, "w", encoding="utf-8") as f:
-            f.write("\n".join(line.rstrip("\n") for line in lines) + "\n")
+        try:
+            with open(path, "w", encoding="utf-8") as f:
+                f.write("\n".join(line.rstrip("\n") for line in lines) + "\n")
+        except OSError:      # a full disk: no half-written log is left, and none is named
+            path.unlink(missing_ok=True)
+            raise
         old = sorted(folder.glob("crash-*.log"))[:-KEEP_LOGS]
         for p in old:
             p.unlink(missing_ok=True)

@@ -10,7 +10,7 @@ from PySide6 import QtCore, QtWidgets
 from app import settings as app_settings
 from app.background import BackgroundRunner
 from model.errors import RigInputError
-from model.export import WeightAnimation, animation_from_timeline, check_export_space, export_rig
+from model.export import WeightAnimation, animation_from_timeline, check_export_space, check_files_beside, export_rig
 
 FILTERS = ("glTF binary (*.glb);;glTF (*.gltf);;USD (*.usd *.usda *.usdc);;OBJ, the posed surface (*.obj)")
 UNITS = ("m", "cm", "mm")
@@ -105,12 +105,14 @@ class ExportController(QtCore.QObject):
 
     def export_to(self, path: str | Path, animation: str | None = None, *, units: str | None = None,
                   up: str = "y") -> None:
-        """Export in the background: the rig and pose are copied now, so edits made meanwhile do not leak in. A file
+        """Export in the background: the rig and pose are taken now (``Rig.snapshot``), so edits made meanwhile do
+        not leak in. A file
         its disk has no room for is refused first (``model.export.check_export_space``, as ``export`` refuses it)."""
         doc = self.window.document
         try:   # not over a file the window has open (the rig's, the project, a .gltf's buffers), as `export` refuses
             from model.beside_inputs import check_not_inputs
             check_not_inputs(path, self.window.export_inputs())
+            check_files_beside(doc.rig, path, lambda p: check_not_inputs(p, self.window.export_inputs()))  # its .mtl
         except RigInputError as exc:
             self._failed(str(exc))
             return

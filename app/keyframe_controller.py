@@ -25,6 +25,7 @@ from app.document import PoseState
 from app.mocap_playback import TakePlayback
 from app.marker_commands import SetSectionArraysCommand
 from app.marker_controller import pose_at_level, same_blend
+from model.atomic import write_error
 from model.errors import RigInputError
 from model.keyframes import Keyframe, Timeline, keyed_frames, keyed_global_weights
 from model.pose import PoseEvaluator
@@ -500,4 +501,4 @@ def _written(path, write):
     try:
         return write()
     except OSError as exc:
-        raise RigInputError(f"{path}: could not be written ({exc.strerror or exc}).") from exc
+        raise write_error(path, exc) from exc

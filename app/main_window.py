@@ -24,6 +24,7 @@ from app.marker_controller import MarkerController
 from app.parts_controller import PartsController
 from app.segmentation_controller import SegmentationController
 from app.shape_list_controller import ShapeListController
+from model.atomic import write_error
 from model.errors import RigInputError
 from model.project import Project
 from model.rig_prep import focus_vertices
@@ -685,8 +686,8 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         session_state.store(self)   # the view, the take and the marker map come back with the project
         try:   # off the GUI thread, the window drawn but holding input (a studio rig's project takes seconds)
             self.document.save(path, write=lambda fn: run_modal(self, "Saving", f"Saving {Path(path).name}…", fn))
-        except OSError as exc:
-            self.show_error("Could not save", f"{path}: could not be written ({exc.strerror or exc}).")
+        except OSError as exc:      # a full disk too: one sentence, the document and its undo history as they were
+            self.show_error("Could not save", str(write_error(path, exc)))
             return False
         app_settings.add_recent_file(str(path))
         app_settings.settings().setValue("lastProjectFolder", str(Path(path).parent))
@@ -737,13 +738,18 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         return inputs
 
     def refuses_export_over_inputs(self, path: str | Path, title: str = "Could not export", *,
-                                   rewrites: str | None = None) -> bool:
+                                   rewrites: str | None = None, rig=None) -> bool:
         """True, after one sentence in a dialog, when an export's ``path`` is one of the files the window has open
         (``export_inputs``; but ``rewrites``, the one this export saves again, e.g. "the marker map"), by the rule of
-        the command line's outputs (``model.beside_inputs.check_not_inputs``); nothing is written then."""
+        the command line's outputs (``model.beside_inputs.check_not_inputs``); nothing is written then. ``rig``: an OBJ
+        of it also writes its material library, checked too (``model.export.check_files_beside``)."""
         from model.beside_inputs import check_not_inputs
+        from model.export import check_files_beside
+        inputs = [(name, source) for name, source in self.export_inputs() if name != rewrites]
         try:
-            check_not_inputs(path, [(name, source) for name, source in self.export_inputs() if name != rewrites])
+            check_not_inputs(path, inputs)
+            if rig is not None:
+                check_files_beside(rig, path, lambda p: check_not_inputs(p, inputs))
         except RigInputError as exc:
             self.show_error(title, str(exc))
             return True
@@ -761,7 +767,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         from model.export import write_surface_obj
         from model.pose import PoseEvaluator
         rig, state = self.document.rig, self.document.pose_state()
-        if self.refuses_export_over_inputs(path):   # e.g. into the rig's own OBJ folder, as one more shape
+        if self.refuses_export_over_inputs(path, rig=rig):   # e.g. into the rig's own OBJ folder, as one more shape
             return
 
         def job() -> None:
@@ -770,7 +776,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
             try:
                 write_surface_obj(rig, path, points, header=f"Blendshape Studio pose of {rig.name}")
             except OSError as exc:
-                raise RigInputError(f"{path}: could not be written ({exc.strerror or exc}).") from exc
+                raise write_error(path, exc) from exc
         self.run_in_background("Exporting the pose…", job, lambda _: self.show_status(f"Exported {path}"),
                                lambda message: self.show_error("Could not export", message))
 
@@ -821,7 +827,7 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
             path = path.with_suffix(path.suffix + ".png") if path.suffix else path.with_suffix(".png")
 
         def unwritable(exc: OSError) -> str:
-            return f"{path}: could not be written ({exc.strerror or exc})."
+            return str(write_error(path, exc))
         if self.refuses_export_over_inputs(path, "Could not save the image"):
             return False
         try:

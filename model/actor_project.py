@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .atomic import write_error
 from .errors import RigInputError
 from .rig import unit_scale
 
@@ -61,7 +62,7 @@ def personalize_project(template, project_state: dict, request: dict, progress=N
     try:
         save_project(project, out)
     except OSError as exc:
-        raise RigInputError(f"{out}: could not be written ({exc.strerror or exc}).") from None
+        raise write_error(out, exc) from None
     return out, summary, rows
 
 

@@ -8,9 +8,13 @@ drive can read it; ``mkstemp`` alone would leave it readable by its owner only (
 """
 from __future__ import annotations
 
+import errno
+import json
 import os
 import secrets
+import shutil
 import stat
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Callable, IO
 
@@ -35,6 +39,73 @@ class OutputPathError(RigInputError, OSError):
     """A path that cannot be written as asked (``check_output_file``, ``check_output_folder``): bad input, one
     sentence naming it (the command line's exit code 2), and an OSError to the callers that catch a failed write as
     one (the window's Save shows it as it showed IsADirectoryError)."""
+
+
+class DiskWriteError(RigInputError, OSError):
+    """A write the disk failed part-way (``disk_error``: full, over quota, a file too large for it, an input/output
+    error): one sentence naming the output and the problem, bad output to the command line (exit code 2, no crash
+    log) and an OSError to the callers that catch a failed write as one. ``errno`` and ``strerror`` are the
+    original error's; ``str()`` is the sentence."""
+
+    def __str__(self) -> str:
+        return str(self.args[0]) if self.args else ""
+
+
+DISK_ERRNOS = tuple(getattr(errno, name) for name in ("ENOSPC", "EDQUOT", "EFBIG", "EIO") if hasattr(errno, name))
+
+
+def disk_error(path: str | Path | None, exc: BaseException, rename: bool = False) -> DiskWriteError | None:
+    """``exc`` (raised while ``path`` was written) as one sentence naming ``path`` when the disk failed the write
+    (``DISK_ERRNOS``), else None. A full disk says how much is free. A DiskWriteError is kept as it is, unless
+    ``rename`` (it names one file of the output ``path``, a folder written whole)."""
+    if isinstance(exc, DiskWriteError) and not rename:
+        return exc
+    words = disk_problem(path if path is not None else getattr(exc, "filename", None), exc)
+    if words is None:
+        return None
+    problem, fix = words
+    return disk_write_error(f"{path if path is not None else exc.filename or 'An output'}: {problem}; nothing was "
+                            f"written; {fix}.", exc)
+
+
+def disk_write_error(sentence: str, exc: OSError) -> DiskWriteError:
+    out = DiskWriteError(sentence)
+    out.errno, out.strerror = exc.errno, exc.strerror
+    return out
+
+
+def disk_problem(path, exc: BaseException) -> tuple[str, str] | None:
+    """(the problem, what to do) in words when ``exc`` is the disk's failure to write ``path``, else None."""
+    code = getattr(exc, "errno", None) if isinstance(exc, OSError) else None
+    if code not in DISK_ERRNOS:
+        return None
+    if code == errno.ENOSPC:
+        return f"the disk is full{_free_on(path)}", "free some space or write to another disk"
+    if code == getattr(errno, "EDQUOT", None):
+        return "your disk quota is used up", "free some of your space or write to another disk"
+    if code == errno.EFBIG:
+        return "the file is larger than its disk (or your limits) allow one file to be", "write to another disk"
+    return "the disk reported an input/output error", "check the disk or write to another"
+
+
+def _free_on(path) -> str:
+    """' (3.2 MB free)' on the disk of ``path`` (or of the nearest folder above it that exists); '' if unknown."""
+    from .free_space import human_size
+    try:
+        folder = Path(os.path.abspath(path)).parent
+        while not folder.exists() and folder != folder.parent:
+            folder = folder.parent
+        return f" ({human_size(shutil.disk_usage(folder).free)} free)"
+    except (OSError, TypeError, ValueError):
+        return ""
+
+
+def write_error(path: str | Path, exc: OSError) -> RigInputError:
+    """The one sentence of a failed write of ``path``: its own for a RigInputError (``OutputPathError``,
+    ``DiskWriteError``), the disk's problem (``disk_error``), else the system's words."""
+    if isinstance(exc, RigInputError):
+        return exc
+    return disk_error(path, exc) or RigInputError(f"{path}: could not be written ({exc.strerror or exc}).")
 
 
 def check_output_file(path: str | Path) -> Path:
@@ -105,14 +176,28 @@ def atomic_write(path: str | Path, data: bytes) -> None:
 def atomic_write_with(path: str | Path, writer: Callable[[IO[bytes]], object]) -> None:
     """Call writer(file) on a temporary file beside path and move it into place when complete."""
     path = check_output_file(path)      # a folder, a device or a path through a file: refused before writing
-    path.parent.mkdir(parents=True, exist_ok=True)
+    with disk_errors(path):
+        path.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temporaries(path.parent)
     tmp = write_temporary(path, writer)
     try:
-        os.replace(tmp, path)
+        with disk_errors(path):
+            os.replace(tmp, path)
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
+
+
+@contextmanager
+def disk_errors(path: str | Path):
+    """An OSError of the disk (``disk_error``) raised inside is raised again as one sentence naming ``path``."""
+    try:
+        yield
+    except OSError as exc:
+        error = disk_error(path, exc)
+        if error is None or error is exc:
+            raise
+        raise error from exc
 
 
 def write_png(path: str | Path, pixels, compress_level: int | None = None) -> None:
@@ -129,20 +214,22 @@ def write_temporary(path: Path, writer: Callable[[IO[bytes]], object]) -> Path:
     """Write a new temporary beside ``path`` completely (``writer(file)``, flushed and fsynced, the user's umask)
     and return it; on any failure it is removed and the error raised. Moving it into place is the caller's."""
     tmp = temp_path(path)
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 & ~current_umask())
-    try:
-        with os.fdopen(fd, "wb") as f:
-            writer(f)
-            f.flush()
-            os.fsync(f.fileno())
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
+    with disk_errors(path):             # a full disk, a quota, a file too large, an I/O error: one sentence
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666 & ~current_umask())
+        try:
+            with os.fdopen(fd, "wb") as f:
+                writer(f)
+                f.flush()
+                os.fsync(f.fileno())
+        except BaseException:
+            tmp.unlink(missing_ok=True)
+            raise
     return tmp
 
 
 # --- temporaries -----------------------------------------------------------------------------------------
 TEMP_MARK = ".bs-tmp-"   # every temporary this application writes: .<target>.bs-tmp-<pid>.<random><suffix>
+JOURNAL_SUFFIX = ".bs-set.json"   # a set's journal of moves (``model.output_set``), beside its first file
 
 
 def temp_path(path: str | Path, suffix: str = ".tmp") -> Path:
@@ -166,13 +253,23 @@ def process_alive(pid: int) -> bool:
 
 def remove_stale_temporaries(folder: str | Path) -> int:
     """Remove this application's temporaries in ``folder`` whose writing process is gone (a kill or a crash
-    mid-write); other files, and temporaries a live process is still writing, are left alone."""
+    mid-write); other files, temporaries a live process is still writing and those a set's journal there still
+    moves in (``model.output_set``: a set whose moves stopped part-way) are left alone."""
     n = 0
     try:
         candidates = list(Path(folder).glob(f".*{TEMP_MARK}*"))
+        journals = list(Path(folder).glob(f".*{JOURNAL_SUFFIX}")) if candidates else []
     except OSError:
         return 0
+    kept = set()
+    for journal in journals:
+        try:
+            kept.update(os.path.realpath(tmp) for tmp, _ in json.loads(journal.read_text())["moves"])
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
     for tmp in candidates:
+        if os.path.realpath(tmp) in kept:
+            continue
         try:
             pid = int(tmp.name.rsplit(TEMP_MARK, 1)[1].split(".")[0])
         except (IndexError, ValueError):

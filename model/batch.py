@@ -42,7 +42,7 @@ from typing import Callable
 import numpy as np
 
 from . import batch_driver, shared_pickle
-from .atomic import check_output_file, check_output_folder, process_alive
+from .atomic import check_output_file, check_output_folder, disk_error, process_alive
 from .batch_driver import ClusterOutcome
 from .errors import RigInputError
 from .fork_server import start_fork_server
@@ -67,11 +67,14 @@ _TMP_PREFIX = ".bs-batch-"
 
 
 # --- which takes, under which names ------------------------------------------------------------------
-def find_takes(items: list[str], exclude: str | Path | None = None) -> list[Path]:
+def find_takes(items: list[str], exclude: str | Path | None = None, notes: list[str] | None = None) -> list[Path]:
     """Take files from files, folders (their .c3d, .trc and .csv files) and glob patterns, in the order given,
-    each once, leaving out files under ``exclude`` (a batch's own output folder). RigInputError when an item
-    names nothing."""
-    found: list[Path] = []
+    each once. Under ``exclude`` (a batch's own output folder) what a folder or a pattern finds is left out: a
+    batch's own outputs there (its summary, each take's weights CSV) would be read as takes. A file named there is
+    solved like any other, unless it is one of a batch's own outputs (``batch_output``: a shell's expansion of
+    ``day1/**/*.csv`` names them), which is left out with one sentence appended to ``notes`` saying so (it was left
+    out without a word, whatever it was). RigInputError when an item names nothing."""
+    found: list[tuple[Path, bool]] = []     # (take file, named as itself)
     for item in items:
         p = Path(item)
         if p.is_dir():
@@ -87,20 +90,35 @@ def find_takes(items: list[str], exclude: str | Path | None = None) -> list[Path
                 raise RigInputError(f"{item}: the pattern matches no take (.c3d, .trc or .csv).")
         else:
             raise RigInputError(f"{item}: does not exist.")
-        found.extend(hits)
-    seen, out = set(), []
+        found.extend((hit, p.is_file()) for hit in hits)
+    seen, out, outputs = set(), [], []
     skip = Path(exclude).resolve() if exclude is not None else None
-    for p in found:
+    for p, named in found:
         key = p.resolve()
-        if skip is not None and key.is_relative_to(skip):
+        if skip is not None and key.is_relative_to(skip) and (not named or batch_output(key, skip)):
+            if named and p not in outputs:
+                outputs.append(p)
             continue
         if key not in seen:
             seen.add(key)
             out.append(key)
+    if outputs and notes is not None:
+        more = f" and {len(outputs) - 1} more file{'s' if len(outputs) > 2 else ''} given" if len(outputs) > 1 else ""
+        many = len(outputs) > 1
+        notes.append(f"{outputs[0]}{more}: {'are' if many else 'is'} a batch's own output{'s' if many else ''} in "
+                     f"the output folder {exclude}, not {'takes' if many else 'a take'} to solve; left out (copy "
+                     f"{'them' if many else 'it'} elsewhere to solve {'them' if many else 'it'}).")
     if found and not out:   # `batch RIG day1 -o day1`: every take left out as an output, and nothing solved (exit 0)
         raise RigInputError(f"{exclude}: every take given is in the output folder, where a batch's own outputs are "
                             "left out; give -o a folder of its own.")
     return out
+
+
+def batch_output(path: Path, out_dir: Path) -> bool:
+    """Whether ``path`` (resolved, inside the resolved ``out_dir``) is one of the files a batch into ``out_dir``
+    writes (``batch_files``): its summary, or a file of a take's set in ``<out_dir>/<take>/``."""
+    parts = path.relative_to(out_dir).parts
+    return parts in ((SUMMARY_JSON,), (SUMMARY_CSV,)) or (len(parts) == 2 and parts[1] in {*OUTPUTS.values(), DONE})
 
 
 @dataclass
@@ -379,6 +397,7 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
                        antagonists=job.antagonists, prepared=job.prepared) if solved else None
     except RigInputError as exc:
         return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
+    made = not out_dir.exists()
     out_dir.mkdir(parents=True, exist_ok=True)
     _sweep_temporaries(out_dir)          # the private folders earlier versions wrote a take into first
     # what ``solve`` writes (``solve_output_writers``), with the preview and done.json, as one set: each file
@@ -405,7 +424,9 @@ def solve_take_file(job: BatchJob, take_path: str, out_dir: str, name: str | Non
     writers[out_dir / DONE] = lambda f: f.write((json.dumps(done, indent=1) + "\n").encode())
     try:
         write_set(writers)     # refuses, before writing any, a set with a folder where one of its files goes
-    except RigInputError as exc:
+    except RigInputError as exc:   # a full disk too: nothing of the set is left, nor the take's folder made for it
+        if made and not any(out_dir.iterdir()):
+            out_dir.rmdir()
         return _row(name, take_path, None, "failed", str(exc), seconds=time.perf_counter() - start)
     return row
 
@@ -426,8 +447,10 @@ def solve_and_report(job: BatchJob, take_path: str, out_dir: str, name: str) -> 
         row = solve_take_file(job, take_path, out_dir, name)
     except Exception as exc:      # noqa: BLE001 (not BaseException: a worker shut down mid-take is Dask's to retry)
         import traceback
-        row = _row(name, Path(take_path), None, "failed", _unexpected(Path(take_path), exc),
-                   traceback="".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
+        full = disk_error(Path(out_dir) if getattr(exc, "filename", None) is None else None, exc)
+        row = _row(name, Path(take_path), None, "failed", str(full)) if full is not None else \
+            _row(name, Path(take_path), None, "failed", _unexpected(Path(take_path), exc),
+                 traceback="".join(traceback.format_exception(type(exc), exc, exc.__traceback__)))
     try:
         from distributed import get_worker
         worker = get_worker()

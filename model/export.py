@@ -237,7 +237,6 @@ def write_surface_obj(rig: Rig, path: str | Path, points: np.ndarray, *, header:
     material's ``Kd``, named by the OBJ's ``mtllib`` line, so a DCC -- or this application -- reading the OBJ
     shows each part in its colour. ``normals``: keep the source's normals (turned by ``rotation``)."""
     import dataclasses
-    import re
 
     from .atomic import atomic_write
     from .obj_io import obj_bytes
@@ -245,11 +244,10 @@ def write_surface_obj(rig: Rig, path: str | Path, points: np.ndarray, *, header:
     if corners is not None and rotation is not None and corners.normals is not None:
         corners = dataclasses.replace(corners, normals=corners.normals @ np.asarray(rotation).T)
     path = Path(path)
-    library = None
-    if rig.materials and corners is not None:
+    library = material_library(rig, path)
+    if library is not None:
         from .parts import mtl_bytes, rig_parts
         parts = rig_parts(rig)
-        library = path.with_name(re.sub(r"\s+", "_", path.stem) + ".mtl")
         mtl = mtl_bytes(parts.names if parts is not None else list(rig.materials), rig.materials, rig.name)
         records = [r for r in corners.records if not r[1].startswith("mtllib")]
         corners = dataclasses.replace(corners, records=[(0, f"mtllib {library.name}")] + records)
@@ -260,6 +258,31 @@ def write_surface_obj(rig: Rig, path: str | Path, points: np.ndarray, *, header:
     else:
         from .output_set import write_set
         write_set({path: lambda f: f.write(obj), library: lambda f: f.write(mtl)})   # both new, or both as they were
+
+
+def material_library(rig: Rig, path: str | Path) -> Path | None:
+    """The material library an OBJ written to ``path`` gets beside it (``write_surface_obj``): ``<stem>.mtl`` (blanks
+    as underscores) when the rig knows its materials' colours, else None."""
+    import re
+    if not (rig.materials and rig.corners is not None):
+        return None
+    path = Path(path)
+    return path.with_name(re.sub(r"\s+", "_", path.stem) + ".mtl")
+
+
+def check_files_beside(rig: Rig, path: str | Path, check) -> None:
+    """``check(file)`` (the front end's rule for its outputs: not over an input, ``model.beside_inputs``) on the files
+    an export to ``path`` writes beside it: an OBJ's material library (``material_library``), which overwrote a file
+    already there unchecked (the rig's own materials too). Its sentence says which export writes the file."""
+    library = material_library(rig, path) if Path(path).suffix.lower() == ".obj" else None
+    if library is None:
+        return
+    try:
+        check(library)
+    except RigInputError as exc:
+        text = str(exc)
+        said = text[len(f"{library}: "):] if text.startswith(f"{library}: ") else text
+        raise RigInputError(f"{library} (the material library written with {path}): {said}") from None
 
 
 def _smooth_unless_said(corners, normals: bool):

@@ -15,10 +15,9 @@ import os
 from pathlib import Path
 from typing import IO, Callable
 
-from .atomic import atomic_write, check_output_file, remove_stale_temporaries, write_temporary
+from .atomic import (JOURNAL_SUFFIX, atomic_write, check_output_file, disk_errors, disk_problem, disk_write_error,
+                     remove_stale_temporaries, write_temporary)
 from .errors import RigInputError
-
-JOURNAL_SUFFIX = ".bs-set.json"
 
 
 def _fsync_dir(folder: Path) -> None:
@@ -50,7 +49,8 @@ def write_set(writers: dict[str | Path, Callable[[IO[bytes]], object]]) -> None:
             raise RigInputError(f"{path}: is named for two of the files written together ({seen[key]} too).")
         seen[key] = path
     for folder in {p.parent for p, _ in items}:
-        folder.mkdir(parents=True, exist_ok=True)
+        with disk_errors(items[0][0]):
+            folder.mkdir(parents=True, exist_ok=True)
         finish_interrupted_sets(folder)
     temps: list[tuple[Path, Path]] = []
     try:
@@ -74,10 +74,18 @@ def _complete(journal: Path) -> None:
         journal.unlink(missing_ok=True)
         return
     folders = set()
-    for tmp, final in moves:
+    for i, (tmp, final) in enumerate(moves):
         tmp, final = Path(tmp), Path(final)
-        if tmp.exists():
-            os.replace(tmp, final)
+        try:
+            if tmp.exists():
+                os.replace(tmp, final)
+        except OSError as exc:   # the journal stays: the rest are moved in by the next look at the folder
+            words = disk_problem(final, exc)
+            if words is None:
+                raise
+            raise disk_write_error(f"{final}: {words[0]} while the {len(moves)} files written together were moved "
+                                   f"into place ({i} of them are new); the rest become new the next time a set is "
+                                   f"written to {journal.parent}; {words[1]}.", exc) from exc
         folders.add(final.parent)
     for folder in folders:
         _fsync_dir(folder)

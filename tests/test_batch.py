@@ -123,6 +123,54 @@ def test_take_names_tell_takes_apart(tmp_path):
         find_takes([str(tmp_path / "*.nothing")])
 
 
+def test_a_take_named_in_the_output_folder_is_solved_and_a_batchs_own_output_named_is_said_to_be_left_out(
+        tmp_path):
+    """A take named by its file inside the batch's output folder was left out of the solve without a word (the
+    folder's files are left out so that a batch's own outputs are not read as takes). A take file named is solved;
+    what a folder or a pattern finds there is still left out; a batch's own output named as a take (the summary, a
+    take's weights CSV: a shell's expansion of day1/**/*.csv names them) is left out and said so, in one sentence."""
+    from model.batch import find_takes
+    out = tmp_path / "out"
+    (out / "take01").mkdir(parents=True)
+    inside, outside = out / "extra.csv", tmp_path / "take02.csv"
+    for p in (inside, outside, out / "take01" / "weights.csv", out / "batch.csv", out / "take01" / "notes.csv"):
+        p.write_text("frame,raise\n0,0.5\n")
+    notes: list[str] = []
+    assert find_takes([str(inside), str(outside)], exclude=out, notes=notes) == [inside, outside] and notes == []
+    assert find_takes([str(out), str(out / "**" / "*.csv"), str(outside)], exclude=out, notes=notes) == [outside]
+    assert notes == []
+    given = [str(out / "batch.csv"), str(out / "take01" / "weights.csv"), str(out / "take01" / "notes.csv"),
+             str(outside)]
+    assert find_takes(given, exclude=out, notes=notes) == [out / "take01" / "notes.csv", outside]
+    assert notes == [f"{out / 'batch.csv'} and 1 more file given: are a batch's own outputs in the output folder "
+                     f"{out}, not takes to solve; left out (copy them elsewhere to solve them)."]
+    notes.clear()
+    assert find_takes(given[1:], exclude=out, notes=notes) == [out / "take01" / "notes.csv", outside]
+    assert notes == [f"{out / 'take01' / 'weights.csv'}: is a batch's own output in the output folder {out}, not a "
+                     "take to solve; left out (copy it elsewhere to solve it)."]
+
+
+def test_batch_solves_a_take_named_in_its_output_folder(tmp_path):
+    """`batch RIG out/take01.csv take02.csv -o out` solved take02 only and said nothing of take01 (and with take01
+    alone: "every take given is in the output folder"). Both are solved now; an earlier batch's weights named too
+    are left out with a warning saying why."""
+    from tests.rig_files import write_rig_folder
+    write_rig_folder(tmp_path / "rig")
+    out = tmp_path / "out"
+    (out / "old").mkdir(parents=True)
+    for p in (out / "take01.csv", tmp_path / "take02.csv", out / "old" / "weights.csv"):
+        p.write_text("frame,raise\n0,0.5\n1,1\n")
+    proc = run_cli("batch", tmp_path / "rig", out / "take01.csv", tmp_path / "take02.csv", out / "old" / "weights.csv",
+                   "-o", out, "--workers", "1", check=False)
+    assert proc.returncode == 0, proc.stderr
+    assert (f"warning: {out / 'old' / 'weights.csv'}: is a batch's own output in the output folder {out}, not a "
+            "take to solve; left out (copy it elsewhere to solve it).") in proc.stderr.splitlines(), proc.stderr
+    rows = json.loads((out / "batch.json").read_text())["takes"]
+    assert [(r["take"], r["status"]) for r in rows] == [("take01", "solved"), ("take02", "solved")]
+    assert (out / "take01" / "weights.csv").is_file()
+    assert (out / "take01.csv").read_text() == "frame,raise\n0,0.5\n1,1\n"
+
+
 def test_a_batch_whose_output_folder_holds_every_take_is_refused(tmp_path):
     """`batch RIG day1 -o day1`: every take in day1 was left out as one of the batch's own outputs, and the command
     said "0 take(s)", solved nothing and exited 0. It is one sentence, exit 2, nothing written."""

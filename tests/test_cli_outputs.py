@@ -291,5 +291,33 @@ def test_personalize_writes_its_project_and_report_as_one_set(tmp_path, monkeypa
     before = _listing(tmp_path)
     code = cli.main(["personalize", str(rig), "--scans", str(rig / "raise.obj"), "-o", str(tmp_path / "actor.bsproj"),
                      "--report", str(tmp_path / "report.json")])
-    assert code != 0 and "No space left on device" in capsys.readouterr().err
+    assert code == 2 and "the disk is full" in capsys.readouterr().err   # one sentence (tests/test_disk_errors.py)
     assert _listing(tmp_path) == before
+
+
+def _rig_with_materials_and_a_linked_shape(tmp_path):
+    """An OBJ rig folder whose neutral names its material library (face.mtl) and one of whose shapes, face.obj, is
+    a link to a file kept elsewhere (a library of shapes shared by rigs): an OBJ written over that link is not in
+    the rig's folder by its real path, but the .mtl written beside it (face.mtl) is the rig's own materials."""
+    rig = tmp_path / "rig"
+    write_rig_folder(rig)
+    (rig / "neutral.obj").write_text("mtllib face.mtl\n" + (rig / "neutral.obj").read_text())
+    (rig / "face.mtl").write_text("newmtl skin\nKd 0.8 0.6 0.5\n")
+    (tmp_path / "library").mkdir()
+    (tmp_path / "library" / "face.obj").write_text((rig / "raise.obj").read_text())
+    os.symlink(os.path.join("..", "library", "face.obj"), rig / "face.obj")
+    return rig
+
+
+def test_an_obj_export_refuses_a_material_library_it_would_write_over_an_input(tmp_path):
+    """`export -o X.obj` also writes X.mtl beside it (the rig's materials' colours), over any file there: the rig's own
+    material library was replaced, unchecked. It is checked as the OBJ is: refused in one sentence naming it, exit 2,
+    nothing written."""
+    rig = _rig_with_materials_and_a_linked_shape(tmp_path)
+    before = {p: (p.read_bytes(), p.is_symlink()) for p in tmp_path.rglob("*") if p.is_file()}
+    proc = run_cli("export", rig, "-o", rig / "face.obj", check=False)
+    _refused(proc, f"{rig / 'face.mtl'} (the material library written with {rig / 'face.obj'}): is in {rig}, which "
+                   "RIG reads, and would overwrite a file it reads; give -o a file elsewhere.")
+    assert {p: (p.read_bytes(), p.is_symlink()) for p in tmp_path.rglob("*") if p.is_file()} == before
+    run_cli("export", rig, "-o", tmp_path / "face.obj", check=True)      # elsewhere: both written
+    assert (tmp_path / "face.mtl").is_file() and "mtllib face.mtl" in (tmp_path / "face.obj").read_text()

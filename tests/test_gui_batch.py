@@ -237,3 +237,30 @@ def test_batch_solve_refuses_an_output_folder_where_it_would_write_over_what_it_
         assert not bc.running and d.status_label.text() == sentence, d.status_label.text()
     assert {p: p.read_bytes() for p in tmp_path.rglob("*") if p.is_file() and "settings" not in p.parts} == before
     assert not (out / "batch.json").exists() and not (day1 / "batch.json").exists()
+
+
+def test_batch_solve_solves_a_take_added_from_its_output_folder(qtbot, tmp_path):
+    """A take added to the dialog from inside the output folder was left out of the solve without a word. It is
+    solved; an earlier batch's output added as a take is left out, and the dialog says so in one sentence."""
+    w = make_window(qtbot, tmp_path)
+    name = w.document.rig.shape_names[0]
+    out = tmp_path / "out"
+    (out / "old").mkdir(parents=True)
+    inside, earlier = out / "take01.csv", out / "old" / "weights.csv"
+    for p in (inside, earlier):
+        p.write_text(f"frame,time,{name}\n0,0,0.5\n1,0.033,1\n")
+    bc = w.batch
+    d = bc.show_dialog()
+    d.take_list.clear()
+    d.add_takes([str(inside), str(earlier)])
+    d.output_edit.setText(str(out))
+    d.workers_spin.setValue(1)
+    sentence = (f"{earlier}: is a batch's own output in the output folder {out}, not a take to solve; left out (copy "
+                "it elsewhere to solve it).")
+    with qtbot.waitSignal(bc.finished, timeout=240000) as blocker:
+        qtbot.mouseClick(d.run_button, QtCore.Qt.LeftButton)
+        assert bc.running and d.status_label.text().endswith(sentence), d.status_label.text()
+    assert [(r["take"], r["status"]) for r in blocker.args[0]] == [("take01", "solved")]
+    assert d.status_label.text() == (f"Batch: solved 1, skipped 0 (complete), failed 0; summary in "
+                                     f"{out / 'batch.json'}. {sentence}")
+    assert (out / "take01" / "weights.csv").is_file()

@@ -169,3 +169,26 @@ def test_export_rig_copies_no_array_on_the_gui_thread_and_exports_the_rig_as_it_
         real_submit(*jobs[0])
     exported = load_gltf(out)
     np.testing.assert_allclose(exported.deltas[exported.shape_index("jawOpen")], before * 0.01, atol=1e-6)   # m
+
+
+def test_the_windows_obj_exports_refuse_a_material_library_over_the_rigs_own(qtbot, tmp_path):
+    """Export Pose as OBJ and Export Rig as OBJ also write the OBJ's material library beside it; one that would land
+    over the rig's own materials is refused in a dialog, as the command line refuses it, and nothing is written."""
+    from tests.gui_helpers import open_and_wait
+    from tests.test_cli_outputs import _rig_with_materials_and_a_linked_shape
+    rig = _rig_with_materials_and_a_linked_shape(tmp_path)
+    w = make_window(qtbot, tmp_path, sample=False)
+    open_and_wait(qtbot, w, rig)
+    before = {p: (p.read_bytes(), p.is_symlink()) for p in tmp_path.rglob("*") if p.is_file() and "settings" not in
+              p.parts}
+    sentence = (f"{rig / 'face.mtl'} (the material library written with {rig / 'face.obj'}): is in {rig}, the folder "
+                "the rig is read from, and would overwrite a file it reads; choose a file elsewhere.")
+    w.export_pose_to(rig / "face.obj")
+    assert w.last_error == sentence
+    w.last_error = None
+    with qtbot.waitSignal(w.exports.failed, timeout=10000) as sig:
+        w.exports.export_to(rig / "face.obj")
+    assert sig.args == [sentence] and w.last_error == sentence
+    w.jobs.wait()
+    assert {p: (p.read_bytes(), p.is_symlink()) for p in tmp_path.rglob("*") if p.is_file() and "settings" not in
+            p.parts} == before

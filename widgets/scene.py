@@ -725,13 +725,14 @@ def write_image_atomically(plotter, out_path) -> None:
     ``model.atomic.write_png`` off the GUI thread)."""
     import os
 
-    from model.atomic import check_output_file, remove_stale_temporaries, temp_path
+    from model.atomic import check_output_file, disk_errors, remove_stale_temporaries, temp_path
     out = check_output_file(out_path)      # a folder or a device: one sentence (an OSError too), nothing written
-    out.parent.mkdir(parents=True, exist_ok=True)
-    remove_stale_temporaries(out.parent)
     tmp = temp_path(out, suffix=out.suffix or ".png")
     try:
-        plotter.screenshot(str(tmp))
-        os.replace(tmp, out)
+        with disk_errors(out):             # a full disk: one sentence naming the picture, no temporary left
+            out.parent.mkdir(parents=True, exist_ok=True)
+            remove_stale_temporaries(out.parent)
+            plotter.screenshot(str(tmp))
+            os.replace(tmp, out)
     finally:
         tmp.unlink(missing_ok=True)
