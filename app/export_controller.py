@@ -106,8 +106,8 @@ class ExportController(QtCore.QObject):
     def export_to(self, path: str | Path, animation: str | None = None, *, units: str | None = None,
                   up: str = "y") -> None:
         """Export in the background: the rig and pose are taken now (``Rig.snapshot``), so edits made meanwhile do
-        not leak in. A file
-        its disk has no room for is refused first (``model.export.check_export_space``, as ``export`` refuses it)."""
+        not leak in. A file its disk has no room for is refused first (``model.export.check_export_space``, as
+        ``export`` refuses it)."""
         doc = self.window.document
         try:   # not over a file the window has open (the rig's, the project, a .gltf's buffers), as `export` refuses
             from model.beside_inputs import check_not_inputs
