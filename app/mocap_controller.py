@@ -30,6 +30,10 @@ from widgets.curve_plot import CurvePlot
 from widgets.mocap_panel import MocapPanel
 from widgets.side_by_side import SideBySideView
 
+# How long a paused scrub waits for the fill to reach the frame (computing nothing on the GUI thread) before the views
+# show the nearest ready frame: on ICT FaceKit a block of frames is ~15 ms, so a scrub shows its own frame at once.
+SCRUB_WAIT = 0.1
+
 TAKE_FILTER = "Takes (*.c3d *.trc *.csv);;C3D (*.c3d);;TRC (*.trc);;CSV / Live Link Face (*.csv)"
 
 
@@ -47,6 +51,7 @@ def solve_progress_text(done: int, total: int, what: str, n_frames: int) -> str:
 
 class _ProgressRelay(QtCore.QObject):
     progress = QtCore.Signal(int, int, str)  # emitted on the worker thread, delivered on the GUI thread
+    filled = QtCore.Signal(object)           # the frame cache it was filling (a block of its frames is ready)
 
 
 class MocapController(QtCore.QObject):
@@ -63,21 +68,27 @@ class MocapController(QtCore.QObject):
         self.weight_plot, self.error_plot = weight_plot, error_plot
         self.workspace = TakeWorkspace(self.document.rig)
         self.cache: FrameCache | None = None
-        self.runner = BackgroundRunner(self)     # the solve, then the filling of the frame cache
+        self.runner = BackgroundRunner(self)     # the solve
         self.playback = TakePlayback(self)
         self._solving = False
         self._shut_down = False
         self._views_split = False  # the Mocap Views splitter got its first layout (saved on shutdown)
         self._relay = _ProgressRelay(self)
         self._relay.progress.connect(self._on_progress)
+        self._relay.filled.connect(self._on_filled)
+        self._waiting: int | None = None     # the frame the views wait for while they show the nearest ready one
+        self._said_before_wait = ""          # the panel's status then, said again once the frame is shown
+        self.views_frame: int | None = None  # the take frame the views show (another while ``_waiting``)
         self._cancel = threading.Event()
         self._progress: QtWidgets.QProgressDialog | None = None
         self._solve_frames = 0   # the frames of the take being solved (the progress is said in them)
         self._fill_stop = threading.Event()
+        self._fill_thread: threading.Thread | None = None   # fills the frame cache, following the playhead
         pb = self.playback
         pb.frame_changed.connect(self._show_frame)
         pb.ticked.connect(self._on_tick)
         pb.playing_changed.connect(panel.set_playing)
+        pb.playing_changed.connect(lambda _on: self._show_waited_frame())
         pb.fps_measured.connect(lambda fps: panel.fps_label.setText(f"{fps:.0f} fps drawn · take {pb.rate:g} fps"))
         p = panel
         p.load_take_requested.connect(self.load_take_dialog)
@@ -418,7 +429,9 @@ class MocapController(QtCore.QObject):
             except SolveCancelled:
                 return None
             # the views' surface and first frames too, here: on the GUI thread they froze the window 0.2-0.3 s
-            return sol, settings, (version, take, marker_map), (faces, views_data(rig, take, sol, faces))
+            prepared = views_data(rig, take, sol, faces)
+            prepared[3].warm()
+            return sol, settings, (version, take, marker_map), (faces, prepared)
 
         dlg = QtWidgets.QProgressDialog("Solving the take…", "Cancel", 0, ws.take.n_frames, self.window)
         dlg.setWindowTitle("Solving")
@@ -457,6 +470,7 @@ class MocapController(QtCore.QObject):
         if prepared is None:
             prepared = views_data(self.rig, self.take, solution, self._shown_faces())
         counts, indices, normals, self.cache, first, clim = prepared
+        self.views_frame = None          # new meshes: a frame is shown on them next
         self.views.set_surface(first, counts, indices, focus=self._face_box(solution.solver.rest),
                                n_markers=len(solution.labels), clim=clim,
                                residual_title="residual (mm)", normals=normals, keep_camera=keep_camera)
@@ -469,8 +483,9 @@ class MocapController(QtCore.QObject):
             return
         self._stop_fill()
         self._set_views_surface(solution, keep_camera=True)
+        self.cache.playhead = self.frame
+        self._start_fill()      # first: the frame shown is the fill's first
         self._show_frame(self.frame)
-        self._start_fill()
 
     def _on_solve_failed(self, message: str) -> None:
         self._close_progress()
@@ -543,22 +558,31 @@ class MocapController(QtCore.QObject):
         if self.cache is not None:   # the views showed that solve: nothing of it stays on screen
             self.views.clear()
         self.cache = None
+        self._waiting = self.views_frame = None
         self.playback.set_length(self.n_frames, self.rate)
         self.weight_plot.set_curves([])
         self.error_plot.set_curves([])
 
     # --- background filling of the frame cache ---------------------------------------------------
     def _start_fill(self) -> None:
-        """Compute every frame's display arrays on the runner after a solve (playback fills them lazily too)."""
+        """Compute every frame's display arrays on a thread of their own after a solve, from the frame shown on (the
+        cache follows the playhead); each block filled is signalled to the GUI thread (``_on_filled``). Not on the
+        runner: its next job starts only once the last one's result reached the event loop, and the views wait for
+        this one at once."""
         self._fill_stop = stop = threading.Event()
-        cache = self.cache
-        self.runner.submit(lambda: cache.fill(stop), lambda _: None, lambda _: None)
+        cache, relay = self.cache, self._relay
+        self._fill_thread = threading.Thread(target=cache.fill, args=(stop, lambda _f: relay.filled.emit(cache)),
+                                             name="frame-cache-fill", daemon=True)
+        self._fill_thread.start()
 
-    def _stop_fill(self) -> None:
+    def _stop_fill(self, wait: bool = False) -> None:
+        """Stop the fill after the block it is computing (``wait``: and wait for that)."""
         self._fill_stop.set()
+        if wait and self._fill_thread is not None:
+            self._fill_thread.join()
 
     def precompute(self) -> None:
-        """Compute every frame's display arrays now (benchmarks; playback otherwise fills them lazily)."""
+        """Compute every frame's display arrays now (benchmarks, tests; otherwise a worker fills them)."""
         self._stop_fill()
         if self.cache is not None:
             self.cache.fill()
@@ -600,13 +624,50 @@ class MocapController(QtCore.QObject):
             if self.take.weights.shape[1] == self.rig.n_shapes:
                 self.document.set_weights(self.take.weights[frame])
         elif self.cache is not None:
-            proj, dense, res = self.cache.frame(frame)
-            self.views.show_frame(proj, dense, res, self.cache.markers[frame], self.cache.fitted[frame],
-                                  normals=self.cache.normals(frame))
+            self._show_solved_frame(frame)
         self.panel.show_frame(frame, self.n_frames, self.rate)
         self.weight_plot.set_cursor(frame)
         self.error_plot.set_cursor(frame)
         self.frame_shown.emit(frame)
+
+    def _show_solved_frame(self, frame: int) -> None:
+        """Both views at ``frame`` if its arrays are filled, else at the nearest filled frame, said in the panel: the
+        fill (a worker) is turned to ``frame`` and ``_on_filled`` shows it once computed. Never computed here: a frame
+        of a studio rig froze the window 0.2-1.1 s."""
+        cache = self.cache
+        cache.playhead, cache.speed = frame, (self.rate if self.playing else 0.0)
+        ready = cache.is_ready(frame) or (not self.playing and cache.wait_ready(frame, SCRUB_WAIT))
+        shown = frame if ready else cache.nearest_ready(frame)
+        if shown != frame:
+            if self._waiting is None:
+                self._said_before_wait = self.panel.status_label.text()
+            self._waiting = frame
+            ready = int(cache.ready.sum())
+            self.panel.set_status(f"Computing frame {frame} ({ready} of {cache.n_frames} frames ready): the views "
+                                  f"show frame {shown} meanwhile." if shown is not None else
+                                  f"Computing frame {frame} ({ready} of {cache.n_frames} frames ready).")
+        elif self._waiting is not None:
+            self._waiting = None
+            self.panel.set_status(self._said_before_wait)
+        if shown is not None and shown != self.views_frame:   # the same nearest frame again: nothing to draw
+            self.views_frame = shown
+            self.views.show_frame(*cache.frame(shown), cache.markers[shown], cache.fitted[shown],
+                                  normals=cache.normals(shown))
+
+    def _on_filled(self, cache) -> None:
+        """A block of frames was filled (the fill's signal): the frame the views wait for is shown once ready."""
+        if cache is self.cache:
+            self._show_waited_frame()
+
+    def _show_waited_frame(self) -> None:
+        """The take is still (paused, or a block filled while still): the fill turns to the frame at the playhead,
+        shown if it is ready (while playing, the next tick shows its own frame anyway)."""
+        cache = self.cache
+        if cache is None or self.playing:
+            return
+        cache.playhead, cache.speed = self.frame, 0.0     # still: the fill computes this frame next
+        if self._waiting is not None and cache.is_ready(self.frame):
+            self._show_frame(self.frame)
 
     def _on_tick(self, frame: int) -> None:
         if isinstance(self.take, WeightTake):
@@ -684,16 +745,11 @@ class MocapController(QtCore.QObject):
         return self._write("weights", path, lambda: export_weights_csv(self.workspace, path))
 
     def export_pc2(self, path) -> bool:
-        """Every frame's surface as a PC2 point cache: the dense solve (head-stabilised, from the frames already
-        shown or filled), or the rig posed by the weight take."""
-        cache = self.cache
-
+        """Every frame's surface as a PC2 point cache: the dense solve (head-stabilised, computed in blocks of
+        frames: the views' frame cache holds only the vertices they draw), or the rig posed by the weight take."""
         def write() -> None:
             check_room_for_pc2(path, self.workspace.n_frames, self.workspace.rig.n_vertices)
-            frames = None if cache is None else (cache.frame(f)[1] for f in range(cache.n_frames))
-            if frames is None:
-                frames = take_surfaces(self.workspace, self.document.evaluator)
-            export_pc2(self.workspace, path, frames)
+            export_pc2(self.workspace, path, take_surfaces(self.workspace, self.document.evaluator))
         QtWidgets.QApplication.setOverrideCursor(QtCore.Qt.WaitCursor)
         try:
             return self._write("point cache", path, write)
@@ -714,7 +770,7 @@ class MocapController(QtCore.QObject):
         if self._views_split and isinstance(splitter, QtWidgets.QSplitter):
             app_settings.settings().setValue("mocap/viewsSplitter", splitter.saveState())  # for the next session
         self.pause()
-        self._stop_fill()
+        self._stop_fill(wait=True)
         self._cancel.set()
         self.runner.shutdown()
         self.views.close_views()
@@ -777,14 +833,16 @@ def _add_take_actions(window, controller: MocapController) -> None:
 def views_data(rig, take, solution, shown_faces) -> tuple:
     """(counts, indices, normals, frame cache, first frame's surface, residual colour range) of the Mocap Views
     for ``solution``: the captured area's faces among ``shown_faces`` (View ▸ Parts; None: all), the vertices they
-    use, one normals function for the cache and both views, and the residual's range in mm from a few sampled
-    frames (99th percentile), fixed for the take. No Qt: the solve's thread makes it."""
+    use, one normals function for the cache and both views, the cache's first frame computed (the views show it at
+    once), and the residual's range in mm from a few sampled frames (99th percentile, from the RBF alone), fixed for
+    the take. No Qt: the solve's thread makes it."""
     counts, indices = captured_area_faces(rig, solution.solver.residual_vertices, shown_faces)
     shown, local = compact_faces(indices)  # the views draw these vertices only
     normals = VertexNormals(counts, local, len(shown))
     cache = FrameCache(solution, take, rig.units, normals=normals, shown=shown)
-    first, _, _ = cache.frame(0)
+    cache.frame(0)
+    first = solution.projection(0)   # the whole rig: the views take the vertices their faces use
     samples = np.unique(np.linspace(0, cache.n_frames - 1, 6).astype(int))
-    vals = np.concatenate([cache.frame(int(f))[2] for f in samples])
+    vals = np.concatenate([cache.residual_lengths(int(f)) for f in samples]).astype(np.float32)
     hi = float(np.percentile(vals[vals > 0], 99)) if (vals > 0).any() else 1.0
     return counts, indices, normals, cache, first, (0.0, max(hi, 1e-3))

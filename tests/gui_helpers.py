@@ -98,6 +98,17 @@ def open_and_wait(qtbot, window, path, timeout=60000):
     QtWidgets.QApplication.processEvents()
 
 
+def solved_on_ict(qtbot, tmp_path, ict_dir, take_dir, timeout=180000):
+    """(window, its mocap controller): the main window on ICT with the real marker take and map loaded and solved."""
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    open_and_wait(qtbot, w, ict_dir)
+    mc = w.mocap
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    with qtbot.waitSignal(mc.solved, timeout=timeout):
+        mc.solve()
+    return w, mc
+
+
 def calls_on_gui_thread(monkeypatch, module, name: str) -> list[bool]:
     """Wrap ``module.name`` so that each call records whether it ran on the GUI (main) thread; returns that list
     (work moved off the GUI thread: the list is [False] after it ran)."""

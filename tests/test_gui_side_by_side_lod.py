@@ -15,17 +15,12 @@ import numpy as np
 import pytest
 from PySide6 import QtCore
 
-from tests.gui_helpers import decimation_until_stopped, make_window, mouse, open_and_wait
+from tests.gui_helpers import decimation_until_stopped, mouse, solved_on_ict
 
 
 def _solved(qtbot, tmp_path, ict_dir, take_dir):
     """The main window on ICT with the real marker take solved, its frame cache filled."""
-    w = make_window(qtbot, tmp_path, size=(1400, 900))
-    open_and_wait(qtbot, w, ict_dir)
-    mc = w.mocap
-    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
-    with qtbot.waitSignal(mc.solved, timeout=180000):
-        mc.solve()
+    w, mc = solved_on_ict(qtbot, tmp_path, ict_dir, take_dir)
     mc.precompute()
     return w, mc
 
@@ -102,7 +97,7 @@ def test_playing_a_take_draws_both_views_by_one_proxy_then_in_full_once_still(qt
     assert left is not views.left_mesh and right is not views.right_mesh
     assert left.GetNumberOfPoints() == right.GetNumberOfPoints() == len(kept)
     proj, dense, residual = mc.cache.frame(mc.frame)
-    at = views.shown_vertices[kept]                 # the rig's vertex ids the proxy keeps
+    at = kept            # the frame cache holds the shown vertices only: the proxy's are its rows ``kept``
     np.testing.assert_array_equal(_points(left), _points(views.left_mesh)[kept])
     np.testing.assert_array_equal(_points(right), _points(views.right_mesh)[kept])
     np.testing.assert_allclose(_points(left), proj[at], atol=1e-6)

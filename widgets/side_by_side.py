@@ -137,16 +137,15 @@ class SideBySideView(QtWidgets.QWidget):
     def show_frame(self, projection: np.ndarray, dense: np.ndarray, residual: np.ndarray,
                    markers: np.ndarray | None = None, fitted: np.ndarray | None = None,
                    normals: tuple[np.ndarray | None, np.ndarray | None] = (None, None)) -> None:
-        """Move both surfaces -- (V, 3) arrays of the whole rig, of which the shown vertices are drawn -- set the
-        residual scalars (V,) and markers / fitted markers (M, 3); render. ``normals``: both surfaces' shading
-        normals at the shown vertices, (len(shown_vertices), 3), if already known (else computed here)."""
+        """Move both surfaces -- (S, 3) arrays at the shown vertices (``shown_vertices``, in their order: a frame
+        cache keeps only those, not the whole rig) -- set the residual scalars (S,) and markers / fitted markers
+        (M, 3); render. ``normals``: both surfaces' shading normals there, (S, 3), if already known (else computed
+        here)."""
         if self.left_mesh is None:
             return
-        shown = self.shown_vertices
         proxy = self.detail.expects_proxy()   # a frame the proxy draws computes only the proxy's normals
-        self._left_arrays.update(np.take(projection, shown, axis=0), normals[0], defer_normals=proxy)
-        self._right_arrays.update(np.take(dense, shown, axis=0), normals[1], np.take(residual, shown),
-                                  defer_normals=proxy)
+        self._left_arrays.update(projection, normals[0], defer_normals=proxy)
+        self._right_arrays.update(dense, normals[1], residual, defer_normals=proxy)
         if self.marker_cloud is not None and markers is not None:
             m = np.asarray(markers, dtype=np.float32)
             seen = np.isfinite(m).all(axis=1)

@@ -11,6 +11,12 @@ median and the longest of its rounds, and real-time playback by the timeline's t
 Also printed: playback right after the solve, as shipped (the level of detail on), while the frame cache is still
 being filled behind it: frames not computed yet are computed as they are shown, on the GUI thread.
 
+``test_bench_studio_mocap_views_right_after_the_solve`` measures that case alone, as a user meets it: the take played
+for 4 s at once after the solve, the frame cache not filled; the frames drawn per second (and how many of them were
+the frame the playhead was at, not the nearest frame filled, shown meanwhile), the longest time between two frames,
+and the longest the window froze (the longest gap between the turns of a 5 ms QTimer probe); then paused, the time
+until the views show the paused frame's own result, checked against the solution.
+
     PYTHONPATH=$PWD python -m pytest tests/benchmarks/test_bench_studio_mocap_views.py --benchmark-only -s
 """
 from __future__ import annotations
@@ -112,3 +118,64 @@ def test_bench_studio_mocap_views_playback(benchmark, qtbot, tmp_path, take_dir,
           f"{f_fps:.1f} fps, longest between frames {f_gap:.0f} ms\n"
           f"  proxy ({proxy:,} triangles a view): step {l_med:.0f} ms median ({1000 / l_med:.1f} fps), longest "
           f"{l_max:.0f} ms; playback {l_fps:.1f} fps, longest between frames {l_gap:.0f} ms")
+
+
+def _probed_play(qtbot, mc, seconds: float = 4.0) -> dict:
+    """Real-time playback for ``seconds`` with a 5 ms QTimer probe: frames shown per second, those that were their
+    own frame per second (the views may show the nearest filled frame meanwhile: ``views_frame``), the longest time
+    between two frames shown and the longest between two turns of the probe (the window frozen that long)."""
+    from PySide6 import QtCore
+    shown: list[float] = []
+    own: list[bool] = []
+    turns: list[float] = []
+
+    def on_frame(f: int) -> None:
+        shown.append(time.perf_counter())
+        own.append(getattr(mc, "views_frame", f) == f)   # the code before this change showed every frame itself
+    probe = QtCore.QTimer()
+    probe.setInterval(5)
+    probe.timeout.connect(lambda: turns.append(time.perf_counter()))
+    mc.frame_shown.connect(on_frame)
+    probe.start()
+    mc.play()
+    t0 = time.perf_counter()
+    qtbot.wait(int(seconds * 1000))
+    mc.pause()
+    elapsed = time.perf_counter() - t0
+    probe.stop()
+    mc.frame_shown.disconnect(on_frame)
+    return {"fps": len(shown) / elapsed, "own_fps": sum(own) / elapsed,
+            "longest_between_frames_ms": 1000 * float(np.diff(shown).max()) if len(shown) > 1 else 1000 * elapsed,
+            "longest_freeze_ms": 1000 * float(np.diff([t0, *turns]).max()) if turns else 1000 * elapsed}
+
+
+@pytest.mark.parametrize("levels", [1, 2])
+def test_bench_studio_mocap_views_right_after_the_solve(benchmark, qtbot, tmp_path, take_dir, levels):
+    path = studio_project(levels)
+    w = make_window(qtbot, tmp_path, size=(1400, 900))
+    w.open_path(path)
+    qtbot.waitUntil(lambda: not w.is_loading, timeout=600000)
+    mc = w.mocap
+    assert mc.load_take(take_dir / "take.c3d") and mc.load_map(take_dir / "marker_map.json")
+    with qtbot.waitSignal(mc.solved, timeout=1200000):
+        mc.solve()
+    mc.panel.loop_check.setChecked(True)
+    t_solved = time.perf_counter()
+    r = benchmark.pedantic(lambda: _probed_play(qtbot, mc), rounds=1, iterations=1)
+    t0 = time.perf_counter()
+    qtbot.waitUntil(lambda: getattr(mc, "views_frame", mc.frame) == mc.frame, timeout=60000)
+    settled = time.perf_counter() - t0
+    f, sol = mc.frame, mc.solution
+    at = mc.views.shown_vertices
+    np.testing.assert_allclose(np.asarray(mc.views.left_mesh.points), sol.projection(f)[at], atol=1e-4)
+    np.testing.assert_allclose(np.asarray(mc.views.right_mesh.points), sol.dense(f)[at], atol=1e-4)
+    cache = mc.cache
+    qtbot.waitUntil(lambda: bool(cache.ready.all()), timeout=600000)
+    filled = time.perf_counter() - t_solved
+    benchmark.extra_info.update(vertices=w.document.rig.n_vertices, **{k: round(v, 1) for k, v in r.items()},
+                                paused_frame_shown_ms=round(1000 * settled), cache_filled_s=round(filled, 1))
+    print(f"\nRight after the solve on a {w.document.rig.n_vertices:,}-vertex rig ({len(at):,} vertices drawn), "
+          f"the frame cache not filled: playback {r['fps']:.1f} fps ({r['own_fps']:.1f} fps of their own frame), "
+          f"longest between frames {r['longest_between_frames_ms']:.0f} ms, longest freeze (5 ms probe) "
+          f"{r['longest_freeze_ms']:.0f} ms; paused: its own frame shown after {1000 * settled:.0f} ms; "
+          f"cache filled {filled:.1f} s after the solve")
