@@ -20,3 +20,28 @@ def installed_bytecode() -> None:
     """The project's modules byte-compiled, as an installation has them (only those not yet or no longer current)."""
     for package in ("app", "model", "solvers", "widgets", "tests"):
         compileall.compile_dir(ROOT / package, quiet=1)
+
+
+@pytest.fixture(autouse=True)
+def closed_windows_let_go():
+    """After each benchmark, what a closed main window still holds is let go. A closed window stays alive in this
+    process (something outside Python's view still refers to it: its C++ side is gone, the Python object stays), and
+    with it its document, rig, caches and views' arrays: a whole benchmark run opens the studio rigs (GBs each) a
+    dozen times and ran out of the machine's 24 GB. The application closes its one window as it quits, so only a
+    process that opens many windows (this one) has to."""
+    yield
+    import gc
+
+    from app.main_window import MainWindow
+    gc.collect()
+    for window in [o for o in gc.get_objects() if isinstance(o, MainWindow)]:
+        try:
+            if window.isVisible():
+                continue
+        except RuntimeError:    # its C++ object is deleted: closed
+            pass
+        owned = [v for v in vars(window).values() if hasattr(v, "__dict__") and not isinstance(v, type)]
+        for value in owned:
+            vars(value).clear()
+        vars(window).clear()
+    gc.collect()
