@@ -642,10 +642,10 @@ class MocapController(QtCore.QObject):
             if self._waiting is None:
                 self._said_before_wait = self.panel.status_label.text()
             self._waiting = frame
-            ready = int(cache.ready.sum())
-            self.panel.set_status(f"Computing frame {frame} ({ready} of {cache.n_frames} frames ready): the views "
+            n_ready = int(cache.ready.sum())
+            self.panel.set_status(f"Computing frame {frame} ({n_ready} of {cache.n_frames} frames ready): the views "
                                   f"show frame {shown} meanwhile." if shown is not None else
-                                  f"Computing frame {frame} ({ready} of {cache.n_frames} frames ready).")
+                                  f"Computing frame {frame} ({n_ready} of {cache.n_frames} frames ready).")
         elif self._waiting is not None:
             self._waiting = None
             self.panel.set_status(self._said_before_wait)

@@ -90,12 +90,9 @@ def disk_problem(path, exc: BaseException) -> tuple[str, str] | None:
 
 def _free_on(path) -> str:
     """' (3.2 MB free)' on the disk of ``path`` (or of the nearest folder above it that exists); '' if unknown."""
-    from .free_space import human_size
+    from .free_space import existing_folder, human_size
     try:
-        folder = Path(os.path.abspath(path)).parent
-        while not folder.exists() and folder != folder.parent:
-            folder = folder.parent
-        return f" ({human_size(shutil.disk_usage(folder).free)} free)"
+        return f" ({human_size(shutil.disk_usage(existing_folder(Path(path))).free)} free)"
     except (OSError, TypeError, ValueError):
         return ""
 

@@ -23,7 +23,7 @@ def human_size(n: float) -> str:
     raise AssertionError("unreachable")
 
 
-def _existing_folder(path: Path) -> Path:
+def existing_folder(path: Path) -> Path:
     """The folder ``path`` will be written in, or the nearest folder above it that exists (the writer makes the
     rest)."""
     folder = path.absolute().parent
@@ -43,7 +43,7 @@ def check_free_space(sizes: Mapping[str | Path, int], lower_bounds: Collection[s
     for path, size in sizes.items():
         if size <= 0:
             continue
-        folder = _existing_folder(Path(path))
+        folder = existing_folder(Path(path))
         by_disk.setdefault(os.stat(folder).st_dev, []).append((Path(path), int(size), folder))
     for files in by_disk.values():
         folder = files[0][2]
