@@ -92,7 +92,7 @@ def _moves(qtbot, w, widget, positions, frames, buttons):
     for pos in positions:
         n0 = frames[0]
         mouse(widget, "move", pos, buttons=buttons)
-        qtbot.waitUntil(lambda: not w.redraw_pending and not w.viewport.render_pending, timeout=5000)
+        qtbot.waitUntil(lambda: not w.redraw_pending, timeout=5000)
         drawn.append(frames[0] - n0)
     return drawn
 

@@ -54,10 +54,10 @@ def sculpting(qtbot, tmp_path, ict_rig):
 
 
 def _until_drawn(w) -> None:
-    """Run the event loop until the renders the move asked for are done (the window's coalesced redraw, the view's
-    requested render: on the loop's next turn), without qtbot.waitUntil's 10 ms sleeps between its looks."""
+    """Run the event loop until the render the move asked for is done (the viewport's one coalesced render, on the
+    loop's next turn), without qtbot.waitUntil's 10 ms sleeps between its looks."""
     deadline = time.perf_counter() + 5.0
-    while w.redraw_pending or getattr(w.viewport, "render_pending", False):
+    while w.redraw_pending:
         QtWidgets.QApplication.processEvents()
         assert time.perf_counter() < deadline, "the move's render never came"
 
