@@ -10,7 +10,7 @@ from PySide6 import QtCore, QtWidgets
 from app import settings as app_settings
 from app.background import BackgroundRunner
 from model.errors import RigInputError
-from model.export import WeightAnimation, animation_from_timeline, check_export_space, check_files_beside, export_rig
+from model.export import WeightAnimation, animation_from_timeline, check_export_space, export_rig
 
 FILTERS = ("glTF binary (*.glb);;glTF (*.gltf);;USD (*.usd *.usda *.usdc);;OBJ, the posed surface (*.obj)")
 UNITS = ("m", "cm", "mm")
@@ -110,9 +110,7 @@ class ExportController(QtCore.QObject):
         ``export`` refuses it)."""
         doc = self.window.document
         try:   # not over a file the window has open (the rig's, the project, a .gltf's buffers), as `export` refuses
-            from model.beside_inputs import check_not_inputs
-            check_not_inputs(path, self.window.export_inputs())
-            check_files_beside(doc.rig, path, lambda p: check_not_inputs(p, self.window.export_inputs()))  # its .mtl
+            self.window.check_export_over_inputs(path, rig=doc.rig)      # an OBJ's .mtl too
         except RigInputError as exc:
             self._failed(str(exc))
             return

@@ -743,17 +743,22 @@ class MainWindow(FileDropTarget, QtWidgets.QMainWindow):
         (``export_inputs``; but ``rewrites``, the one this export saves again, e.g. "the marker map"), by the rule of
         the command line's outputs (``model.beside_inputs.check_not_inputs``); nothing is written then. ``rig``: an OBJ
         of it also writes its material library, checked too (``model.export.check_files_beside``)."""
-        from model.beside_inputs import check_not_inputs
-        from model.export import check_files_beside
-        inputs = [(name, source) for name, source in self.export_inputs() if name != rewrites]
         try:
-            check_not_inputs(path, inputs)
-            if rig is not None:
-                check_files_beside(rig, path, lambda p: check_not_inputs(p, inputs))
+            self.check_export_over_inputs(path, rewrites=rewrites, rig=rig)
         except RigInputError as exc:
             self.show_error(title, str(exc))
             return True
         return False
+
+    def check_export_over_inputs(self, path: str | Path, *, rewrites: str | None = None, rig=None) -> None:
+        """Raise RigInputError (one sentence) when an export's ``path`` (or, with ``rig``, the material library an
+        OBJ of it writes beside it) is one of the files the window has open (``refuses_export_over_inputs``)."""
+        from model.beside_inputs import check_not_inputs
+        from model.export import check_files_beside
+        inputs = [(name, source) for name, source in self.export_inputs() if name != rewrites]
+        check_not_inputs(path, inputs)
+        if rig is not None:
+            check_files_beside(rig, path, lambda p: check_not_inputs(p, inputs))
 
     def export_pose(self) -> None:
         if self.document.project is not None:
